@@ -1,0 +1,359 @@
+"""Reading and writing at the pipeline's edges: point files, rasters, GeoPackages, 2DM, JSON.
+
+Every writer writes to a temporary name beside the target and renames it when complete, so an
+error, Ctrl-C or a cancel leaves the previous file (or none), never a truncated one.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import uuid
+from pathlib import Path
+
+import numpy as np
+
+from .errors import FloodMeshError
+from .points import PointCloud, clean_points
+from .raster import Grid, require_metric_crs
+
+POINT_EXTENSIONS = (".las", ".laz", ".xyz", ".txt", ".csv", ".pts")
+RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
+GROUND_CLASS = 2
+
+
+# ---------------------------------------------------------------------------------------------
+# atomic output
+@contextlib.contextmanager
+def atomic_output(path):
+    """Yield a temporary path beside ``path``; move it into place only if the block succeeds."""
+    path = Path(path)
+    if path.parent and not path.parent.exists():
+        raise FloodMeshError(f"output folder {path.parent} does not exist: create it first")
+    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.partial{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        for leftover in (tmp, Path(f"{tmp}-journal"), Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+            with contextlib.suppress(FileNotFoundError):
+                leftover.unlink()
+
+
+def _require_file(path, what: str) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise FloodMeshError(f"{what} {path} does not exist: check the path")
+    if not path.is_file():
+        raise FloodMeshError(f"{what} {path} is not a file")
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# points
+def read_points(path, *, crs=None, classes=None) -> PointCloud:
+    """Read ground points from LAS/LAZ (class 2 when classified, or ``classes``) or XYZ/CSV text.
+
+    ``crs`` overrides the file's own CRS (needed for text files, which carry none).
+    """
+    path = _require_file(path, "point file")
+    ext = path.suffix.lower()
+    if ext in (".las", ".laz"):
+        xyz, file_crs = _read_las(path, classes)
+    elif ext in (".xyz", ".txt", ".csv", ".pts"):
+        xyz, file_crs = _read_xyz(path), None
+    else:
+        raise FloodMeshError(f"{path.name}: unknown point file type '{ext}'; use LAS/LAZ or "
+                             "XYZ/CSV text (x y z per line), or a GeoTIFF DEM")
+    return clean_points(xyz, crs if crs is not None else file_crs, f"point file {path.name}")
+
+
+def _read_las(path: Path, classes):
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            las = reader.read()
+    except Exception as exc:
+        raise FloodMeshError(f"{path.name} is not a readable LAS/LAZ file ({exc})") from None
+    cls = np.asarray(las.classification)
+    if classes is None:
+        keep = cls == GROUND_CLASS if np.any(cls == GROUND_CLASS) else np.ones(len(cls), bool)
+    else:
+        keep = np.isin(cls, list(classes))
+        if not keep.any():
+            present = ", ".join(str(c) for c in np.unique(cls)) or "none"
+            raise FloodMeshError(f"{path.name} has no points of classes {sorted(classes)} "
+                                 f"(classes present: {present}); choose other classes")
+    xyz = np.column_stack([np.asarray(las.x)[keep], np.asarray(las.y)[keep],
+                           np.asarray(las.z)[keep]])
+    try:
+        file_crs = las.header.parse_crs()
+    except Exception:
+        file_crs = None
+    return xyz, file_crs
+
+
+def _read_xyz(path: Path) -> np.ndarray:
+    with open(path, "r", errors="replace") as fh:
+        head = [fh.readline() for _ in range(5)]
+    delimiter = "," if any("," in line for line in head) else (";" if any(";" in line for line in head) else None)
+    first = head[0].replace(",", " ").replace(";", " ").split()
+    try:
+        [float(v) for v in first[:3]]
+        skip = 0
+    except ValueError:
+        skip = 1  # a header line such as "x,y,z"
+    try:
+        data = np.loadtxt(path, delimiter=delimiter, skiprows=skip, usecols=(0, 1, 2), ndmin=2)
+    except (ValueError, IndexError) as exc:
+        raise FloodMeshError(f"{path.name} is not an XYZ text file with x, y, z in the first "
+                             f"three columns ({exc})") from None
+    return data
+
+
+def write_points_las(path, points: PointCloud, *, classes=GROUND_CLASS) -> None:
+    """Write points as LAS/LAZ (by extension) with the CRS; ``classes`` one code or one per point."""
+    import laspy
+
+    header = laspy.LasHeader(point_format=3, version="1.4")
+    header.offsets = np.floor(points.xyz.min(axis=0))
+    header.scales = np.array([0.001, 0.001, 0.001])
+    header.add_crs(points.crs)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points.xyz[:, 0], points.xyz[:, 1], points.xyz[:, 2]
+    las.classification = np.broadcast_to(np.asarray(classes, np.uint8), (len(points),)).copy()
+    with atomic_output(path) as tmp:
+        las.write(str(tmp), do_compress=Path(path).suffix.lower() == ".laz")
+
+
+# ---------------------------------------------------------------------------------------------
+# rasters
+def read_raster(path, *, crs=None) -> Grid:
+    """Read band 1 of a raster as a float64 Grid with NaN for nodata."""
+    import rasterio
+
+    path = _require_file(path, "raster")
+    try:
+        with rasterio.open(path) as src:
+            values = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+            transform, file_crs = src.transform, src.crs
+    except rasterio.errors.RasterioIOError as exc:
+        raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
+    crs = require_metric_crs(crs if crs is not None else (file_crs.to_wkt() if file_crs else None),
+                             f"raster {path.name}")
+    if not np.isfinite(values).any():
+        raise FloodMeshError(f"raster {path.name} has no valid cells (all nodata or NaN)")
+    return Grid(values, transform, crs)
+
+
+def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
+    """Write a Grid as a compressed GeoTIFF; float NaN (or cells outside ``valid``) become nodata."""
+    import rasterio
+
+    values = grid.values
+    if values.dtype == bool:
+        values = values.astype(np.uint8)
+    if np.issubdtype(values.dtype, np.floating):
+        values = values.astype(np.float32)
+        nodata = -9999.0
+        values = np.where(np.isfinite(values), values, nodata)
+    else:
+        nodata = 255
+        values = values.astype(np.uint8)
+    if valid is not None:
+        values = np.where(valid, values, nodata)
+    profile = dict(driver="GTiff", height=values.shape[0], width=values.shape[1], count=1,
+                   dtype=values.dtype, crs=grid.crs.to_wkt(), transform=grid.transform,
+                   nodata=nodata, compress="deflate", tiled=True, blockxsize=256, blockysize=256)
+    if values.shape[0] < 256 or values.shape[1] < 256:
+        profile.update(tiled=False)
+        profile.pop("blockxsize")
+        profile.pop("blockysize")
+    with atomic_output(path) as tmp:
+        with rasterio.open(tmp, "w", **profile) as dst:
+            dst.write(values, 1)
+
+
+def read_input(path, *, crs=None, classes=None):
+    """A point file (→ PointCloud) or a raster DEM (→ Grid), by extension."""
+    ext = Path(path).suffix.lower()
+    if ext in RASTER_EXTENSIONS:
+        return read_raster(path, crs=crs)
+    if ext in POINT_EXTENSIONS:
+        return read_points(path, crs=crs, classes=classes)
+    _require_file(path, "input")
+    raise FloodMeshError(f"{Path(path).name}: unknown input type '{ext}'; give a LAS/LAZ or XYZ/CSV "
+                         "point file, or a GeoTIFF/ASCII-grid DEM")
+
+
+# ---------------------------------------------------------------------------------------------
+# vectors (GeoPackage through fiona/GDAL)
+def _write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, crs) -> None:
+    import fiona
+
+    schema = {"geometry": geometry_type, "properties": properties}
+    with atomic_output(path) as tmp:
+        with fiona.open(tmp, "w", driver="GPKG", layer=layer, schema=schema,
+                        crs_wkt=crs.to_wkt()) as dst:
+            dst.writerecords(records)
+
+
+def _field_type(values) -> str:
+    kind = np.asarray(values).dtype.kind
+    return {"i": "int", "u": "int", "b": "int", "f": "float"}.get(kind, "str")
+
+
+def _records(geometries, attributes: dict):
+    columns = {name: np.asarray(v).tolist() for name, v in attributes.items()}
+    for i, geometry in enumerate(geometries):
+        yield {"geometry": geometry,
+               "properties": {name: values[i] for name, values in columns.items()}}
+
+
+def write_lines_gpkg(path, lines, crs, *, layer="breaklines", attributes=None) -> None:
+    """Write (k, 3) coordinate arrays as LineStringZ features with per-line attributes
+    (name → sequence, one value per line)."""
+    attributes = attributes or {}
+    geometries = ({"type": "LineString", "coordinates": [tuple(p) for p in line.tolist()]}
+                  for line in lines)
+    props = {name: _field_type(v) for name, v in attributes.items()}
+    _write_gpkg(path, layer, "3D LineString", props, _records(geometries, attributes), crs)
+
+
+def write_breaklines(path, lines, crs) -> None:
+    """Write BreakLines with their id, point count, length and slope figures."""
+    def per_line(f):
+        return np.array([f(line) for line in lines], dtype=float)
+
+    with np.errstate(all="ignore"):
+        attributes = {
+            "line_id": np.arange(1, len(lines) + 1),
+            "n_points": np.array([len(line.coords) for line in lines], dtype=np.int64),
+            "length_m": per_line(lambda line: line.length),
+            "mean_slope_deg": per_line(lambda line: np.nanmean(line.slopes) if np.isfinite(line.slopes).any() else np.nan),
+            "max_slope_deg": per_line(lambda line: np.nanmax(line.slopes) if np.isfinite(line.slopes).any() else np.nan),
+        }
+    write_lines_gpkg(path, [line.coords for line in lines], crs, attributes=attributes)
+
+
+def write_points_gpkg(path, xyz: np.ndarray, crs, *, layer="points", attributes=None) -> None:
+    """Write points as PointZ features with per-point attributes (name → sequence)."""
+    attributes = attributes or {}
+    geometries = ({"type": "Point", "coordinates": tuple(p)} for p in xyz.tolist())
+    props = {name: _field_type(v) for name, v in attributes.items()}
+    _write_gpkg(path, layer, "3D Point", props, _records(geometries, attributes), crs)
+
+
+def read_breaklines(path) -> list:
+    """Read a line layer as BreakLines (slopes unknown: NaN)."""
+    from .breaklines import BreakLine
+
+    return [BreakLine(c, np.full(len(c), np.nan)) for c in read_lines_gpkg(path)]
+
+
+def read_lines_gpkg(path) -> list[np.ndarray]:
+    """Read the line features of a vector file as (k, 3) arrays (z = NaN where 2-D)."""
+    import fiona
+
+    path = _require_file(path, "line file")
+    lines = []
+    try:
+        with fiona.open(path) as src:
+            for feat in src:
+                geom = feat["geometry"]
+                if geom is None:
+                    continue
+                parts = ([geom["coordinates"]] if geom["type"] == "LineString"
+                         else geom["coordinates"] if geom["type"] == "MultiLineString" else None)
+                if parts is None:
+                    raise FloodMeshError(f"{path.name} holds {geom['type']} features; "
+                                         "break lines must be lines")
+                for part in parts:
+                    arr = np.array([tuple(p) + (np.nan,) * (3 - len(p)) for p in part], float)
+                    lines.append(arr[:, :3])
+    except fiona.errors.FionaError as exc:
+        raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
+    return lines
+
+
+def read_points_vector(path) -> np.ndarray:
+    """Read the PointZ features of a vector file (e.g. holdout points) as an (N, 3) array."""
+    import fiona
+
+    path = _require_file(path, "point layer")
+    with fiona.open(path) as src:
+        xyz = [feat["geometry"]["coordinates"] for feat in src if feat["geometry"]]
+    if not xyz or len(xyz[0]) < 3:
+        raise FloodMeshError(f"{path.name} has no 3-D points")
+    return np.asarray(xyz, dtype=float)[:, :3]
+
+
+def vector_crs(path):
+    import fiona
+
+    with fiona.open(path) as src:
+        return src.crs_wkt or None
+
+
+# ---------------------------------------------------------------------------------------------
+# meshes
+def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: int = 1) -> None:
+    """Write a triangular mesh as SMS 2DM (1-based ids; E3T lines, then ND lines with elevation)."""
+    n_tri = len(triangles)
+    ids = np.arange(1, n_tri + 1)
+    elements = np.column_stack([ids, triangles + 1, np.full(n_tri, material)])
+    node_rows = np.column_stack([np.arange(1, len(nodes) + 1), nodes])
+    with atomic_output(path) as tmp:
+        with open(tmp, "w") as fh:
+            fh.write("MESH2D\n")
+            np.savetxt(fh, elements, fmt="E3T %d %d %d %d %d")
+            np.savetxt(fh, node_rows, fmt="ND %d %.4f %.4f %.4f")
+
+
+def read_mesh_2dm(path) -> tuple[np.ndarray, np.ndarray]:
+    """Read nodes (n, 3) and triangles (m, 3, zero-based) of an SMS 2DM file."""
+    path = _require_file(path, "mesh file")
+    nodes, tris = {}, []
+    with open(path) as fh:
+        first = fh.readline().split()
+        if not first or first[0] != "MESH2D":
+            raise FloodMeshError(f"{path.name} is not an SMS 2DM mesh (no MESH2D line)")
+        for line in fh:
+            parts = line.split()
+            if not parts:
+                continue
+            if parts[0] == "ND":
+                nodes[int(parts[1])] = (float(parts[2]), float(parts[3]), float(parts[4]))
+            elif parts[0] == "E3T":
+                tris.append((int(parts[2]), int(parts[3]), int(parts[4])))
+            elif parts[0] in ("E4Q", "E6T", "E8Q", "E9Q"):
+                raise FloodMeshError(f"{path.name} has {parts[0]} elements; only triangles (E3T) "
+                                     "are supported")
+    ids = np.array(sorted(nodes))
+    index = {nid: i for i, nid in enumerate(ids)}
+    node_arr = np.array([nodes[i] for i in ids], dtype=float).reshape(-1, 3)
+    tri_arr = np.array([[index[a], index[b], index[c]] for a, b, c in tris], dtype=np.int64)
+    return node_arr, tri_arr.reshape(-1, 3)
+
+
+def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, layer="triangles"):
+    """Write the mesh's triangles as PolygonZ features (id, area_m2, min_angle_deg)."""
+    from .mesh import triangle_angles, triangle_areas
+
+    areas = triangle_areas(nodes, triangles)
+    min_angles = triangle_angles(nodes, triangles).min(axis=1)
+    coords = nodes[triangles].tolist()
+    records = ({"geometry": {"type": "Polygon", "coordinates": [[*map(tuple, c), tuple(c[0])]]},
+                "properties": {"id": i + 1, "area_m2": float(areas[i]),
+                               "min_angle_deg": float(min_angles[i])}}
+               for i, c in enumerate(coords))
+    _write_gpkg(path, layer, "3D Polygon",
+                {"id": "int", "area_m2": "float", "min_angle_deg": "float"}, records, crs)
+
+
+def write_json(path, data: dict) -> None:
+    with atomic_output(path) as tmp:
+        with open(tmp, "w") as fh:
+            json.dump(data, fh, indent=2, sort_keys=False)
+            fh.write("\n")

@@ -1,0 +1,203 @@
+"""Meshing: break lines and the domain boundary as a PSLG, refined by Triangle.
+
+``triangulate_pslg`` is the only function that calls Triangle (Shewchuk's library is free for
+non-commercial use only), so another backend can replace it in one place.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from pyproj import CRS
+
+from .errors import FloodMeshError
+from .raster import Grid, bilinear
+
+MAX_MIN_ANGLE = 34.0  # Triangle's refinement stops terminating reliably above about 33.8 degrees
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """A triangular mesh: ``nodes`` (n, 3) x, y, z in metres, ``triangles`` (m, 3) node indices,
+    counter-clockwise."""
+
+    nodes: np.ndarray
+    triangles: np.ndarray
+    crs: CRS
+
+
+@dataclass(frozen=True)
+class PSLG:
+    """A planar straight line graph in Triangle's terms: ``vertices`` (n, 2), ``segments`` (s, 2)
+    vertex index pairs, ``holes`` (h, 2) a point inside each hole."""
+
+    vertices: np.ndarray
+    segments: np.ndarray
+    holes: np.ndarray
+
+
+def domain_from_dem(dem: Grid, *, min_area: float = 0.0):
+    """The area of valid DEM cells as a (Multi)Polygon through the outer cell centres.
+
+    Parts smaller than ``min_area`` (m²) are dropped; the staircase outline is simplified within
+    half a cell.
+    """
+    from rasterio.features import shapes
+
+    valid = np.isfinite(dem.values).astype(np.uint8)
+    parts = [shapely.geometry.shape(geom) for geom, value in
+             shapes(valid, mask=valid.astype(bool), transform=dem.transform, connectivity=4)
+             if value == 1]
+    d = dem.cell_size
+    domain = shapely.unary_union(parts).buffer(-d / 2, join_style="mitre")
+    domain = domain.simplify(d / 2, preserve_topology=True)
+    polygons = [p for p in getattr(domain, "geoms", [domain])
+                if p.geom_type == "Polygon" and p.area > max(min_area, 4 * d * d)]
+    if not polygons:
+        raise FloodMeshError("the DEM has no area of valid cells large enough to mesh; check its "
+                             "nodata and the cell size")
+    return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
+
+
+def build_pslg(lines: list[np.ndarray], domain, *, snap: float) -> PSLG:
+    """PSLG of break lines (x, y[, z] arrays) inside ``domain`` plus its boundary.
+
+    Lines are clipped to the domain shrunk by ``snap`` (m) so that none ends on or near the
+    boundary; all lines are noded at their crossings on a ``snap``/5 precision grid, which also
+    merges vertices closer than that.
+    """
+    if not snap > 0:
+        raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
+    inner = domain.buffer(-snap)
+    pieces = [shapely.LineString(np.asarray(c)[:, :2]) for c in lines if len(c) >= 2]
+    clipped = shapely.intersection(pieces, inner) if pieces else []
+    geoms = [domain.boundary] + [g for g in clipped if not g.is_empty]
+    noded = shapely.unary_union(geoms, grid_size=snap / 5)
+    parts = [g for g in getattr(noded, "geoms", [noded]) if g.geom_type == "LineString"]
+    coords = [np.asarray(p.coords)[:, :2] for p in parts]
+    allpts = np.concatenate(coords)
+    vertices, inverse = np.unique(np.round(allpts / (snap / 5)).astype(np.int64), axis=0,
+                                  return_inverse=True)
+    inverse = inverse.ravel()
+    segments = []
+    offset = 0
+    for c in coords:
+        idx = inverse[offset:offset + len(c)]
+        segments.append(np.column_stack([idx[:-1], idx[1:]]))
+        offset += len(c)
+    segments = np.concatenate(segments)
+    segments = segments[segments[:, 0] != segments[:, 1]]
+    segments = np.unique(np.sort(segments, axis=1), axis=0)
+    vertices = vertices * (snap / 5)
+    holes = [shapely.Polygon(ring).representative_point().coords[0]
+             for poly in getattr(domain, "geoms", [domain]) for ring in poly.interiors]
+    return PSLG(vertices.astype(float), segments.astype(np.int32),
+                np.asarray(holes, float).reshape(-1, 2))
+
+
+def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
+                     conforming: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Quality triangulation of a PSLG with Triangle (Shewchuk 1996, doi:10.1007/BFb0014497).
+
+    No angle below ``min_angle`` degrees (except at small input angles), no triangle above
+    ``max_area`` m²; ``conforming`` asks for a conforming Delaunay triangulation (switch D).
+    Returns vertices (n, 2), the PSLG's vertices first, and triangles (m, 3).
+    """
+    import triangle
+
+    if not 0 < min_angle <= MAX_MIN_ANGLE:
+        raise FloodMeshError(
+            f"minimum angle must be above 0 and at most {MAX_MIN_ANGLE} degrees, got {min_angle}: "
+            "above that Delaunay refinement may never finish (25 to 30 is usual)")
+    if not max_area > 0:
+        raise FloodMeshError(f"maximum triangle area must be positive m², got {max_area}")
+    origin = pslg.vertices.min(axis=0)
+    data = {"vertices": pslg.vertices - origin, "segments": pslg.segments}
+    if len(pslg.holes):
+        data["holes"] = pslg.holes - origin
+    switches = f"pq{min_angle:.6g}a{max_area:.6g}{'D' if conforming else ''}"
+    result = triangle.triangulate(data, switches)
+    if "triangles" not in result or len(result["triangles"]) == 0:
+        raise FloodMeshError("Triangle produced no triangles: the domain boundary is not closed "
+                             "or a hole point lies outside its hole")
+    return result["vertices"] + origin, result["triangles"].astype(np.int64)
+
+
+def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
+               max_area: float = 100.0, conforming: bool = True, snap: float | None = None,
+               domain=None) -> Mesh:
+    """Mesh the DEM's valid area honouring the break lines; node z from the lines where a node is
+    a break-line vertex, else bilinear from the DEM."""
+    snap = dem.cell_size / 4 if snap is None else snap
+    domain = domain_from_dem(dem) if domain is None else domain
+    pslg = build_pslg(lines, domain, snap=snap)
+    vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
+                                           conforming=conforming)
+    z = bilinear(dem, vertices[:, 0], vertices[:, 1])
+    known = _line_vertex_z(lines, precision=snap / 5)
+    if known:
+        keys = map(tuple, np.round(vertices / (snap / 5)).astype(np.int64).tolist())
+        for i, key in enumerate(keys):
+            value = known.get(key)
+            if value is not None and np.isfinite(value):
+                z[i] = value
+    if not np.isfinite(z).all():
+        raise FloodMeshError(f"{int((~np.isfinite(z)).sum())} mesh nodes fall where the DEM has no "
+                             "data; check the domain against the DEM's nodata")
+    return Mesh(np.column_stack([vertices, z]), _counter_clockwise(vertices, triangles), dem.crs)
+
+
+def _line_vertex_z(lines, precision):
+    known = {}
+    for c in lines:
+        c = np.asarray(c)
+        if c.shape[1] < 3:
+            continue
+        for key, zval in zip(map(tuple, np.round(c[:, :2] / precision).astype(np.int64).tolist()),
+                             c[:, 2]):
+            known[key] = zval
+    return known
+
+
+def _counter_clockwise(xy, triangles):
+    p = xy[triangles]
+    cross = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+             - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+    out = triangles.copy()
+    out[cross < 0] = out[cross < 0][:, [0, 2, 1]]
+    return out
+
+
+def triangle_areas(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Plan areas (m²) of the triangles; negative for clockwise ones."""
+    p = nodes[triangles][:, :, :2]
+    return 0.5 * ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                  - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+
+
+def triangle_angles(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Interior plan angles (m, 3) in degrees at each triangle's three corners."""
+    p = nodes[triangles][:, :, :2]
+    angles = np.empty((len(triangles), 3))
+    for k in range(3):
+        u = p[:, (k + 1) % 3] - p[:, k]
+        v = p[:, (k + 2) % 3] - p[:, k]
+        cos = (u * v).sum(axis=1) / (np.hypot(*u.T) * np.hypot(*v.T))
+        angles[:, k] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return angles
+
+
+def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
+    """Smallest angle, largest area, and how many triangles break either bound."""
+    areas = triangle_areas(mesh.nodes, mesh.triangles)
+    min_angles = triangle_angles(mesh.nodes, mesh.triangles).min(axis=1)
+    return {
+        "nodes": int(len(mesh.nodes)),
+        "triangles": int(len(mesh.triangles)),
+        "min_angle_deg": float(min_angles.min()),
+        "max_area_m2": float(areas.max()),
+        "n_below_min_angle": int((min_angles < min_angle - 1e-6).sum()),
+        "n_above_max_area": int((areas > max_area * (1 + 1e-9)).sum()),
+        "all_counter_clockwise": bool((areas > 0).all()),
+    }

@@ -1,0 +1,179 @@
+"""The whole chain, points → grid → slope → breakpoints → break lines → mesh → assessment,
+with every intermediate written to an output folder and a report of figures and timings."""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from . import io
+from .accuracy import accuracy_statistics, residual_class, residuals
+from .breaklines import trace_breaklines
+from .breakpoints import classify_breakpoints
+from .errors import Cancelled, FloodMeshError
+from .grid import grid_points_linear
+from .mesh import build_mesh, mesh_quality
+from .points import PointCloud, split_holdout
+from .raster import Grid
+from .simplify import max_deviation, simplify_douglas_peucker, simplify_keep_every
+from .slope import slope
+
+OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
+                "mesh.gpkg", "residuals.gpkg", "report.json")
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Parameters of the whole chain; the defaults are the method's reference case."""
+
+    cell_size: float = 1.0          # d, m
+    slope_method: str = "one-over-distance"
+    s_crit: float = 10.0            # critical slope, degrees
+    keep_every: int | None = None   # keep every n-th break-line point (default 4) ...
+    tolerance: float | None = None  # ... or Douglas–Peucker within this many metres
+    min_angle: float = 25.0         # degrees
+    max_area: float = 100.0         # m²
+    holdout: float = 0.001          # fraction of points held out for assessment
+    seed: int = 0
+    max_gap: float | None = None    # m; default 10 cell sizes
+    tracing_mode: str = "auto"
+    min_points: int = 3
+    crs: str | None = None
+    classes: tuple[int, ...] | None = None
+
+    def simplification(self) -> tuple[str, float]:
+        if self.keep_every is not None and self.tolerance is not None:
+            raise FloodMeshError("give either keep-every or tolerance for simplification, not both")
+        if self.tolerance is not None:
+            return "douglas-peucker", float(self.tolerance)
+        return "keep-every", float(4 if self.keep_every is None else self.keep_every)
+
+
+class _Steps:
+    """Times each step, reports overall progress and checks for cancellation between steps."""
+
+    def __init__(self, weights: dict, progress, cancelled, log):
+        self.weights, self.total = weights, float(sum(weights.values()))
+        self.progress, self.cancelled, self.log = progress, cancelled, log
+        self.done, self.seconds = 0.0, {}
+
+    def run(self, name: str, func: Callable, *args, **kwargs):
+        if self.cancelled and self.cancelled():
+            raise Cancelled()
+        if self.log:
+            self.log(f"{name}...")
+        start = time.perf_counter()
+        weight = self.weights.get(name, 1.0)
+        if "progress" in kwargs and self.progress:
+            base = self.done
+            kwargs["progress"] = lambda f: self.progress((base + f * weight) / self.total)
+        result = func(*args, **kwargs)
+        self.seconds[name] = round(time.perf_counter() - start, 3)
+        self.done += weight
+        if self.progress:
+            self.progress(self.done / self.total)
+        return result
+
+
+def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
+                 progress: Callable[[float], None] | None = None,
+                 cancelled: Callable[[], bool] | None = None,
+                 log: Callable[[str], None] | None = None) -> dict:
+    """Run the whole chain on a point file or DEM and write ``OUTPUT_FILES`` into ``out_dir``.
+
+    ``progress`` receives the overall fraction done (0–1), ``cancelled`` is polled between and
+    inside long steps (raising ``Cancelled``), ``log`` receives step names. Returns the report.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    method, amount = options.simplification()
+    steps = _Steps({"read": 1, "grid": 4, "slope": 1, "breakpoints": 0.5, "breaklines": 1,
+                    "simplify": 0.5, "mesh": 2, "assess": 1, "write": 2}, progress, cancelled, log)
+    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes)
+    if isinstance(data, PointCloud):
+        gridding, holdout = split_holdout(data, options.holdout, options.seed)
+        dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
+                        max_gap=options.max_gap, progress=None)
+        holdout_source = "LiDAR points withheld from gridding"
+        n_points = len(data)
+    else:
+        dem = data  # a DEM keeps its own cell size
+        holdout = _dem_check_points(dem, options.holdout, options.seed)
+        holdout_source = "DEM cell centres (not independent of the DEM)"
+        n_points = 0
+    slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
+    breakpoints = steps.run("breakpoints", classify_breakpoints, slope_grid, options.s_crit)
+    traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
+                       options.s_crit, mode=options.tracing_mode, min_points=options.min_points)
+    if method == "douglas-peucker":
+        lines = steps.run("simplify", simplify_douglas_peucker, traced, amount)
+    else:
+        lines = steps.run("simplify", simplify_keep_every, traced, int(amount))
+    mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines],
+                     min_angle=options.min_angle, max_area=options.max_area)
+    res = steps.run("assess", residuals, mesh, holdout.xyz)
+
+    delta = dem.cell_size / 2
+    deviation = max((max_deviation(a, b) for a, b in zip(traced, lines)), default=0.0)
+    alpha = amount / delta if method == "douglas-peucker" else deviation / delta
+    quality = mesh_quality(mesh, min_angle=options.min_angle, max_area=options.max_area)
+    stats = accuracy_statistics(res, alpha=alpha, delta=delta)
+
+    def write_all():
+        valid = np.isfinite(dem.values)
+        io.write_raster(out / "dem.tif", dem)
+        io.write_raster(out / "slope.tif", slope_grid)
+        io.write_raster(out / "breakpoints.tif", breakpoints, valid=valid)
+        io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs)
+        io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles)
+        io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
+        tin_z = holdout.xyz[:, 2] - res
+        io.write_points_gpkg(out / "residuals.gpkg", holdout.xyz, dem.crs, layer="residuals",
+                             attributes={"residual_m": res, "tin_z": tin_z,
+                                         "class": residual_class(res)})
+
+    steps.run("write", write_all)
+    report = {
+        "input": str(input_path),
+        "crs": dem.crs.to_string(),
+        "options": {k: v for k, v in asdict(options).items()},
+        "n_points": n_points,
+        "holdout_source": holdout_source,
+        "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
+                 "valid_cells": int(np.isfinite(dem.values).sum())},
+        "n_breakpoints": int(breakpoints.values.sum()),
+        "n_breaklines_traced": len(traced),
+        "n_breaklines": len(lines),
+        "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
+        "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
+        "simplification": {"method": method, "value": amount,
+                           "max_deviation_m": deviation},
+        **quality,
+        **stats,
+        "seconds": steps.seconds,
+    }
+    io.write_json(out / "report.json", _jsonable(report))
+    return report
+
+
+def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
+    rows, cols = np.nonzero(np.isfinite(dem.values))
+    n = max(int(round(fraction * rows.size)), min(rows.size, 30))
+    pick = np.random.default_rng(seed).choice(rows.size, size=n, replace=False)
+    x, y = dem.cell_centres(rows[pick], cols[pick])
+    return PointCloud(np.column_stack([x, y, dem.values[rows[pick], cols[pick]]]), dem.crs)
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (np.floating, float)):
+        return None if not np.isfinite(value) else float(value)
+    return value

@@ -1,0 +1,132 @@
+"""The small georeferenced grid type every raster step takes and returns."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from affine import Affine
+from pyproj import CRS
+
+from .errors import FloodMeshError
+
+METRE_NAMES = {"metre", "meter", "metres", "meters"}
+
+
+def require_metric_crs(crs, what: str) -> CRS:
+    """Return ``crs`` as a pyproj CRS, refusing none, geographic and non-metre CRSs."""
+    if crs is None:
+        raise FloodMeshError(
+            f"{what} has no coordinate reference system: give one with --crs EPSG:XXXX "
+            "(a projected CRS in metres, e.g. the UTM zone of the survey)")
+    try:
+        crs = CRS.from_user_input(crs)
+    except Exception as exc:  # pyproj raises CRSError with a technical message
+        raise FloodMeshError(f"{what}: cannot understand the CRS {crs!r} ({exc}); "
+                             "give it as EPSG:XXXX") from None
+    if crs.is_geographic:
+        raise FloodMeshError(
+            f"{what} is in a geographic CRS ({crs.name}, degrees): slopes and areas need metres. "
+            "Reproject it to a projected CRS in metres first (e.g. gdalwarp -t_srs EPSG:326XX, "
+            "or pdal translate with filters.reprojection for point clouds)")
+    unit = crs.axis_info[0].unit_name.lower() if crs.axis_info else ""
+    if unit not in METRE_NAMES:
+        raise FloodMeshError(
+            f"{what} has horizontal units of '{unit or 'unknown'}' ({crs.name}); FloodMesh works in "
+            "metres. Reproject the data to a CRS in metres (e.g. the matching UTM zone) first")
+    return crs
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A north-up raster with square cells: ``values`` (rows, cols), NaN where there is no data.
+
+    ``transform`` maps (col, row) to map coordinates of the cell's upper-left corner, as in
+    GDAL/rasterio; ``crs`` is a projected CRS in metres. Integer grids (breakpoints) have no NaN;
+    their nodata cells are those given by ``valid`` when written.
+    """
+
+    values: np.ndarray
+    transform: Affine
+    crs: CRS
+
+    def __post_init__(self):
+        if self.values.ndim != 2:
+            raise FloodMeshError(f"a grid must be 2-D, got {self.values.ndim}-D")
+        t = self.transform
+        if t.b != 0 or t.d != 0:
+            raise FloodMeshError("the raster is rotated (its geotransform has rotation terms): "
+                                 "warp it to a north-up grid first (gdalwarp)")
+        if t.e >= 0:
+            raise FloodMeshError("the raster is not north-up (positive y pixel size): "
+                                 "warp it to a north-up grid first (gdalwarp)")
+        if not np.isclose(t.a, -t.e, rtol=1e-6):
+            raise FloodMeshError(
+                f"the raster's cells are not square ({t.a} x {-t.e} m): resample it to square "
+                "cells first (gdalwarp -tr D D)")
+
+    @property
+    def cell_size(self) -> float:
+        """Cell size d in metres."""
+        return float(self.transform.a)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.values.shape
+
+    def with_values(self, values: np.ndarray) -> "Grid":
+        """The same georeference with other values of the same shape."""
+        if values.shape != self.values.shape:
+            raise ValueError(f"shape {values.shape} differs from the grid's {self.values.shape}")
+        return Grid(values, self.transform, self.crs)
+
+    def cell_centres(self, rows, cols) -> tuple[np.ndarray, np.ndarray]:
+        """Map coordinates (x, y) of the centres of cells (rows, cols)."""
+        t = self.transform
+        x = t.c + (np.asarray(cols) + 0.5) * t.a
+        y = t.f + (np.asarray(rows) + 0.5) * t.e
+        return x, y
+
+    def fractional_index(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """(row, col) as floats of map points, with cell centres at whole numbers."""
+        t = self.transform
+        col = (np.asarray(x) - t.c) / t.a - 0.5
+        row = (np.asarray(y) - t.f) / t.e - 0.5
+        return row, col
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) of the cell edges."""
+        t = self.transform
+        rows, cols = self.shape
+        return t.c, t.f + rows * t.e, t.c + cols * t.a, t.f
+
+
+def bilinear(grid: Grid, x, y) -> np.ndarray:
+    """Elevation at map points by bilinear interpolation between cell centres.
+
+    Points beyond the outer cell centres take the nearest edge values; NaN neighbours are left
+    out and the remaining weights renormalised, so only points with no valid neighbour get NaN.
+    """
+    z = grid.values
+    rows, cols = z.shape
+    r, c = grid.fractional_index(x, y)
+    r = np.clip(r, 0, rows - 1)
+    c = np.clip(c, 0, cols - 1)
+    r0 = np.minimum(np.floor(r).astype(np.int64), max(rows - 2, 0))
+    c0 = np.minimum(np.floor(c).astype(np.int64), max(cols - 2, 0))
+    r1 = np.minimum(r0 + 1, rows - 1)
+    c1 = np.minimum(c0 + 1, cols - 1)
+    fr = r - r0
+    fc = c - c0
+    total = np.zeros(np.shape(r))
+    weight = np.zeros(np.shape(r))
+    for rr, cc, w in ((r0, c0, (1 - fr) * (1 - fc)), (r0, c1, (1 - fr) * fc),
+                      (r1, c0, fr * (1 - fc)), (r1, c1, fr * fc)):
+        v = z[rr, cc]
+        ok = np.isfinite(v)
+        total += np.where(ok, v, 0.0) * w
+        weight += np.where(ok, w, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = total / weight
+    # A point exactly on a NaN-free side can get zero total weight only if every neighbour is NaN.
+    return np.where(weight > 1e-12, out, np.nan)
