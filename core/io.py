@@ -95,6 +95,8 @@ def _read_las(path: Path, classes):
 
 
 def _read_xyz(path: Path) -> np.ndarray:
+    if path.stat().st_size == 0:
+        raise FloodMeshError(f"{path.name} is empty: it holds no points")
     with open(path, "r", errors="replace") as fh:
         head = [fh.readline() for _ in range(5)]
     delimiter = "," if any("," in line for line in head) else (";" if any(";" in line for line in head) else None)

@@ -1,0 +1,1 @@
+"""One Processing algorithm per pipeline step, each a thin wrapper over one core call."""

@@ -1,0 +1,148 @@
+"""LiDAR to mesh: the whole FloodMesh chain in one Processing algorithm."""
+from pathlib import Path
+
+from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingContext,
+                       QgsProcessingException, QgsProcessingOutputFile,
+                       QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
+                       QgsProcessingParameterCrs, QgsProcessingParameterEnum,
+                       QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
+                       QgsProcessingParameterNumber, QgsVectorLayer)
+from qgis.PyQt.QtCore import QCoreApplication
+
+from ..core.errors import Cancelled, FloodMeshError
+from ..core.pipeline import RunOptions, run_pipeline
+from ..core.slope import SLOPE_METHODS
+
+INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
+                "All files (*.*)")
+METHODS = list(SLOPE_METHODS)
+
+
+class LidarToMeshAlgorithm(QgsProcessingAlgorithm):
+    INPUT = "INPUT"
+    CRS = "CRS"
+    CELL_SIZE = "CELL_SIZE"
+    SLOPE_METHOD = "SLOPE_METHOD"
+    CRITICAL_SLOPE = "CRITICAL_SLOPE"
+    KEEP_EVERY = "KEEP_EVERY"
+    MIN_ANGLE = "MIN_ANGLE"
+    MAX_AREA = "MAX_AREA"
+    HOLDOUT = "HOLDOUT"
+    SEED = "SEED"
+    OUTPUT_FOLDER = "OUTPUT_FOLDER"
+    BREAKLINES = "BREAKLINES"
+    MESH = "MESH"
+    REPORT = "REPORT"
+    NODES = "NODES"
+    TRIANGLES = "TRIANGLES"
+    RMSE = "RMSE"
+
+    def name(self):
+        return "lidartomesh"
+
+    def displayName(self):  # noqa: N802
+        return self.tr("LiDAR to mesh")
+
+    def group(self):
+        return self.tr("Workflows")
+
+    def groupId(self):  # noqa: N802
+        return "workflows"
+
+    def shortHelpString(self):  # noqa: N802
+        return self.tr(
+            "Runs the whole FloodMesh chain on a LiDAR point file (LAS/LAZ ground class, XYZ/CSV) "
+            "or a DEM: grid (cell size d, m), slope (degrees), breakpoints (slope ≥ S_crit), "
+            "break lines, simplification (every n-th point), a Triangle mesh with a minimum "
+            "angle (degrees) and maximum area (m²), and the residuals of held-out points. "
+            "Defaults are the method's reference case: 1 m grid, one-over-distance slope, "
+            "S_crit 10°, every 4th point, 25°, 100 m². Writes dem.tif, slope.tif, "
+            "breakpoints.tif, breaklines.gpkg, mesh.2dm, mesh.gpkg, residuals.gpkg and "
+            "report.json into the output folder, and loads the break lines and the mesh.")
+
+    def createInstance(self):  # noqa: N802
+        return type(self)()
+
+    def tr(self, text):
+        return QCoreApplication.translate("FloodMesh", text)
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        defaults = RunOptions()
+        self.addParameter(QgsProcessingParameterFile(
+            self.INPUT, self.tr("LiDAR points or DEM"), fileFilter=INPUT_FILTER))
+        self.addParameter(QgsProcessingParameterCrs(
+            self.CRS, self.tr("CRS of the input (when the file has none)"), optional=True))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.CELL_SIZE, self.tr("Grid cell size d (m)"), QgsProcessingParameterNumber.Double,
+            defaults.cell_size, minValue=0.01))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.SLOPE_METHOD, self.tr("Slope method"), options=METHODS,
+            defaultValue=METHODS.index(defaults.slope_method)))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
+            QgsProcessingParameterNumber.Double, defaults.s_crit, minValue=0.01, maxValue=89.99))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.KEEP_EVERY, self.tr("Keep every n-th break-line point"),
+            QgsProcessingParameterNumber.Integer, 4, minValue=1))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),
+            QgsProcessingParameterNumber.Double, defaults.min_angle, minValue=0.01, maxValue=34))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_AREA, self.tr("Maximum triangle area (m²)"),
+            QgsProcessingParameterNumber.Double, defaults.max_area, minValue=0.0001))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.HOLDOUT, self.tr("Fraction of points held out for assessment"),
+            QgsProcessingParameterNumber.Double, defaults.holdout, minValue=0, maxValue=0.5))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.SEED, self.tr("Random seed"), QgsProcessingParameterNumber.Integer,
+            defaults.seed))
+        self.addParameter(QgsProcessingParameterFolderDestination(
+            self.OUTPUT_FOLDER, self.tr("Output folder")))
+        self.addOutput(QgsProcessingOutputVectorLayer(
+            self.BREAKLINES, self.tr("Break lines"), QgsProcessing.TypeVectorLine))
+        self.addOutput(QgsProcessingOutputFile(self.MESH, self.tr("Mesh (SMS 2DM)")))
+        self.addOutput(QgsProcessingOutputFile(self.REPORT, self.tr("Report (JSON)")))
+        self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Mesh nodes")))
+        self.addOutput(QgsProcessingOutputNumber(self.TRIANGLES, self.tr("Mesh triangles")))
+        self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("Holdout RMSE (m)")))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        crs = self.parameterAsCrs(parameters, self.CRS, context)
+        options = RunOptions(
+            cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
+            slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],
+            s_crit=self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
+            keep_every=self.parameterAsInt(parameters, self.KEEP_EVERY, context),
+            min_angle=self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
+            max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
+            holdout=self.parameterAsDouble(parameters, self.HOLDOUT, context),
+            seed=self.parameterAsInt(parameters, self.SEED, context),
+            crs=crs.toWkt() if crs.isValid() else None,
+        )
+        source = self.parameterAsFile(parameters, self.INPUT, context)
+        out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
+        try:
+            report = run_pipeline(source, out, options,
+                                  progress=lambda f: feedback.setProgress(100 * f),
+                                  cancelled=feedback.isCanceled, log=feedback.pushInfo)
+        except FloodMeshError as exc:
+            raise QgsProcessingException(str(exc)) from None
+        except Cancelled:
+            raise QgsProcessingException(self.tr("Cancelled; no partial output was written"))
+        breaklines = str(out / "breaklines.gpkg")
+        mesh = str(out / "mesh.2dm")
+        _load_on_completion(context, QgsVectorLayer(breaklines, "Break lines", "ogr"),
+                            self.BREAKLINES)
+        _load_on_completion(context, QgsMeshLayer(mesh, "Mesh", "mdal"), self.MESH)
+        return {self.OUTPUT_FOLDER: str(out), self.BREAKLINES: breaklines, self.MESH: mesh,
+                self.REPORT: str(out / "report.json"), self.NODES: report["nodes"],
+                self.TRIANGLES: report["triangles"], self.RMSE: report["rmse_m"]}
+
+
+def _load_on_completion(context, layer, output_name):
+    """Hand a finished layer to QGIS to add to the project when the algorithm ends."""
+    if not layer.isValid():
+        raise QgsProcessingException(f"the output {layer.source()} could not be opened by QGIS")
+    context.temporaryLayerStore().addMapLayer(layer)
+    context.addLayerToLoadOnCompletion(
+        layer.id(), QgsProcessingContext.LayerDetails(layer.name(), context.project(), output_name))

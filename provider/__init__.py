@@ -1,0 +1,1 @@
+"""The QGIS side of FloodMesh: the plugin class and the Processing provider."""

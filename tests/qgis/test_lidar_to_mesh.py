@@ -1,0 +1,102 @@
+"""The "LiDAR to mesh" algorithm in real QGIS: through processing.run and through qgis_process,
+with its mesh read back by QGIS's own mesh reader (MDAL)."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+
+import pytest
+from qgis.core import QgsMeshLayer, QgsProcessingContext, QgsProcessingFeedback, QgsVectorLayer
+
+from floodmesh.core import io
+
+from ..conftest import REPO
+
+
+def _mesh_counts(path):
+    layer = QgsMeshLayer(str(path), "mesh", "mdal")
+    assert layer.isValid(), f"QGIS cannot open {path} as a mesh"
+    provider = layer.dataProvider()
+    return provider.vertexCount(), provider.faceCount()
+
+
+def test_processing_run_writes_and_loads_the_mesh(processing, demo_points_file, tmp_path):
+    out = tmp_path / "run"
+    context = QgsProcessingContext()
+    result = processing.run("floodmesh:lidartomesh", {
+        "INPUT": str(demo_points_file), "CELL_SIZE": 1.0, "CRITICAL_SLOPE": 10.0,
+        "KEEP_EVERY": 4, "MIN_ANGLE": 25.0, "MAX_AREA": 100.0, "HOLDOUT": 0.01, "SEED": 0,
+        "OUTPUT_FOLDER": str(out)}, context=context, feedback=QgsProcessingFeedback())
+    report = json.loads((out / "report.json").read_text())
+    nodes, faces = _mesh_counts(result["MESH"])
+    assert (nodes, faces) == (report["nodes"], report["triangles"])
+    assert (result["NODES"], result["TRIANGLES"]) == (nodes, faces)
+    assert report["min_angle_deg"] >= 25.0 - 1e-6 and report["max_area_m2"] <= 100.0
+    lines = QgsVectorLayer(result["BREAKLINES"], "lines", "ogr")
+    assert lines.isValid() and lines.featureCount() == report["n_breaklines"] > 10
+    # both layers are handed to QGIS to load when the algorithm ends
+    to_load = context.layersToLoadOnCompletion()
+    names = {details.name for details in to_load.values()}
+    assert names == {"Break lines", "Mesh"}
+
+
+def test_bad_input_is_a_processing_exception(processing, tmp_path):
+    from qgis.core import QgsProcessingException
+
+    bad = tmp_path / "empty.xyz"
+    bad.write_text("")
+    with pytest.raises(QgsProcessingException, match="is empty"):
+        processing.run("floodmesh:lidartomesh", {"INPUT": str(bad), "CRS": "EPSG:25832",
+                                                 "OUTPUT_FOLDER": str(tmp_path / "out")})
+    assert not (tmp_path / "out" / "mesh.2dm").exists()
+
+
+def _qgis_process_env(home):
+    env = dict(os.environ)
+    env.update(QT_QPA_PLATFORM="offscreen", HOME=str(home), XDG_DATA_HOME=str(home / "data"),
+               QGIS_PLUGINPATH=str(REPO / "build" / "plugins"),
+               PYTHONPATH=sysconfig.get_paths()["purelib"])
+    return env
+
+
+@pytest.fixture(scope="module")
+def qgis_process(tmp_path_factory):
+    exe = shutil.which("qgis_process.bin") or shutil.which("qgis_process")
+    if exe is None:
+        pytest.skip("qgis_process is not installed")
+    if not (REPO / "build" / "plugins" / "floodmesh").exists():
+        pytest.skip("build/plugins/floodmesh is missing: run scripts/setup.sh")
+    home = tmp_path_factory.mktemp("qgis-home")
+    env = _qgis_process_env(home)
+    enable = subprocess.run([exe, "plugins", "enable", "floodmesh"], env=env,
+                            capture_output=True, text=True, timeout=120)
+    assert enable.returncode == 0, enable.stdout + enable.stderr
+    return exe, env
+
+
+def test_qgis_process_runs_the_algorithm(qgis_process, demo_points_file, tmp_path):
+    exe, env = qgis_process
+    out = tmp_path / "headless"
+    run = subprocess.run(
+        [exe, "run", "floodmesh:lidartomesh", "--json", "--", f"INPUT={demo_points_file}",
+         "MAX_AREA=200", "HOLDOUT=0.01", f"OUTPUT_FOLDER={out}"],
+        env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    results = json.loads(run.stdout[run.stdout.index("{"):])["results"]
+    nodes, triangles = io.read_mesh_2dm(results["MESH"])
+    assert results["NODES"] == len(nodes) and results["TRIANGLES"] == len(triangles)
+    assert _mesh_counts(results["MESH"]) == (len(nodes), len(triangles))
+    assert json.loads((out / "report.json").read_text())["max_area_m2"] <= 200
+
+
+def test_qgis_process_reports_bad_input_without_traceback(qgis_process, tmp_path):
+    exe, env = qgis_process
+    run = subprocess.run(
+        [exe, "run", "floodmesh:lidartomesh", "--", f"INPUT={tmp_path / 'missing.laz'}",
+         f"OUTPUT_FOLDER={tmp_path / 'out'}"], env=env, capture_output=True, text=True,
+        timeout=120)
+    assert run.returncode != 0
+    assert "does not exist" in run.stdout + run.stderr
+    assert "Traceback" not in run.stdout + run.stderr
