@@ -5,7 +5,7 @@ non-commercial use only), so another backend can replace it in one place.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
@@ -25,6 +25,8 @@ class Mesh:
     nodes: np.ndarray
     triangles: np.ndarray
     crs: CRS
+    segments: np.ndarray = field(default_factory=lambda: np.empty((0, 2), np.int64))
+    """Input (PSLG) segments as node index pairs."""
 
 
 @dataclass(frozen=True)
@@ -60,12 +62,15 @@ def domain_from_dem(dem: Grid, *, min_area: float = 0.0):
     return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 
-def build_pslg(lines: list[np.ndarray], domain, *, snap: float) -> PSLG:
+def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
+               min_angle: float | None = None) -> PSLG:
     """PSLG of break lines (x, y[, z] arrays) inside ``domain`` plus its boundary.
 
     Lines are clipped to the domain shrunk by ``snap`` (m) so that none ends on or near the
     boundary; all lines are noded at their crossings on a ``snap``/5 precision grid, which also
-    merges vertices closer than that.
+    merges vertices closer than that. With ``min_angle`` (degrees), break-line segments that
+    meet another segment at less than that angle are dropped: Triangle cannot refine the
+    triangles in such a corner, so they would break the angle bound.
     """
     if not snap > 0:
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
@@ -90,10 +95,53 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float) -> PSLG:
     segments = segments[segments[:, 0] != segments[:, 1]]
     segments = np.unique(np.sort(segments, axis=1), axis=0)
     vertices = vertices * (snap / 5)
+    if min_angle is not None:
+        on_boundary = shapely.distance(
+            shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 10
+        segments = _drop_small_angles(vertices, segments, on_boundary, min_angle)
+        used = np.unique(segments)
+        renumber = np.full(len(vertices), -1)
+        renumber[used] = np.arange(len(used))
+        vertices, segments = vertices[used], renumber[segments]
     holes = [shapely.Polygon(ring).representative_point().coords[0]
              for poly in getattr(domain, "geoms", [domain]) for ring in poly.interiors]
     return PSLG(vertices.astype(float), segments.astype(np.int32),
                 np.asarray(holes, float).reshape(-1, 2))
+
+
+def _drop_small_angles(vertices, segments, fixed, min_angle):
+    """Remove non-``fixed`` segments until no two segments meet at less than ``min_angle``."""
+    keep = np.ones(len(segments), bool)
+    incident = {}
+    for k, (a, b) in enumerate(segments):
+        incident.setdefault(a, []).append(k)
+        incident.setdefault(b, []).append(k)
+    cos_limit = np.cos(np.radians(min_angle))
+    for v, ks in incident.items():
+        changed = True
+        while changed:
+            changed = False
+            live = [k for k in ks if keep[k]]
+            directions = {}
+            for k in live:
+                other = segments[k, 1] if segments[k, 0] == v else segments[k, 0]
+                d = vertices[other] - vertices[v]
+                directions[k] = d / np.hypot(*d)
+            for i, ki in enumerate(live):
+                for kj in live[i + 1:]:
+                    if directions[ki] @ directions[kj] > cos_limit:
+                        # drop the break-line segment whose far end has fewer other segments
+                        candidates = [k for k in (ki, kj) if not fixed[k]]
+                        if not candidates:
+                            continue
+                        drop = min(candidates, key=lambda k: len(
+                            incident[segments[k, 1] if segments[k, 0] == v else segments[k, 0]]))
+                        keep[drop] = False
+                        changed = True
+                        break
+                if changed:
+                    break
+    return segments[keep]
 
 
 def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
@@ -131,7 +179,7 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
     a break-line vertex, else bilinear from the DEM."""
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
-    pslg = build_pslg(lines, domain, snap=snap)
+    pslg = build_pslg(lines, domain, snap=snap, min_angle=min_angle)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
                                            conforming=conforming)
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
@@ -145,7 +193,8 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
     if not np.isfinite(z).all():
         raise FloodMeshError(f"{int((~np.isfinite(z)).sum())} mesh nodes fall where the DEM has no "
                              "data; check the domain against the DEM's nodata")
-    return Mesh(np.column_stack([vertices, z]), _counter_clockwise(vertices, triangles), dem.crs)
+    return Mesh(np.column_stack([vertices, z]), _counter_clockwise(vertices, triangles), dem.crs,
+                pslg.segments.astype(np.int64))
 
 
 def _line_vertex_z(lines, precision):
@@ -188,16 +237,44 @@ def triangle_angles(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return angles
 
 
+def input_corner_angles(nodes: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Smallest angle (degrees) between the input segments meeting at each node; 180 where fewer
+    than two segments meet."""
+    smallest = np.full(len(nodes), 180.0)
+    incident = {}
+    for a, b in segments:
+        incident.setdefault(a, []).append(b)
+        incident.setdefault(b, []).append(a)
+    for v, others in incident.items():
+        d = nodes[others, :2] - nodes[v, :2]
+        d /= np.hypot(*d.T)[:, None]
+        cos = np.clip(d @ d.T, -1, 1)
+        np.fill_diagonal(cos, -1)
+        smallest[v] = np.degrees(np.arccos(cos.max())) if len(others) > 1 else 180.0
+    return smallest
+
+
 def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
-    """Smallest angle, largest area, and how many triangles break either bound."""
+    """Smallest angle, largest area, and how many triangles break either bound.
+
+    A triangle whose smallest angle lies in a corner where input segments meet at less than
+    ``min_angle`` cannot be refined (the corner is input); those are counted apart.
+    """
     areas = triangle_areas(mesh.nodes, mesh.triangles)
-    min_angles = triangle_angles(mesh.nodes, mesh.triangles).min(axis=1)
+    angles = triangle_angles(mesh.nodes, mesh.triangles)
+    min_angles = angles.min(axis=1)
+    corner = input_corner_angles(mesh.nodes, mesh.segments)
+    at_node = mesh.triangles[np.arange(len(angles)), angles.argmin(axis=1)]
+    small = min_angles < min_angle - 1e-6
+    at_input_corner = small & (corner[at_node] < min_angle)
     return {
         "nodes": int(len(mesh.nodes)),
         "triangles": int(len(mesh.triangles)),
         "min_angle_deg": float(min_angles.min()),
         "max_area_m2": float(areas.max()),
-        "n_below_min_angle": int((min_angles < min_angle - 1e-6).sum()),
+        "n_below_min_angle": int((small & ~at_input_corner).sum()),
+        "n_small_input_angles": int(at_input_corner.sum()),
+        "smallest_input_angle_deg": float(corner.min()) if len(corner) else 180.0,
         "n_above_max_area": int((areas > max_area * (1 + 1e-9)).sum()),
         "all_counter_clockwise": bool((areas > 0).all()),
     }

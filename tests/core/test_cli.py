@@ -1,0 +1,107 @@
+"""The floodmesh command as scripts use it: the whole chain, each step, errors and Ctrl-C."""
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from floodmesh.core import io
+from floodmesh.core.pipeline import OUTPUT_FILES
+
+FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
+
+
+def floodmesh(*args, check=True):
+    result = subprocess.run([FLOODMESH, *map(str, args)], capture_output=True, text=True,
+                            timeout=600)
+    if check:
+        assert result.returncode == 0, result.stderr
+    return result
+
+
+def test_demo_writes_every_output_and_meets_the_bounds(tmp_path):
+    out = tmp_path / "demo"
+    floodmesh("demo", "--out", out)
+    for name in OUTPUT_FILES:
+        assert (out / name).stat().st_size > 0, name
+    report = json.loads((out / "report.json").read_text())
+    assert report["min_angle_deg"] >= 25.0 - 1e-6
+    assert report["max_area_m2"] <= 100.0
+    assert report["n_below_min_angle"] == 0 and report["n_above_max_area"] == 0
+    # 9 points/m² over 300 x 240 m, 0.1 % held out
+    assert report["n_holdout"] == round(0.001 * 9 * 300 * 240)
+    assert report["rmse_m"] < 0.10 and report["classes"]["<10 cm"] > 0.75
+    assert set(report["seconds"]) >= {"grid", "slope", "breakpoints", "breaklines", "mesh"}
+    nodes, triangles = io.read_mesh_2dm(out / "mesh.2dm")
+    assert (len(nodes), len(triangles)) == (report["nodes"], report["triangles"])
+
+
+def test_each_step_as_its_own_command(demo_points_file, tmp_path):
+    t = tmp_path
+    floodmesh("grid", demo_points_file, "--cell-size", 1, "--out", t / "dem.tif",
+              "--holdout", 0.01, "--seed", 3)
+    assert (t / "holdout.gpkg").exists()
+    floodmesh("slope", t / "dem.tif", "--method", "sharpnack-akin", "--out", t / "slope.tif")
+    floodmesh("breakpoints", t / "slope.tif", "--s-crit", 10, "--out", t / "bp.tif")
+    floodmesh("breaklines", t / "bp.tif", "--slope", t / "slope.tif", "--dem", t / "dem.tif",
+              "--out", t / "lines.gpkg")
+    floodmesh("simplify", t / "lines.gpkg", "--tolerance", 0.9, "--out", t / "simple.gpkg")
+    floodmesh("mesh", t / "dem.tif", "--breaklines", t / "simple.gpkg", "--min-angle", 28,
+              "--max-area", 50, "--out", t / "mesh.2dm", "--gpkg", t / "mesh.gpkg")
+    stats = json.loads(floodmesh("assess", t / "mesh.2dm", "--points", t / "holdout.gpkg",
+                                 "--out", t / "res.gpkg").stdout)
+    traced, simple = io.read_lines_gpkg(t / "lines.gpkg"), io.read_lines_gpkg(t / "simple.gpkg")
+    assert len(traced) == len(simple) > 10
+    assert sum(map(len, simple)) < sum(map(len, traced))
+    nodes, triangles = io.read_mesh_2dm(t / "mesh.2dm")
+    from floodmesh.core.mesh import triangle_angles, triangle_areas
+    assert triangle_angles(nodes, triangles).min() >= 28 - 1e-6
+    assert triangle_areas(nodes, triangles).max() <= 50
+    assert stats["n_holdout"] == round(0.01 * 2 * 300 * 240)
+    assert 0 < stats["rmse_m"] < 0.15
+
+
+@pytest.mark.parametrize("args, words", [
+    (["run", "missing.laz", "--out", "o"], "does not exist"),
+    (["run", "{xyz}", "--out", "o"], "--crs"),
+    (["run", "{xyz}", "--out", "o", "--crs", "EPSG:4326"], "geographic"),
+    (["run", "{xyz}", "--out", "o", "--crs", "EPSG:25832", "--min-angle", "40"], "34"),
+    (["run", "{xyz}", "--out", "o", "--crs", "EPSG:25832", "--s-crit", "95"], "S_crit"),
+])
+def test_bad_input_is_one_line_and_exit_code_2(tmp_path, args, words):
+    xyz = tmp_path / "points.xyz"
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(0, 50, 4000), rng.uniform(0, 50, 4000)
+    np.savetxt(xyz, np.column_stack([x + 4e5, y + 5.6e6, 0.3 * x]), fmt="%.3f")
+    args = [a.format(xyz=xyz) for a in args]
+    args[args.index("--out") + 1] = str(tmp_path / "out")
+    result = floodmesh(*args, check=False)
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("floodmesh: error:") and words in lines[0]
+    assert not (tmp_path / "out" / "mesh.2dm").exists()
+
+
+@pytest.mark.parametrize("delay", [1.5, 3.0, 4.5])
+def test_ctrl_c_leaves_no_half_written_file(demo_points_file, tmp_path, delay):
+    out = tmp_path / "interrupted"
+    proc = subprocess.Popen([FLOODMESH, "run", str(demo_points_file), "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode in (0, 130), stderr
+    if proc.returncode == 130:
+        assert "interrupted" in stderr and "Traceback" not in stderr
+    leftovers = [p.name for p in out.glob("*") if ".partial" in p.name] if out.exists() else []
+    assert leftovers == []
+    # every file that is there is complete: each opens
+    if (out / "mesh.2dm").exists():
+        io.read_mesh_2dm(out / "mesh.2dm")
+    if (out / "dem.tif").exists():
+        io.read_raster(out / "dem.tif")
