@@ -1,0 +1,171 @@
+"""Speed and quality figures, each against a peer in the same run. Prints a table per topic.
+
+    .venv/bin/python benchmarks/run.py [--only grid,slope,trace,mesh] [--points N] [--size N]
+
+grid:  FloodMesh TIN gridding vs scipy.interpolate.griddata (linear, the same Qhull TIN).
+slope: every slope method vs GDAL's own slope (Horn, ZevenbergenThorne) on one grid.
+trace: break-line tracing throughput (breakpoints per second).
+mesh:  break-line mesh vs a uniform Triangle mesh on the demo floodplain (nodes and RMSE).
+"""
+from __future__ import annotations
+
+import argparse
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from affine import Affine
+from pyproj import CRS
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent.parent))
+
+from floodmesh.core.raster import Grid  # noqa: E402
+
+CRS_M = CRS.from_epsg(25832)
+
+
+def timed(func, *args, repeat=1, **kwargs):
+    best, result = np.inf, None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = func(*args, **kwargs)
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+def peak_rss_mb():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def bench_grid(n_points):
+    from scipy.interpolate import griddata
+
+    from floodmesh.core.demo import ground_elevation
+    from floodmesh.core.grid import grid_points_linear
+    from floodmesh.core.points import PointCloud
+
+    side = np.sqrt(n_points / 9.0)
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(0, side, n_points), rng.uniform(0, side, n_points)
+    xyz = np.column_stack([x, y, ground_elevation(x % 300, y % 240)])
+    cloud = PointCloud(xyz, CRS_M)
+    grid_points_linear(PointCloud(xyz[:2000], CRS_M), 1.0)  # compile outside the timing
+    t_ours, dem = timed(grid_points_linear, cloud, 1.0)
+    rows, cols = dem.shape
+    gx, gy = dem.cell_centres(*np.indices((rows, cols)))
+    t_peer, ref = timed(griddata, xyz[:, :2], xyz[:, 2], (gx, gy), method="linear")
+    both = np.isfinite(ref) & np.isfinite(dem.values)
+    print(f"\n## Gridding {n_points:,} points ({side:.0f} m square, 9 points/m²) to a 1 m grid")
+    print(f"{'method':<34}{'seconds':>10}{'Mpoints/s':>12}")
+    print(f"{'floodmesh grid_points_linear':<34}{t_ours:>10.2f}{n_points / t_ours / 1e6:>12.3f}")
+    print(f"{'scipy griddata linear (peer)':<34}{t_peer:>10.2f}{n_points / t_peer / 1e6:>12.3f}")
+    print(f"ratio peer/ours {t_peer / t_ours:.2f}; max |difference| "
+          f"{np.abs(ref[both] - dem.values[both]).max():.2e} m; peak RSS {peak_rss_mb():.0f} MB")
+
+
+def bench_slope(size):
+    from osgeo import gdal
+
+    from floodmesh.core import io
+    from floodmesh.core.slope import SLOPE_METHODS, slope
+
+    gdal.UseExceptions()
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[0:size, 0:size].astype(float)
+    z = 20 + 3 * np.sin(xx / 37) * np.cos(yy / 53) + rng.normal(0, 0.05, (size, size))
+    dem = Grid(z, Affine(1.0, 0, 400000, 0, -1.0, 5600000 + size), CRS_M)
+    with tempfile.TemporaryDirectory() as tmp:
+        src = str(Path(tmp) / "dem.tif")
+        io.write_raster(src, dem)
+        gdal_times = {}
+        for alg in ("Horn", "ZevenbergenThorne"):
+            out = str(Path(tmp) / f"{alg}.tif")
+            gdal_times[alg], _ = timed(gdal.DEMProcessing, out, src, "slope", alg=alg,
+                                       computeEdges=True, format="GTiff")
+        print(f"\n## Slope on a {size} x {size} grid (GDAL writes a GeoTIFF; FloodMesh in memory)")
+        print(f"{'method':<22}{'seconds':>10}{'GDAL peer':>12}{'GDAL/ours':>12}")
+        peers = {"sharpnack-akin": "Horn", "zevenbergen-thorne": "ZevenbergenThorne"}
+        for method in SLOPE_METHODS:
+            t, _ = timed(slope, dem, method)
+            peer = peers.get(method)
+            if peer:
+                print(f"{method:<22}{t:>10.2f}{gdal_times[peer]:>12.2f}{gdal_times[peer] / t:>12.2f}")
+            else:
+                print(f"{method:<22}{t:>10.2f}{'-':>12}{'-':>12}")
+
+
+def bench_trace(size):
+    from floodmesh.core.breaklines import trace_breaklines
+    from floodmesh.core.breakpoints import classify_breakpoints
+    from floodmesh.core.slope import slope
+
+    yy, xx = np.mgrid[0:size, 0:size].astype(float)
+    # ridges every 8 cells in both directions: a dense net of breakpoints
+    z = 2.0 * np.abs(((xx + 0.5 * yy) % 16) - 8) / 8 + 1.5 * np.abs((yy % 12) - 6) / 6
+    dem = Grid(z, Affine(1.0, 0, 0, 0, -1.0, size), CRS_M)
+    s = slope(dem, "one-over-distance")
+    bp = classify_breakpoints(s, 10.0)
+    small = 64
+    trace_breaklines(Grid(bp.values[:small, :small], bp.transform, CRS_M),
+                     Grid(s.values[:small, :small], bp.transform, CRS_M),
+                     Grid(z[:small, :small], bp.transform, CRS_M), 10.0)  # compile
+    t, lines = timed(trace_breaklines, bp, s, dem, 10.0)
+    n_bp = int(bp.values.sum())
+    print(f"\n## Break-line tracing on a {size} x {size} grid")
+    print(f"{n_bp:,} breakpoints → {len(lines):,} lines in {t:.2f} s: "
+          f"{n_bp / t / 1e6:.2f} M breakpoints/s")
+
+
+def bench_mesh():
+    from floodmesh.core.accuracy import residuals
+    from floodmesh.core.breaklines import trace_breaklines
+    from floodmesh.core.breakpoints import classify_breakpoints
+    from floodmesh.core.demo import synthetic_floodplain
+    from floodmesh.core.grid import grid_points_linear
+    from floodmesh.core.mesh import build_mesh
+    from floodmesh.core.points import PointCloud, split_holdout
+    from floodmesh.core.simplify import simplify_keep_every
+    from floodmesh.core.slope import slope
+
+    points, classes = synthetic_floodplain()
+    ground = PointCloud(points.xyz[classes == 2], points.crs)
+    gridding, holdout = split_holdout(ground, 0.01, 0)
+    dem = grid_points_linear(gridding, 1.0)
+    s = slope(dem, "one-over-distance")
+    lines = trace_breaklines(classify_breakpoints(s, 10.0), s, dem, 10.0)
+    coords = [line.coords for line in simplify_keep_every(lines, 4)]
+    print("\n## Break-line mesh vs uniform mesh on the demo floodplain (25°)")
+    print(f"{'mesh':<34}{'max area':>9}{'nodes':>8}{'RMSE cm':>9}{'max cm':>8}")
+    for label, lines_used, areas in (("break lines (FloodMesh)", coords, (100, 50)),
+                                     ("uniform, no break lines (peer)", [], (100, 25, 10, 5, 2))):
+        for area in areas:
+            mesh = build_mesh(dem, lines_used, min_angle=25, max_area=area)
+            r = residuals(mesh, holdout.xyz)
+            r = r[np.isfinite(r)]
+            print(f"{label:<34}{area:>9}{len(mesh.nodes):>8}{100 * np.sqrt(np.mean(r ** 2)):>9.1f}"
+                  f"{100 * np.abs(r).max():>8.1f}")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--only", default="grid,slope,trace,mesh")
+    parser.add_argument("--points", type=int, default=1_000_000, help="points to grid")
+    parser.add_argument("--size", type=int, default=4000, help="raster side for slope/trace")
+    args = parser.parse_args()
+    chosen = set(args.only.split(","))
+    if "grid" in chosen:
+        bench_grid(args.points)
+    if "slope" in chosen:
+        bench_slope(args.size)
+    if "trace" in chosen:
+        bench_trace(args.size)
+    if "mesh" in chosen:
+        bench_mesh()
+
+
+if __name__ == "__main__":
+    main()
