@@ -1,0 +1,209 @@
+"""Gridding (``grid_points_linear``) and the holdout split (``split_holdout``).
+
+Reference: linear interpolation on any triangulation of points lying on a plane reproduces
+that plane exactly, so the DEM of plane points must equal the analytic plane at every cell
+centre; the coverage is checked against scipy's convex hull of the points.
+"""
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+from pyproj import CRS
+from scipy.spatial import Delaunay
+
+from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.grid import grid_points_linear
+from floodmesh.core.points import PointCloud, split_holdout
+
+from ..conftest import plane_points
+
+CRS_M = CRS.from_epsg(25832)
+ORIGIN = (500000.0, 6e6)
+A, B, C = 0.1, -0.05, 12.0
+
+
+def plane(x, y):
+    """The plane of ``plane_points`` defaults, at map coordinates."""
+    return A * (x - ORIGIN[0]) + B * (y - ORIGIN[1]) + C
+
+
+def cloud(xyz):
+    return PointCloud(np.asarray(xyz, dtype=np.float64), CRS_M)
+
+
+def centres(grid):
+    rows, cols = np.indices(grid.shape)
+    return grid.cell_centres(rows, cols)
+
+
+@pytest.fixture(scope="module")
+def plane_xyz():
+    return plane_points(a=A, b=B, c=C, size=40.0, density=4.0, seed=0, origin=ORIGIN)
+
+
+@pytest.mark.parametrize("d", [1.0, 2.5])
+def test_plane_is_reproduced_at_every_cell_centre(plane_xyz, d):
+    """Every valid cell equals the plane at its centre (1e-9 m); most of the area is covered."""
+    dem = grid_points_linear(cloud(plane_xyz), d)
+    x, y = centres(dem)
+    valid = np.isfinite(dem.values)
+    assert valid.sum() > 0.8 * (40.0 / d) ** 2
+    assert_allclose(dem.values[valid], plane(x, y)[valid], rtol=0, atol=1e-9)
+    assert dem.cell_size == d
+    assert dem.crs == CRS_M
+
+
+@pytest.mark.parametrize("d", [1.0, 2.5])
+def test_cell_edges_aligned_to_multiples_of_cell_size(plane_xyz, d):
+    """The upper-left corner lies on whole multiples of d and the grid covers all points."""
+    dem = grid_points_linear(cloud(plane_xyz), d)
+    t = dem.transform
+    assert (t.a, t.b, t.d, t.e) == (d, 0.0, 0.0, -d)
+    assert math.fmod(t.c, d) == 0.0
+    assert math.fmod(t.f, d) == 0.0
+    xmin, ymin, xmax, ymax = dem.bounds
+    assert xmin <= plane_xyz[:, 0].min() and plane_xyz[:, 0].max() <= xmax
+    assert ymin <= plane_xyz[:, 1].min() and plane_xyz[:, 1].max() <= ymax
+    # no spare row or column of cells beyond the data
+    assert xmax - plane_xyz[:, 0].max() < d and plane_xyz[:, 1].min() - ymin < d
+
+
+def test_cells_outside_convex_hull_are_nan(plane_xyz):
+    """Cell centres outside the points' convex hull (scipy) are NaN; those inside are valid."""
+    dem = grid_points_linear(cloud(plane_xyz), 1.0)
+    x, y = centres(dem)
+    inside = Delaunay(plane_xyz[:, :2]).find_simplex(np.column_stack([x.ravel(), y.ravel()]))
+    inside = (inside >= 0).reshape(dem.shape)
+    assert (~inside).sum() > 0, "the test needs cells outside the hull"
+    assert np.isnan(dem.values[~inside]).all()
+    assert np.isfinite(dem.values[inside]).all()
+
+
+def gap_points():
+    """Plane points with every point in the 10 m strip 15 <= local x < 25 removed."""
+    xyz = plane_points(a=A, b=B, c=C, size=40.0, density=4.0, seed=0, origin=ORIGIN)
+    local_x = xyz[:, 0] - ORIGIN[0]
+    return xyz[(local_x < 15.0) | (local_x >= 25.0)]
+
+
+def strip_cells(dem):
+    """Cells whose centres lie well inside the strip (local x in [17, 23], y in [2, 38])."""
+    x, y = centres(dem)
+    lx, ly = x - ORIGIN[0], y - ORIGIN[1]
+    return (lx >= 17) & (lx <= 23) & (ly >= 2) & (ly <= 38)
+
+
+def test_gap_wider_than_max_gap_stays_nodata():
+    dem = grid_points_linear(cloud(gap_points()), 1.0, max_gap=3.0)
+    strip = strip_cells(dem)
+    assert strip.sum() == 6 * 36  # centres at x = 17.5 .. 22.5, y = 2.5 .. 37.5
+    assert np.isnan(dem.values[strip]).all()
+    # the data either side of the strip is still gridded
+    x, _ = centres(dem)
+    lx = x - ORIGIN[0]
+    assert np.isfinite(dem.values[(lx > 3) & (lx < 12)]).mean() > 0.8
+    assert np.isfinite(dem.values[(lx > 28) & (lx < 37)]).mean() > 0.8
+
+
+def test_gap_narrower_than_max_gap_is_bridged_on_the_plane():
+    dem = grid_points_linear(cloud(gap_points()), 1.0, max_gap=50.0)
+    strip = strip_cells(dem)
+    assert np.isfinite(dem.values[strip]).all()
+    x, y = centres(dem)
+    assert_allclose(dem.values[strip], plane(x, y)[strip], rtol=0, atol=1e-9)
+
+
+def curved_points():
+    """Points on a curved surface, so a different triangulation would change the DEM."""
+    xyz = plane_points(a=A, b=B, c=C, size=40.0, density=2.0, seed=3, origin=ORIGIN)
+    lx, ly = xyz[:, 0] - ORIGIN[0], xyz[:, 1] - ORIGIN[1]
+    xyz[:, 2] = 3.0 * np.sin(lx / 5.0) * np.cos(ly / 7.0) + 0.02 * lx * ly
+    return xyz
+
+
+def test_exact_duplicate_points_give_the_same_dem():
+    xyz = curved_points()
+    reference = grid_points_linear(cloud(xyz), 1.0)
+    doubled = grid_points_linear(cloud(np.vstack([xyz, xyz[::-1]])), 1.0)
+    assert doubled.transform == reference.transform
+    assert_array_equal(np.isnan(doubled.values), np.isnan(reference.values))
+    assert_allclose(doubled.values, reference.values, rtol=0, atol=1e-9, equal_nan=True)
+
+
+def test_jittered_duplicate_points_give_the_same_dem():
+    """Each point again, moved by 1e-9 m in x and y (same z)."""
+    xyz = curved_points()
+    rng = np.random.default_rng(7)
+    jittered = xyz.copy()
+    jittered[:, :2] += rng.choice([-1e-9, 1e-9], size=(len(xyz), 2))
+    reference = grid_points_linear(cloud(xyz), 1.0)
+    doubled = grid_points_linear(cloud(np.vstack([xyz, jittered])), 1.0)
+    assert doubled.transform == reference.transform
+    assert_array_equal(np.isnan(doubled.values), np.isnan(reference.values))
+    assert_allclose(doubled.values, reference.values, rtol=0, atol=1e-6, equal_nan=True)
+
+
+@pytest.mark.parametrize("cell_size", [0.0, -1.0, float("nan"), float("inf")])
+def test_non_positive_cell_size_is_refused(plane_xyz, cell_size):
+    with pytest.raises(FloodMeshError, match="cell size"):
+        grid_points_linear(cloud(plane_xyz), cell_size)
+
+
+@pytest.mark.parametrize("cell_size", [20.0, 100.0])
+def test_cell_size_larger_than_the_data_is_refused(plane_xyz, cell_size):
+    """40 m of data at 20 m or 100 m cells is fewer than 3 cells each way."""
+    with pytest.raises(FloodMeshError, match="fewer than 3 cells"):
+        grid_points_linear(cloud(plane_xyz), cell_size)
+
+
+def test_too_many_cells_is_refused(plane_xyz):
+    """40 m at 1 mm cells would be 1.6e9 cells, over the limit."""
+    with pytest.raises(FloodMeshError, match="cells"):
+        grid_points_linear(cloud(plane_xyz), 0.001)
+
+
+# ---------------------------------------------------------------------------------------------
+# holdout split
+@pytest.fixture(scope="module")
+def thousand():
+    xyz = plane_points(size=10.0, density=10.0, seed=5, origin=ORIGIN)
+    assert len(xyz) == 1000
+    return cloud(xyz)
+
+
+def rows_as_set(xyz):
+    return {tuple(row) for row in xyz.tolist()}
+
+
+def test_holdout_fraction_and_partition(thousand):
+    kept, held = split_holdout(thousand, 0.1, seed=42)
+    assert len(held) == 100
+    assert len(kept) == 900
+    assert kept.crs == thousand.crs and held.crs == thousand.crs
+    assert rows_as_set(kept.xyz).isdisjoint(rows_as_set(held.xyz))
+    assert rows_as_set(kept.xyz) | rows_as_set(held.xyz) == rows_as_set(thousand.xyz)
+    together = np.vstack([kept.xyz, held.xyz])
+    assert_array_equal(together[np.lexsort(together.T)],
+                       thousand.xyz[np.lexsort(thousand.xyz.T)])
+
+
+def test_holdout_same_seed_same_split_other_seed_other_split(thousand):
+    kept1, held1 = split_holdout(thousand, 0.1, seed=42)
+    kept2, held2 = split_holdout(thousand, 0.1, seed=42)
+    assert_array_equal(held1.xyz, held2.xyz)
+    assert_array_equal(kept1.xyz, kept2.xyz)
+    _, held3 = split_holdout(thousand, 0.1, seed=43)
+    assert rows_as_set(held3.xyz) != rows_as_set(held1.xyz)
+
+
+def test_holdout_fraction_zero_holds_nothing_out(thousand):
+    kept, held = split_holdout(thousand, 0.0, seed=1)
+    assert len(held) == 0
+    assert_array_equal(kept.xyz, thousand.xyz)
+
+
+@pytest.mark.parametrize("fraction", [-0.1, 1.0, 1.5])
+def test_holdout_fraction_outside_range_is_refused(thousand, fraction):
+    with pytest.raises(FloodMeshError, match="holdout fraction"):
+        split_holdout(thousand, fraction, seed=0)
