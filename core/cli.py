@@ -11,8 +11,8 @@ import time
 from pathlib import Path
 
 from .errors import Cancelled, FloodMeshError
-from .pipeline import RunOptions
-from .slope import SLOPE_METHODS
+from .pipeline import BREAKPOINT_METHODS, RunOptions
+from .slope import LOG_KERNELS
 
 DEFAULTS = RunOptions()
 
@@ -58,10 +58,12 @@ def _add_chain_options(p: argparse.ArgumentParser):
     p.add_argument("--crs", help="CRS of the input when it has none or a wrong one (EPSG:XXXX)")
     p.add_argument("--cell-size", type=_positive(float), default=DEFAULTS.cell_size,
                    help="grid cell size d in metres (default %(default)s)")
-    p.add_argument("--slope-method", choices=list(SLOPE_METHODS), default=DEFAULTS.slope_method,
-                   help="slope kernel (default %(default)s)")
+    p.add_argument("--slope-method", choices=BREAKPOINT_METHODS, default=DEFAULTS.slope_method,
+                   help="slope kernel, or log for Laplacian-of-Gaussian breakpoints "
+                        "(default %(default)s)")
     p.add_argument("--s-crit", type=float, default=DEFAULTS.s_crit,
                    help="critical slope S_crit in degrees (default %(default)s)")
+    _add_log_options(p)
     simplify = p.add_mutually_exclusive_group()
     simplify.add_argument("--keep-every", type=int, help="keep every n-th break-line point "
                           "(default 4)")
@@ -79,9 +81,24 @@ def _add_chain_options(p: argparse.ArgumentParser):
                    help="LAS classes to grid, e.g. 2,9 (default: 2 when classified)")
 
 
+def _add_log_options(p: argparse.ArgumentParser, *, response=True):
+    p.add_argument("--sigma", type=float, default=DEFAULTS.sigma,
+                   help="LoG Gaussian smoothing sigma in metres (default %(default)s)")
+    p.add_argument("--log-kernel", choices=LOG_KERNELS, default=DEFAULTS.log_kernel,
+                   help="LoG Laplacian: Pratt's 3x3 mask or the analytic kernel")
+    if response:
+        p.add_argument("--sensitivity", type=float, default=DEFAULTS.sensitivity,
+                       help="LoG breakpoint threshold in metres (default %(default)s)")
+        p.add_argument("--zero-crossings", action="store_true",
+                       help="LoG breakpoints at zero crossings (mid-slope) instead of "
+                            "|response| >= sensitivity (crests and toes)")
+
+
 def _options(args) -> RunOptions:
     return RunOptions(cell_size=args.cell_size, slope_method=args.slope_method,
-                      s_crit=args.s_crit, keep_every=args.keep_every, tolerance=args.tolerance,
+                      s_crit=args.s_crit, sigma=args.sigma, sensitivity=args.sensitivity,
+                      log_kernel=args.log_kernel, zero_crossings=args.zero_crossings,
+                      keep_every=args.keep_every, tolerance=args.tolerance,
                       min_angle=args.min_angle, max_area=args.max_area, holdout=args.holdout,
                       seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes)
 
@@ -143,21 +160,29 @@ def cmd_grid(args):
 
 def cmd_slope(args):
     from . import io
-    from .slope import slope
+    from .slope import laplacian_of_gaussian, slope
 
     dem = io.read_raster(args.dem, crs=args.crs)
-    io.write_raster(args.out, slope(dem, args.method))
-    print(f"slope ({args.method}) written to {args.out}")
+    if args.method == "log":
+        io.write_raster(args.out, laplacian_of_gaussian(dem, args.sigma, kernel=args.log_kernel))
+        print(f"Laplacian-of-Gaussian response (sigma {args.sigma} m, m) written to {args.out}")
+    else:
+        io.write_raster(args.out, slope(dem, args.method))
+        print(f"slope ({args.method}, degrees) written to {args.out}")
 
 
 def cmd_breakpoints(args):
-    from . import io
-    from .breakpoints import classify_breakpoints
-
-    slope_grid = io.read_raster(args.slope, crs=args.crs)
     import numpy as np
-    bp = classify_breakpoints(slope_grid, args.s_crit)
-    io.write_raster(args.out, bp, valid=np.isfinite(slope_grid.values))
+
+    from . import io
+    from .breakpoints import classify_breakpoints, log_breakpoints
+
+    grid = io.read_raster(args.slope, crs=args.crs)
+    if args.sensitivity is not None:
+        bp = log_breakpoints(grid, args.sensitivity, zero_crossings=args.zero_crossings)
+    else:
+        bp = classify_breakpoints(grid, args.s_crit)
+    io.write_raster(args.out, bp, valid=np.isfinite(grid.values))
     print(f"{int(bp.values.sum())} breakpoints written to {args.out}")
 
 
@@ -260,16 +285,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=cmd_grid)
 
-    p = sub.add_parser("slope", help="slope in degrees from a DEM")
+    p = sub.add_parser("slope", help="slope in degrees (or the LoG response) from a DEM")
     p.add_argument("dem")
-    p.add_argument("--method", choices=list(SLOPE_METHODS), default=DEFAULTS.slope_method)
+    p.add_argument("--method", choices=BREAKPOINT_METHODS, default=DEFAULTS.slope_method)
+    _add_log_options(p, response=False)
     p.add_argument("--out", required=True)
     p.add_argument("--crs")
     p.set_defaults(func=cmd_slope)
 
-    p = sub.add_parser("breakpoints", help="thinned breakpoints where slope >= S_crit")
-    p.add_argument("slope")
+    p = sub.add_parser("breakpoints", help="thinned breakpoints where slope >= S_crit "
+                                          "(or from a LoG response with --sensitivity)")
+    p.add_argument("slope", help="slope raster (degrees), or LoG response raster (m)")
     p.add_argument("--s-crit", type=float, default=DEFAULTS.s_crit)
+    p.add_argument("--sensitivity", type=float,
+                   help="treat the input as a LoG response: breakpoints where |response| >= "
+                        "this many metres")
+    p.add_argument("--zero-crossings", action="store_true",
+                   help="with --sensitivity: breakpoints at the response's zero crossings")
     p.add_argument("--out", required=True)
     p.add_argument("--crs")
     p.set_defaults(func=cmd_breakpoints)

@@ -15,6 +15,9 @@ from .errors import FloodMeshError
 from .raster import Grid, bilinear
 
 MAX_MIN_ANGLE = 34.0  # Triangle's refinement stops terminating reliably above about 33.8 degrees
+# Triangle leaves skinny triangles in the concentric shells it builds around input corners
+# sharper than 60 degrees (Miller, Pav & Walkington 2003), so break lines may not form them.
+SHARP_CORNER = 60.0
 
 
 @dataclass(frozen=True)
@@ -63,14 +66,14 @@ def domain_from_dem(dem: Grid, *, min_area: float = 0.0):
 
 
 def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
-               min_angle: float | None = None) -> PSLG:
+               drop_sharp_corners: bool = True) -> PSLG:
     """PSLG of break lines (x, y[, z] arrays) inside ``domain`` plus its boundary.
 
     Lines are clipped to the domain shrunk by ``snap`` (m) so that none ends on or near the
     boundary; all lines are noded at their crossings on a ``snap``/5 precision grid, which also
-    merges vertices closer than that. With ``min_angle`` (degrees), break-line segments that
-    meet another segment at less than that angle are dropped: Triangle cannot refine the
-    triangles in such a corner, so they would break the angle bound.
+    merges vertices closer than that. With ``drop_sharp_corners``, break-line segments that
+    meet another segment at less than ``SHARP_CORNER`` degrees are dropped: Triangle does not
+    refine the triangles in such a corner, so they would break the angle bound.
     """
     if not snap > 0:
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
@@ -95,10 +98,10 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     segments = segments[segments[:, 0] != segments[:, 1]]
     segments = np.unique(np.sort(segments, axis=1), axis=0)
     vertices = vertices * (snap / 5)
-    if min_angle is not None:
+    if drop_sharp_corners:
         on_boundary = shapely.distance(
             shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 10
-        segments = _drop_small_angles(vertices, segments, on_boundary, min_angle)
+        segments = _drop_small_angles(vertices, segments, on_boundary, SHARP_CORNER)
         used = np.unique(segments)
         renumber = np.full(len(vertices), -1)
         renumber[used] = np.arange(len(used))
@@ -109,14 +112,14 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
                 np.asarray(holes, float).reshape(-1, 2))
 
 
-def _drop_small_angles(vertices, segments, fixed, min_angle):
-    """Remove non-``fixed`` segments until no two segments meet at less than ``min_angle``."""
+def _drop_small_angles(vertices, segments, fixed, limit):
+    """Remove non-``fixed`` segments until no two segments meet at less than ``limit`` degrees."""
     keep = np.ones(len(segments), bool)
     incident = {}
     for k, (a, b) in enumerate(segments):
         incident.setdefault(a, []).append(k)
         incident.setdefault(b, []).append(k)
-    cos_limit = np.cos(np.radians(min_angle))
+    cos_limit = np.cos(np.radians(limit))
     for v, ks in incident.items():
         changed = True
         while changed:
@@ -179,7 +182,7 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
     a break-line vertex, else bilinear from the DEM."""
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
-    pslg = build_pslg(lines, domain, snap=snap, min_angle=min_angle)
+    pslg = build_pslg(lines, domain, snap=snap)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
                                            conforming=conforming)
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
@@ -257,16 +260,27 @@ def input_corner_angles(nodes: np.ndarray, segments: np.ndarray) -> np.ndarray:
 def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
     """Smallest angle, largest area, and how many triangles break either bound.
 
-    A triangle whose smallest angle lies in a corner where input segments meet at less than
-    ``min_angle`` cannot be refined (the corner is input); those are counted apart.
+    Triangles below the angle bound within reach of an input corner sharper than 60° (the
+    shortest segment at that corner) are input-bound, not refinable, and counted apart.
     """
+    from scipy.spatial import cKDTree
+
     areas = triangle_areas(mesh.nodes, mesh.triangles)
-    angles = triangle_angles(mesh.nodes, mesh.triangles)
-    min_angles = angles.min(axis=1)
+    min_angles = triangle_angles(mesh.nodes, mesh.triangles).min(axis=1)
     corner = input_corner_angles(mesh.nodes, mesh.segments)
-    at_node = mesh.triangles[np.arange(len(angles)), angles.argmin(axis=1)]
     small = min_angles < min_angle - 1e-6
-    at_input_corner = small & (corner[at_node] < min_angle)
+    at_input_corner = np.zeros_like(small)
+    sharp = np.nonzero(corner < SHARP_CORNER)[0]
+    if small.any() and sharp.size:
+        reach = np.full(len(mesh.nodes), 0.0)
+        seg_len = np.hypot(*(mesh.nodes[mesh.segments[:, 0], :2]
+                             - mesh.nodes[mesh.segments[:, 1], :2]).T)
+        for k, (a, b) in enumerate(mesh.segments):
+            for v in (a, b):
+                reach[v] = seg_len[k] if reach[v] == 0 else min(reach[v], seg_len[k])
+        centroids = mesh.nodes[mesh.triangles[small]][:, :, :2].mean(axis=1)
+        dist, nearest = cKDTree(mesh.nodes[sharp, :2]).query(centroids)
+        at_input_corner[np.nonzero(small)[0]] = dist <= reach[sharp[nearest]]
     return {
         "nodes": int(len(mesh.nodes)),
         "triangles": int(len(mesh.triangles)),

@@ -12,15 +12,16 @@ import numpy as np
 from . import io
 from .accuracy import accuracy_statistics, residual_class, residuals
 from .breaklines import trace_breaklines
-from .breakpoints import classify_breakpoints
+from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled, FloodMeshError
 from .grid import grid_points_linear
 from .mesh import build_mesh, mesh_quality
 from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_douglas_peucker, simplify_keep_every
-from .slope import slope
+from .slope import LOG_KERNELS, SLOPE_METHODS, laplacian_of_gaussian, slope
 
+BREAKPOINT_METHODS = (*SLOPE_METHODS, "log")
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
                 "mesh.gpkg", "residuals.gpkg", "report.json")
 
@@ -30,8 +31,12 @@ class RunOptions:
     """Parameters of the whole chain; the defaults are the method's reference case."""
 
     cell_size: float = 1.0          # d, m
-    slope_method: str = "one-over-distance"
+    slope_method: str = "one-over-distance"  # or "log": breakpoints from the LoG response
     s_crit: float = 10.0            # critical slope, degrees
+    sigma: float = 1.0              # LoG smoothing, m
+    sensitivity: float = 0.02       # LoG response threshold, m
+    log_kernel: str = "pratt"
+    zero_crossings: bool = False    # LoG breakpoints at zero crossings instead of |response|
     keep_every: int | None = None   # keep every n-th break-line point (default 4) ...
     tolerance: float | None = None  # ... or Douglas–Peucker within this many metres
     min_angle: float = 25.0         # degrees
@@ -43,6 +48,14 @@ class RunOptions:
     min_points: int = 3
     crs: str | None = None
     classes: tuple[int, ...] | None = None
+
+    def __post_init__(self):
+        if self.slope_method not in BREAKPOINT_METHODS:
+            raise FloodMeshError(f"unknown slope method {self.slope_method!r}; choose one of "
+                                 f"{', '.join(BREAKPOINT_METHODS)}")
+        if self.log_kernel not in LOG_KERNELS:
+            raise FloodMeshError(f"unknown LoG kernel {self.log_kernel!r}; choose pratt or "
+                                 "analytic")
 
     def simplification(self) -> tuple[str, float]:
         if self.keep_every is not None and self.tolerance is not None:
@@ -104,8 +117,16 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         holdout = _dem_check_points(dem, options.holdout, options.seed)
         holdout_source = "DEM cell centres (not independent of the DEM)"
         n_points = 0
-    slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
-    breakpoints = steps.run("breakpoints", classify_breakpoints, slope_grid, options.s_crit)
+    if options.slope_method == "log":
+        # second order: breakpoints from the LoG; the tracer still follows first-order slope
+        response = steps.run("slope", laplacian_of_gaussian, dem, options.sigma,
+                             kernel=options.log_kernel, cancelled=cancelled)
+        breakpoints = steps.run("breakpoints", log_breakpoints, response, options.sensitivity,
+                                zero_crossings=options.zero_crossings)
+        slope_grid = slope(dem, "one-over-distance", cancelled=cancelled)
+    else:
+        slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
+        breakpoints = steps.run("breakpoints", classify_breakpoints, slope_grid, options.s_crit)
     traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points)
     if method == "douglas-peucker":

@@ -105,3 +105,17 @@ def test_ctrl_c_leaves_no_half_written_file(demo_points_file, tmp_path, delay):
         io.read_mesh_2dm(out / "mesh.2dm")
     if (out / "dem.tif").exists():
         io.read_raster(out / "dem.tif")
+
+
+def test_log_breakpoints_through_the_commands_and_the_chain(demo_points_file, tmp_path):
+    """LoG as a step (slope --method log, breakpoints --sensitivity) and in the whole chain."""
+    t = tmp_path
+    floodmesh("grid", demo_points_file, "--cell-size", 1, "--out", t / "dem.tif")
+    floodmesh("slope", t / "dem.tif", "--method", "log", "--sigma", 1.5, "--out", t / "log.tif")
+    floodmesh("breakpoints", t / "log.tif", "--sensitivity", 0.03, "--out", t / "bp.tif")
+    assert io.read_raster(t / "bp.tif").values.sum() > 500
+    floodmesh("run", demo_points_file, "--out", t / "run", "--slope-method", "log",
+              "--sigma", 1.5, "--sensitivity", 0.03, "--holdout", 0.01)
+    report = json.loads((t / "run" / "report.json").read_text())
+    assert report["options"]["slope_method"] == "log" and report["n_breaklines"] > 20
+    assert report["n_below_min_angle"] == 0 and report["max_area_m2"] <= 100
