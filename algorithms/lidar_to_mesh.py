@@ -1,24 +1,33 @@
 """LiDAR to mesh: the whole FloodMesh chain in one Processing algorithm."""
 from pathlib import Path
 
-from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingAlgorithm, QgsProcessingContext,
+from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingContext,
                        QgsProcessingException, QgsProcessingOutputFile,
                        QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
                        QgsProcessingParameterCrs, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
                        QgsProcessingParameterNumber, QgsVectorLayer)
-from qgis.PyQt.QtCore import QCoreApplication
 
-from ..core.errors import Cancelled, FloodMeshError
-from ..core.pipeline import RunOptions, run_pipeline
-from ..core.slope import SLOPE_METHODS
+from ..core.pipeline import BREAKPOINT_METHODS, RunOptions, run_pipeline
+from .base import FloodMeshAlgorithm, crs_or_none, run_core
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
-METHODS = list(SLOPE_METHODS)
+METHODS = list(BREAKPOINT_METHODS)
 
 
-class LidarToMeshAlgorithm(QgsProcessingAlgorithm):
+class LidarToMeshAlgorithm(FloodMeshAlgorithm):
+    NAME = "lidartomesh"
+    DISPLAY_NAME = "LiDAR to mesh"
+    GROUP, GROUP_ID = "Workflows", "workflows"
+    HELP = ("Runs the whole FloodMesh chain on a LiDAR point file (LAS/LAZ ground class, XYZ/CSV) "
+            "or a DEM: grid (cell size d, m), slope (degrees), breakpoints (slope ≥ S_crit), "
+            "break lines, simplification (every n-th point), a Triangle mesh with a minimum "
+            "angle (degrees) and maximum area (m²), and the residuals of held-out points. "
+            "Defaults are the method's reference case: 1 m grid, one-over-distance slope, "
+            "S_crit 10°, every 4th point, 25°, 100 m². Writes dem.tif, slope.tif, "
+            "breakpoints.tif, breaklines.gpkg, mesh.2dm, mesh.gpkg, residuals.gpkg and "
+            "report.json into the output folder, and loads the break lines and the mesh.")
     INPUT = "INPUT"
     CRS = "CRS"
     CELL_SIZE = "CELL_SIZE"
@@ -36,35 +45,6 @@ class LidarToMeshAlgorithm(QgsProcessingAlgorithm):
     NODES = "NODES"
     TRIANGLES = "TRIANGLES"
     RMSE = "RMSE"
-
-    def name(self):
-        return "lidartomesh"
-
-    def displayName(self):  # noqa: N802
-        return self.tr("LiDAR to mesh")
-
-    def group(self):
-        return self.tr("Workflows")
-
-    def groupId(self):  # noqa: N802
-        return "workflows"
-
-    def shortHelpString(self):  # noqa: N802
-        return self.tr(
-            "Runs the whole FloodMesh chain on a LiDAR point file (LAS/LAZ ground class, XYZ/CSV) "
-            "or a DEM: grid (cell size d, m), slope (degrees), breakpoints (slope ≥ S_crit), "
-            "break lines, simplification (every n-th point), a Triangle mesh with a minimum "
-            "angle (degrees) and maximum area (m²), and the residuals of held-out points. "
-            "Defaults are the method's reference case: 1 m grid, one-over-distance slope, "
-            "S_crit 10°, every 4th point, 25°, 100 m². Writes dem.tif, slope.tif, "
-            "breakpoints.tif, breaklines.gpkg, mesh.2dm, mesh.gpkg, residuals.gpkg and "
-            "report.json into the output folder, and loads the break lines and the mesh.")
-
-    def createInstance(self):  # noqa: N802
-        return type(self)()
-
-    def tr(self, text):
-        return QCoreApplication.translate("FloodMesh", text)
 
     def initAlgorithm(self, config=None):  # noqa: N802
         defaults = RunOptions()
@@ -107,8 +87,7 @@ class LidarToMeshAlgorithm(QgsProcessingAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("Holdout RMSE (m)")))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        crs = self.parameterAsCrs(parameters, self.CRS, context)
-        options = RunOptions(
+        options = run_core(RunOptions,
             cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],
             s_crit=self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
@@ -117,18 +96,12 @@ class LidarToMeshAlgorithm(QgsProcessingAlgorithm):
             max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
             holdout=self.parameterAsDouble(parameters, self.HOLDOUT, context),
             seed=self.parameterAsInt(parameters, self.SEED, context),
-            crs=crs.toWkt() if crs.isValid() else None,
-        )
+            crs=crs_or_none(self, parameters, self.CRS, context))
         source = self.parameterAsFile(parameters, self.INPUT, context)
         out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
-        try:
-            report = run_pipeline(source, out, options,
-                                  progress=lambda f: feedback.setProgress(100 * f),
-                                  cancelled=feedback.isCanceled, log=feedback.pushInfo)
-        except FloodMeshError as exc:
-            raise QgsProcessingException(str(exc)) from None
-        except Cancelled:
-            raise QgsProcessingException(self.tr("Cancelled; no partial output was written"))
+        report = run_core(run_pipeline, source, out, options,
+                          progress=lambda f: feedback.setProgress(100 * f),
+                          cancelled=feedback.isCanceled, log=feedback.pushInfo)
         breaklines = str(out / "breaklines.gpkg")
         mesh = str(out / "mesh.2dm")
         _load_on_completion(context, QgsVectorLayer(breaklines, "Break lines", "ogr"),

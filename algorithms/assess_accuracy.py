@@ -1,0 +1,55 @@
+"""Assess accuracy: residuals of check points against a mesh's TIN."""
+import json
+
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterFile,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterVectorDestination)
+
+from ..core import io
+from ..core.accuracy import accuracy_statistics, residual_class, residuals
+from ..core.mesh import Mesh
+from ..core.raster import require_metric_crs
+from .base import FloodMeshAlgorithm, layer_file, run_core
+
+
+class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
+    NAME = "assessaccuracy"
+    DISPLAY_NAME = "Assess accuracy"
+    GROUP, GROUP_ID = "Mesh", "mesh"
+    HELP = ("Residual = check point z − mesh TIN z (linear in the triangle holding the point), "
+            "for held-out LiDAR points. Reports RMSE, mean, standard deviation, skew, 1.96·RMSE, "
+            "the maximum, the FEMA/NSSDA sample test and the shares of residuals under 10 cm, "
+            "10–25 cm and over 25 cm; the points get their residual and class.")
+    MESH, POINTS, OUTPUT, REPORT, RMSE = "MESH", "POINTS", "OUTPUT", "REPORT", "RMSE"
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile(self.MESH, self.tr("Mesh (SMS 2DM)"),
+                                                     fileFilter="SMS 2DM (*.2dm)"))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            self.POINTS, self.tr("Check points (3-D)"), [QgsProcessing.TypeVectorPoint]))
+        self.addParameter(QgsProcessingParameterVectorDestination(
+            self.OUTPUT, self.tr("Residuals"), QgsProcessing.TypeVectorPoint))
+        self.addParameter(QgsProcessingParameterFileDestination(
+            self.REPORT, self.tr("Statistics (JSON)"), fileFilter="JSON (*.json)",
+            optional=True, createByDefault=False))
+        self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("RMSE (m)")))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        layer = self.parameterAsVectorLayer(parameters, self.POINTS, context)
+        xyz = run_core(io.read_points_vector, layer_file(layer, "Check points"))
+        crs = run_core(require_metric_crs, layer.crs().toWkt() or None, layer.name())
+        nodes, triangles = run_core(io.read_mesh_2dm,
+                                    self.parameterAsFile(parameters, self.MESH, context))
+        res = residuals(Mesh(nodes, triangles, crs), xyz)
+        out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
+        run_core(io.write_points_gpkg, out, xyz, crs, layer="residuals",
+                 attributes={"residual_m": res, "tin_z": xyz[:, 2] - res,
+                             "class": residual_class(res)})
+        stats = accuracy_statistics(res)
+        feedback.pushInfo(json.dumps(stats, indent=1))
+        results = {self.OUTPUT: out, self.RMSE: stats["rmse_m"]}
+        report = self.parameterAsFileOutput(parameters, self.REPORT, context)
+        if report:
+            run_core(io.write_json, report, stats)
+            results[self.REPORT] = report
+        return results

@@ -1,0 +1,68 @@
+"""What every FloodMesh algorithm shares: names, groups, help, and turning core errors into
+messages QGIS shows."""
+from pathlib import Path
+
+from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
+from qgis.PyQt.QtCore import QCoreApplication
+
+from ..core.errors import Cancelled, FloodMeshError
+
+
+class FloodMeshAlgorithm(QgsProcessingAlgorithm):
+    """Subclasses set NAME, DISPLAY_NAME, GROUP, GROUP_ID and HELP, and implement
+    ``initAlgorithm`` and ``processAlgorithm``; they keep no state on ``self``."""
+
+    NAME = DISPLAY_NAME = GROUP = GROUP_ID = HELP = ""
+
+    def name(self):
+        return self.NAME
+
+    def displayName(self):  # noqa: N802
+        return self.tr(self.DISPLAY_NAME)
+
+    def group(self):
+        return self.tr(self.GROUP)
+
+    def groupId(self):  # noqa: N802
+        return self.GROUP_ID
+
+    def shortHelpString(self):  # noqa: N802
+        return self.tr(self.HELP)
+
+    def createInstance(self):  # noqa: N802
+        return type(self)()
+
+    def tr(self, text):
+        return QCoreApplication.translate("FloodMesh", text)
+
+
+def run_core(func, *args, **kwargs):
+    """Call a core function; bad input becomes a QgsProcessingException with the same message."""
+    try:
+        return func(*args, **kwargs)
+    except FloodMeshError as exc:
+        raise QgsProcessingException(str(exc)) from None
+    except Cancelled:
+        raise QgsProcessingException("Cancelled; no partial output was written") from None
+
+
+def feedback_callables(feedback):
+    """Progress and cancellation as the plain callables core takes."""
+    return {"progress": lambda f: feedback.setProgress(100 * f),
+            "cancelled": feedback.isCanceled}
+
+
+def layer_file(layer, what: str) -> str:
+    """The file behind a raster or vector layer (without a GeoPackage layer suffix)."""
+    if layer is None:
+        raise QgsProcessingException(f"{what}: no layer given")
+    path = layer.source().split("|")[0]
+    if not Path(path).is_file():
+        raise QgsProcessingException(f"{what} must be a file-based layer (GeoTIFF, GeoPackage…); "
+                                     f"{layer.name()} is not: save it to a file first")
+    return path
+
+
+def crs_or_none(algorithm, parameters, name, context):
+    crs = algorithm.parameterAsCrs(parameters, name, context)
+    return crs.toWkt() if crs.isValid() else None

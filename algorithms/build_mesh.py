@@ -1,0 +1,64 @@
+"""Build mesh: break lines and the DEM's extent as a PSLG, refined by Triangle."""
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
+                       QgsProcessingParameterVectorDestination)
+
+from ..core import io
+from ..core.mesh import build_mesh, mesh_quality
+from .base import FloodMeshAlgorithm, layer_file, run_core
+
+
+class BuildMeshAlgorithm(FloodMeshAlgorithm):
+    NAME = "buildmesh"
+    DISPLAY_NAME = "Build mesh"
+    GROUP, GROUP_ID = "Mesh", "mesh"
+    HELP = ("Meshes the DEM's valid area with Triangle (conforming Delaunay refinement), "
+            "honouring the break lines: no angle below the minimum (degrees, default 25, at most "
+            "34) and no triangle above the maximum area (m², default 100). Break-line vertices "
+            "keep their z; other nodes take z bilinearly from the DEM. Writes SMS 2DM and, "
+            "optionally, the triangles as PolygonZ.")
+    DEM, BREAKLINES, MIN_ANGLE, MAX_AREA = "DEM", "BREAKLINES", "MIN_ANGLE", "MAX_AREA"
+    OUTPUT, TRIANGLES, NODES, TRIANGLE_COUNT = "OUTPUT", "TRIANGLES", "NODES", "TRIANGLE_COUNT"
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterRasterLayer(self.DEM, self.tr("DEM")))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            self.BREAKLINES, self.tr("Break lines"), [QgsProcessing.TypeVectorLine],
+            optional=True))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MIN_ANGLE, self.tr("Minimum angle (degrees)"),
+            QgsProcessingParameterNumber.Double, 25.0, minValue=0.01, maxValue=34.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_AREA, self.tr("Maximum triangle area (m²)"),
+            QgsProcessingParameterNumber.Double, 100.0, minValue=0.0001))
+        self.addParameter(QgsProcessingParameterFileDestination(
+            self.OUTPUT, self.tr("Mesh (SMS 2DM)"), fileFilter="SMS 2DM (*.2dm)"))
+        self.addParameter(QgsProcessingParameterVectorDestination(
+            self.TRIANGLES, self.tr("Triangles"), QgsProcessing.TypeVectorPolygon, optional=True,
+            createByDefault=False))
+        self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Nodes")))
+        self.addOutput(QgsProcessingOutputNumber(self.TRIANGLE_COUNT, self.tr("Triangles")))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        dem = run_core(io.read_raster, layer_file(
+            self.parameterAsRasterLayer(parameters, self.DEM, context), "DEM"))
+        lines_layer = self.parameterAsVectorLayer(parameters, self.BREAKLINES, context)
+        lines = (run_core(io.read_lines_gpkg, layer_file(lines_layer, "Break lines"))
+                 if lines_layer is not None else [])
+        min_angle = self.parameterAsDouble(parameters, self.MIN_ANGLE, context)
+        max_area = self.parameterAsDouble(parameters, self.MAX_AREA, context)
+        mesh = run_core(build_mesh, dem, lines, min_angle=min_angle, max_area=max_area)
+        quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)
+        feedback.pushInfo(f"{quality['nodes']} nodes, {quality['triangles']} triangles, smallest "
+                          f"angle {quality['min_angle_deg']:.2f}°, largest area "
+                          f"{quality['max_area_m2']:.1f} m²")
+        out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
+        run_core(io.write_mesh_2dm, out, mesh.nodes, mesh.triangles)
+        results = {self.OUTPUT: out, self.NODES: quality["nodes"],
+                   self.TRIANGLE_COUNT: quality["triangles"]}
+        triangles_out = self.parameterAsOutputLayer(parameters, self.TRIANGLES, context)
+        if triangles_out:
+            run_core(io.write_mesh_gpkg, triangles_out, mesh.nodes, mesh.triangles, dem.crs)
+            results[self.TRIANGLES] = triangles_out
+        return results

@@ -1,0 +1,65 @@
+"""Grid LiDAR points: points to a DEM by linear (TIN) interpolation."""
+from qgis.core import (QgsProcessingParameterCrs, QgsProcessingParameterFile,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
+                       QgsProcessingParameterVectorDestination)
+
+from ..core import io
+from ..core.grid import grid_points_linear
+from ..core.points import split_holdout
+from .base import FloodMeshAlgorithm, crs_or_none, run_core
+
+POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
+
+
+class GridPointsAlgorithm(FloodMeshAlgorithm):
+    NAME = "gridpoints"
+    DISPLAY_NAME = "Grid LiDAR points"
+    GROUP, GROUP_ID = "Terrain analysis", "terrain"
+    HELP = ("Grids LiDAR ground points (LAS/LAZ class 2 when classified, or XYZ/CSV) to a DEM of "
+            "cell size d (m) by linear interpolation on their Delaunay TIN; cells are aligned to "
+            "whole multiples of d. Triangles with an edge longer than the maximum gap (m, default "
+            "10 d) are not used, so water and voids stay nodata. A fraction of the points can be "
+            "held out (by seed) for the accuracy assessment.")
+    INPUT, CRS, CELL_SIZE, MAX_GAP = "INPUT", "CRS", "CELL_SIZE", "MAX_GAP"
+    HOLDOUT, SEED, OUTPUT, HOLDOUT_OUTPUT = "HOLDOUT", "SEED", "OUTPUT", "HOLDOUT_OUTPUT"
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterFile(self.INPUT, self.tr("LiDAR points"),
+                                                     fileFilter=POINT_FILTER))
+        self.addParameter(QgsProcessingParameterCrs(
+            self.CRS, self.tr("CRS of the points (when the file has none)"), optional=True))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.CELL_SIZE, self.tr("Cell size d (m)"), QgsProcessingParameterNumber.Double, 1.0,
+            minValue=0.01))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_GAP, self.tr("Maximum gap bridged (m; empty: 10 cells)"),
+            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.01))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.HOLDOUT, self.tr("Fraction of points held out"),
+            QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=0.5))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.SEED, self.tr("Random seed"), QgsProcessingParameterNumber.Integer, 0))
+        self.addParameter(QgsProcessingParameterRasterDestination(self.OUTPUT, self.tr("DEM")))
+        self.addParameter(QgsProcessingParameterVectorDestination(
+            self.HOLDOUT_OUTPUT, self.tr("Held-out points"), optional=True,
+            createByDefault=False))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        points = run_core(io.read_points, self.parameterAsFile(parameters, self.INPUT, context),
+                          crs=crs_or_none(self, parameters, self.CRS, context))
+        gridding, holdout = run_core(split_holdout, points,
+                                     self.parameterAsDouble(parameters, self.HOLDOUT, context),
+                                     self.parameterAsInt(parameters, self.SEED, context))
+        max_gap = (self.parameterAsDouble(parameters, self.MAX_GAP, context)
+                   if parameters.get(self.MAX_GAP) not in (None, "") else None)
+        dem = run_core(grid_points_linear, gridding,
+                       self.parameterAsDouble(parameters, self.CELL_SIZE, context),
+                       max_gap=max_gap, progress=lambda f: feedback.setProgress(100 * f))
+        out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
+        run_core(io.write_raster, out, dem)
+        results = {self.OUTPUT: out}
+        holdout_out = self.parameterAsOutputLayer(parameters, self.HOLDOUT_OUTPUT, context)
+        if holdout_out and len(holdout):
+            run_core(io.write_points_gpkg, holdout_out, holdout.xyz, points.crs, layer="holdout")
+            results[self.HOLDOUT_OUTPUT] = holdout_out
+        return results

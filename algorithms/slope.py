@@ -1,0 +1,51 @@
+"""Slope: one of the six first-order kernels, or the Laplacian of Gaussian."""
+from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
+
+from ..core import io
+from ..core.pipeline import BREAKPOINT_METHODS
+from ..core.slope import LOG_KERNELS, laplacian_of_gaussian, slope
+from .base import FloodMeshAlgorithm, layer_file, run_core
+
+
+class SlopeAlgorithm(FloodMeshAlgorithm):
+    NAME = "slope"
+    DISPLAY_NAME = "Slope"
+    GROUP, GROUP_ID = "Terrain analysis", "terrain"
+    HELP = ("Slope of a DEM in degrees from its 3x3 neighbourhood: maximum slope (Shanholtz), "
+            "one-over-distance (NOAA, default), Sharpnack & Akin (= Horn), constrained quadratic "
+            "(Wood), quadratic surface (Zevenbergen & Thorne) or diagonal (Ritter). Edges and "
+            "nodata neighbours are extrapolated linearly, so planes keep their exact slope. "
+            "'log' gives the Laplacian-of-Gaussian response in metres instead (Gaussian sigma in "
+            "m, Pratt's 3x3 mask or the analytic kernel), positive on crests.")
+    INPUT, METHOD, SIGMA, LOG_KERNEL, OUTPUT = "INPUT", "METHOD", "SIGMA", "LOG_KERNEL", "OUTPUT"
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterRasterLayer(self.INPUT, self.tr("DEM")))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.METHOD, self.tr("Method"), options=list(BREAKPOINT_METHODS),
+            defaultValue=BREAKPOINT_METHODS.index("one-over-distance")))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.SIGMA, self.tr("LoG: Gaussian sigma (m)"), QgsProcessingParameterNumber.Double,
+            1.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"), options=list(LOG_KERNELS),
+            defaultValue=0))
+        self.addParameter(QgsProcessingParameterRasterDestination(
+            self.OUTPUT, self.tr("Slope (degrees) or LoG response (m)")))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        dem = run_core(io.read_raster, layer_file(
+            self.parameterAsRasterLayer(parameters, self.INPUT, context), "DEM"))
+        method = BREAKPOINT_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
+        if method == "log":
+            result = run_core(laplacian_of_gaussian, dem,
+                              self.parameterAsDouble(parameters, self.SIGMA, context),
+                              kernel=LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL,
+                                                                      context)],
+                              cancelled=feedback.isCanceled)
+        else:
+            result = run_core(slope, dem, method, cancelled=feedback.isCanceled)
+        out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
+        run_core(io.write_raster, out, result)
+        return {self.OUTPUT: out}

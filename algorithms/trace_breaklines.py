@@ -1,0 +1,55 @@
+"""Trace break lines through thinned breakpoints."""
+from qgis.core import (QgsProcessing, QgsProcessingParameterEnum, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterLayer, QgsProcessingParameterVectorDestination)
+
+from ..core import io
+from ..core.breaklines import MODES, trace_breaklines
+from .base import FloodMeshAlgorithm, layer_file, run_core
+
+
+class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
+    NAME = "tracebreaklines"
+    DISPLAY_NAME = "Trace break lines"
+    GROUP, GROUP_ID = "Break lines", "breaklines"
+    HELP = ("Joins breakpoints into break lines: only breakpoints, only grid neighbours; slope "
+            "changes by less than S_crit (degrees) between consecutive points; no turn over 90° "
+            "from the line's trend; no line crosses another. In flat terrain the next point is "
+            "the candidate of least slope, in steep terrain the one of least change of slope "
+            "(auto: steep when the median slope reaches S_crit). Lines with fewer points than "
+            "the minimum are dropped. Output: LineStringZ with z from the DEM.")
+    BREAKPOINTS, SLOPE, DEM, CRITICAL_SLOPE = "BREAKPOINTS", "SLOPE", "DEM", "CRITICAL_SLOPE"
+    MODE, MIN_POINTS, OUTPUT = "MODE", "MIN_POINTS", "OUTPUT"
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterRasterLayer(self.BREAKPOINTS,
+                                                            self.tr("Breakpoints")))
+        self.addParameter(QgsProcessingParameterRasterLayer(self.SLOPE,
+                                                            self.tr("Slope (degrees)")))
+        self.addParameter(QgsProcessingParameterRasterLayer(self.DEM, self.tr("DEM")))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
+            QgsProcessingParameterNumber.Double, 10.0, minValue=0.01, maxValue=89.99))
+        self.addParameter(QgsProcessingParameterEnum(self.MODE, self.tr("Terrain"),
+                                                     options=list(MODES), defaultValue=0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MIN_POINTS, self.tr("Minimum points per line"),
+            QgsProcessingParameterNumber.Integer, 3, minValue=2))
+        self.addParameter(QgsProcessingParameterVectorDestination(
+            self.OUTPUT, self.tr("Break lines"), QgsProcessing.TypeVectorLine))
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        def raster(name, what):
+            return run_core(io.read_raster, layer_file(
+                self.parameterAsRasterLayer(parameters, name, context), what))
+
+        breakpoints = raster(self.BREAKPOINTS, "Breakpoints")
+        breakpoints = breakpoints.with_values((breakpoints.values == 1).astype("uint8"))
+        dem = raster(self.DEM, "DEM")
+        lines = run_core(trace_breaklines, breakpoints, raster(self.SLOPE, "Slope"), dem,
+                         self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
+                         mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)],
+                         min_points=self.parameterAsInt(parameters, self.MIN_POINTS, context))
+        out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
+        run_core(io.write_breaklines, out, lines, dem.crs)
+        feedback.pushInfo(f"{len(lines)} break lines")
+        return {self.OUTPUT: out}

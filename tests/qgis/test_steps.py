@@ -1,0 +1,100 @@
+"""Each pipeline step as its own Processing algorithm, chained through processing.run the way the
+Graphical Modeler chains them; outputs open as QGIS layers with the expected sizes."""
+import json
+import subprocess
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+from qgis.core import QgsMeshLayer, QgsRasterLayer, QgsVectorLayer
+
+from floodmesh.core import io
+from floodmesh.core.slope import slope
+
+from .test_lidar_to_mesh import qgis_process  # noqa: F401 (fixture)
+
+
+def test_provider_lists_every_step(processing):
+    from qgis.core import QgsApplication
+
+    ids = {a.id() for a in QgsApplication.processingRegistry().providerById("floodmesh")
+           .algorithms()}
+    assert ids == {f"floodmesh:{n}" for n in (
+        "gridpoints", "slope", "classifybreakpoints", "tracebreaklines", "simplifybreaklines",
+        "buildmesh", "assessaccuracy", "lidartomesh")}
+
+
+def test_steps_chain_through_processing_run(processing, demo_points_file, tmp_path):
+    t = tmp_path
+    grid = processing.run("floodmesh:gridpoints", {
+        "INPUT": str(demo_points_file), "CELL_SIZE": 1.0, "HOLDOUT": 0.01, "SEED": 2,
+        "OUTPUT": str(t / "dem.tif"), "HOLDOUT_OUTPUT": str(t / "holdout.gpkg")})
+    dem_layer = QgsRasterLayer(grid["OUTPUT"], "dem")
+    assert dem_layer.isValid() and (dem_layer.width(), dem_layer.height()) == (300, 240)
+    assert dem_layer.crs().authid() == "EPSG:25832"
+
+    slope_out = processing.run("floodmesh:slope", {"INPUT": grid["OUTPUT"], "METHOD": 2,
+                                                   "OUTPUT": str(t / "slope.tif")})["OUTPUT"]
+    # the algorithm writes exactly what the core computes (float32 on disk)
+    expected = slope(io.read_raster(grid["OUTPUT"]), "sharpnack-akin").values
+    assert_allclose(io.read_raster(slope_out).values, expected, rtol=1e-6, equal_nan=True)
+
+    bp = processing.run("floodmesh:classifybreakpoints", {
+        "INPUT": slope_out, "CRITICAL_SLOPE": 10.0, "OUTPUT": str(t / "bp.tif")})["OUTPUT"]
+    bp_layer = QgsRasterLayer(bp, "bp")
+    assert bp_layer.isValid() and bp_layer.width() == 300
+    n_bp = int(np.nansum(io.read_raster(bp).values))
+    assert n_bp > 1000
+
+    lines = processing.run("floodmesh:tracebreaklines", {
+        "BREAKPOINTS": bp, "SLOPE": slope_out, "DEM": grid["OUTPUT"], "CRITICAL_SLOPE": 10.0,
+        "OUTPUT": str(t / "lines.gpkg")})["OUTPUT"]
+    traced = QgsVectorLayer(lines, "lines", "ogr")
+    assert traced.isValid() and traced.featureCount() > 20
+
+    simple = processing.run("floodmesh:simplifybreaklines", {
+        "INPUT": lines, "METHOD": 1, "TOLERANCE": 0.9, "OUTPUT": str(t / "simple.gpkg")})["OUTPUT"]
+    assert QgsVectorLayer(simple, "simple", "ogr").featureCount() == traced.featureCount()
+
+    mesh = processing.run("floodmesh:buildmesh", {
+        "DEM": grid["OUTPUT"], "BREAKLINES": simple, "MIN_ANGLE": 25.0, "MAX_AREA": 100.0,
+        "OUTPUT": str(t / "mesh.2dm"), "TRIANGLES": str(t / "triangles.gpkg")})
+    mesh_layer = QgsMeshLayer(mesh["OUTPUT"], "mesh", "mdal")
+    assert mesh_layer.isValid()
+    assert mesh_layer.dataProvider().vertexCount() == mesh["NODES"]
+    assert mesh_layer.dataProvider().faceCount() == mesh["TRIANGLE_COUNT"]
+    assert QgsVectorLayer(mesh["TRIANGLES"], "tri", "ogr").featureCount() == mesh["TRIANGLE_COUNT"]
+
+    assessed = processing.run("floodmesh:assessaccuracy", {
+        "MESH": mesh["OUTPUT"], "POINTS": grid["HOLDOUT_OUTPUT"],
+        "OUTPUT": str(t / "residuals.gpkg"), "REPORT": str(t / "stats.json")})
+    stats = json.loads((t / "stats.json").read_text())
+    assert stats["n_holdout"] == round(0.01 * 2 * 300 * 240)
+    assert assessed["RMSE"] == pytest.approx(stats["rmse_m"]) and 0 < stats["rmse_m"] < 0.15
+    assert QgsVectorLayer(assessed["OUTPUT"], "r", "ogr").featureCount() == stats["n_holdout"]
+
+
+def test_log_through_the_slope_and_breakpoint_algorithms(processing, tmp_path, real_data):
+    dem = str(real_data / "merewether_topography1.asc")
+    response = processing.run("floodmesh:slope", {
+        "INPUT": dem, "METHOD": 6, "SIGMA": 1.0, "OUTPUT": str(tmp_path / "log.tif")})["OUTPUT"]
+    bp = processing.run("floodmesh:classifybreakpoints", {
+        "INPUT": response, "LOG_SENSITIVITY": 0.05, "OUTPUT": str(tmp_path / "bp.tif")})["OUTPUT"]
+    layer = QgsRasterLayer(bp, "bp")
+    assert layer.isValid() and (layer.width(), layer.height()) == (321, 416)
+    assert np.nansum(io.read_raster(bp).values) > 1000
+
+
+def test_slope_headless_through_qgis_process(qgis_process, real_data, tmp_path):  # noqa: F811
+    exe, env = qgis_process
+    out = tmp_path / "slope.tif"
+    run = subprocess.run(
+        [exe, "run", "floodmesh:slope", "--json", "--",
+         f"INPUT={real_data / 'merewether_topography1.asc'}", "METHOD=4", f"OUTPUT={out}"],
+        env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    assert json.loads(run.stdout[run.stdout.index("{"):])["results"]["OUTPUT"] == str(out)
+    layer = QgsRasterLayer(str(out), "slope")
+    assert layer.isValid() and (layer.width(), layer.height()) == (321, 416)
+    values = io.read_raster(out).values
+    assert 0 <= np.nanmin(values) and np.nanmax(values) < 90
