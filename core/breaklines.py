@@ -13,6 +13,11 @@ their own. Every other breakpoint belongs to at most one line. A candidate must:
 Among the candidates, "flat" terrain takes the one of least slope, "steep" terrain the one of
 least change of slope; remaining ties go to the smallest turn, then to a fixed neighbour order,
 so results are reproducible.
+
+Thinning keeps the interior cells of steep bands that run obliquely to the grid (they have a
+non-breakpoint diagonal neighbour); traced on their own they give short lines across the band.
+A short line every point of which lies next to a line at least twice as long adds nothing, and
+is dropped.
 """
 from __future__ import annotations
 
@@ -70,15 +75,39 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     order = np.lexsort((-slope_values[rows, cols], ~is_end))
     flat_order = (rows * bp.shape[1] + cols)[order].astype(np.int64)
     cells, starts = _trace(bp, slope_values, flat_order, float(s_crit), mode == "steep")
+    paths = [cells[starts[i]:starts[i + 1]] for i in range(len(starts) - 1)]
+    paths = _drop_fringes([p for p in paths if len(p) >= min_points], bp.shape)
     lines = []
-    for i in range(len(starts) - 1):
-        idx = cells[starts[i]:starts[i + 1]]
-        if len(idx) < min_points:
-            continue
+    for idx in paths:
         r, c = np.divmod(idx, bp.shape[1])
         x, y = dem.cell_centres(r, c)
         lines.append(BreakLine(np.column_stack([x, y, dem.values[r, c]]), slope.values[r, c]))
     return lines
+
+
+def _drop_fringes(paths: list[np.ndarray], shape) -> list[np.ndarray]:
+    """Drop short paths whose every cell touches (8-neighbourhood) a path twice as long."""
+    rows, cols = shape
+    length_at = np.zeros(rows * cols, dtype=np.int64)
+    owner = np.full(rows * cols, -1, dtype=np.int64)
+    for k, path in enumerate(paths):
+        longer = len(path) > length_at[path]
+        length_at[path[longer]] = len(path)
+        owner[path[longer]] = k
+    keep = []
+    for k, path in enumerate(paths):
+        r, c = np.divmod(path, cols)
+        touched = np.zeros(len(path), bool)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                rr, cc = r + dr, c + dc
+                inside = (rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols)
+                neighbour = np.where(inside, rr * cols + cc, 0)
+                touched |= (inside & (owner[neighbour] != k) & (owner[neighbour] >= 0)
+                            & (length_at[neighbour] >= 2 * len(path)))
+        if not touched.all():
+            keep.append(path)
+    return keep
 
 
 @numba.njit(cache=True)
