@@ -1,0 +1,340 @@
+"""Reading and writing at the pipeline's edges (floodmesh.core.io)."""
+import os
+
+import fiona
+import numpy as np
+import pytest
+from affine import Affine
+from pyproj import CRS
+
+from floodmesh.core import io
+from floodmesh.core.breaklines import BreakLine
+from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.points import PointCloud
+from floodmesh.core.raster import Grid
+
+from ..conftest import plane_points
+
+UTM32 = CRS.from_epsg(25832)
+
+
+def _cloud(n=60, seed=3):
+    xyz = plane_points(size=50.0, density=n / 2500.0, seed=seed, origin=(412_000.0, 5_652_000.0))
+    return PointCloud(xyz, UTM32)
+
+
+# ---------------------------------------------------------------------------------------------
+# LAS / LAZ
+@pytest.mark.parametrize("ext", [".las", ".laz"])
+def test_las_round_trip_reads_ground_class_by_default(tmp_path, ext):
+    """Written points with classes 2 and 1 read back: class 2 only, to the 1 mm LAS scale, same CRS."""
+    cloud = _cloud()
+    classes = np.where(np.arange(len(cloud)) % 3 == 0, 1, 2).astype(np.uint8)
+    path = tmp_path / f"points{ext}"
+    io.write_points_las(path, cloud, classes=classes)
+
+    ground = io.read_points(path)
+    assert len(ground) == int((classes == 2).sum())
+    np.testing.assert_allclose(ground.xyz, cloud.xyz[classes == 2], rtol=0, atol=1e-3)
+    assert ground.crs == UTM32
+
+    other = io.read_points(path, classes=(1,))
+    assert len(other) == int((classes == 1).sum())
+    np.testing.assert_allclose(other.xyz, cloud.xyz[classes == 1], rtol=0, atol=1e-3)
+    assert other.crs == UTM32
+
+
+def test_las_absent_classes_are_refused_with_the_present_ones(tmp_path):
+    """Asking for classes the file lacks raises FloodMeshError listing the classes present (1, 2)."""
+    cloud = _cloud()
+    classes = np.where(np.arange(len(cloud)) % 2 == 0, 1, 2).astype(np.uint8)
+    path = tmp_path / "points.laz"
+    io.write_points_las(path, cloud, classes=classes)
+    with pytest.raises(FloodMeshError, match=r"classes present: 1, 2"):
+        io.read_points(path, classes=(6, 9))
+
+
+# ---------------------------------------------------------------------------------------------
+# XYZ text
+XYZ = np.array([[412_000.5, 5_652_000.25, 10.0], [412_010.0, 5_652_001.0, 11.5],
+                [412_003.0, 5_652_012.5, 12.25], [412_020.0, 5_652_020.0, 9.75]])
+
+
+@pytest.mark.parametrize("name, text", [
+    ("spaces.xyz", "\n".join(f"{x} \t{y}   {z}" for x, y, z in XYZ) + "\n"),
+    ("header.csv", "x,y,z\n" + "\n".join(f"{x},{y},{z}" for x, y, z in XYZ) + "\n"),
+    ("semicolon.txt", "\n".join(f"{x};{y};{z}" for x, y, z in XYZ) + "\n"),
+])
+def test_xyz_text_variants(tmp_path, name, text):
+    """Whitespace, comma-with-header and semicolon text files give the written coordinates exactly."""
+    path = tmp_path / name
+    path.write_text(text)
+    points = io.read_points(path, crs="EPSG:25832")
+    np.testing.assert_array_equal(points.xyz, XYZ)
+    assert points.crs == UTM32
+
+
+def test_xyz_without_crs_asks_for_crs(tmp_path):
+    """A text file carries no CRS: without one the error points to --crs."""
+    path = tmp_path / "points.xyz"
+    path.write_text("\n".join(f"{x} {y} {z}" for x, y, z in XYZ))
+    with pytest.raises(FloodMeshError, match="--crs"):
+        io.read_points(path)
+
+
+# ---------------------------------------------------------------------------------------------
+# errors
+def test_missing_file(tmp_path):
+    """A path that does not exist is named as missing."""
+    with pytest.raises(FloodMeshError, match="does not exist"):
+        io.read_points(tmp_path / "nowhere.laz")
+    with pytest.raises(FloodMeshError, match="does not exist"):
+        io.read_raster(tmp_path / "nowhere.tif")
+
+
+def test_garbage_laz(tmp_path):
+    """A .laz file holding text is reported as not a readable LAS/LAZ file."""
+    path = tmp_path / "garbage.laz"
+    path.write_text("this is not a point cloud\n" * 20)
+    with pytest.raises(FloodMeshError, match="not a readable LAS/LAZ"):
+        io.read_points(path)
+
+
+def test_unknown_extension(tmp_path):
+    """An existing file with an unknown extension is refused by type, naming the extension."""
+    path = tmp_path / "points.foo"
+    path.write_text("\n".join(f"{x} {y} {z}" for x, y, z in XYZ))
+    with pytest.raises(FloodMeshError, match=r"unknown point file type '\.foo'"):
+        io.read_points(path, crs="EPSG:25832")
+    with pytest.raises(FloodMeshError, match=r"unknown input type '\.foo'"):
+        io.read_input(path, crs="EPSG:25832")
+
+
+def test_geographic_crs_is_refused(tmp_path):
+    """EPSG:4326 (degrees) is refused with advice to reproject."""
+    path = tmp_path / "points.xyz"
+    path.write_text("\n".join(f"{x} {y} {z}" for x, y, z in XYZ))
+    with pytest.raises(FloodMeshError, match="(?i)reproject"):
+        io.read_points(path, crs="EPSG:4326")
+
+
+def test_crs_in_feet_is_refused(tmp_path):
+    """EPSG:2994 (Oregon Lambert, feet) is refused because FloodMesh works in metres."""
+    path = tmp_path / "points.xyz"
+    path.write_text("\n".join(f"{x} {y} {z}" for x, y, z in XYZ))
+    with pytest.raises(FloodMeshError, match="metres") as err:
+        io.read_points(path, crs="EPSG:2994")
+    assert "foot" in str(err.value)
+
+
+def test_fewer_than_three_points(tmp_path):
+    """Two usable points (a third with NaN z is dropped) are too few for a terrain model."""
+    path = tmp_path / "points.xyz"
+    path.write_text("412000 5652000 10\n412010 5652010 11\n412020 5652000 nan\n")
+    with pytest.raises(FloodMeshError, match="2 usable points"):
+        io.read_points(path, crs="EPSG:25832")
+
+
+# ---------------------------------------------------------------------------------------------
+# real data
+def test_real_topography_laz_ground_points(real_data):
+    """Topography.laz: 8159 ground (class 2) points in EPSG:2949, as its README says."""
+    points = io.read_points(real_data / "Topography.laz")
+    assert len(points) == 8159
+    assert points.crs.to_epsg() == 2949
+    assert points.crs == CRS.from_epsg(2949)
+
+
+def test_real_autzen_is_refused_for_feet(real_data):
+    """autzen_trim.laz is in international feet and is refused, the message saying so."""
+    with pytest.raises(FloodMeshError, match="foot") as err:
+        io.read_points(real_data / "autzen_trim.laz")
+    assert "metres" in str(err.value)
+
+
+# ---------------------------------------------------------------------------------------------
+# rasters
+def _grid(values, d=2.0, origin=(412_000.0, 5_652_000.0), crs=UTM32):
+    rows = values.shape[0]
+    return Grid(values, Affine(d, 0.0, origin[0], 0.0, -d, origin[1] + rows * d), crs)
+
+
+def test_geotiff_round_trip(tmp_path):
+    """Values (to float32), NaN nodata, transform and CRS come back as written."""
+    rng = np.random.default_rng(5)
+    values = rng.uniform(10.0, 50.0, (23, 31))
+    values[3:6, 4:9] = np.nan
+    values[-1, -1] = np.nan
+    grid = _grid(values)
+    path = tmp_path / "dem.tif"
+    io.write_raster(path, grid)
+    back = io.read_raster(path)
+    assert back.shape == grid.shape
+    assert np.array_equal(np.isnan(back.values), np.isnan(values))
+    ok = np.isfinite(values)
+    np.testing.assert_array_equal(back.values[ok], values[ok].astype(np.float32).astype(np.float64))
+    assert back.transform.almost_equals(grid.transform, precision=1e-9)
+    assert back.crs == UTM32
+
+
+def test_geotiff_uint8_with_valid_mask(tmp_path):
+    """A uint8 grid written with a valid mask reads back NaN outside the mask, its values inside."""
+    rng = np.random.default_rng(6)
+    values = rng.integers(0, 2, (20, 25)).astype(np.uint8)
+    valid = np.ones(values.shape, bool)
+    valid[:, :5] = False
+    valid[12:, 10:14] = False
+    path = tmp_path / "breakpoints.tif"
+    io.write_raster(path, _grid(values), valid=valid)
+    back = io.read_raster(path)
+    assert np.isnan(back.values[~valid]).all()
+    np.testing.assert_array_equal(back.values[valid], values[valid].astype(float))
+
+
+def test_all_nodata_raster_is_refused(tmp_path):
+    """A raster whose every cell is nodata raises FloodMeshError saying it has no valid cells."""
+    path = tmp_path / "empty.tif"
+    io.write_raster(path, _grid(np.full((10, 12), np.nan)))
+    with pytest.raises(FloodMeshError, match="no valid cells"):
+        io.read_raster(path)
+
+
+@pytest.mark.parametrize("crs", [None, "EPSG:32756"])
+def test_real_merewether_ascii_grid(real_data, crs):
+    """merewether_topography1.asc reads with the CRS of its .prj (UTM 56S) or an explicit one."""
+    grid = io.read_raster(real_data / "merewether_topography1.asc", crs=crs)
+    assert grid.shape == (416, 321)
+    assert grid.crs == CRS.from_epsg(32756)
+    assert grid.cell_size == pytest.approx(0.99993681000029, abs=1e-12)
+    assert grid.transform.c == pytest.approx(382249.79174463, abs=1e-6)
+    assert np.nanmin(grid.values) == pytest.approx(16.47, abs=0.01)
+    assert np.nanmax(grid.values) == pytest.approx(51.97, abs=0.01)
+    # the first column holds NODATA (-9999) cells: they must come back as NaN, not -9999
+    assert np.isnan(grid.values).any()
+    assert np.nanmin(grid.values) > 0
+
+
+# ---------------------------------------------------------------------------------------------
+# atomic output
+def test_atomic_output_failure_leaves_nothing(tmp_path):
+    """An exception inside atomic_output leaves no target and no temporary file behind."""
+    target = tmp_path / "out.txt"
+    with pytest.raises(RuntimeError):
+        with io.atomic_output(target) as tmp:
+            with open(tmp, "w") as fh:
+                fh.write("half")
+            raise RuntimeError("boom")
+    assert not target.exists()
+    assert os.listdir(tmp_path) == []
+
+
+def test_atomic_output_failure_keeps_old_content(tmp_path):
+    """A failing write over an existing file leaves the old content and no other file."""
+    target = tmp_path / "out.txt"
+    target.write_text("old")
+    with pytest.raises(RuntimeError):
+        with io.atomic_output(target) as tmp:
+            with open(tmp, "w") as fh:
+                fh.write("new, incomplete")
+            raise RuntimeError("boom")
+    assert target.read_text() == "old"
+    assert os.listdir(tmp_path) == ["out.txt"]
+
+
+def test_failing_writer_keeps_old_mesh(tmp_path):
+    """write_mesh_2dm failing half-way (bad triangle data) keeps the previous mesh file intact."""
+    target = tmp_path / "mesh.2dm"
+    nodes = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 2.0], [0.0, 1.0, 3.0]])
+    io.write_mesh_2dm(target, nodes, np.array([[0, 1, 2]]))
+    old = target.read_bytes()
+    with pytest.raises(Exception):
+        io.write_mesh_2dm(target, nodes, np.array([["a", "b", "c"]]))
+    assert target.read_bytes() == old
+    assert os.listdir(tmp_path) == ["mesh.2dm"]
+
+
+def test_atomic_output_missing_folder(tmp_path):
+    """Writing into a folder that does not exist is a FloodMeshError naming the folder."""
+    with pytest.raises(FloodMeshError, match="does not exist"):
+        with io.atomic_output(tmp_path / "missing" / "out.txt"):
+            pass
+
+
+# ---------------------------------------------------------------------------------------------
+# 2DM
+def test_2dm_round_trip(tmp_path):
+    """Nodes come back to the 1e-4 m written precision and triangles exactly."""
+    rng = np.random.default_rng(7)
+    nodes = np.column_stack([412_000 + rng.uniform(0, 100, 9), 5_652_000 + rng.uniform(0, 100, 9),
+                             rng.uniform(5, 30, 9)])
+    triangles = np.array([[0, 1, 2], [2, 1, 3], [3, 4, 2], [5, 6, 7], [8, 7, 6]])
+    path = tmp_path / "mesh.2dm"
+    io.write_mesh_2dm(path, nodes, triangles)
+    back_nodes, back_tris = io.read_mesh_2dm(path)
+    assert back_nodes.shape == nodes.shape
+    np.testing.assert_allclose(back_nodes, nodes, rtol=0, atol=0.5e-4 + 1e-9)
+    np.testing.assert_array_equal(back_tris, triangles)
+
+
+def test_2dm_without_header(tmp_path):
+    """A file not starting with MESH2D is refused."""
+    path = tmp_path / "mesh.2dm"
+    path.write_text("E3T 1 1 2 3 1\nND 1 0 0 0\nND 2 1 0 0\nND 3 0 1 0\n")
+    with pytest.raises(FloodMeshError, match="MESH2D"):
+        io.read_mesh_2dm(path)
+
+
+# ---------------------------------------------------------------------------------------------
+# GeoPackage
+def test_breaklines_gpkg_round_trip(tmp_path):
+    """write_breaklines → read_lines_gpkg gives the coordinates back; fiona sees 3D LineStrings with
+    line_id, n_points and length_m equal to the lines' own figures."""
+    rng = np.random.default_rng(8)
+    lines = []
+    for k in (2, 5, 11):
+        xy = np.cumsum(rng.uniform(-2, 2, (k, 2)), axis=0) + [412_050.0, 5_652_050.0]
+        coords = np.column_stack([xy, rng.uniform(10, 12, k)])
+        lines.append(BreakLine(coords, rng.uniform(10, 40, k)))
+    path = tmp_path / "breaklines.gpkg"
+    io.write_breaklines(path, lines, UTM32)
+
+    back = io.read_lines_gpkg(path)
+    assert len(back) == len(lines)
+    for got, line in zip(back, lines):
+        np.testing.assert_allclose(got, line.coords, rtol=0, atol=1e-9)
+
+    with fiona.open(path) as src:
+        assert src.schema["geometry"] == "3D LineString"
+        assert {"line_id", "n_points", "length_m"} <= set(src.schema["properties"])
+        feats = list(src)
+    assert [f["properties"]["line_id"] for f in feats] == [1, 2, 3]
+    assert [f["properties"]["n_points"] for f in feats] == [2, 5, 11]
+    for f, line in zip(feats, lines):
+        expected = np.hypot(*np.diff(line.coords[:, :2], axis=0).T).sum()
+        assert f["properties"]["length_m"] == pytest.approx(expected, rel=1e-12)
+        assert f["properties"]["mean_slope_deg"] == pytest.approx(line.slopes.mean(), rel=1e-12)
+        assert f["properties"]["max_slope_deg"] == pytest.approx(line.slopes.max(), rel=1e-12)
+
+
+def test_points_gpkg_attributes_round_trip(tmp_path):
+    """write_points_gpkg with int, float and str attributes reads back equal through fiona."""
+    xyz = plane_points(size=10.0, density=0.1, seed=4)
+    n = len(xyz)
+    ints = np.arange(n, dtype=np.int64) * 3 - 7
+    floats = np.linspace(-1.5, 2.25, n)
+    strs = np.array([f"p{i}" for i in range(n)])
+    path = tmp_path / "points.gpkg"
+    io.write_points_gpkg(path, xyz, UTM32, layer="pts",
+                         attributes={"count": ints, "value": floats, "label": strs})
+    with fiona.open(path, layer="pts") as src:
+        assert src.schema["geometry"] == "3D Point"
+        assert CRS.from_wkt(src.crs_wkt) == UTM32
+        feats = list(src)
+    assert len(feats) == n
+    got_xyz = np.array([f["geometry"]["coordinates"] for f in feats])
+    np.testing.assert_allclose(got_xyz, xyz, rtol=0, atol=1e-9)
+    assert [f["properties"]["count"] for f in feats] == ints.tolist()
+    assert all(isinstance(f["properties"]["count"], int) for f in feats)
+    np.testing.assert_allclose([f["properties"]["value"] for f in feats], floats, rtol=0, atol=0)
+    assert [f["properties"]["label"] for f in feats] == strs.tolist()
+    np.testing.assert_allclose(io.read_points_vector(path), xyz, rtol=0, atol=1e-9)

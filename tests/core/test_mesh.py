@@ -1,0 +1,190 @@
+"""Meshing with break lines (floodmesh.core.mesh): quality bounds, honoured break lines, holes."""
+import numpy as np
+import pytest
+import shapely
+from affine import Affine
+from pyproj import CRS
+from scipy.spatial import cKDTree
+
+from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.mesh import build_mesh, build_pslg, domain_from_dem, mesh_quality
+from floodmesh.core.raster import Grid
+
+ORIGIN = np.array([500_000.0, 6_000_000.0])
+N = 60  # cells each way, d = 1 m: the domain runs through the outer cell centres, 0.5..59.5
+
+
+def _plane(x, y):
+    """z of the test plane at local coordinates."""
+    return 0.1 * x - 0.05 * y + 12.0
+
+
+def _plane_dem(hole=None):
+    x = np.arange(N) + 0.5
+    y = N - (np.arange(N) + 0.5)
+    xx, yy = np.meshgrid(x, y)
+    z = _plane(xx, yy)
+    if hole is not None:
+        z[hole] = np.nan
+    transform = Affine(1.0, 0.0, ORIGIN[0], 0.0, -1.0, ORIGIN[1] + N)
+    return Grid(z, transform, CRS.from_epsg(25832))
+
+
+def _line(local_xy):
+    """A break line (k, 3) in map coordinates with z on the plane."""
+    xy = np.asarray(local_xy, float)
+    return np.column_stack([xy + ORIGIN, _plane(xy[:, 0], xy[:, 1])])
+
+
+DIAGONAL = _line([(10, 12), (18, 20), (26, 28), (34, 36), (42, 44), (48, 50)])
+L_SHAPE = _line([(8, 52), (16, 52), (28, 52), (28, 44), (28, 36)])
+OUTWARD = _line([(45, 20), (52, 20), (70, 20)])  # leaves the domain at x = 59.5: clipped
+
+
+def _edges(triangles):
+    e = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
+                                triangles[:, [2, 0]]]), axis=1)
+    return np.unique(e, axis=0)
+
+
+def _angles_and_areas(nodes, triangles):
+    """Interior angles (degrees) by atan2(|cross|, dot) and signed areas, computed here."""
+    p = nodes[triangles][:, :, :2]
+    angles = []
+    for k in range(3):
+        u = p[:, (k + 1) % 3] - p[:, k]
+        v = p[:, (k + 2) % 3] - p[:, k]
+        cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+        dot = (u * v).sum(axis=1)
+        angles.append(np.degrees(np.arctan2(np.abs(cross), dot)))
+    a, b, c = p[:, 0], p[:, 1], p[:, 2]
+    signed = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                    - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    return np.column_stack(angles), signed
+
+
+def _covered_length(nodes, edges, a, b, tol=1e-6):
+    """Total length of the mesh edges lying on the straight segment a-b."""
+    ab = b - a
+    length = np.hypot(*ab)
+    rel = nodes[:, :2] - a
+    t = rel @ ab / length ** 2
+    off = np.abs(rel[:, 0] * ab[1] - rel[:, 1] * ab[0]) / length
+    on = (off < tol) & (t > -tol / length) & (t < 1 + tol / length)
+    both = on[edges[:, 0]] & on[edges[:, 1]]
+    e = edges[both]
+    return np.hypot(*(nodes[e[:, 1], :2] - nodes[e[:, 0], :2]).T).sum()
+
+
+@pytest.fixture(scope="module")
+def plane_mesh():
+    dem = _plane_dem()
+    lines = [DIAGONAL, L_SHAPE, OUTWARD]
+    return dem, lines, build_mesh(dem, lines, min_angle=25, max_area=20)
+
+
+def test_quality_bounds(plane_mesh):
+    """mesh_quality and an independent computation agree: no angle below 25 degrees, no area above
+    20 m², every triangle counter-clockwise, and the triangles tile the 59 x 59 m domain."""
+    dem, _, mesh = plane_mesh
+    q = mesh_quality(mesh, min_angle=25, max_area=20)
+    assert q["min_angle_deg"] >= 25 - 1e-6
+    assert q["max_area_m2"] <= 20
+    assert q["n_below_min_angle"] == 0 and q["n_above_max_area"] == 0
+    assert q["all_counter_clockwise"] is True
+    assert q["nodes"] == len(mesh.nodes) and q["triangles"] == len(mesh.triangles)
+
+    angles, areas = _angles_and_areas(mesh.nodes, mesh.triangles)
+    np.testing.assert_allclose(angles.sum(axis=1), 180.0, atol=1e-9)
+    assert angles.min() >= 25 - 1e-6
+    assert (areas > 0).all()
+    assert areas.max() <= 20 * (1 + 1e-9)
+    assert areas.sum() == pytest.approx(59.0 * 59.0, rel=1e-9)
+    assert q["min_angle_deg"] == pytest.approx(angles.min(), abs=1e-9)
+    assert q["max_area_m2"] == pytest.approx(areas.max(), rel=1e-12)
+    assert mesh.crs == dem.crs
+
+
+def test_break_lines_are_chains_of_mesh_edges(plane_mesh):
+    """Every surviving break-line vertex is a mesh node, and every PSLG segment (break lines after
+    clipping, and the boundary) is covered end to end by mesh edges lying on it."""
+    dem, lines, mesh = plane_mesh
+    nodes = mesh.nodes
+    tree = cKDTree(nodes[:, :2])
+    snap = dem.cell_size / 4
+    inner = shapely.Polygon([(0.5, 0.5), (59.5, 0.5), (59.5, 59.5), (0.5, 59.5)]).buffer(-snap)
+    for line in lines:
+        local = line[:, :2] - ORIGIN
+        inside = shapely.contains_xy(inner, local[:, 0], local[:, 1])
+        dist, _ = tree.query(line[inside, :2])
+        assert dist.max() < 1e-6
+    assert (~shapely.contains_xy(inner, *(OUTWARD[:, :2] - ORIGIN).T)).sum() == 1
+
+    pslg = build_pslg([c for c in lines], domain_from_dem(dem), snap=snap)
+    edges = _edges(mesh.triangles)
+    # 4 boundary sides + 5 diagonal + 4 L-shape + 2 clipped outward segments
+    assert len(pslg.segments) == 15
+    for i, j in pslg.segments:
+        a, b = pslg.vertices[i], pslg.vertices[j]
+        expected = np.hypot(*(b - a))
+        assert _covered_length(nodes, edges, a, b) == pytest.approx(expected, rel=1e-9, abs=1e-6)
+    # the clipped outward line ends just inside the boundary (snap from it) and is a segment chain
+    end = np.array([59.5 - snap, 20.0]) + ORIGIN
+    assert tree.query(end)[0] < 1e-6
+    assert _covered_length(nodes, edges, OUTWARD[0, :2], end) == pytest.approx(59.5 - snap - 45)
+
+
+def test_nodes_are_unique_and_on_the_plane(plane_mesh):
+    """No two nodes coincide and every node's z is the plane's (bilinear is exact on a plane)."""
+    _, _, mesh = plane_mesh
+    nodes = mesh.nodes
+    assert cKDTree(nodes[:, :2]).query_pairs(1e-6) == set()
+    local = nodes[:, :2] - ORIGIN
+    np.testing.assert_allclose(nodes[:, 2], _plane(local[:, 0], local[:, 1]), rtol=0, atol=1e-6)
+    assert np.unique(mesh.triangles).size == len(nodes), "a node belongs to no triangle"
+
+
+def test_nan_hole_is_not_meshed():
+    """A 20 x 20 cell NaN hole: no triangle centroid inside it, all node z finite, and the mesh area
+    is the domain's (59² minus the hole through the valid cell centres around it, 21²). The L-shaped
+    line reaches into the hole and is clipped there."""
+    dem = _plane_dem(hole=(slice(20, 40), slice(20, 40)))
+    mesh = build_mesh(dem, [DIAGONAL[:2], L_SHAPE], min_angle=25, max_area=20)
+    assert np.isfinite(mesh.nodes[:, 2]).all()
+    centroids = mesh.nodes[mesh.triangles][:, :, :2].mean(axis=1) - ORIGIN
+    in_hole = ((centroids > 20) & (centroids < 40)).all(axis=1)
+    assert not in_hole.any()
+    _, areas = _angles_and_areas(mesh.nodes, mesh.triangles)
+    assert areas.sum() == pytest.approx(59.0 ** 2 - 21.0 ** 2, rel=1e-9)
+    local = mesh.nodes[:, :2] - ORIGIN
+    np.testing.assert_allclose(mesh.nodes[:, 2], _plane(local[:, 0], local[:, 1]), atol=1e-6)
+
+
+@pytest.mark.parametrize("min_angle", [40.0, 0.0, -5.0])
+def test_min_angle_out_of_range(min_angle):
+    """A minimum angle of 0 or above 34 degrees is refused, the message naming 34."""
+    with pytest.raises(FloodMeshError, match="34"):
+        build_mesh(_plane_dem(), [DIAGONAL], min_angle=min_angle, max_area=20)
+
+
+@pytest.mark.parametrize("max_area", [0.0, -10.0])
+def test_max_area_not_positive(max_area):
+    """A maximum area of 0 or less is refused."""
+    with pytest.raises(FloodMeshError, match="area"):
+        build_mesh(_plane_dem(), [DIAGONAL], min_angle=25, max_area=max_area)
+
+
+def test_crossing_break_lines_are_noded():
+    """Two break lines crossing in an X: the crossing point (30, 30) is a mesh node with the plane's
+    z, and both lines are chains of mesh edges through it."""
+    a = _line([(10, 10), (50, 50)])
+    b = _line([(10, 50), (50, 10)])
+    mesh = build_mesh(_plane_dem(), [a, b], min_angle=25, max_area=20)
+    crossing = ORIGIN + [30.0, 30.0]
+    dist, idx = cKDTree(mesh.nodes[:, :2]).query(crossing)
+    assert dist < 1e-6
+    assert mesh.nodes[idx, 2] == pytest.approx(_plane(30.0, 30.0), abs=1e-6)
+    edges = _edges(mesh.triangles)
+    for line in (a, b):
+        for p, q in ((line[0, :2], crossing), (crossing, line[1, :2])):
+            assert _covered_length(mesh.nodes, edges, p, q) == pytest.approx(np.hypot(*(q - p)))

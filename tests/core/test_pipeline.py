@@ -1,0 +1,234 @@
+"""The whole chain (floodmesh.core.pipeline.run_pipeline) on the demo floodplain and real data."""
+import json
+import os
+
+import fiona
+import numpy as np
+import pytest
+from pyproj import CRS
+
+from floodmesh.core import io
+from floodmesh.core.errors import Cancelled
+from floodmesh.core.pipeline import OUTPUT_FILES, RunOptions, run_pipeline
+from floodmesh.core.points import PointCloud
+
+from ..conftest import REAL_DATA, plane_points
+
+REPORT_KEYS = ("nodes", "triangles", "min_angle_deg", "max_area_m2", "rmse_m", "mean_m",
+               "max_abs_residual_m", "n_holdout")
+
+
+def _mesh_from_gpkg(path):
+    """Triangles of mesh.gpkg as a (m, 3, 2) array of full-precision corner coordinates."""
+    with fiona.open(path) as src:
+        return np.array([[c[:2] for c in f["geometry"]["coordinates"][0][:3]] for f in src])
+
+
+def _angles_and_areas(corners):
+    """Interior angles (degrees) and signed areas of (m, 3, 2) triangles, computed here."""
+    angles = []
+    for k in range(3):
+        u = corners[:, (k + 1) % 3] - corners[:, k]
+        v = corners[:, (k + 2) % 3] - corners[:, k]
+        cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+        angles.append(np.degrees(np.arctan2(np.abs(cross), (u * v).sum(axis=1))))
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    areas = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    return np.column_stack(angles), areas
+
+
+def _residuals_from_gpkg(path):
+    with fiona.open(path) as src:
+        values = [f["properties"]["residual_m"] for f in src]
+    return np.array([np.nan if v is None else v for v in values], float)
+
+
+@pytest.fixture(scope="module")
+def demo_run(demo_points_file, tmp_path_factory):
+    """One run on the demo floodplain (2 points/m²) with 1 % held out, recording progress and log."""
+    out = tmp_path_factory.mktemp("run1")
+    fractions, steps = [], []
+    report = run_pipeline(demo_points_file, out, RunOptions(holdout=0.01),
+                          progress=fractions.append, log=steps.append)
+    return out, report, fractions, steps
+
+
+def test_all_outputs_written(demo_run):
+    """All eight OUTPUT_FILES exist and no temporary (.partial, hidden) file is left behind."""
+    out, _, _, _ = demo_run
+    assert len(OUTPUT_FILES) == 8
+    names = os.listdir(out)
+    assert set(OUTPUT_FILES) <= set(names)
+    assert [n for n in names if "partial" in n or n.startswith(".")] == []
+    for name in OUTPUT_FILES:
+        assert (out / name).stat().st_size > 0
+
+
+def test_report_json(demo_run):
+    """report.json holds the figures returned, with a seconds entry per step."""
+    out, report, _, _ = demo_run
+    written = json.loads((out / "report.json").read_text())
+    for key in REPORT_KEYS:
+        assert key in written
+        assert written[key] == pytest.approx(report[key], rel=1e-12)
+    assert isinstance(written["seconds"], dict)
+    assert {"read", "grid", "slope", "breakpoints", "breaklines", "mesh", "assess", "write"} \
+        <= set(written["seconds"])
+    assert all(v >= 0 for v in written["seconds"].values())
+
+
+def test_progress_and_log(demo_run):
+    """Progress rises monotonically from above 0 to 1; the log names the steps in order."""
+    _, _, fractions, steps = demo_run
+    assert fractions and all(0 < f <= 1 + 1e-12 for f in fractions)
+    assert all(b >= a - 1e-12 for a, b in zip(fractions, fractions[1:]))
+    assert fractions[-1] == pytest.approx(1.0)
+    assert steps[0].startswith("read") and steps[-1].startswith("write")
+
+
+def test_mesh_bounds_and_accuracy(demo_run):
+    """Report: min angle >= 25, max area <= 100, no violations, RMSE < 0.15 m; the angles and areas
+    recomputed from mesh.gpkg agree."""
+    out, report, _, _ = demo_run
+    assert report["min_angle_deg"] >= 25
+    assert report["max_area_m2"] <= 100
+    assert report["n_below_min_angle"] == 0 and report["n_above_max_area"] == 0
+    assert report["rmse_m"] < 0.15
+    angles, areas = _angles_and_areas(_mesh_from_gpkg(out / "mesh.gpkg"))
+    assert len(areas) == report["triangles"]
+    assert angles.min() >= 25 - 1e-6
+    assert (areas > 0).all() and areas.max() <= 100 * (1 + 1e-9)
+
+
+def test_dem_and_mesh_files_match_report(demo_run):
+    """dem.tif has the report's grid shape and valid cells; mesh.2dm the report's node and triangle
+    counts, with node z inside the DEM's range."""
+    out, report, _, _ = demo_run
+    dem = io.read_raster(out / "dem.tif")
+    assert dem.shape == (report["grid"]["rows"], report["grid"]["cols"])
+    assert int(np.isfinite(dem.values).sum()) == report["grid"]["valid_cells"]
+    assert dem.cell_size == report["grid"]["cell_size_m"] == 1.0
+    nodes, triangles = io.read_mesh_2dm(out / "mesh.2dm")
+    assert len(nodes) == report["nodes"] and len(triangles) == report["triangles"]
+    assert np.nanmin(dem.values) - 0.01 <= nodes[:, 2].min()
+    assert nodes[:, 2].max() <= np.nanmax(dem.values) + 0.01
+
+
+def test_residuals_file(demo_run):
+    """residuals.gpkg holds n_holdout points with residual_m; their RMSE and NaN count are the
+    report's."""
+    out, report, _, _ = demo_run
+    res = _residuals_from_gpkg(out / "residuals.gpkg")
+    assert report["n_holdout"] == len(res) == 1440  # 1 % of 144 000 ground points
+    assert int(np.isnan(res).sum()) == report["n_outside_mesh"]
+    inside = res[np.isfinite(res)]
+    assert np.sqrt(np.mean(inside ** 2)) == pytest.approx(report["rmse_m"], rel=1e-9)
+    assert np.abs(inside).max() == pytest.approx(report["max_abs_residual_m"], rel=1e-9)
+
+
+def test_same_inputs_give_identical_mesh(demo_run, demo_points_file, tmp_path):
+    """A second run with the same input and seed writes a byte-identical mesh.2dm."""
+    out, _, _, _ = demo_run
+    run_pipeline(demo_points_file, tmp_path, RunOptions(holdout=0.01))
+    assert (tmp_path / "mesh.2dm").read_bytes() == (out / "mesh.2dm").read_bytes()
+
+
+def test_cancel_at_once(demo_points_file, tmp_path):
+    """cancelled() true from the start raises Cancelled and writes no mesh (no file at all)."""
+    with pytest.raises(Cancelled):
+        run_pipeline(demo_points_file, tmp_path, RunOptions(holdout=0.01), cancelled=lambda: True)
+    assert not (tmp_path / "mesh.2dm").exists()
+    assert os.listdir(tmp_path) == []
+
+
+def test_cancel_before_writing(tmp_path):
+    """Cancelling after the assessment (just before the write step) leaves no output files."""
+    points = tmp_path / "plane.laz"
+    io.write_points_las(points, PointCloud(plane_points(size=40.0, density=2.0),
+                                           CRS.from_epsg(25832)))
+    out = tmp_path / "out"
+    seen = []
+    with pytest.raises(Cancelled):
+        run_pipeline(points, out, RunOptions(holdout=0.05), log=seen.append,
+                     cancelled=lambda: any(s.startswith("assess") for s in seen))
+    assert seen[-1].startswith("assess")
+    assert os.listdir(out) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# real data
+def _real(name):
+    path = REAL_DATA / name
+    if not path.is_file():
+        pytest.skip(f"{path} is not beside this checkout")
+    return path
+
+
+@pytest.fixture(scope="module")
+def merewether_run(tmp_path_factory):
+    path = _real("merewether_topography1.asc")
+    out = tmp_path_factory.mktemp("merewether")
+    return out, run_pipeline(path, out, RunOptions())
+
+
+@pytest.fixture(scope="module")
+def topography_run(tmp_path_factory):
+    path = _real("Topography.laz")
+    out = tmp_path_factory.mktemp("topography")
+    return out, run_pipeline(path, out, RunOptions(cell_size=2.0))
+
+
+def _assert_valid_mesh(out, report):
+    nodes, triangles = io.read_mesh_2dm(out / "mesh.2dm")
+    assert len(nodes) == report["nodes"] > 1000
+    assert len(triangles) == report["triangles"]
+    assert np.isfinite(nodes).all()
+    assert np.unique(triangles).size == len(nodes)
+    angles, areas = _angles_and_areas(_mesh_from_gpkg(out / "mesh.gpkg"))
+    assert (areas > 0).all(), "triangles not counter-clockwise or degenerate"
+    assert areas.max() <= 100 * (1 + 1e-9)
+    assert report["all_counter_clockwise"] is True and report["n_above_max_area"] == 0
+    dem = io.read_raster(out / "dem.tif")
+    assert np.nanmin(dem.values) - 0.01 <= nodes[:, 2].min()
+    assert nodes[:, 2].max() <= np.nanmax(dem.values) + 0.01
+    xmin, ymin, xmax, ymax = dem.bounds
+    assert (nodes[:, 0] >= xmin).all() and (nodes[:, 0] <= xmax).all()
+    assert (nodes[:, 1] >= ymin).all() and (nodes[:, 1] <= ymax).all()
+    return angles, areas
+
+
+def test_real_merewether_dem(merewether_run):
+    """The 1 m ASCII DEM (UTM 56S from its .prj) runs through: a valid mesh inside the DEM, the
+    report's counts, and check points at DEM cell centres assessed."""
+    out, report = merewether_run
+    _assert_valid_mesh(out, report)
+    assert report["grid"]["rows"] == 416 and report["grid"]["cols"] == 321
+    assert CRS.from_user_input(report["crs"]) == CRS.from_epsg(32756)
+    assert report["n_holdout"] >= 30 and report["n_outside_mesh"] < report["n_holdout"]
+    assert report["n_breaklines"] > 0
+    assert report["rmse_m"] < 0.5
+
+
+def test_real_topography_laz(topography_run):
+    """Topography.laz (0.9 points/m², lakes) at 2 m cells: a valid mesh within the area bound,
+    with nodata cells over the lakes left out of the mesh."""
+    out, report = topography_run
+    _assert_valid_mesh(out, report)
+    assert report["grid"]["cell_size_m"] == 2.0
+    assert report["grid"]["valid_cells"] < report["grid"]["rows"] * report["grid"]["cols"]
+    assert report["n_points"] == 8159
+    assert report["max_area_m2"] <= 100
+
+
+@pytest.mark.parametrize("run", ["merewether_run", "topography_run"])
+def test_real_data_meets_angle_bound(run, request):
+    """On real data every triangle, recomputed from mesh.gpkg, has all angles >= 25 degrees, and the
+    report counts no violation."""
+    out, report = request.getfixturevalue(run)
+    angles, _ = _angles_and_areas(_mesh_from_gpkg(out / "mesh.gpkg"))
+    smallest = angles.min(axis=1)
+    assert smallest.min() >= 25 - 1e-6, (
+        f"{int((smallest < 25 - 1e-6).sum())} triangles below 25 degrees, smallest "
+        f"{smallest.min():.2f}")
+    assert report["min_angle_deg"] == pytest.approx(smallest.min(), abs=1e-9)
+    assert report["n_below_min_angle"] == 0
