@@ -6,6 +6,7 @@ Ctrl-C exits with 130 and leaves no half-written file.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 from pathlib import Path
@@ -357,6 +358,9 @@ def main(argv=None) -> int:
     except (KeyboardInterrupt, Cancelled):
         print("floodmesh: interrupted; no partial file was left behind", file=sys.stderr)
         return 130
+    # Every file is in place: a Ctrl-C now, during interpreter teardown, would otherwise kill
+    # the process with SIGINT and report a finished run as failed.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if sys.stderr.isatty():
         print(f"done in {time.perf_counter() - start:.1f} s", file=sys.stderr)
     return 0
