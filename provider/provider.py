@@ -1,7 +1,7 @@
 """The FloodMesh Processing provider: a flat list of algorithms."""
 from pathlib import Path
 
-from qgis.core import QgsProcessingProvider
+from qgis.core import QgsApplication, QgsProcessingModelAlgorithm, QgsProcessingProvider
 from qgis.PyQt.QtGui import QIcon
 
 from ..algorithms.assess_accuracy import AssessAccuracyAlgorithm
@@ -17,7 +17,9 @@ ALGORITHMS = (GridPointsAlgorithm, SlopeAlgorithm, ClassifyBreakpointsAlgorithm,
               TraceBreaklinesAlgorithm, SimplifyBreaklinesAlgorithm, BuildMeshAlgorithm,
               AssessAccuracyAlgorithm, LidarToMeshAlgorithm)
 
-ICON = Path(__file__).resolve().parent.parent / "icons" / "floodmesh.svg"
+ROOT = Path(__file__).resolve().parent.parent
+ICON = ROOT / "icons" / "floodmesh.svg"
+MODELS = ROOT / "models"
 
 
 class FloodMeshProvider(QgsProcessingProvider):
@@ -33,6 +35,25 @@ class FloodMeshProvider(QgsProcessingProvider):
     def svgIconPath(self):  # noqa: N802
         return str(ICON)
 
+    def load(self):
+        # The shipped models chain this provider's algorithms, which the registry can resolve
+        # only once the provider is registered: load them again when it is.
+        QgsApplication.processingRegistry().providerAdded.connect(self._registered)
+        return super().load()
+
+    def _registered(self, provider_id):
+        if provider_id == self.id():
+            QgsApplication.processingRegistry().providerAdded.disconnect(self._registered)
+            self.refreshAlgorithms()
+
+    def supportsNonFileBasedOutput(self):  # noqa: N802
+        # core writes files; temporary outputs (as in models) must become files, not memory layers
+        return False
+
     def loadAlgorithms(self):  # noqa: N802
         for algorithm in ALGORITHMS:
             self.addAlgorithm(algorithm())
+        for path in sorted(MODELS.glob("*.model3")):
+            model = QgsProcessingModelAlgorithm()
+            if model.fromFile(str(path)):
+                self.addAlgorithm(model)

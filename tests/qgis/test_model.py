@@ -1,0 +1,43 @@
+"""The Graphical Modeler model shipped with the plugin: listed by the provider, run through
+processing.run and headless through qgis_process from its id."""
+import json
+import subprocess
+
+from qgis.core import QgsApplication, QgsMeshLayer, QgsVectorLayer
+
+from .test_lidar_to_mesh import qgis_process  # noqa: F401 (fixture)
+
+MODEL_ID = "floodmesh:LiDAR to mesh step by step"
+
+
+def test_model_is_in_the_toolbox_with_its_outputs(processing):
+    model = QgsApplication.processingRegistry().algorithmById(MODEL_ID)
+    assert model is not None
+    assert {o.name() for o in model.outputDefinitions()} == {
+        "mesh:mesh", "simplify:breaklines", "assess:residuals"}
+
+
+def test_model_runs_through_processing_run(processing, demo_points_file, tmp_path):
+    result = processing.run(MODEL_ID, {
+        "points": str(demo_points_file), "cell_size": 1.0, "s_crit": 10.0, "min_angle": 25.0,
+        "max_area": 100.0, "mesh:mesh": str(tmp_path / "mesh.2dm"),
+        "simplify:breaklines": str(tmp_path / "lines.gpkg"),
+        "assess:residuals": str(tmp_path / "residuals.gpkg")})
+    mesh = QgsMeshLayer(result["mesh:mesh"], "mesh", "mdal")
+    assert mesh.isValid() and mesh.dataProvider().faceCount() > 1000
+    assert QgsVectorLayer(result["simplify:breaklines"], "l", "ogr").featureCount() > 20
+    assert QgsVectorLayer(result["assess:residuals"], "r", "ogr").featureCount() == round(
+        0.01 * 2 * 300 * 240)
+
+
+def test_model_runs_headless(qgis_process, demo_points_file, tmp_path):  # noqa: F811
+    exe, env = qgis_process
+    run = subprocess.run(
+        [exe, "run", MODEL_ID, "--json", "--", f"points={demo_points_file}", "max_area=150",
+         f"mesh:mesh={tmp_path / 'mesh.2dm'}", f"simplify:breaklines={tmp_path / 'l.gpkg'}",
+         f"assess:residuals={tmp_path / 'r.gpkg'}"],
+        env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    results = json.loads(run.stdout[run.stdout.index("{"):])["results"]
+    layer = QgsMeshLayer(results["mesh:mesh"], "mesh", "mdal")
+    assert layer.isValid() and layer.dataProvider().vertexCount() > 500
