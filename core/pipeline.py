@@ -109,7 +109,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     if isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
         dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
-                        max_gap=options.max_gap, progress=None)
+                        max_gap=options.max_gap, progress=None, cancelled=cancelled)
         holdout_source = "LiDAR points withheld from gridding"
         n_points = len(data)
     else:

@@ -207,3 +207,26 @@ def test_holdout_fraction_zero_holds_nothing_out(thousand):
 def test_holdout_fraction_outside_range_is_refused(thousand, fraction):
     with pytest.raises(FloodMeshError, match="holdout fraction"):
         split_holdout(thousand, fraction, seed=0)
+
+
+def test_tiles_equal_one_global_tin():
+    """A grid spanning several tiles (with halos) equals linear interpolation on one global
+    Delaunay TIN (scipy's griddata, Qhull), cell for cell. The reference works in local
+    coordinates: at UTM magnitudes Qhull's interpolation is off by centimetres."""
+    from scipy.interpolate import griddata
+
+    from floodmesh.core import grid as grid_module
+
+    rng = np.random.default_rng(5)
+    n = 120_000
+    x, y = rng.uniform(0, 700, n), rng.uniform(0, 330, n)
+    z = 5 * np.sin(x / 37) * np.cos(y / 23) + 0.01 * x
+    xyz = np.column_stack([x + 500_000, y + 6e6, z])
+    dem = grid_module.grid_points_linear(PointCloud(xyz, CRS_M), 1.0, max_gap=50.0)
+    assert dem.shape[1] > 2 * grid_module.TILE  # several tiles each way
+    rows, cols = np.indices(dem.shape)
+    gx, gy = dem.cell_centres(rows, cols)
+    reference = griddata(np.column_stack([x, y]), z, (gx - 500_000, gy - 6e6), method="linear")
+    assert_array_equal(np.isfinite(dem.values), np.isfinite(reference))
+    both = np.isfinite(reference)
+    assert_allclose(dem.values[both], reference[both], atol=1e-9)
