@@ -6,7 +6,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterVectorDestination)
 
 from ..core import io
-from ..core.accuracy import accuracy_statistics, residual_class, residuals
+from ..core.accuracy import accuracy_statistics, residuals
 from ..core.mesh import Mesh
 from ..core.raster import require_metric_crs
 from .base import FloodMeshAlgorithm, layer_file, run_core
@@ -42,9 +42,7 @@ class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
                                     self.parameterAsFile(parameters, self.MESH, context))
         res = residuals(Mesh(nodes, triangles, crs), xyz)
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_points_gpkg, out, xyz, crs, layer="residuals",
-                 attributes={"residual_m": res, "tin_z": xyz[:, 2] - res,
-                             "class": residual_class(res)})
+        run_core(io.write_residuals, out, xyz, res, crs)
         stats = accuracy_statistics(res)
         feedback.pushInfo(json.dumps(stats, indent=1))
         results = {self.OUTPUT: out, self.RMSE: stats["rmse_m"]}

@@ -129,7 +129,6 @@ def cmd_run(args):
 def cmd_demo(args):
     from . import io
     from .demo import synthetic_floodplain
-    from .pipeline import run_pipeline
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -236,7 +235,7 @@ def cmd_assess(args):
     import json
 
     from . import io
-    from .accuracy import accuracy_statistics, residual_class, residuals
+    from .accuracy import accuracy_statistics, residuals
     from .mesh import Mesh
     from .raster import require_metric_crs
 
@@ -249,9 +248,7 @@ def cmd_assess(args):
         xyz, crs = cloud.xyz, cloud.crs
     crs = require_metric_crs(crs, Path(args.points).name)
     res = residuals(Mesh(nodes, triangles, crs), xyz)
-    io.write_points_gpkg(args.out, xyz, crs, layer="residuals",
-                         attributes={"residual_m": res, "tin_z": xyz[:, 2] - res,
-                                     "class": residual_class(res)})
+    io.write_residuals(args.out, xyz, res, crs)
     stats = accuracy_statistics(res)
     if args.report:
         io.write_json(args.report, stats)

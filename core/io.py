@@ -247,6 +247,16 @@ def write_points_gpkg(path, xyz: np.ndarray, crs, *, layer="points", attributes=
     _write_gpkg(path, layer, "3D Point", props, _records(geometries, attributes), crs)
 
 
+def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:
+    """Check points with their residual (m), the TIN's z there and the residual class
+    (0: <10 cm, 1: 10–25 cm, 2: >25 cm, −1: outside the mesh)."""
+    from .accuracy import residual_class
+
+    write_points_gpkg(path, xyz, crs, layer="residuals",
+                      attributes={"residual_m": res, "tin_z": xyz[:, 2] - res,
+                                  "class": residual_class(res)})
+
+
 def read_breaklines(path) -> list:
     """Read a line layer as BreakLines (slopes unknown: NaN)."""
     from .breaklines import BreakLine

@@ -10,7 +10,7 @@ from typing import Callable
 import numpy as np
 
 from . import io
-from .accuracy import accuracy_statistics, residual_class, residuals
+from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled, FloodMeshError
@@ -151,10 +151,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs)
         io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles)
         io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
-        tin_z = holdout.xyz[:, 2] - res
-        io.write_points_gpkg(out / "residuals.gpkg", holdout.xyz, dem.crs, layer="residuals",
-                             attributes={"residual_m": res, "tin_z": tin_z,
-                                         "class": residual_class(res)})
+        io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
 
     steps.run("write", write_all)
     report = {

@@ -1,7 +1,11 @@
 """Headless QGIS for the plugin tests: one QgsApplication, Processing, and the provider."""
 import os
+import shutil
+import subprocess
 import sys
+import sysconfig
 import tempfile
+from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 if "XDG_RUNTIME_DIR" not in os.environ:
@@ -30,3 +34,29 @@ def processing():
     assert QgsApplication.processingRegistry().addProvider(provider)
     yield qgis_processing
     QgsApplication.processingRegistry().removeProvider(provider)
+
+
+REPO = Path(__file__).resolve().parent.parent.parent
+
+
+def _qgis_process_env(home):
+    env = dict(os.environ)
+    env.update(QT_QPA_PLATFORM="offscreen", HOME=str(home), XDG_DATA_HOME=str(home / "data"),
+               QGIS_PLUGINPATH=str(REPO / "build" / "plugins"),
+               PYTHONPATH=sysconfig.get_paths()["purelib"])
+    return env
+
+
+@pytest.fixture(scope="module")
+def qgis_process(tmp_path_factory):
+    exe = shutil.which("qgis_process.bin") or shutil.which("qgis_process")
+    if exe is None:
+        pytest.skip("qgis_process is not installed")
+    if not (REPO / "build" / "plugins" / "floodmesh").exists():
+        pytest.skip("build/plugins/floodmesh is missing: run scripts/setup.sh")
+    home = tmp_path_factory.mktemp("qgis-home")
+    env = _qgis_process_env(home)
+    enable = subprocess.run([exe, "plugins", "enable", "floodmesh"], env=env,
+                            capture_output=True, text=True, timeout=120)
+    assert enable.returncode == 0, enable.stdout + enable.stderr
+    return exe, env

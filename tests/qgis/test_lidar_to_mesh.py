@@ -1,18 +1,12 @@
 """The "LiDAR to mesh" algorithm in real QGIS: through processing.run and through qgis_process,
 with its mesh read back by QGIS's own mesh reader (MDAL)."""
 import json
-import os
-import shutil
 import subprocess
-import sys
-import sysconfig
 
 import pytest
 from qgis.core import QgsMeshLayer, QgsProcessingContext, QgsProcessingFeedback, QgsVectorLayer
 
 from floodmesh.core import io
-
-from ..conftest import REPO
 
 
 def _mesh_counts(path):
@@ -51,29 +45,6 @@ def test_bad_input_is_a_processing_exception(processing, tmp_path):
         processing.run("floodmesh:lidartomesh", {"INPUT": str(bad), "CRS": "EPSG:25832",
                                                  "OUTPUT_FOLDER": str(tmp_path / "out")})
     assert not (tmp_path / "out" / "mesh.2dm").exists()
-
-
-def _qgis_process_env(home):
-    env = dict(os.environ)
-    env.update(QT_QPA_PLATFORM="offscreen", HOME=str(home), XDG_DATA_HOME=str(home / "data"),
-               QGIS_PLUGINPATH=str(REPO / "build" / "plugins"),
-               PYTHONPATH=sysconfig.get_paths()["purelib"])
-    return env
-
-
-@pytest.fixture(scope="module")
-def qgis_process(tmp_path_factory):
-    exe = shutil.which("qgis_process.bin") or shutil.which("qgis_process")
-    if exe is None:
-        pytest.skip("qgis_process is not installed")
-    if not (REPO / "build" / "plugins" / "floodmesh").exists():
-        pytest.skip("build/plugins/floodmesh is missing: run scripts/setup.sh")
-    home = tmp_path_factory.mktemp("qgis-home")
-    env = _qgis_process_env(home)
-    enable = subprocess.run([exe, "plugins", "enable", "floodmesh"], env=env,
-                            capture_output=True, text=True, timeout=120)
-    assert enable.returncode == 0, enable.stdout + enable.stderr
-    return exe, env
 
 
 def test_qgis_process_runs_the_algorithm(qgis_process, demo_points_file, tmp_path):

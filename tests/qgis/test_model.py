@@ -5,7 +5,6 @@ import subprocess
 
 from qgis.core import QgsApplication, QgsMeshLayer, QgsVectorLayer
 
-from .test_lidar_to_mesh import qgis_process  # noqa: F401 (fixture)
 
 MODEL_ID = "floodmesh:LiDAR to mesh step by step"
 
@@ -30,7 +29,7 @@ def test_model_runs_through_processing_run(processing, demo_points_file, tmp_pat
         0.01 * 2 * 300 * 240)
 
 
-def test_model_runs_headless(qgis_process, demo_points_file, tmp_path):  # noqa: F811
+def test_model_runs_headless(qgis_process, demo_points_file, tmp_path):
     exe, env = qgis_process
     run = subprocess.run(
         [exe, "run", MODEL_ID, "--json", "--", f"points={demo_points_file}", "max_area=150",

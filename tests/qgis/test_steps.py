@@ -11,7 +11,6 @@ from qgis.core import QgsMeshLayer, QgsRasterLayer, QgsVectorLayer
 from floodmesh.core import io
 from floodmesh.core.slope import slope
 
-from .test_lidar_to_mesh import qgis_process  # noqa: F401 (fixture)
 
 
 def test_provider_lists_every_step(processing):
@@ -85,7 +84,7 @@ def test_log_through_the_slope_and_breakpoint_algorithms(processing, tmp_path, r
     assert np.nansum(io.read_raster(bp).values) > 1000
 
 
-def test_slope_headless_through_qgis_process(qgis_process, real_data, tmp_path):  # noqa: F811
+def test_slope_headless_through_qgis_process(qgis_process, real_data, tmp_path):
     exe, env = qgis_process
     out = tmp_path / "slope.tif"
     run = subprocess.run(
