@@ -57,41 +57,38 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
         raise FloodMeshError(
             f"the data covers only {xmax - xmin:.2f} x {ymax - ymin:.2f} m, fewer than 3 cells of "
             f"{cell_size} m each way; choose a smaller cell size")
-    # local coordinates, y down: Delaunay and the barycentric weights keep their digits
-    xy = np.column_stack([xyz[:, 0] - x0, y1 - xyz[:, 1]])
     values = np.full((rows, cols), np.nan)
     tiles = [(r, c) for r in range(0, rows, TILE) for c in range(0, cols, TILE)]
     halo = max(max_gap, 4 * cell_size)
-    # points bucketed by tile, so each tile gathers its halo from the 3x3 tiles around it
-    tile_size = TILE * cell_size
-    n_tile_rows, n_tile_cols = math.ceil(rows / TILE), math.ceil(cols / TILE)
-    bucket = (np.clip(np.floor(xy[:, 1] / tile_size).astype(np.int64), 0, n_tile_rows - 1)
-              * n_tile_cols
-              + np.clip(np.floor(xy[:, 0] / tile_size).astype(np.int64), 0, n_tile_cols - 1))
-    order = np.argsort(bucket, kind="stable")
-    bounds = np.searchsorted(bucket[order], np.arange(n_tile_rows * n_tile_cols + 1))
-    reach = max(1, math.ceil(halo / tile_size))
+    # Points sorted once into buckets about a halo wide, row-major: a tile and its halo are
+    # then a few contiguous slices, one per bucket row.
+    per_tile = max(1, min(8, int(TILE * cell_size // halo)))
+    bucket_size = TILE * cell_size / per_tile
+    n_brows = math.ceil(rows / TILE) * per_tile
+    n_bcols = math.ceil(cols / TILE) * per_tile
+    xy, z, bounds = _bucket_sort(xyz, float(x0), float(y1), bucket_size, n_brows, n_bcols)
 
     def grid_tile(tile):
         r0, c0 = tile
         if cancelled is not None and cancelled():
             raise Cancelled()
-        tr, tc = r0 // TILE, c0 // TILE
-        pick = np.concatenate([
-            order[bounds[i * n_tile_cols + j]:bounds[i * n_tile_cols + j + 1]]
-            for i in range(max(0, tr - reach), min(n_tile_rows, tr + reach + 1))
-            for j in range(max(0, tc - reach), min(n_tile_cols, tc + reach + 1))])
-        local = xy[pick]
-        inside = ((local[:, 0] >= c0 * cell_size - halo)
-                  & (local[:, 0] <= (c0 + TILE) * cell_size + halo)
-                  & (local[:, 1] >= r0 * cell_size - halo)
-                  & (local[:, 1] <= (r0 + TILE) * cell_size + halo))
-        pick = pick[inside]
-        if len(pick) < 3:
+        x_lo, x_hi = c0 * cell_size - halo, (c0 + TILE) * cell_size + halo
+        y_lo, y_hi = r0 * cell_size - halo, (r0 + TILE) * cell_size + halo
+        j0 = max(0, int(x_lo // bucket_size))
+        j1 = min(n_bcols - 1, int(x_hi // bucket_size))
+        slices = [slice(bounds[i * n_bcols + j0], bounds[i * n_bcols + j1 + 1])
+                  for i in range(max(0, int(y_lo // bucket_size)),
+                                 min(n_brows - 1, int(y_hi // bucket_size)) + 1)]
+        local = np.concatenate([xy[sl] for sl in slices])
+        local_z = np.concatenate([z[sl] for sl in slices])
+        inside = ((local[:, 0] >= x_lo) & (local[:, 0] <= x_hi)
+                  & (local[:, 1] >= y_lo) & (local[:, 1] <= y_hi))
+        local, local_z = local[inside], local_z[inside]
+        if len(local) < 3:
             return
-        triangles = delaunay(xy[pick])
+        triangles = delaunay(local)
         if len(triangles):
-            _rasterise_tin(xy[pick], xyz[pick, 2], triangles, values, r0, min(rows, r0 + TILE),
+            _rasterise_tin(local, local_z, triangles, values, r0, min(rows, r0 + TILE),
                            c0, min(cols, c0 + TILE), float(cell_size), float(max_gap))
 
     with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
@@ -106,6 +103,32 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
         progress(1.0)
     transform = Affine(cell_size, 0.0, x0, 0.0, -cell_size, y1)
     return Grid(values, transform, points.crs)
+
+
+@numba.njit(cache=True, nogil=True)
+def _bucket_sort(xyz, x0, y1, size, n_rows, n_cols):
+    """Local coordinates (x − x0, y1 − y: y down, keeping the digits that UTM magnitudes would
+    cost) and z, counting-sorted into row-major buckets of ``size`` metres; ``bounds[k]`` is the
+    first point of bucket k."""
+    n = xyz.shape[0]
+    key = np.empty(n, np.int64)
+    counts = np.zeros(n_rows * n_cols + 1, np.int64)
+    for p in range(n):
+        r = min(max(int((y1 - xyz[p, 1]) // size), 0), n_rows - 1)
+        c = min(max(int((xyz[p, 0] - x0) // size), 0), n_cols - 1)
+        key[p] = r * n_cols + c
+        counts[key[p] + 1] += 1
+    bounds = np.cumsum(counts)
+    fill = bounds[:-1].copy()
+    xy = np.empty((n, 2))
+    z = np.empty(n)
+    for p in range(n):
+        k = fill[key[p]]
+        fill[key[p]] += 1
+        xy[k, 0] = xyz[p, 0] - x0
+        xy[k, 1] = y1 - xyz[p, 1]
+        z[k] = xyz[p, 2]
+    return xy, z, bounds
 
 
 @numba.njit(cache=True, nogil=True)
