@@ -1,6 +1,7 @@
 """Grid LiDAR points: points to a DEM by linear (TIN) interpolation."""
-from qgis.core import (QgsProcessingParameterCrs, QgsProcessingParameterFile,
-                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
+from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
+                       QgsProcessingParameterFile, QgsProcessingParameterNumber,
+                       QgsProcessingParameterRasterDestination, QgsProcessingParameterString,
                        QgsProcessingParameterVectorDestination)
 
 from ..core import io
@@ -20,7 +21,7 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
             "whole multiples of d. Triangles with an edge longer than the maximum gap (m, default "
             "10 d) are not used, so water and voids stay nodata. A fraction of the points can be "
             "held out (by seed) for the accuracy assessment.")
-    INPUT, CRS, CELL_SIZE, MAX_GAP = "INPUT", "CRS", "CELL_SIZE", "MAX_GAP"
+    INPUT, CRS, CLASSES, CELL_SIZE, MAX_GAP = "INPUT", "CRS", "CLASSES", "CELL_SIZE", "MAX_GAP"
     HOLDOUT, SEED, OUTPUT, HOLDOUT_OUTPUT = "HOLDOUT", "SEED", "OUTPUT", "HOLDOUT_OUTPUT"
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -28,6 +29,9 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
                                                      fileFilter=POINT_FILTER))
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, self.tr("CRS of the points (when the file has none)"), optional=True))
+        self.addParameter(QgsProcessingParameterString(
+            self.CLASSES, self.tr("LAS classes to grid, e.g. 2,9 (empty: 2 when classified)"),
+            optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.CELL_SIZE, self.tr("Cell size d (m)"), QgsProcessingParameterNumber.Double, 1.0,
             minValue=0.01))
@@ -45,8 +49,14 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
             createByDefault=False))
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        text = self.parameterAsString(parameters, self.CLASSES, context).strip()
+        try:
+            classes = tuple(int(c) for c in text.split(",")) if text else None
+        except ValueError:
+            raise QgsProcessingException(f"LAS classes must be whole numbers separated by "
+                                         f"commas, e.g. 2,9; got {text!r}") from None
         points = run_core(io.read_points, self.parameterAsFile(parameters, self.INPUT, context),
-                          crs=crs_or_none(self, parameters, self.CRS, context))
+                          crs=crs_or_none(self, parameters, self.CRS, context), classes=classes)
         gridding, holdout = run_core(split_holdout, points,
                                      self.parameterAsDouble(parameters, self.HOLDOUT, context),
                                      self.parameterAsInt(parameters, self.SEED, context))

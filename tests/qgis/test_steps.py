@@ -97,3 +97,30 @@ def test_slope_headless_through_qgis_process(qgis_process, real_data, tmp_path):
     assert layer.isValid() and (layer.width(), layer.height()) == (321, 416)
     values = io.read_raster(out).values
     assert 0 <= np.nanmin(values) and np.nanmax(values) < 90
+
+
+def test_grid_and_breakpoints_headless_with_las_classes(qgis_process, demo_points_file,
+                                                        tmp_path):
+    """Grid only the vegetation class (1) headless, then classify breakpoints headless."""
+    exe, env = qgis_process
+
+    def run(algorithm, *args):
+        result = subprocess.run([exe, "run", algorithm, "--json", "--", *args], env=env,
+                                capture_output=True, text=True, timeout=300)
+        assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+        return json.loads(result.stdout[result.stdout.index("{"):])["results"]
+
+    dem = run("floodmesh:gridpoints", f"INPUT={demo_points_file}", "CLASSES=1", "CELL_SIZE=2",
+              f"OUTPUT={tmp_path / 'veg.tif'}")["OUTPUT"]
+    layer = QgsRasterLayer(dem, "veg")
+    assert layer.isValid() and (layer.width(), layer.height()) == (150, 120)
+    # vegetation sits 0.5-12 m above the ground: its surface is far above the ground DEM's
+    ground = mean_ground_z(demo_points_file)
+    assert np.nanmean(io.read_raster(dem).values) > ground + 2
+    bp = run("floodmesh:classifybreakpoints", f"INPUT={dem}", "CRITICAL_SLOPE=30",
+             f"OUTPUT={tmp_path / 'bp.tif'}")["OUTPUT"]
+    assert QgsRasterLayer(bp, "bp").isValid() and np.nansum(io.read_raster(bp).values) > 100
+
+
+def mean_ground_z(path):
+    return float(io.read_points(path).xyz[:, 2].mean())
