@@ -71,3 +71,28 @@ def test_qgis_process_reports_bad_input_without_traceback(qgis_process, tmp_path
     assert run.returncode != 0
     assert "does not exist" in run.stdout + run.stderr
     assert "Traceback" not in run.stdout + run.stderr
+
+
+@pytest.mark.parametrize("at_percent", [5, 20, 60])
+def test_cancel_mid_run_leaves_no_partial_output(processing, demo_points_file, tmp_path,
+                                                 at_percent):
+    """Cancel pressed part-way (as the dialog's Cancel button does): the run stops with a
+    message, and the folder holds no mesh and no half-written file."""
+    from qgis.core import QgsProcessingException
+
+    feedback = QgsProcessingFeedback()
+    seen = []
+
+    def on_progress(percent):
+        seen.append(percent)
+        if percent >= at_percent:
+            feedback.cancel()
+
+    feedback.progressChanged.connect(on_progress)
+    out = tmp_path / "cancelled"
+    with pytest.raises(QgsProcessingException, match="Cancelled"):
+        processing.run("floodmesh:lidartomesh", {"INPUT": str(demo_points_file),
+                                                 "OUTPUT_FOLDER": str(out)}, feedback=feedback)
+    assert max(seen) < 100
+    assert not (out / "mesh.2dm").exists() and not (out / "report.json").exists()
+    assert [p.name for p in out.glob("*partial*")] == []
