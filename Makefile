@@ -13,5 +13,8 @@ test: setup
 bench: setup
 	.venv/bin/python benchmarks/run.py
 
+plugin-zip: setup
+	.venv/bin/python scripts/build_plugin_zip.py
+
 clean:
 	rm -rf build dist demo_output .pytest_cache
