@@ -5,10 +5,6 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterVectorDestination)
 
-from ..core import io
-from ..core.accuracy import accuracy_statistics, residuals
-from ..core.mesh import Mesh
-from ..core.raster import require_metric_crs
 from .base import FloodMeshAlgorithm, layer_file, run_core
 
 
@@ -34,7 +30,12 @@ class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
             optional=True, createByDefault=False))
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("RMSE (m)")))
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+    def process(self, parameters, context, feedback):
+        from ..core import io
+        from ..core.accuracy import accuracy_statistics, residuals
+        from ..core.mesh import Mesh
+        from ..core.raster import require_metric_crs
+
         layer = self.parameterAsVectorLayer(parameters, self.POINTS, context)
         xyz = run_core(io.read_points_vector, layer_file(layer, "Check points"))
         crs = run_core(require_metric_crs, layer.crs().toWkt() or None, layer.name())

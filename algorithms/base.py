@@ -5,12 +5,14 @@ from pathlib import Path
 from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
 from qgis.PyQt.QtCore import QCoreApplication
 
+from ..core.dependencies import install_hint, missing_dependencies
 from ..core.errors import Cancelled, FloodMeshError
 
 
 class FloodMeshAlgorithm(QgsProcessingAlgorithm):
     """Subclasses set NAME, DISPLAY_NAME, GROUP, GROUP_ID and HELP, and implement
-    ``initAlgorithm`` and ``processAlgorithm``; they keep no state on ``self``."""
+    ``initAlgorithm`` and ``process`` (importing the numerical core there, so that the plugin
+    loads even where a dependency is missing); they keep no state on ``self``."""
 
     NAME = DISPLAY_NAME = GROUP = GROUP_ID = HELP = ""
 
@@ -28,6 +30,21 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
 
     def shortHelpString(self):  # noqa: N802
         return self.tr(self.HELP)
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802
+        missing = missing_dependencies()
+        if missing:
+            return False, install_hint(missing)
+        return super().checkParameterValues(parameters, context)
+
+    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+        missing = missing_dependencies()
+        if missing:
+            raise QgsProcessingException(install_hint(missing))
+        return self.process(parameters, context, feedback)
+
+    def process(self, parameters, context, feedback):
+        raise NotImplementedError
 
     def createInstance(self):  # noqa: N802
         return type(self)()

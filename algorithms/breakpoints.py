@@ -1,10 +1,7 @@
 """Classify breakpoints: slope ≥ S_crit (or a LoG response), thinned."""
-import numpy as np
 from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
 
-from ..core import io
-from ..core.breakpoints import classify_breakpoints, log_breakpoints
 from .base import FloodMeshAlgorithm, layer_file, run_core
 
 
@@ -33,7 +30,11 @@ class ClassifyBreakpointsAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.OUTPUT, self.tr("Breakpoints")))
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+    def process(self, parameters, context, feedback):
+        import numpy as np
+        from ..core import io
+        from ..core.breakpoints import classify_breakpoints, log_breakpoints
+
         grid = run_core(io.read_raster, layer_file(
             self.parameterAsRasterLayer(parameters, self.INPUT, context), "Slope"))
         if parameters.get(self.LOG_SENSITIVITY) not in (None, ""):

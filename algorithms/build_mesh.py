@@ -4,8 +4,6 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
                        QgsProcessingParameterVectorDestination)
 
-from ..core import io
-from ..core.mesh import build_mesh, mesh_quality
 from .base import FloodMeshAlgorithm, layer_file, run_core
 
 
@@ -40,7 +38,10 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Nodes")))
         self.addOutput(QgsProcessingOutputNumber(self.TRIANGLE_COUNT, self.tr("Triangles")))
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+    def process(self, parameters, context, feedback):
+        from ..core import io
+        from ..core.mesh import build_mesh, mesh_quality
+
         dem = run_core(io.read_raster, layer_file(
             self.parameterAsRasterLayer(parameters, self.DEM, context), "DEM"))
         lines_layer = self.parameterAsVectorLayer(parameters, self.BREAKLINES, context)

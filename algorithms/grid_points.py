@@ -4,9 +4,6 @@ from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterString,
                        QgsProcessingParameterVectorDestination)
 
-from ..core import io
-from ..core.grid import grid_points_linear
-from ..core.points import split_holdout
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
 
 POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
@@ -48,7 +45,11 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
             self.HOLDOUT_OUTPUT, self.tr("Held-out points"), optional=True,
             createByDefault=False))
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+    def process(self, parameters, context, feedback):
+        from ..core import io
+        from ..core.grid import grid_points_linear
+        from ..core.points import split_holdout
+
         text = self.parameterAsString(parameters, self.CLASSES, context).strip()
         try:
             classes = tuple(int(c) for c in text.split(",")) if text else None

@@ -8,7 +8,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingContext,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
                        QgsProcessingParameterNumber, QgsVectorLayer)
 
-from ..core.pipeline import BREAKPOINT_METHODS, RunOptions, run_pipeline
+from ..core.options import BREAKPOINT_METHODS, RunOptions
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
@@ -86,7 +86,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.TRIANGLES, self.tr("Mesh triangles")))
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("Holdout RMSE (m)")))
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+    def process(self, parameters, context, feedback):
+        from ..core.pipeline import run_pipeline
+
         options = run_core(RunOptions,
             cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],

@@ -3,9 +3,6 @@ from qgis.core import (QgsProcessing, QgsProcessingParameterEnum,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber,
                        QgsProcessingParameterVectorDestination)
 
-from ..core import io
-from ..core.raster import require_metric_crs
-from ..core.simplify import simplify_douglas_peucker, simplify_keep_every
 from .base import FloodMeshAlgorithm, layer_file, run_core
 
 METHODS = ("keep every n-th point", "Douglas-Peucker")
@@ -36,7 +33,11 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Simplified break lines"), QgsProcessing.TypeVectorLine))
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+    def process(self, parameters, context, feedback):
+        from ..core import io
+        from ..core.raster import require_metric_crs
+        from ..core.simplify import simplify_douglas_peucker, simplify_keep_every
+
         layer = self.parameterAsVectorLayer(parameters, self.INPUT, context)
         path = layer_file(layer, "Break lines")
         crs = run_core(require_metric_crs, layer.crs().toWkt() or None, layer.name())

@@ -2,9 +2,7 @@
 from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
 
-from ..core import io
-from ..core.pipeline import BREAKPOINT_METHODS
-from ..core.slope import LOG_KERNELS, laplacian_of_gaussian, slope
+from ..core.options import BREAKPOINT_METHODS, LOG_KERNELS
 from .base import FloodMeshAlgorithm, layer_file, run_core
 
 
@@ -34,7 +32,10 @@ class SlopeAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.OUTPUT, self.tr("Slope (degrees) or LoG response (m)")))
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+    def process(self, parameters, context, feedback):
+        from ..core import io
+        from ..core.slope import laplacian_of_gaussian, slope
+
         dem = run_core(io.read_raster, layer_file(
             self.parameterAsRasterLayer(parameters, self.INPUT, context), "DEM"))
         method = BREAKPOINT_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]

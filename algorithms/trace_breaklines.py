@@ -2,8 +2,7 @@
 from qgis.core import (QgsProcessing, QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer, QgsProcessingParameterVectorDestination)
 
-from ..core import io
-from ..core.breaklines import MODES, trace_breaklines
+from ..core.options import TRACING_MODES as MODES
 from .base import FloodMeshAlgorithm, layer_file, run_core
 
 
@@ -37,7 +36,10 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Break lines"), QgsProcessing.TypeVectorLine))
 
-    def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
+    def process(self, parameters, context, feedback):
+        from ..core import io
+        from ..core.breaklines import trace_breaklines
+
         def raster(name, what):
             return run_core(io.read_raster, layer_file(
                 self.parameterAsRasterLayer(parameters, name, context), what))

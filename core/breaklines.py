@@ -28,9 +28,10 @@ import numpy as np
 from scipy import ndimage
 
 from .errors import FloodMeshError
+from .options import TRACING_MODES
 from .raster import Grid
 
-MODES = ("auto", "flat", "steep")
+MODES = TRACING_MODES
 # neighbour order: E, NE, N, NW, W, SW, S, SE as (row, col) offsets
 DR = np.array([0, -1, -1, -1, 0, 1, 1, 1], dtype=np.int64)
 DC = np.array([1, 1, 0, -1, -1, -1, 0, 1], dtype=np.int64)

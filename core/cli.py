@@ -12,8 +12,7 @@ import time
 from pathlib import Path
 
 from .errors import Cancelled, FloodMeshError
-from .pipeline import BREAKPOINT_METHODS, RunOptions
-from .slope import LOG_KERNELS
+from .options import BREAKPOINT_METHODS, LOG_KERNELS, RunOptions
 
 DEFAULTS = RunOptions()
 

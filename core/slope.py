@@ -24,6 +24,7 @@ import numpy as np
 
 from .blocks import map_overlap
 from .errors import FloodMeshError
+from .options import LOG_KERNELS, SLOPE_METHOD_NAMES
 from .raster import Grid
 
 SQRT2 = math.sqrt(2.0)
@@ -71,14 +72,14 @@ def _ritter(z1, z2, z3, z4, z5, z6, z7, z8, d):
 
 
 # name → (code, summary); the code selects the kernel inside the compiled loop
-SLOPE_METHODS = {
-    "max-slope": (0, "maximum slope to a neighbour (Shanholtz)"),
-    "one-over-distance": (1, "one-over-distance weighted differences (NOAA)"),
-    "sharpnack-akin": (2, "neighbourhood method (Sharpnack & Akin = Horn)"),
-    "wood": (3, "constrained quadratic surface (Wood)"),
-    "zevenbergen-thorne": (4, "quadratic surface (Zevenbergen & Thorne)"),
-    "ritter": (5, "diagonal differences (Ritter)"),
-}
+SLOPE_METHODS = dict(zip(SLOPE_METHOD_NAMES, (
+    (0, "maximum slope to a neighbour (Shanholtz)"),
+    (1, "one-over-distance weighted differences (NOAA)"),
+    (2, "neighbourhood method (Sharpnack & Akin = Horn)"),
+    (3, "constrained quadratic surface (Wood)"),
+    (4, "quadratic surface (Zevenbergen & Thorne)"),
+    (5, "diagonal differences (Ritter)"),
+)))
 
 
 @numba.njit(inline="always")
@@ -169,7 +170,6 @@ def slope(dem: Grid, method: str = "one-over-distance", *, diagonal_distance: bo
 
 # ---------------------------------------------------------------------------------------------
 # second order: Laplacian of Gaussian
-LOG_KERNELS = ("pratt", "analytic")
 
 
 def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
