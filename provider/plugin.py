@@ -16,6 +16,11 @@ class FloodMeshPlugin:
 
     def initGui(self):  # noqa: N802
         self.initProcessing()
+        from ..core.dependencies import install_hint, missing_dependencies
+
+        missing = missing_dependencies()
+        if missing and self.iface is not None:
+            self.iface.messageBar().pushWarning("FloodMesh", install_hint(missing))
 
     def unload(self):
         if self.provider:
