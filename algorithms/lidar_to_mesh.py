@@ -10,6 +10,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingContext,
 
 from ..core.options import BREAKPOINT_METHODS, RunOptions
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
+from .styles import style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
@@ -106,9 +107,14 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
                           cancelled=feedback.isCanceled, log=feedback.pushInfo)
         breaklines = str(out / "breaklines.gpkg")
         mesh = str(out / "mesh.2dm")
-        _load_on_completion(context, QgsVectorLayer(breaklines, "Break lines", "ogr"),
-                            self.BREAKLINES)
-        _load_on_completion(context, QgsMeshLayer(mesh, "Mesh", "mdal"), self.MESH)
+        for layer, style, output in (
+                (QgsVectorLayer(breaklines, "Break lines", "ogr"), style_breaklines,
+                 self.BREAKLINES),
+                (QgsMeshLayer(mesh, "Mesh", "mdal"), style_mesh, self.MESH),
+                (QgsVectorLayer(str(out / "residuals.gpkg"), "Residuals", "ogr"),
+                 style_residuals, self.REPORT)):
+            _load_on_completion(context, layer, output)
+            style(layer)
         return {self.OUTPUT_FOLDER: str(out), self.BREAKLINES: breaklines, self.MESH: mesh,
                 self.REPORT: str(out / "report.json"), self.NODES: report["nodes"],
                 self.TRIANGLES: report["triangles"], self.RMSE: report["rmse_m"]}

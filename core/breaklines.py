@@ -39,10 +39,12 @@ DC = np.array([1, 1, 0, -1, -1, -1, 0, 1], dtype=np.int64)
 
 @dataclass(frozen=True)
 class BreakLine:
-    """One break line: ``coords`` (k, 3) x, y, z in metres and the slope (degrees) at each point."""
+    """One break line: ``coords`` (k, 3) x, y, z in metres, the slope (degrees) at each point,
+    and the connected break-line system it belongs to (lines that touch share a component)."""
 
     coords: np.ndarray
     slopes: np.ndarray
+    component: int = 0
 
     @property
     def length(self) -> float:
@@ -78,12 +80,26 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     cells, starts = _trace(bp, slope_values, flat_order, float(s_crit), mode == "steep")
     paths = [cells[starts[i]:starts[i + 1]] for i in range(len(starts) - 1)]
     paths = _drop_fringes([p for p in paths if len(p) >= min_points], bp.shape)
+    components = _components(paths, bp.shape)
     lines = []
-    for idx in paths:
+    for idx, component in zip(paths, components):
         r, c = np.divmod(idx, bp.shape[1])
         x, y = dem.cell_centres(r, c)
-        lines.append(BreakLine(np.column_stack([x, y, dem.values[r, c]]), slope.values[r, c]))
+        lines.append(BreakLine(np.column_stack([x, y, dem.values[r, c]]), slope.values[r, c],
+                               int(component)))
     return lines
+
+
+def _components(paths: list[np.ndarray], shape) -> list[int]:
+    """Component id (1, 2, …) of each path: paths whose cells touch (8-neighbourhood) share one."""
+    from scipy import ndimage
+
+    if not paths:
+        return []
+    traced = np.zeros(shape[0] * shape[1], bool)
+    traced[np.concatenate(paths)] = True
+    labels, _ = ndimage.label(traced.reshape(shape), structure=np.ones((3, 3), bool))
+    return [int(labels.flat[path[0]]) for path in paths]
 
 
 def _drop_fringes(paths: list[np.ndarray], shape) -> list[np.ndarray]:

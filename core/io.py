@@ -231,6 +231,7 @@ def write_breaklines(path, lines, crs) -> None:
     with np.errstate(all="ignore"):
         attributes = {
             "line_id": np.arange(1, len(lines) + 1),
+            "component_id": np.array([line.component for line in lines], dtype=np.int64),
             "n_points": np.array([len(line.coords) for line in lines], dtype=np.int64),
             "length_m": per_line(lambda line: line.length),
             "mean_slope_deg": per_line(lambda line: np.nanmean(line.slopes) if np.isfinite(line.slopes).any() else np.nan),
@@ -258,10 +259,19 @@ def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:
 
 
 def read_breaklines(path) -> list:
-    """Read a line layer as BreakLines (slopes unknown: NaN)."""
+    """Read a line layer as BreakLines (slopes unknown: NaN; component from ``component_id``
+    where the layer has it)."""
+    import fiona
+
     from .breaklines import BreakLine
 
-    return [BreakLine(c, np.full(len(c), np.nan)) for c in read_lines_gpkg(path)]
+    with fiona.open(_require_file(path, "line file")) as src:
+        components = [int(f["properties"].get("component_id") or 0) if "component_id" in
+                      src.schema["properties"] else 0 for f in src if f["geometry"]]
+    lines = read_lines_gpkg(path)
+    if len(components) != len(lines):  # multi-part features: components are not per part
+        components = [0] * len(lines)
+    return [BreakLine(c, np.full(len(c), np.nan), k) for c, k in zip(lines, components)]
 
 
 def read_lines_gpkg(path) -> list[np.ndarray]:

@@ -16,7 +16,7 @@ def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
         keep = np.zeros(len(line.coords), bool)
         keep[::int(n)] = True
         keep[-1] = True
-        out.append(BreakLine(line.coords[keep], line.slopes[keep]))
+        out.append(BreakLine(line.coords[keep], line.slopes[keep], line.component))
     return out
 
 
@@ -28,7 +28,7 @@ def simplify_douglas_peucker(lines: list[BreakLine], tolerance: float) -> list[B
     out = []
     for line in lines:
         keep = douglas_peucker_mask(line.coords, tolerance)
-        out.append(BreakLine(line.coords[keep], line.slopes[keep]))
+        out.append(BreakLine(line.coords[keep], line.slopes[keep], line.component))
     return out
 
 

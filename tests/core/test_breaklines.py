@@ -304,3 +304,26 @@ def test_floodplain_tracing_is_deterministic(floodplain):
     for a, b in zip(first, second):
         np.testing.assert_array_equal(a.coords, b.coords)
         np.testing.assert_array_equal(a.slopes, b.slopes)
+
+
+def test_touching_lines_share_a_component_and_it_survives_simplification(tmp_path):
+    """Two separate steep bands give two break-line systems; a line's component id is written
+    to the GeoPackage, read back, and kept by simplification."""
+    from floodmesh.core import io
+    from floodmesh.core.simplify import simplify_keep_every
+
+    x, y = _centres(60, 60)
+    z = np.clip((x - 10) / 3, 0, 1) * 2 + np.clip((x - 40) / 3, 0, 1) * 2
+    dem, s, bp, lines = _trace(z, mode="flat")
+    by_band = {}
+    for line in lines:
+        band = "west" if _local(line)[:, 0].mean() < 30 else "east"
+        by_band.setdefault(band, set()).add(line.component)
+    assert len(by_band["west"]) >= 1 and len(by_band["east"]) >= 1
+    assert not by_band["west"] & by_band["east"]
+    assert all(line.component > 0 for line in lines)
+    simple = simplify_keep_every(lines, 4)
+    assert [line.component for line in simple] == [line.component for line in lines]
+    io.write_breaklines(tmp_path / "l.gpkg", simple, dem.crs)
+    assert [line.component for line in io.read_breaklines(tmp_path / "l.gpkg")] == \
+        [line.component for line in lines]

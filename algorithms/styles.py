@@ -1,0 +1,38 @@
+"""How FloodMesh's results look when they load: break lines by component, residuals by class,
+the mesh shaded by elevation."""
+from qgis.core import QgsCategorizedSymbolRenderer, QgsRendererCategory, QgsSymbol
+from qgis.PyQt.QtGui import QColor
+
+RESIDUAL_CLASSES = ((0, "< 10 cm", "#1a9641"), (1, "10–25 cm", "#fdae61"),
+                    (2, "> 25 cm", "#d7191c"), (-1, "outside the mesh", "#9e9e9e"))
+
+
+def _categorised(layer, field, categories, width=None):
+    renderer = QgsCategorizedSymbolRenderer(field)
+    for value, label, colour in categories:
+        symbol = QgsSymbol.defaultSymbol(layer.geometryType())
+        symbol.setColor(QColor(colour))
+        if width is not None:
+            symbol.setWidth(width)
+        renderer.addCategory(QgsRendererCategory(value, symbol, label))
+    layer.setRenderer(renderer)
+
+
+def style_breaklines(layer):
+    """A distinct colour per connected break-line system (``component_id``)."""
+    index = layer.fields().indexOf("component_id")
+    values = sorted(layer.uniqueValues(index)) if index >= 0 else []
+    colours = [QColor.fromHsv(int(137.508 * k) % 360, 200, 210).name() for k in range(len(values))]
+    _categorised(layer, "component_id", [(v, f"system {v}", c) for v, c in zip(values, colours)],
+                 width=0.6)
+
+
+def style_residuals(layer):
+    _categorised(layer, "class", RESIDUAL_CLASSES)
+
+
+def style_mesh(layer):
+    """Shade the faces by the nodes' elevation (the mesh's first dataset group)."""
+    settings = layer.rendererSettings()
+    settings.setActiveScalarDatasetGroup(0)
+    layer.setRendererSettings(settings)
