@@ -104,26 +104,44 @@ def _components(paths: list[np.ndarray], shape) -> list[int]:
 
 def _drop_fringes(paths: list[np.ndarray], shape) -> list[np.ndarray]:
     """Drop short paths whose every cell touches (8-neighbourhood) a path twice as long."""
-    rows, cols = shape
+    if not paths:
+        return paths
+    lengths = np.array([len(p) for p in paths], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(lengths)])
+    keep = _fringe_keep(np.concatenate(paths), starts, shape[0], shape[1])
+    return [p for p, k in zip(paths, keep) if k]
+
+
+@numba.njit(cache=True)
+def _fringe_keep(cells, starts, rows, cols):
+    n_paths = starts.size - 1
     length_at = np.zeros(rows * cols, dtype=np.int64)
     owner = np.full(rows * cols, -1, dtype=np.int64)
-    for k, path in enumerate(paths):
-        longer = len(path) > length_at[path]
-        length_at[path[longer]] = len(path)
-        owner[path[longer]] = k
-    keep = []
-    for k, path in enumerate(paths):
-        r, c = np.divmod(path, cols)
-        touched = np.zeros(len(path), bool)
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                rr, cc = r + dr, c + dc
-                inside = (rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols)
-                neighbour = np.where(inside, rr * cols + cc, 0)
-                touched |= (inside & (owner[neighbour] != k) & (owner[neighbour] >= 0)
-                            & (length_at[neighbour] >= 2 * len(path)))
-        if not touched.all():
-            keep.append(path)
+    for k in range(n_paths):
+        length = starts[k + 1] - starts[k]
+        for i in range(starts[k], starts[k + 1]):
+            if length > length_at[cells[i]]:
+                length_at[cells[i]] = length
+                owner[cells[i]] = k
+    keep = np.ones(n_paths, dtype=np.bool_)
+    for k in range(n_paths):
+        length = starts[k + 1] - starts[k]
+        beside = True
+        for i in range(starts[k], starts[k + 1]):
+            r, c = cells[i] // cols, cells[i] % cols
+            touched = False
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    rr, cc = r + dr, c + dc
+                    if rr < 0 or rr >= rows or cc < 0 or cc >= cols:
+                        continue
+                    other = owner[rr * cols + cc]
+                    if other >= 0 and other != k and length_at[rr * cols + cc] >= 2 * length:
+                        touched = True
+            if not touched:
+                beside = False
+                break
+        keep[k] = not beside
     return keep
 
 
