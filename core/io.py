@@ -260,26 +260,25 @@ def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:
 
 def read_breaklines(path) -> list:
     """Read a line layer as BreakLines (slopes unknown: NaN; component from ``component_id``
-    where the layer has it)."""
-    import fiona
-
+    where the layer has it, else 0)."""
     from .breaklines import BreakLine
 
-    with fiona.open(_require_file(path, "line file")) as src:
-        components = [int(f["properties"].get("component_id") or 0) if "component_id" in
-                      src.schema["properties"] else 0 for f in src if f["geometry"]]
-    lines = read_lines_gpkg(path)
-    if len(components) != len(lines):  # multi-part features: components are not per part
-        components = [0] * len(lines)
-    return [BreakLine(c, np.full(len(c), np.nan), k) for c, k in zip(lines, components)]
+    return [BreakLine(coords, np.full(len(coords), np.nan),
+                      int(properties.get("component_id") or 0))
+            for coords, properties in _line_parts(path)]
 
 
 def read_lines_gpkg(path) -> list[np.ndarray]:
     """Read the line features of a vector file as (k, 3) arrays (z = NaN where 2-D)."""
+    return [coords for coords, _ in _line_parts(path)]
+
+
+def _line_parts(path) -> list[tuple[np.ndarray, dict]]:
+    """Each part of each line feature as ((k, 3) coordinates, the feature's attributes)."""
     import fiona
 
     path = _require_file(path, "line file")
-    lines = []
+    parts_out = []
     try:
         with fiona.open(path) as src:
             for feat in src:
@@ -291,12 +290,13 @@ def read_lines_gpkg(path) -> list[np.ndarray]:
                 if parts is None:
                     raise FloodMeshError(f"{path.name} holds {geom['type']} features; "
                                          "break lines must be lines")
+                properties = dict(feat["properties"])
                 for part in parts:
                     arr = np.array([tuple(p) + (np.nan,) * (3 - len(p)) for p in part], float)
-                    lines.append(arr[:, :3])
+                    parts_out.append((arr[:, :3], properties))
     except fiona.errors.FionaError as exc:
         raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
-    return lines
+    return parts_out
 
 
 def read_points_vector(path) -> np.ndarray:

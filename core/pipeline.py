@@ -84,7 +84,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                              kernel=options.log_kernel, cancelled=cancelled)
         breakpoints = steps.run("breakpoints", log_breakpoints, response, options.sensitivity,
                                 zero_crossings=options.zero_crossings)
-        slope_grid = slope(dem, "one-over-distance", cancelled=cancelled)
+        slope_grid = steps.run("tracing slope", slope, dem, "one-over-distance",
+                               cancelled=cancelled)
     else:
         slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
         breakpoints = steps.run("breakpoints", classify_breakpoints, slope_grid, options.s_crit)
