@@ -1,10 +1,12 @@
 """Speed and quality figures, each against a peer in the same run. Prints a table per topic.
 
-    .venv/bin/python benchmarks/run.py [--only grid,slope,trace,mesh] [--points N] [--size N]
+    .venv/bin/python benchmarks/run.py [--only grid,slope,trace,lines,mesh] [--points N]
+                                       [--size N] [--breakpoints N]
 
 grid:  FloodMesh TIN gridding vs scipy.interpolate.griddata (linear, the same Qhull TIN).
 slope: every slope method vs GDAL's own slope (Horn, ZevenbergenThorne) on one grid.
-trace: break-line tracing throughput (breakpoints per second).
+trace: break-line tracing throughput (breakpoints per second) vs scipy's component labelling.
+lines: recall, precision and pieces per true line against the demo's known break lines.
 mesh:  break-line mesh vs a uniform Triangle mesh on the demo floodplain (nodes and RMSE).
 """
 from __future__ import annotations
@@ -108,26 +110,68 @@ def bench_slope(size):
                 print(f"{method:<22}{t:>10.2f}{'-':>12}{'-':>12}")
 
 
-def bench_trace(size):
+def bench_trace(n_breakpoints):
+    """Tracing ``n_breakpoints`` (about) on a dense net of ridges, against scipy's connected
+    component labelling of the same breakpoints (one pass over the same cells: a floor)."""
+    from scipy import ndimage
+
     from floodmesh.core.breaklines import trace_breaklines
     from floodmesh.core.breakpoints import classify_breakpoints
     from floodmesh.core.slope import slope
 
-    yy, xx = np.mgrid[0:size, 0:size].astype(float)
-    # ridges every 8 cells in both directions: a dense net of breakpoints
-    z = 2.0 * np.abs(((xx + 0.5 * yy) % 16) - 8) / 8 + 1.5 * np.abs((yy % 12) - 6) / 6
-    dem = Grid(z, Affine(1.0, 0, 0, 0, -1.0, size), CRS_M)
-    s = slope(dem, "one-over-distance")
-    bp = classify_breakpoints(s, 10.0)
-    small = 64
-    trace_breaklines(Grid(bp.values[:small, :small], bp.transform, CRS_M),
-                     Grid(s.values[:small, :small], bp.transform, CRS_M),
-                     Grid(z[:small, :small], bp.transform, CRS_M), 10.0)  # compile
-    t, lines = timed(trace_breaklines, bp, s, dem, 10.0)
+    def ridges(size):
+        yy, xx = np.mgrid[0:size, 0:size].astype(float)
+        # ridges every 8 cells in both directions: a dense net of breakpoints
+        z = 2.0 * np.abs(((xx + 0.5 * yy) % 16) - 8) / 8 + 1.5 * np.abs((yy % 12) - 6) / 6
+        dem = Grid(z, Affine(1.0, 0, 0, 0, -1.0, size), CRS_M)
+        s = slope(dem, "one-over-distance")
+        return dem, s, classify_breakpoints(s, 10.0)
+
+    dem, s, bp = ridges(200)
+    trace_breaklines(bp, s, dem, 10.0)  # compile
+    while bp.values.sum() < n_breakpoints:
+        dem, s, bp = ridges(int(bp.shape[0] * np.sqrt(n_breakpoints / bp.values.sum())) + 8)
+    t, lines = timed(trace_breaklines, bp, s, dem, 10.0, repeat=3)
+    t_label, _ = timed(ndimage.label, bp.values, np.ones((3, 3)), repeat=3)
     n_bp = int(bp.values.sum())
-    print(f"\n## Break-line tracing on a {size} x {size} grid")
-    print(f"{n_bp:,} breakpoints → {len(lines):,} lines in {t:.2f} s: "
-          f"{n_bp / t / 1e6:.2f} M breakpoints/s")
+    print(f"\n## Break-line tracing, {n_bp:,} breakpoints on a {bp.shape[1]} x {bp.shape[0]} grid")
+    print(f"{'':<34}{'seconds':>9}{'M breakpoints/s':>17}")
+    print(f"{'trace_breaklines (FloodMesh)':<34}{t:>9.2f}{n_bp / t / 1e6:>17.2f}"
+          f"   ({len(lines):,} lines)")
+    print(f"{'scipy.ndimage.label (peer, floor)':<34}{t_label:>9.2f}{n_bp / t_label / 1e6:>17.2f}")
+
+
+def bench_lines(seeds=3):
+    """Recall, precision and pieces per true line on the demo floodplain with 5 cm noise."""
+    import shapely
+
+    from floodmesh.core import demo
+    from floodmesh.core.breaklines import trace_breaklines
+    from floodmesh.core.breakpoints import classify_breakpoints
+    from floodmesh.core.grid import grid_points_linear
+    from floodmesh.core.slope import SLOPE_METHODS, slope
+    from floodmesh.core.validation import score_breaklines
+
+    truth = [shapely.affinity.translate(g, *demo.DEMO_ORIGIN) for g in demo.true_breaklines()]
+    print(f"\n## Break lines against the truth: demo floodplain, 9 points/m², 5 cm noise, 1 m grid,"
+          f" S_crit 10°, within 2 cells, mean over {seeds} noise seeds (bars: 0.9, 0.9, < 3)")
+    print(f"{'slope method':<22}{'joined':>7}{'recall':>8}{'precision':>10}{'pieces':>8}"
+          f"{'max':>5}{'lines':>7}")
+    dems = [grid_points_linear(demo.synthetic_floodplain(vegetation=0.0, seed=k)[0], 1.0)
+            for k in range(seeds)]
+    for method in SLOPE_METHODS:
+        for join in (True, False):
+            scores = []
+            for dem in dems:
+                s = slope(dem, method)
+                lines = trace_breaklines(classify_breakpoints(s, 10.0), s, dem, 10.0, join=join)
+                scores.append(score_breaklines([line.coords for line in lines], truth, 2.0))
+            mean = {k: np.mean([sc[k] for sc in scores])
+                    for k in ("recall", "precision", "mean_pieces", "n_traced")}
+            worst = max(sc["max_pieces"] for sc in scores)
+            print(f"{method:<22}{'yes' if join else 'no':>7}{mean['recall']:>8.3f}"
+                  f"{mean['precision']:>10.3f}{mean['mean_pieces']:>8.2f}{worst:>5}"
+                  f"{mean['n_traced']:>7.0f}")
 
 
 def bench_mesh():
@@ -163,9 +207,11 @@ def bench_mesh():
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", default="grid,slope,trace,mesh")
+    parser.add_argument("--only", default="grid,slope,trace,lines,mesh")
     parser.add_argument("--points", type=int, default=1_000_000, help="points to grid")
-    parser.add_argument("--size", type=int, default=4000, help="raster side for slope/trace")
+    parser.add_argument("--size", type=int, default=4000, help="raster side for slope")
+    parser.add_argument("--breakpoints", type=int, default=1_000_000,
+                        help="breakpoints to trace")
     args = parser.parse_args()
     chosen = set(args.only.split(","))
     if "grid" in chosen:
@@ -173,7 +219,9 @@ def main():
     if "slope" in chosen:
         bench_slope(args.size)
     if "trace" in chosen:
-        bench_trace(args.size)
+        bench_trace(args.breakpoints)
+    if "lines" in chosen:
+        bench_lines()
     if "mesh" in chosen:
         bench_mesh()
 
