@@ -1,11 +1,13 @@
-"""Simplify break lines: every n-th point, or Douglas–Peucker within a tolerance."""
+"""Simplify break lines: every n-th point, Douglas–Peucker or a cubic smoothing spline."""
 from qgis.core import (QgsProcessing, QgsProcessingParameterEnum,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber,
                        QgsProcessingParameterVectorDestination)
 
+from ..core.options import SIMPLIFY_METHODS
 from .base import FloodMeshAlgorithm, layer_file, run_core
+from .styles import style_breaklines, style_when_loaded
 
-METHODS = ("keep every n-th point", "Douglas-Peucker")
+METHODS = ("keep every n-th point", "Douglas-Peucker", "cubic smoothing spline")
 
 
 class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
@@ -13,11 +15,14 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
     DISPLAY_NAME = "Simplify break lines"
     GROUP, GROUP_ID = "Break lines", "breaklines"
     HELP = ("Thins break-line vertices within a tolerance α·Δ (Δ = d/2): keep every n-th point "
-            "(default 4, both ends always kept), or Douglas–Peucker, which keeps every dropped "
+            "(default 4, both ends always kept); Douglas–Peucker, which keeps every dropped "
             "vertex within the tolerance (m) of the simplified line, horizontally and "
-            "vertically.")
-    INPUT, METHOD, KEEP_EVERY, TOLERANCE, OUTPUT = ("INPUT", "METHOD", "KEEP_EVERY", "TOLERANCE",
-                                                    "OUTPUT")
+            "vertically; or a cubic smoothing spline within the same bound. The result stays a "
+            "valid mesh input: segments that would cross another line get their vertices back, "
+            "parts of a line closer than the minimum distance (m) to a longer line merge into "
+            "it, and vertices closer than it to the previous one are dropped.")
+    INPUT, METHOD, KEEP_EVERY, TOLERANCE, MIN_DISTANCE, OUTPUT = (
+        "INPUT", "METHOD", "KEEP_EVERY", "TOLERANCE", "MIN_DISTANCE", "OUTPUT")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFeatureSource(
@@ -28,26 +33,30 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
             self.KEEP_EVERY, self.tr("Keep every n-th point"),
             QgsProcessingParameterNumber.Integer, 4, minValue=1))
         self.addParameter(QgsProcessingParameterNumber(
-            self.TOLERANCE, self.tr("Douglas–Peucker tolerance (m)"),
+            self.TOLERANCE, self.tr("Tolerance for Douglas–Peucker or spline (m)"),
             QgsProcessingParameterNumber.Double, 0.9, minValue=0.001))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MIN_DISTANCE, self.tr("Minimum distance between lines (m)"),
+            QgsProcessingParameterNumber.Double, 0.5, minValue=0.0))
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Simplified break lines"), QgsProcessing.TypeVectorLine))
 
     def process(self, parameters, context, feedback):
         from ..core import io
         from ..core.raster import require_metric_crs
-        from ..core.simplify import simplify_douglas_peucker, simplify_keep_every
+        from ..core.simplify import simplify_breaklines
 
         layer = self.parameterAsVectorLayer(parameters, self.INPUT, context)
         path = layer_file(layer, "Break lines")
         crs = run_core(require_metric_crs, layer.crs().toWkt() or None, layer.name())
         lines = run_core(io.read_breaklines, path)
-        if self.parameterAsEnum(parameters, self.METHOD, context) == 1:
-            lines = run_core(simplify_douglas_peucker, lines,
-                             self.parameterAsDouble(parameters, self.TOLERANCE, context))
-        else:
-            lines = run_core(simplify_keep_every, lines,
-                             self.parameterAsInt(parameters, self.KEEP_EVERY, context))
+        method = SIMPLIFY_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
+        amount = (self.parameterAsInt(parameters, self.KEEP_EVERY, context)
+                  if method == "keep-every"
+                  else self.parameterAsDouble(parameters, self.TOLERANCE, context))
+        lines = run_core(simplify_breaklines, lines, method, amount,
+                         min_distance=self.parameterAsDouble(parameters, self.MIN_DISTANCE, context))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
         run_core(io.write_breaklines, out, lines, crs)
+        style_when_loaded(context, out, style_breaklines)
         return {self.OUTPUT: out}

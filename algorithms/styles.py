@@ -1,6 +1,7 @@
 """How FloodMesh's results look when they load: break lines by component, residuals by class,
 the mesh shaded by elevation."""
-from qgis.core import QgsCategorizedSymbolRenderer, QgsRendererCategory, QgsSymbol
+from qgis.core import (QgsCategorizedSymbolRenderer, QgsProcessingLayerPostProcessorInterface,
+                       QgsRendererCategory, QgsSymbol)
 from qgis.PyQt.QtGui import QColor
 
 RESIDUAL_CLASSES = ((0, "< 10 cm", "#1a9641"), (1, "10–25 cm", "#fdae61"),
@@ -36,3 +37,26 @@ def style_mesh(layer):
     settings = layer.rendererSettings()
     settings.setActiveScalarDatasetGroup(0)
     layer.setRendererSettings(settings)
+
+
+class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):
+    def __init__(self, style):
+        super().__init__()
+        self.style = style
+
+    def postProcessLayer(self, layer, context, feedback):  # noqa: N802
+        self.style(layer)
+        layer.triggerRepaint()
+
+
+_PENDING = []  # QGIS holds post-processors by pointer only: keep them alive here
+
+
+def style_when_loaded(context, output_path: str, style) -> None:
+    """Apply ``style`` to the layer QGIS loads from ``output_path`` when the algorithm ends (a
+    destination parameter the user asked to open)."""
+    if context.willLoadLayerOnCompletion(output_path):
+        styler = _StyleOnLoad(style)
+        _PENDING.append(styler)
+        del _PENDING[:-16]
+        context.layerToLoadOnCompletionDetails(output_path).setPostProcessor(styler)

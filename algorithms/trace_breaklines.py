@@ -1,9 +1,11 @@
 """Trace break lines through thinned breakpoints."""
-from qgis.core import (QgsProcessing, QgsProcessingParameterEnum, QgsProcessingParameterNumber,
+from qgis.core import (QgsProcessing, QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
+                       QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer, QgsProcessingParameterVectorDestination)
 
 from ..core.options import TRACING_MODES as MODES
 from .base import FloodMeshAlgorithm, layer_file, run_core
+from .styles import style_breaklines, style_when_loaded
 
 
 class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
@@ -14,10 +16,14 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
             "changes by less than S_crit (degrees) between consecutive points; no turn over 90° "
             "from the line's trend; no line crosses another. In flat terrain the next point is "
             "the candidate of least slope, in steep terrain the one of least change of slope "
-            "(auto: steep when the median slope reaches S_crit). Lines with fewer points than "
-            "the minimum are dropped. Output: LineStringZ with z from the DEM.")
+            "(auto: steep when the median slope reaches S_crit); ties widen the kernel to 5x5, "
+            "then 7x7, then go to a random choice fixed by the seed. Pieces cut at the "
+            "staircase corners of bands oblique to the grid are joined end to end. Lines with "
+            "fewer points, or shorter (m), than the minimum are dropped. Output: LineStringZ "
+            "with z from the DEM, coloured by connected break-line system.")
     BREAKPOINTS, SLOPE, DEM, CRITICAL_SLOPE = "BREAKPOINTS", "SLOPE", "DEM", "CRITICAL_SLOPE"
-    MODE, MIN_POINTS, OUTPUT = "MODE", "MIN_POINTS", "OUTPUT"
+    MODE, MIN_POINTS, MIN_LENGTH, JOIN, SEED, OUTPUT = ("MODE", "MIN_POINTS", "MIN_LENGTH",
+                                                        "JOIN", "SEED", "OUTPUT")
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterRasterLayer(self.BREAKPOINTS,
@@ -33,6 +39,15 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_POINTS, self.tr("Minimum points per line"),
             QgsProcessingParameterNumber.Integer, 3, minValue=2))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MIN_LENGTH, self.tr("Minimum line length (m)"),
+            QgsProcessingParameterNumber.Double, 0.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.JOIN, self.tr("Join pieces cut at staircase corners"), defaultValue=True))
+        seed = QgsProcessingParameterNumber(self.SEED, self.tr("Random seed for ties"),
+                                            QgsProcessingParameterNumber.Integer, 0, minValue=0)
+        seed.setFlags(seed.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+        self.addParameter(seed)
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Break lines"), QgsProcessing.TypeVectorLine))
 
@@ -50,8 +65,12 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         lines = run_core(trace_breaklines, breakpoints, raster(self.SLOPE, "Slope"), dem,
                          self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
                          mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)],
-                         min_points=self.parameterAsInt(parameters, self.MIN_POINTS, context))
+                         min_points=self.parameterAsInt(parameters, self.MIN_POINTS, context),
+                         min_length=self.parameterAsDouble(parameters, self.MIN_LENGTH, context),
+                         join=self.parameterAsBool(parameters, self.JOIN, context),
+                         seed=self.parameterAsInt(parameters, self.SEED, context))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
         run_core(io.write_breaklines, out, lines, dem.crs)
+        style_when_loaded(context, out, style_breaklines)
         feedback.pushInfo(f"{len(lines)} break lines")
         return {self.OUTPUT: out}

@@ -68,6 +68,12 @@ def _add_chain_options(p: argparse.ArgumentParser):
     simplify.add_argument("--keep-every", type=int, help="keep every n-th break-line point "
                           "(default 4)")
     simplify.add_argument("--tolerance", type=float, help="Douglas–Peucker tolerance in metres")
+    simplify.add_argument("--spline", type=float, metavar="TOLERANCE",
+                          help="cubic smoothing spline within this many metres")
+    p.add_argument("--min-distance", type=float,
+                   help="merge break lines (and vertices) closer than this, m (default d/2)")
+    p.add_argument("--min-length", type=float, default=DEFAULTS.min_length,
+                   help="drop break lines shorter than this, m (default %(default)s)")
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle,
                    help="minimum triangle angle in degrees (default %(default)s)")
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area,
@@ -98,7 +104,8 @@ def _options(args) -> RunOptions:
     return RunOptions(cell_size=args.cell_size, slope_method=args.slope_method,
                       s_crit=args.s_crit, sigma=args.sigma, sensitivity=args.sensitivity,
                       log_kernel=args.log_kernel, zero_crossings=args.zero_crossings,
-                      keep_every=args.keep_every, tolerance=args.tolerance,
+                      keep_every=args.keep_every, tolerance=args.tolerance, spline=args.spline,
+                      min_distance=args.min_distance, min_length=args.min_length,
                       min_angle=args.min_angle, max_area=args.max_area, holdout=args.holdout,
                       seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes)
 
@@ -136,7 +143,7 @@ def cmd_demo(args):
     io.write_points_las(source, points, classes=classes)
     print(f"synthetic floodplain: {len(points):,} points (9 ground points/m²) in {source}")
     args.input = str(source)
-    for name in ("crs", "max_gap", "classes", "keep_every", "tolerance"):
+    for name in ("crs", "max_gap", "classes"):
         setattr(args, name, None)
     cmd_run(args)
 
@@ -194,7 +201,8 @@ def cmd_breaklines(args):
     slope_grid = io.read_raster(args.slope, crs=args.crs)
     dem = io.read_raster(args.dem, crs=args.crs)
     lines = trace_breaklines(bp, slope_grid, dem, args.s_crit, mode=args.mode,
-                             min_points=args.min_points)
+                             min_points=args.min_points, min_length=args.min_length,
+                             join=not args.no_join, seed=args.seed)
     io.write_breaklines(args.out, lines, dem.crs)
     print(f"{len(lines)} break lines written to {args.out}")
 
@@ -202,14 +210,13 @@ def cmd_breaklines(args):
 def cmd_simplify(args):
     from . import io
     from .raster import require_metric_crs
-    from .simplify import simplify_douglas_peucker, simplify_keep_every
+    from .simplify import simplify_breaklines
 
     lines = io.read_breaklines(args.breaklines)
     crs = require_metric_crs(args.crs or io.vector_crs(args.breaklines), Path(args.breaklines).name)
-    if args.tolerance is not None:
-        out = simplify_douglas_peucker(lines, args.tolerance)
-    else:
-        out = simplify_keep_every(lines, args.keep_every or 4)
+    method, amount = RunOptions(keep_every=args.keep_every, tolerance=args.tolerance,
+                                spline=args.spline).simplification()
+    out = simplify_breaklines(lines, method, amount, min_distance=args.min_distance)
     io.write_breaklines(args.out, out, crs)
     before, after = sum(len(x.coords) for x in lines), sum(len(x.coords) for x in out)
     print(f"{len(out)} break lines, {before} → {after} points, written to {args.out}")
@@ -310,6 +317,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--s-crit", type=float, default=DEFAULTS.s_crit)
     p.add_argument("--mode", choices=["auto", "flat", "steep"], default="auto")
     p.add_argument("--min-points", type=int, default=DEFAULTS.min_points)
+    p.add_argument("--min-length", type=float, default=DEFAULTS.min_length,
+                   help="drop lines shorter than this, m (default %(default)s)")
+    p.add_argument("--no-join", action="store_true",
+                   help="keep pieces apart where thinning cut a line at a staircase corner")
+    p.add_argument("--seed", type=int, default=DEFAULTS.seed,
+                   help="seed for ties the 7x7 kernel leaves (default 0)")
     p.add_argument("--out", required=True)
     p.add_argument("--crs")
     p.set_defaults(func=cmd_breaklines)
@@ -318,7 +331,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("breaklines")
     group = p.add_mutually_exclusive_group()
     group.add_argument("--keep-every", type=int)
-    group.add_argument("--tolerance", type=float)
+    group.add_argument("--tolerance", type=float, help="Douglas–Peucker tolerance, m")
+    group.add_argument("--spline", type=float, metavar="TOLERANCE",
+                       help="cubic smoothing spline within this many metres")
+    p.add_argument("--min-distance", type=float, default=0.0,
+                   help="merge lines and vertices closer than this, m (default 0: off)")
     p.add_argument("--out", required=True)
     p.add_argument("--crs")
     p.set_defaults(func=cmd_simplify)

@@ -11,6 +11,7 @@ SLOPE_METHOD_NAMES = ("max-slope", "one-over-distance", "sharpnack-akin", "wood"
 BREAKPOINT_METHODS = (*SLOPE_METHOD_NAMES, "log")
 LOG_KERNELS = ("pratt", "analytic")
 TRACING_MODES = ("auto", "flat", "steep")
+SIMPLIFY_METHODS = ("keep-every", "douglas-peucker", "spline")
 
 
 @dataclass(frozen=True)
@@ -25,7 +26,9 @@ class RunOptions:
     log_kernel: str = "pratt"
     zero_crossings: bool = False    # LoG breakpoints at zero crossings instead of |response|
     keep_every: int | None = None   # keep every n-th break-line point (default 4) ...
-    tolerance: float | None = None  # ... or Douglas–Peucker within this many metres
+    tolerance: float | None = None  # ... or Douglas–Peucker within this many metres ...
+    spline: float | None = None     # ... or a cubic smoothing spline within this many metres
+    min_distance: float | None = None  # m between lines and vertices; default Δ = d/2
     min_angle: float = 25.0         # degrees
     max_area: float = 100.0         # m²
     holdout: float = 0.001          # fraction of points held out for assessment
@@ -33,6 +36,7 @@ class RunOptions:
     max_gap: float | None = None    # m; default 10 cell sizes
     tracing_mode: str = "auto"
     min_points: int = 3
+    min_length: float = 0.0         # m; shorter break lines are dropped
     crs: str | None = None
     classes: tuple[int, ...] | None = None
 
@@ -45,8 +49,12 @@ class RunOptions:
                                  "analytic")
 
     def simplification(self) -> tuple[str, float]:
-        if self.keep_every is not None and self.tolerance is not None:
-            raise FloodMeshError("give either keep-every or tolerance for simplification, not both")
-        if self.tolerance is not None:
-            return "douglas-peucker", float(self.tolerance)
-        return "keep-every", float(4 if self.keep_every is None else self.keep_every)
+        """(method, amount): keep-every n, or douglas-peucker / spline within metres."""
+        given = [(name, value) for name, value in (("keep-every", self.keep_every),
+                                                   ("douglas-peucker", self.tolerance),
+                                                   ("spline", self.spline)) if value is not None]
+        if len(given) > 1:
+            raise FloodMeshError("give one simplification (keep-every, tolerance or spline), not "
+                                 + " and ".join(name for name, _ in given))
+        name, value = given[0] if given else ("keep-every", 4)
+        return name, float(value)

@@ -18,7 +18,7 @@ from .grid import grid_points_linear
 from .mesh import build_mesh, mesh_quality
 from .points import PointCloud, split_holdout
 from .raster import Grid
-from .simplify import max_deviation, simplify_douglas_peucker, simplify_keep_every
+from .simplify import max_deviation, simplify_breaklines
 from .options import RunOptions
 from .slope import laplacian_of_gaussian, slope
 
@@ -90,18 +90,18 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
         breakpoints = steps.run("breakpoints", classify_breakpoints, slope_grid, options.s_crit)
     traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
-                       options.s_crit, mode=options.tracing_mode, min_points=options.min_points)
-    if method == "douglas-peucker":
-        lines = steps.run("simplify", simplify_douglas_peucker, traced, amount)
-    else:
-        lines = steps.run("simplify", simplify_keep_every, traced, int(amount))
+                       options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
+                       min_length=options.min_length, seed=options.seed)
+    delta = dem.cell_size / 2
+    min_distance = delta if options.min_distance is None else options.min_distance
+    lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
+                      min_distance=min_distance)
     mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines],
                      min_angle=options.min_angle, max_area=options.max_area)
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
-    delta = dem.cell_size / 2
-    deviation = max((max_deviation(a, b) for a, b in zip(traced, lines)), default=0.0)
-    alpha = amount / delta if method == "douglas-peucker" else deviation / delta
+    deviation = max_deviation(traced, lines)
+    alpha = deviation / delta if method == "keep-every" else amount / delta
     quality = mesh_quality(mesh, min_angle=options.min_angle, max_area=options.max_area)
     stats = accuracy_statistics(res, alpha=alpha, delta=delta)
 
@@ -129,7 +129,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         "n_breaklines": len(lines),
         "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
         "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
-        "simplification": {"method": method, "value": amount,
+        "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
                            "max_deviation_m": deviation},
         **quality,
         **stats,

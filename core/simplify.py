@@ -1,21 +1,30 @@
-"""Break-line simplification within a tolerance α·Δ (Δ = d/2, the scale of detail)."""
+"""Break-line simplification within a tolerance α·Δ (Δ = d/2, the scale of detail).
+
+Three methods per line: keep every n-th point, Douglas–Peucker, and a cubic smoothing spline.
+``simplify_breaklines`` is what the chain uses: it simplifies each line, then keeps the set a
+valid PSLG: a simplified segment that crosses another line (or its own) gets back the original
+vertices it skipped until it no longer does, parts of a line closer than ``min_distance`` to a
+longer line are merged into it (dropped), and vertices closer than ``min_distance`` to the
+previous one on their line are dropped. Those merges trade the tolerance for a valid mesh
+input: an original vertex next to a merge may lie up to tolerance + ``min_distance`` from the
+result (the chain reports the largest deviation it finds).
+"""
 from __future__ import annotations
 
 import numpy as np
+import shapely
 
 from .breaklines import BreakLine
 from .errors import FloodMeshError
+from .options import SIMPLIFY_METHODS
 
 
 def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
     """Keep every ``n``-th point of each line, and always both ends."""
-    if int(n) != n or n < 1:
-        raise FloodMeshError(f"keep-every must be a whole number of at least 1, got {n}")
+    _check_keep_every(n)
     out = []
     for line in lines:
-        keep = np.zeros(len(line.coords), bool)
-        keep[::int(n)] = True
-        keep[-1] = True
+        keep = _keep_every_mask(len(line.coords), int(n))
         out.append(BreakLine(line.coords[keep], line.slopes[keep], line.component))
     return out
 
@@ -23,8 +32,7 @@ def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
 def simplify_douglas_peucker(lines: list[BreakLine], tolerance: float) -> list[BreakLine]:
     """Douglas–Peucker: no dropped point lies farther than ``tolerance`` (m) from the simplified
     line, horizontally or vertically."""
-    if not tolerance > 0:
-        raise FloodMeshError(f"simplification tolerance must be positive metres, got {tolerance}")
+    _check_tolerance(tolerance)
     out = []
     for line in lines:
         keep = douglas_peucker_mask(line.coords, tolerance)
@@ -68,11 +76,195 @@ def _deviation(a, b, pts):
     return horizontal, vertical
 
 
-def max_deviation(original: BreakLine, simplified: BreakLine) -> float:
-    """Largest horizontal distance (m) from an original vertex to the simplified polyline."""
-    from shapely import LineString, points, distance
-
-    if len(simplified.coords) < 2:
+def max_deviation(original: list[BreakLine], simplified: list[BreakLine]) -> float:
+    """Largest horizontal distance (m) from an original vertex to the nearest simplified line."""
+    geoms = [shapely.LineString(line.coords[:, :2]) for line in simplified if len(line.coords) > 1]
+    if not original or not geoms:
         return 0.0
-    return float(distance(LineString(simplified.coords[:, :2]),
-                          points(original.coords[:, :2])).max())
+    pts = shapely.points(np.concatenate([line.coords[:, :2] for line in original]))
+    _, distance = shapely.STRtree(geoms).query_nearest(pts, return_distance=True, all_matches=False)
+    return float(distance.max())
+
+
+def simplify_breaklines(lines: list[BreakLine], method: str, amount: float, *,
+                        min_distance: float = 0.0) -> list[BreakLine]:
+    """Simplify ``lines`` by ``method`` ("keep-every": every ``amount``-th point;
+    "douglas-peucker" or "spline": within ``amount`` metres), then repair crossings and merge
+    slivers and near-duplicate vertices closer than ``min_distance`` metres (see the module
+    docstring)."""
+    if method not in SIMPLIFY_METHODS:
+        raise FloodMeshError(f"unknown simplification {method!r}; choose one of "
+                             f"{', '.join(SIMPLIFY_METHODS)}")
+    if not min_distance >= 0:
+        raise FloodMeshError(f"minimum distance between lines must be 0 m or more, got "
+                             f"{min_distance}")
+    if method == "keep-every":
+        _check_keep_every(amount)
+        plans = [(line.coords, _keep_every_mask(len(line.coords), int(amount))) for line in lines]
+    else:
+        _check_tolerance(amount)
+        if method == "douglas-peucker":
+            plans = [(line.coords, douglas_peucker_mask(line.coords, amount)) for line in lines]
+        else:
+            plans = [spline_plan(line.coords, amount) for line in lines]
+    positions = [p.copy() for p, _ in plans]
+    masks = [m.copy() for _, m in plans]
+    _repair_crossings(lines, positions, masks)
+    return _separate(lines, positions, masks, min_distance)
+
+
+def spline_plan(coords: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cubic smoothing spline through x(s), y(s), z(s) (s: distance along the line), as smooth
+    as keeps every vertex within ``tolerance``/2 of its own position in plan and in z, ends
+    fixed; then Douglas–Peucker within ``tolerance``/2 on the smoothed vertices. Returns the
+    smoothed positions and the mask of vertices kept: every original vertex lies within
+    ``tolerance`` of the simplified line, horizontally and vertically."""
+    from scipy.interpolate import make_smoothing_spline
+
+    coords = np.asarray(coords, float)
+    half = tolerance / 2
+    if len(coords) < 5 or not np.isfinite(coords).all():
+        return coords, douglas_peucker_mask(coords, tolerance)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(coords[:, :2], axis=0).T))])
+    scale = (s[-1] / len(s)) ** 3  # lam is in units of spacing³
+
+    def smoothed(lam):
+        out = np.column_stack([make_smoothing_spline(s, coords[:, k], lam=lam)(s)
+                               for k in range(3)])
+        out[0], out[-1] = coords[0], coords[-1]
+        return out
+
+    def within(p):
+        return (np.hypot(*(p[:, :2] - coords[:, :2]).T).max() <= half
+                and np.abs(p[:, 2] - coords[:, 2]).max() <= half)
+
+    best = coords
+    lo, hi = np.log(1e-4 * scale), np.log(1e4 * scale)
+    for _ in range(14):  # bisection on log(lam) for the smoothest spline within the bound
+        mid = (lo + hi) / 2
+        candidate = smoothed(np.exp(mid))
+        if within(candidate):
+            best, lo = candidate, mid
+        else:
+            hi = mid
+    return best, douglas_peucker_mask(best, half)
+
+
+def _check_keep_every(n):
+    if int(n) != n or n < 1:
+        raise FloodMeshError(f"keep-every must be a whole number of at least 1, got {n}")
+
+
+def _check_tolerance(tolerance):
+    if not tolerance > 0:
+        raise FloodMeshError(f"simplification tolerance must be positive metres, got {tolerance}")
+
+
+def _keep_every_mask(n_points: int, n: int) -> np.ndarray:
+    keep = np.zeros(n_points, bool)
+    keep[::n] = True
+    keep[-1] = True
+    return keep
+
+
+def _kept_lines(positions, masks) -> np.ndarray:
+    lines = [shapely.LineString(p[m][:, :2]) if m.sum() >= 2 else shapely.LineString()
+             for p, m in zip(positions, masks)]
+    return np.array(lines + [None], dtype=object)[:-1]  # an object array even when empty
+
+
+def _repair_crossings(lines, positions, masks, max_rounds=1000):
+    """Give simplified segments that cross another line (or their own) back the original
+    vertex they skipped that lies farthest from them, or, on a segment between neighbouring
+    vertices, the original positions, until nothing crosses that the originals did not."""
+    for _ in range(max_rounds):
+        geoms = _kept_lines(positions, masks)
+        tree = shapely.STRtree(geoms)
+        pairs = set()
+        for predicate in ("crosses", "overlaps", "contains"):  # contains: collinear, inside
+            a, b = tree.query(geoms, predicate=predicate)
+            pairs |= {(int(i), int(j)) for i, j in zip(a, b) if i != j}
+            pairs |= {(int(j), int(i)) for i, j in zip(a, b) if i != j}
+        pairs |= {(i, i) for i, g in enumerate(geoms) if not g.is_empty and not g.is_simple}
+        changed = False
+        for i, j in sorted(pairs):
+            changed |= _refine_where(lines[i].coords, positions[i], masks[i],
+                                     geoms[j] if i != j else None)
+        if not changed:
+            return
+
+
+def _refine_where(original, position, mask, other) -> bool:
+    """Refine the kept segments of one line that cross ``other`` (None: the line itself)."""
+    kept = np.flatnonzero(mask)
+    segments = shapely.linestrings(np.stack([position[kept[:-1], :2], position[kept[1:], :2]],
+                                            axis=1))
+    if other is None:  # segments meeting non-adjacent segments, or folding back on the next
+        tree = shapely.STRtree(segments)
+        u, v = tree.query(segments, predicate="intersects")
+        apart = np.abs(u - v)
+        folded = (apart == 1) & (shapely.length(shapely.intersection(segments[u],
+                                                                     segments[v])) > 0)
+        hit = np.unique(u[(apart > 1) | folded])
+    else:
+        shared = shapely.length(shapely.intersection(segments, other)) > 0  # collinear parts
+        hit = np.flatnonzero(shapely.crosses(segments, other) | shared)
+    changed = False
+    for k in hit:
+        a, b = kept[k], kept[k + 1]
+        if b - a > 1:
+            horizontal, vertical = _deviation(position[a], position[b], position[a + 1:b])
+            mask[a + 1 + int(np.argmax(np.maximum(horizontal, vertical)))] = True
+            changed = True
+        elif not np.array_equal(position[a:b + 1], original[a:b + 1]):
+            position[a:b + 1] = original[a:b + 1]
+            changed = True
+    return changed
+
+
+def _separate(lines, positions, masks, min_distance) -> list[BreakLine]:
+    """Split off the kept vertices that lie within ``min_distance`` of a longer line (merged
+    into it), drop vertices within ``min_distance`` of the previous one, and build the lines."""
+    geoms = _kept_lines(positions, masks)
+    near = [np.zeros(int(m.sum()), bool) for m in masks]
+    if min_distance > 0 and len(geoms):
+        rank = np.empty(len(geoms), int)
+        rank[np.argsort(-shapely.length(geoms), kind="stable")] = \
+            np.arange(len(geoms))
+        tree = shapely.STRtree(geoms)
+        for i, (p, m) in enumerate(zip(positions, masks)):
+            pts = shapely.points(p[m][:, :2])
+            v, j = tree.query(pts, predicate="dwithin", distance=min_distance)
+            longer = rank[j] < rank[i]
+            near[i][v[longer]] = True
+    out = []
+    for line, p, m, drop in zip(lines, positions, masks, near):
+        idx = np.flatnonzero(m)
+        # runs of consecutive kept vertices that are not merged into a longer line
+        breaks = np.flatnonzero(drop)
+        for run in np.split(np.arange(len(idx)), breaks):
+            run = run[~drop[run]]
+            if len(run) < 2:
+                continue
+            keep = _spaced(p[idx[run]], min_distance)
+            coords = p[idx[run]][keep]
+            out.append(BreakLine(coords, line.slopes[idx[run]][keep], line.component))
+    return out
+
+
+def _spaced(coords: np.ndarray, min_distance: float) -> np.ndarray:
+    """Mask dropping interior vertices closer than ``min_distance`` (plan) to the previous kept
+    one; both ends stay (the one before the last end gives way instead)."""
+    keep = np.ones(len(coords), bool)
+    if min_distance <= 0:
+        return keep
+    last = coords[0, :2]
+    for i in range(1, len(coords) - 1):
+        if np.hypot(*(coords[i, :2] - last)) < min_distance:
+            keep[i] = False
+        else:
+            last = coords[i, :2]
+    prev = np.flatnonzero(keep[:-1])[-1]
+    if prev > 0 and np.hypot(*(coords[-1, :2] - coords[prev, :2])) < min_distance:
+        keep[prev] = False
+    return keep

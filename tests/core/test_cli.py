@@ -117,5 +117,33 @@ def test_log_breakpoints_through_the_commands_and_the_chain(demo_points_file, tm
     floodmesh("run", demo_points_file, "--out", t / "run", "--slope-method", "log",
               "--sigma", 1.5, "--sensitivity", 0.03, "--holdout", 0.01)
     report = json.loads((t / "run" / "report.json").read_text())
-    assert report["options"]["slope_method"] == "log" and report["n_breaklines"] > 20
+    assert report["options"]["slope_method"] == "log" and report["n_breaklines"] > 10
     assert report["n_below_min_angle"] == 0 and report["max_area_m2"] <= 100
+
+
+def test_tracing_and_simplification_options(demo_points_file, tmp_path):
+    """breaklines --min-length/--no-join/--seed and simplify --spline/--min-distance, and the
+    chain with --spline: the report names the method and its bound holds."""
+    t = tmp_path
+    floodmesh("grid", demo_points_file, "--cell-size", 1, "--out", t / "dem.tif")
+    floodmesh("slope", t / "dem.tif", "--out", t / "slope.tif")
+    floodmesh("breakpoints", t / "slope.tif", "--out", t / "bp.tif")
+    common = ["--slope", t / "slope.tif", "--dem", t / "dem.tif"]
+    floodmesh("breaklines", t / "bp.tif", *common, "--out", t / "joined.gpkg")
+    floodmesh("breaklines", t / "bp.tif", *common, "--no-join", "--out", t / "pieces.gpkg")
+    floodmesh("breaklines", t / "bp.tif", *common, "--min-length", 20, "--seed", 5,
+              "--out", t / "long.gpkg")
+    joined, pieces = io.read_breaklines(t / "joined.gpkg"), io.read_breaklines(t / "pieces.gpkg")
+    long_lines = io.read_breaklines(t / "long.gpkg")
+    assert len(pieces) > 2 * len(joined)
+    assert long_lines and min(line.length for line in long_lines) >= 20
+    floodmesh("simplify", t / "joined.gpkg", "--spline", 0.9, "--min-distance", 0.5,
+              "--out", t / "smooth.gpkg")
+    smooth = io.read_breaklines(t / "smooth.gpkg")
+    assert sum(len(x.coords) for x in smooth) < 0.5 * sum(len(x.coords) for x in joined)
+    floodmesh("run", demo_points_file, "--out", t / "run", "--spline", 0.9, "--holdout", 0.01)
+    report = json.loads((t / "run" / "report.json").read_text())
+    assert report["simplification"]["method"] == "spline"
+    # within the tolerance, plus the minimum distance (d/2) where lines or vertices merged
+    assert report["simplification"]["max_deviation_m"] <= 0.9 + 0.5 + 1e-9
+    assert report["n_below_min_angle"] == 0

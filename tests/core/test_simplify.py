@@ -83,7 +83,7 @@ def test_douglas_peucker_random_walk(seed, tolerance):
     np.testing.assert_array_equal(out.slopes, line.slopes[keep])
     assert len(out.coords) < len(line.coords)
     _assert_within_tolerance(line, out, tolerance)
-    assert max_deviation(line, out) <= tolerance + 1e-9
+    assert max_deviation([line], [out]) <= tolerance + 1e-9
 
 
 @pytest.mark.parametrize("tolerance", [0.05, 0.2, 1.0])
@@ -123,3 +123,133 @@ def test_douglas_peucker_refuses_non_positive_tolerance(tolerance):
     """A tolerance that is not a positive number is a FloodMeshError."""
     with pytest.raises(FloodMeshError, match="tolerance"):
         simplify_douglas_peucker([_random_walk(10, 0)], tolerance)
+
+
+# ---------------------------------------------------------------------------------------------
+# cubic smoothing spline
+@pytest.mark.parametrize("tolerance", [0.3, 0.9, 2.0])
+@pytest.mark.parametrize("shape", ["walk", "noisy sine"])
+def test_spline_stays_within_tolerance(shape, tolerance):
+    """Every original vertex lies within the tolerance of the simplified segment that replaces
+    it, in plan and in z at its foot on that segment; ends stay put; fewer vertices remain."""
+    from floodmesh.core.simplify import spline_plan
+
+    if shape == "walk":
+        coords = _random_walk(300, seed=4, step=0.7).coords
+    else:
+        rng = np.random.default_rng(1)
+        coords = _sine().coords + np.column_stack([rng.normal(0, 0.15, (400, 2)),
+                                                   rng.normal(0, 0.05, 400)])
+    position, keep = spline_plan(coords, tolerance)
+    kept = np.flatnonzero(keep)
+    assert keep[0] and keep[-1] and keep.sum() < len(coords)
+    np.testing.assert_array_equal(position[[0, -1]], coords[[0, -1]])
+    for a, b in zip(kept[:-1], kept[1:]):
+        pa, pb = position[a], position[b]
+        ab = pb[:2] - pa[:2]
+        for i in range(a, b + 1):
+            t = np.clip((coords[i, :2] - pa[:2]) @ ab / (ab @ ab), 0, 1)
+            foot = pa + t * (pb - pa)
+            assert np.hypot(*(coords[i, :2] - foot[:2])) <= tolerance + 1e-9
+            assert abs(coords[i, 2] - foot[2]) <= tolerance + 1e-9
+
+
+def test_spline_is_smoother_than_the_staircase():
+    """On a grid staircase (a line at 20° traced through cell centres) the spline's vertices lie
+    closer to the true straight line than the staircase's own vertices do."""
+    from floodmesh.core.simplify import spline_plan
+
+    x = np.arange(0, 60.0)
+    y = np.round(np.tan(np.radians(20)) * x)
+    coords = np.column_stack([x, y, np.zeros_like(x)])
+    position, keep = spline_plan(coords, 1.0)
+    true_line = shapely.LineString([(0, 0), (60, 60 * np.tan(np.radians(20)))])
+    before = shapely.distance(true_line, shapely.points(coords[:, :2])).mean()
+    after = shapely.distance(true_line, shapely.points(position[:, :2])).mean()
+    assert after < 0.7 * before
+
+
+# ---------------------------------------------------------------------------------------------
+# the simplified set stays a valid PSLG
+def _traced_rough_lines(seed=0):
+    from affine import Affine
+    from pyproj import CRS
+    from scipy import ndimage
+
+    from floodmesh.core.breaklines import trace_breaklines
+    from floodmesh.core.breakpoints import classify_breakpoints
+    from floodmesh.core.raster import Grid
+    from floodmesh.core.slope import slope
+
+    rng = np.random.default_rng(seed)
+    z = ndimage.gaussian_filter(rng.normal(0, 1, (120, 120)), 2) * 20
+    dem = Grid(z, Affine(1, 0, 500_000, 0, -1, 6_000_120), CRS.from_epsg(25832))
+    s = slope(dem)
+    return trace_breaklines(classify_breakpoints(s, 10.0), s, dem, 10.0)
+
+
+def _crossings(lines):
+    geoms = [shapely.LineString(line.coords[:, :2]) for line in lines]
+    tree = shapely.STRtree(geoms)
+    n = 0
+    for predicate in ("crosses", "overlaps"):
+        a, b = tree.query(geoms, predicate=predicate)
+        n += int((a < b).sum())
+    return n + sum(not g.is_simple for g in geoms)
+
+
+@pytest.mark.parametrize("method, amount", [("keep-every", 6), ("douglas-peucker", 1.5),
+                                            ("spline", 1.5)])
+def test_simplified_lines_do_not_cross(method, amount):
+    """Dense traced lines on rough terrain do not cross; simplified one by one they do (so the
+    case is a real one); simplify_breaklines gives back vertices until none cross."""
+    from floodmesh.core.simplify import simplify_breaklines, spline_plan
+
+    lines = _traced_rough_lines(seed=1)
+    assert _crossings(lines) == 0
+    if method == "keep-every":
+        naive = simplify_keep_every(lines, amount)
+    elif method == "douglas-peucker":
+        naive = simplify_douglas_peucker(lines, amount)
+    else:
+        naive = [_line(p[m]) for p, m in (spline_plan(line.coords, amount) for line in lines)]
+    assert _crossings(naive) > 0
+    out = simplify_breaklines(lines, method, amount)
+    assert _crossings(out) == 0
+    assert sum(len(o.coords) for o in out) < 0.7 * sum(len(line.coords) for line in lines)
+
+
+def test_slivers_merge_into_the_longer_line():
+    """A line running 0.3 m beside a longer one merges into it at min_distance 0.5 m (only the
+    part beyond the longer line's end survives), and both stay at min_distance 0.2 m; no two
+    consecutive vertices are closer than min_distance."""
+    from floodmesh.core.simplify import simplify_breaklines
+
+    x = np.arange(0, 60.0)
+    long_line = _line(np.column_stack([x, np.zeros_like(x), np.zeros_like(x)]))
+    x2 = np.arange(30, 70.0)
+    short = _line(np.column_stack([x2, np.full_like(x2, 0.3), np.zeros_like(x2)]))
+    merged = simplify_breaklines([long_line, short], "keep-every", 1, min_distance=0.5)
+    assert len(merged) == 2
+    np.testing.assert_array_equal(merged[0].coords, long_line.coords)
+    assert merged[1].coords[:, 0].min() == 60.0  # only the part past the long line's end
+    kept = simplify_breaklines([long_line, short], "keep-every", 1, min_distance=0.2)
+    assert [len(k.coords) for k in kept] == [60, 40]
+    dense = _line(np.column_stack([np.arange(0, 10, 0.25), np.zeros(40), np.zeros(40)]))
+    (spaced,) = simplify_breaklines([dense], "keep-every", 1, min_distance=0.6)
+    steps = np.hypot(*np.diff(spaced.coords[:, :2], axis=0).T)
+    assert steps.min() >= 0.6 and spaced.coords[0, 0] == 0 and spaced.coords[-1, 0] == 9.75
+
+
+def test_simplify_breaklines_refuses_bad_arguments():
+    from floodmesh.core.simplify import simplify_breaklines
+
+    lines = [_random_walk(10, 0)]
+    with pytest.raises(FloodMeshError, match="unknown simplification"):
+        simplify_breaklines(lines, "bezier", 1.0)
+    with pytest.raises(FloodMeshError, match="tolerance"):
+        simplify_breaklines(lines, "spline", 0)
+    with pytest.raises(FloodMeshError, match="keep-every"):
+        simplify_breaklines(lines, "keep-every", 0)
+    with pytest.raises(FloodMeshError, match="minimum distance"):
+        simplify_breaklines(lines, "keep-every", 2, min_distance=-1)
