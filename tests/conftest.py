@@ -33,3 +33,22 @@ def plane_points(a=0.1, b=-0.05, c=12.0, size=40.0, density=4.0, seed=0, origin=
     n = int(size * size * density)
     x, y = rng.uniform(0, size, n), rng.uniform(0, size, n)
     return np.column_stack([x + origin[0], y + origin[1], a * x + b * y + c])
+
+
+UTM_ORIGIN = (412_000.0, 5_652_000.0)
+
+
+def hole_mesh(max_area=40.0):
+    """A 100 x 60 m rectangle with a 20 x 20 m square hole (x 40–60, y 20–40, local metres),
+    meshed by Triangle, at UTM coordinates, z = 10 + 0.01·x + 0.02·y: (nodes (n, 3), triangles)."""
+    from floodmesh.core.mesh import PSLG, triangulate_pslg
+
+    corners = np.array([[0, 0], [100, 0], [100, 60], [0, 60],
+                        [40, 20], [60, 20], [60, 40], [40, 40]], float) + UTM_ORIGIN
+    segments = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4]])
+    hole = np.array([[50.0, 30.0]]) + UTM_ORIGIN
+    xy, triangles = triangulate_pslg(PSLG(corners, segments, hole), min_angle=25.0,
+                                     max_area=max_area)
+    local = xy - UTM_ORIGIN
+    z = 10.0 + 0.01 * local[:, 0] + 0.02 * local[:, 1]
+    return np.column_stack([xy, z]), triangles
