@@ -2,7 +2,10 @@
 read back by a reader written here from the format's published description (ADCIRC fort.14,
 SCHISM hgrid.gr3, TELEMAC Selafin and .cli) or by our own 2DM reader; QGIS's readers (MDAL)
 check the 2DM, Selafin and UGRID files in tests/qgis/test_export.py."""
+import json
 import struct
+import subprocess
+import sys
 from pathlib import Path
 
 import fiona
@@ -16,13 +19,16 @@ from floodmesh.core import export, io
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.mesh import boundary_loops, triangle_areas
 from floodmesh.core.options import RunOptions, parse_formats
+from floodmesh.core.pipeline import OUTPUT_FILES, run_pipeline
+from floodmesh.core.points import PointCloud
 
-from ..conftest import UTM_ORIGIN, hole_mesh
+from ..conftest import UTM_ORIGIN, hole_mesh, plane_points
 
 X0, Y0 = UTM_ORIGIN
 UTM32 = CRS.from_epsg(25832)
 WEST_LINE = np.array([[X0, Y0 + 10.0], [X0, Y0 + 50.0]])   # an inflow section on the west edge
 EAST_LINE = np.array([[X0 + 100.0, Y0 + 5.0], [X0 + 100.0, Y0 + 25.0]])
+FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
 
 
 @pytest.fixture(scope="module")
@@ -517,3 +523,114 @@ def test_a_failed_export_leaves_no_file(mesh, tmp_path):
     with pytest.raises(FloodMeshError, match="1 mesh nodes belong to no triangle"):
         export.export_mesh(tmp_path / "mesh.slf", extra, tris)
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# command line and the whole chain
+def floodmesh(*args):
+    return subprocess.run([FLOODMESH, *map(str, args)], capture_output=True, text=True,
+                          timeout=300)
+
+
+@pytest.fixture
+def mesh_files(mesh, tmp_path):
+    nodes, tris = mesh
+    io.write_mesh_2dm(tmp_path / "mesh.2dm", nodes, tris)
+    io.write_lines_gpkg(tmp_path / "open.gpkg", [np.column_stack([WEST_LINE, [0.0, 0.0]])],
+                        UTM32, layer="open")
+    schema = {"geometry": "Polygon", "properties": {"mat": "int"}}
+    with fiona.open(tmp_path / "regions.gpkg", "w", driver="GPKG", schema=schema,
+                    crs_wkt=UTM32.to_wkt()) as dst:
+        dst.write({"geometry": shapely.geometry.mapping(shapely.box(X0, Y0, X0 + 30, Y0 + 60)),
+                   "properties": {"mat": 6}})
+    return tmp_path
+
+
+def test_export_command(mesh, mesh_files):
+    """floodmesh export: the format from the extension, open boundaries and regions from
+    layers (their CRS taken for the netCDF file), --format forcing a format."""
+    t = mesh_files
+    nodes, tris = mesh
+    run = floodmesh("export", t / "mesh.2dm", t / "out.2dm", "--open-boundaries", t / "open.gpkg",
+                    "--regions", t / "regions.gpkg", "--material-field", "mat")
+    assert run.returncode == 0, run.stderr
+    back = io.read_2dm(t / "out.2dm")
+    assert set(np.unique(back.materials)) == {1, 6} and len(back.node_strings) == 3
+    run = floodmesh("export", t / "mesh.2dm", t / "out.nc", "--open-boundaries", t / "open.gpkg")
+    assert run.returncode == 0, run.stderr
+    with netcdf_file(t / "out.nc", "r", mmap=False) as nc:
+        assert nc.variables["projected_coordinate_system"].epsg == 25832
+    run = floodmesh("export", t / "mesh.2dm", t / "hgrid", "--format", "gr3", "--datum-offset", 2)
+    assert run.returncode == 0, run.stderr
+    grid = read_fort14(t / "hgrid")
+    np.testing.assert_allclose(grid["xyd"][:, 2], -(nodes[:, 2] + 2), atol=0.5e-4)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["{t}/mesh.2dm", "{t}/out.msh"], "extension '.msh'"),
+    (["{t}/mesh.2dm", "{t}/out.2dm", "--format", "telemac"], "unknown mesh format 'telemac'"),
+    (["{t}/regions.gpkg", "{t}/out.slf"], "not an SMS 2DM mesh"),
+    (["{t}/missing.2dm", "{t}/out.slf"], "does not exist"),
+    (["{t}/mesh.2dm", "{t}/out.nc"], "--crs"),
+    (["{t}/mesh.2dm", "{t}/out.slf", "--open-boundaries", "{t}/open.gpkg", "--snap", "0.5",
+      "--crs", "EPSG:25832", "--regions", "{t}/far.gpkg"], "far.gpkg does not exist"),
+])
+def test_export_command_errors_are_one_line(mesh_files, args, words):
+    t = mesh_files
+    run = floodmesh("export", *[a.format(t=t) for a in args])
+    assert run.returncode == 2
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("floodmesh: error:") and words in lines[0]
+    assert not any(p.name.startswith("out") for p in t.iterdir())
+
+
+def test_export_command_refuses_a_line_off_the_boundary(mesh_files):
+    t = mesh_files
+    io.write_lines_gpkg(t / "inside.gpkg", [np.array([[X0 + 30, Y0 + 10, 0], [X0 + 30, Y0 + 15, 0]])],
+                        UTM32, layer="open")
+    run = floodmesh("export", t / "mesh.2dm", t / "out.slf", "--open-boundaries", t / "inside.gpkg")
+    assert run.returncode == 2
+    assert "open boundary line 1 touches the mesh boundary at fewer than two nodes" in run.stderr
+    assert not (t / "out.slf").exists() and not (t / "out.cli").exists()
+
+
+def test_run_writes_the_formats_beside_mesh_2dm(tmp_path):
+    """run_pipeline with formats writes mesh.<ext> for each (mesh.cli with mesh.slf), all with
+    the mesh's node and triangle counts, and report.json lists every file."""
+    points = PointCloud(plane_points(size=40.0, density=2.0), UTM32)
+    src = tmp_path / "plane.laz"
+    io.write_points_las(src, points)
+    out = tmp_path / "out"
+    report = run_pipeline(src, out, RunOptions(holdout=0.02, formats=("2dm", "slf", "14", "gr3",
+                                                                      "nc", "gpkg")))
+    names = {p.name for p in out.iterdir()}
+    exported = {"mesh.slf", "mesh.cli", "mesh.14", "mesh.gr3", "mesh.nc"}
+    assert names == set(OUTPUT_FILES) | exported
+    assert set(json.loads((out / "report.json").read_text())["files"]) == names
+    n, m = report["nodes"], report["triangles"]
+    back = io.read_2dm(out / "mesh.2dm")
+    assert (len(back.nodes), len(back.triangles)) == (n, m) and len(back.node_strings) == 1
+    slf = read_selafin(out / "mesh.slf")
+    assert (len(slf["x"]), len(slf["ikle"])) == (n, m)
+    grid = read_fort14(out / "mesh.14")
+    assert (len(grid["jn"]), len(grid["elements"])) == (n, m)
+    layers = {"triangles", "nodes", "boundary"} | ({"breaklines"} if report["n_breaklines"]
+                                                   else set())
+    assert set(fiona.listlayers(out / "mesh.gpkg")) == layers
+    with fiona.open(out / "mesh.gpkg", layer="triangles") as src_:
+        assert len(src_) == m and {"area_m2", "min_angle_deg"} <= set(src_.schema["properties"])
+    assert triangle_areas(back.nodes, back.triangles).min() > 0
+
+
+def test_run_command_formats_option(tmp_path):
+    xyz = tmp_path / "points.xyz"
+    np.savetxt(xyz, plane_points(size=30.0, density=2.0), fmt="%.3f")
+    bad = floodmesh("run", xyz, "--out", tmp_path / "bad", "--crs", "EPSG:25832",
+                    "--formats", "2dm,fem")
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1
+    assert "unknown mesh format 'fem'" in bad.stderr
+    good = floodmesh("run", xyz, "--out", tmp_path / "out", "--crs", "EPSG:25832",
+                     "--formats", "gr3,nc", "--holdout", 0.05)
+    assert good.returncode == 0, good.stderr
+    assert (tmp_path / "out" / "mesh.gr3").is_file() and (tmp_path / "out" / "mesh.nc").is_file()
+    assert not (tmp_path / "out" / "mesh.slf").exists()
