@@ -52,3 +52,36 @@ def hole_mesh(max_area=40.0):
     local = xy - UTM_ORIGIN
     z = 10.0 + 0.01 * local[:, 0] + 0.02 * local[:, 1]
     return np.column_stack([xy, z]), triangles
+
+
+def write_regions(path, regions, crs="EPSG:25832"):
+    """A GeoPackage of polygons with an integer field ``mat`` and a text field ``label``:
+    ``regions`` is a list of (shapely polygon, material id)."""
+    import fiona
+    import shapely.geometry
+    from pyproj import CRS
+
+    schema = {"geometry": "Polygon", "properties": {"mat": "int", "label": "str"}}
+    with fiona.open(path, "w", driver="GPKG", schema=schema,
+                    crs_wkt=CRS.from_user_input(crs).to_wkt()) as dst:
+        for k, (polygon, material) in enumerate(regions):
+            dst.write({"geometry": shapely.geometry.mapping(polygon),
+                       "properties": {"mat": material, "label": f"r{k}"}})
+
+
+def write_export_inputs(folder, material):
+    """hole_mesh() as mesh.2dm, an open-boundary line along its west edge (y 10–50 m) as
+    open.gpkg and a region over its western 30 m with material id ``material`` as
+    regions.gpkg, all in EPSG:25832; returns the mesh's (nodes, triangles)."""
+    import shapely
+    from pyproj import CRS
+
+    from floodmesh.core import io
+
+    nodes, tris = hole_mesh()
+    io.write_mesh_2dm(folder / "mesh.2dm", nodes, tris)
+    x0, y0 = UTM_ORIGIN
+    io.write_lines_gpkg(folder / "open.gpkg", [np.array([[x0, y0 + 10, 0], [x0, y0 + 50, 0]])],
+                        CRS.from_epsg(25832), layer="open")
+    write_regions(folder / "regions.gpkg", [(shapely.box(x0, y0, x0 + 30, y0 + 60), material)])
+    return nodes, tris

@@ -22,7 +22,7 @@ from floodmesh.core.options import RunOptions, parse_formats
 from floodmesh.core.pipeline import OUTPUT_FILES, run_pipeline
 from floodmesh.core.points import PointCloud
 
-from ..conftest import UTM_ORIGIN, hole_mesh, plane_points
+from ..conftest import UTM_ORIGIN, hole_mesh, plane_points, write_export_inputs, write_regions
 
 X0, Y0 = UTM_ORIGIN
 UTM32 = CRS.from_epsg(25832)
@@ -196,12 +196,8 @@ def test_regions_set_material_ids_by_centroid(mesh):
 
 def test_region_layer_with_and_without_a_field(tmp_path):
     path = tmp_path / "regions.gpkg"
-    schema = {"geometry": "Polygon", "properties": {"mat": "int", "label": "str"}}
-    with fiona.open(path, "w", driver="GPKG", schema=schema, crs_wkt=UTM32.to_wkt()) as dst:
-        for k, (x, mat) in enumerate([(0, 7), (50, 3)]):
-            dst.write({"geometry": shapely.geometry.mapping(shapely.box(X0 + x, Y0, X0 + x + 10,
-                                                                        Y0 + 10)),
-                       "properties": {"mat": mat, "label": f"r{k}"}})
+    write_regions(path, [(shapely.box(X0, Y0, X0 + 10, Y0 + 10), 7),
+                         (shapely.box(X0 + 50, Y0, X0 + 60, Y0 + 10), 3)])
     assert [m for _, m in io.read_regions(path, field="mat")] == [7, 3]
     assert [m for _, m in io.read_regions(path)] == [2, 3]
     with pytest.raises(FloodMeshError, match="no field 'nope'.*mat, label"):
@@ -533,16 +529,8 @@ def floodmesh(*args):
 
 
 @pytest.fixture
-def mesh_files(mesh, tmp_path):
-    nodes, tris = mesh
-    io.write_mesh_2dm(tmp_path / "mesh.2dm", nodes, tris)
-    io.write_lines_gpkg(tmp_path / "open.gpkg", [np.column_stack([WEST_LINE, [0.0, 0.0]])],
-                        UTM32, layer="open")
-    schema = {"geometry": "Polygon", "properties": {"mat": "int"}}
-    with fiona.open(tmp_path / "regions.gpkg", "w", driver="GPKG", schema=schema,
-                    crs_wkt=UTM32.to_wkt()) as dst:
-        dst.write({"geometry": shapely.geometry.mapping(shapely.box(X0, Y0, X0 + 30, Y0 + 60)),
-                   "properties": {"mat": 6}})
+def mesh_files(tmp_path):
+    write_export_inputs(tmp_path, material=6)
     return tmp_path
 
 

@@ -4,10 +4,8 @@ the GeoPackage layers. Through processing.run ("Export mesh", "LiDAR to mesh") a
 import json
 import subprocess
 
-import fiona
 import numpy as np
 import pytest
-import shapely
 from pyproj import CRS
 from qgis.core import (QgsMesh, QgsMeshDatasetGroupMetadata, QgsMeshDatasetIndex, QgsMeshLayer,
                        QgsProcessingException, QgsVectorLayer, QgsWkbTypes)
@@ -15,7 +13,7 @@ from qgis.core import (QgsMesh, QgsMeshDatasetGroupMetadata, QgsMeshDatasetIndex
 from floodmesh.core import io
 from floodmesh.core.mesh import triangle_areas
 
-from ..conftest import UTM_ORIGIN, hole_mesh
+from ..conftest import UTM_ORIGIN, write_export_inputs
 
 X0, Y0 = UTM_ORIGIN
 UTM32 = CRS.from_epsg(25832)
@@ -48,16 +46,8 @@ def inputs(tmp_path_factory):
     """A mesh with a hole as mesh.2dm, an open-boundary line on its west edge, and a region
     polygon with material id 8 over its western 30 m."""
     t = tmp_path_factory.mktemp("export-inputs")
-    nodes, tris = hole_mesh()
-    io.write_mesh_2dm(t / "mesh.2dm", nodes, tris)
+    _, tris = write_export_inputs(t, material=8)
     nodes = io.read_2dm(t / "mesh.2dm").nodes  # what the export starts from: 0.1 mm steps
-    io.write_lines_gpkg(t / "open.gpkg", [np.array([[X0, Y0 + 10, 0], [X0, Y0 + 50, 0]])],
-                        UTM32, layer="open")
-    schema = {"geometry": "Polygon", "properties": {"mat": "int"}}
-    with fiona.open(t / "regions.gpkg", "w", driver="GPKG", schema=schema,
-                    crs_wkt=UTM32.to_wkt()) as dst:
-        dst.write({"geometry": shapely.geometry.mapping(shapely.box(X0, Y0, X0 + 30, Y0 + 60)),
-                   "properties": {"mat": 8}})
     ccw = np.where((triangle_areas(nodes, tris) < 0)[:, None], tris[:, [0, 2, 1]], tris)
     centroid_x = nodes[tris][:, :, 0].mean(axis=1) - X0
     return t, nodes, ccw, np.where(centroid_x < 30, 8, 1)
