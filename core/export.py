@@ -295,7 +295,8 @@ def write(path, mesh: SolverMesh, fmt: str, *, element_elevations: bool = False,
 # SMS 2DM
 def write_2dm(path, mesh: SolverMesh, *, element_elevations: bool = False) -> None:
     """SMS 2DM (Aquaveo's 2D mesh file): material ids, node elevations (BASEMENT 2.8, TUFLOW FV,
-    SRH-2D) and optionally element-centre elevations as the second material column (BASEMENT 3);
+    SRH-2D) and optionally element-centre elevations (the mean of the three node elevations)
+    as the second material column (BASEMENT 3);
     node strings: each boundary loop (closed, its first node repeated), then each open section."""
     loops = [np.append(loop, loop[0]) for loop in mesh.boundary.loops]
     sections = [np.append(s.nodes, s.nodes[0]) if s.closed else s.nodes
