@@ -8,7 +8,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingContext,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
                        QgsProcessingParameterNumber, QgsVectorLayer)
 
-from ..core.options import BREAKPOINT_METHODS, RunOptions
+from ..core.options import BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS, RunOptions
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
 from .styles import style_breaklines, style_mesh, style_residuals
 
@@ -28,7 +28,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             "Defaults are the method's reference case: 1 m grid, one-over-distance slope, "
             "S_crit 10°, every 4th point, 25°, 100 m². Writes dem.tif, slope.tif, "
             "breakpoints.tif, breaklines.gpkg, mesh.2dm, mesh.gpkg, residuals.gpkg and "
-            "report.json into the output folder, and loads the break lines and the mesh.")
+            "report.json into the output folder, and loads the break lines and the mesh. "
+            "Solver formats chosen are written beside them as mesh.<ext> (the whole boundary "
+            "a solid wall; Export mesh sets open boundaries and regions).")
     INPUT = "INPUT"
     CRS = "CRS"
     CELL_SIZE = "CELL_SIZE"
@@ -39,6 +41,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     MAX_AREA = "MAX_AREA"
     HOLDOUT = "HOLDOUT"
     SEED = "SEED"
+    FORMATS = "FORMATS"
     OUTPUT_FOLDER = "OUTPUT_FOLDER"
     BREAKLINES = "BREAKLINES"
     MESH = "MESH"
@@ -77,6 +80,10 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.SEED, self.tr("Random seed"), QgsProcessingParameterNumber.Integer,
             defaults.seed))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.FORMATS, self.tr("Also write the mesh for solvers"),
+            options=list(EXPORT_FORMAT_LABELS), allowMultiple=True, optional=True,
+            defaultValue=[]))
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
         self.addOutput(QgsProcessingOutputVectorLayer(
@@ -99,7 +106,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
             holdout=self.parameterAsDouble(parameters, self.HOLDOUT, context),
             seed=self.parameterAsInt(parameters, self.SEED, context),
-            crs=crs_or_none(self, parameters, self.CRS, context))
+            crs=crs_or_none(self, parameters, self.CRS, context),
+            formats=tuple(EXPORT_FORMATS[i] for i in
+                          self.parameterAsEnums(parameters, self.FORMATS, context)))
         source = self.parameterAsFile(parameters, self.INPUT, context)
         out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
         report = run_core(run_pipeline, source, out, options,

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from .errors import Cancelled, FloodMeshError
-from .options import BREAKPOINT_METHODS, LOG_KERNELS, RunOptions
+from .options import BREAKPOINT_METHODS, EXPORT_FORMATS, LOG_KERNELS, RunOptions, parse_formats
 
 DEFAULTS = RunOptions()
 
@@ -85,6 +85,9 @@ def _add_chain_options(p: argparse.ArgumentParser):
                    help="longest triangle edge bridged when gridding, m (default 10 cells)")
     p.add_argument("--classes", type=lambda s: tuple(int(c) for c in s.split(",")),
                    help="LAS classes to grid, e.g. 2,9 (default: 2 when classified)")
+    p.add_argument("--formats", default="",
+                   help="solver exports written as mesh.<ext> beside mesh.2dm, comma-separated: "
+                        f"{','.join(EXPORT_FORMATS)}")
 
 
 def _add_log_options(p: argparse.ArgumentParser, *, response=True):
@@ -107,7 +110,8 @@ def _options(args) -> RunOptions:
                       keep_every=args.keep_every, tolerance=args.tolerance, spline=args.spline,
                       min_distance=args.min_distance, min_length=args.min_length,
                       min_angle=args.min_angle, max_area=args.max_area, holdout=args.holdout,
-                      seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes)
+                      seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes,
+                      formats=parse_formats(args.formats))
 
 
 def _summary(report: dict, out: Path) -> str:
@@ -261,6 +265,25 @@ def cmd_assess(args):
     print(json.dumps(stats, indent=2))
 
 
+def cmd_export(args):
+    from . import io
+    from .export import export_mesh, format_of, layers_crs
+
+    fmt = format_of(args.output, args.format)
+    mesh = io.read_2dm(args.mesh)
+    crs = layers_crs(args.crs, {"open boundary": args.open_boundaries, "region": args.regions,
+                                "break line": args.breaklines})
+    written = export_mesh(
+        args.output, mesh.nodes, mesh.triangles, fmt=fmt, crs=crs,
+        open_lines=io.read_lines_gpkg(args.open_boundaries) if args.open_boundaries else (),
+        snap=args.snap, materials=mesh.materials,
+        regions=io.read_regions(args.regions, field=args.material_field) if args.regions else (),
+        datum_offset=args.datum_offset, element_elevations=args.element_elevations,
+        breaklines=io.read_lines_gpkg(args.breaklines) if args.breaklines else ())
+    print(f"{len(mesh.nodes)} nodes, {len(mesh.triangles)} triangles written as {fmt} to "
+          f"{', '.join(str(p) for p in written)}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="floodmesh", description="LiDAR to finite-element meshes for 2D hydrodynamic models.")
@@ -357,6 +380,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", help="statistics as JSON")
     p.add_argument("--crs")
     p.set_defaults(func=cmd_assess)
+
+    p = sub.add_parser("export", help="write a mesh for a solver: 2DM, Selafin, fort.14, "
+                                      "hgrid.gr3, UGRID netCDF or GeoPackage")
+    p.add_argument("mesh", help="SMS 2DM mesh (e.g. mesh.2dm of floodmesh run)")
+    p.add_argument("output", help="file to write; its extension names the format: "
+                                  f"{' '.join('.' + f for f in EXPORT_FORMATS)}")
+    p.add_argument("--format", help=f"the format, whatever the extension: "
+                                    f"{', '.join(EXPORT_FORMATS)}")
+    p.add_argument("--crs", help="CRS of the mesh (EPSG:XXXX); needed for nc and gpkg unless a "
+                                 "given layer carries it")
+    p.add_argument("--open-boundaries", help="line layer of open boundary sections (inflow, "
+                                             "outflow); all other boundary is land")
+    p.add_argument("--snap", type=_positive(float), default=1.0,
+                   help="boundary nodes within this many metres of an open boundary line are "
+                        "open (default %(default)s)")
+    p.add_argument("--regions", help="polygon layer of regions: one material id each")
+    p.add_argument("--material-field", help="integer field of --regions holding the material id "
+                                            "(default: 2, 3, … in feature order; 1 elsewhere)")
+    p.add_argument("--datum-offset", type=float, default=0.0,
+                   help="metres added to every elevation before writing (default 0)")
+    p.add_argument("--element-elevations", action="store_true",
+                   help="2DM: also write each element's centre elevation (BASEMENT 3)")
+    p.add_argument("--breaklines", help="line layer written as the breaklines layer (gpkg)")
+    p.set_defaults(func=cmd_export)
     return parser
 
 

@@ -9,6 +9,7 @@ import contextlib
 import json
 import os
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -191,12 +192,15 @@ def read_input(path, *, crs=None, classes=None):
 
 # ---------------------------------------------------------------------------------------------
 # vectors (GeoPackage through fiona/GDAL)
-def _write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, crs) -> None:
+def _write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, crs, *,
+                atomic: bool = True) -> None:
+    """Write one layer; ``atomic=False`` adds it to ``path`` as it is (a GeoPackage being
+    assembled under a temporary name, see ``atomic_output``)."""
     import fiona
 
     schema = {"geometry": geometry_type, "properties": properties}
-    with atomic_output(path) as tmp:
-        with fiona.open(tmp, "w", driver="GPKG", layer=layer, schema=schema,
+    with atomic_output(path) if atomic else contextlib.nullcontext(path) as target:
+        with fiona.open(target, "w", driver="GPKG", layer=layer, schema=schema,
                         crs_wkt=crs.to_wkt()) as dst:
             dst.writerecords(records)
 
@@ -213,14 +217,16 @@ def _records(geometries, attributes: dict):
                "properties": {name: values[i] for name, values in columns.items()}}
 
 
-def write_lines_gpkg(path, lines, crs, *, layer="breaklines", attributes=None) -> None:
+def write_lines_gpkg(path, lines, crs, *, layer="breaklines", attributes=None,
+                     atomic: bool = True) -> None:
     """Write (k, 3) coordinate arrays as LineStringZ features with per-line attributes
     (name → sequence, one value per line)."""
     attributes = attributes or {}
     geometries = ({"type": "LineString", "coordinates": [tuple(p) for p in line.tolist()]}
                   for line in lines)
     props = {name: _field_type(v) for name, v in attributes.items()}
-    _write_gpkg(path, layer, "3D LineString", props, _records(geometries, attributes), crs)
+    _write_gpkg(path, layer, "3D LineString", props, _records(geometries, attributes), crs,
+                atomic=atomic)
 
 
 def write_breaklines(path, lines, crs) -> None:
@@ -240,12 +246,14 @@ def write_breaklines(path, lines, crs) -> None:
     write_lines_gpkg(path, [line.coords for line in lines], crs, attributes=attributes)
 
 
-def write_points_gpkg(path, xyz: np.ndarray, crs, *, layer="points", attributes=None) -> None:
+def write_points_gpkg(path, xyz: np.ndarray, crs, *, layer="points", attributes=None,
+                      atomic: bool = True) -> None:
     """Write points as PointZ features with per-point attributes (name → sequence)."""
     attributes = attributes or {}
     geometries = ({"type": "Point", "coordinates": tuple(p)} for p in xyz.tolist())
     props = {name: _field_type(v) for name, v in attributes.items()}
-    _write_gpkg(path, layer, "3D Point", props, _records(geometries, attributes), crs)
+    _write_gpkg(path, layer, "3D Point", props, _records(geometries, attributes), crs,
+                atomic=atomic)
 
 
 def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:
@@ -299,6 +307,43 @@ def _line_parts(path) -> list[tuple[np.ndarray, dict]]:
     return parts_out
 
 
+def read_regions(path, *, field: str | None = None) -> list:
+    """Polygon features as (shapely geometry, material id): the integer attribute ``field``, or
+    2, 3, … in feature order (1 being the rest of the domain)."""
+    import fiona
+    import shapely.geometry
+
+    path = _require_file(path, "region layer")
+    regions = []
+    try:
+        with fiona.open(path) as src:
+            fields = list(src.schema["properties"])
+            if field and field not in fields:
+                raise FloodMeshError(f"{path.name} has no field {field!r} (its fields: "
+                                     f"{', '.join(fields) or 'none'}); name the material id field")
+            for feat in src:
+                geom = feat["geometry"]
+                if geom is None:
+                    continue
+                if geom["type"] not in ("Polygon", "MultiPolygon"):
+                    raise FloodMeshError(f"{path.name} holds {geom['type']} features; regions "
+                                         "must be polygons")
+                value = len(regions) + 2 if not field else feat["properties"][field]
+                try:
+                    material = float(value)
+                except (TypeError, ValueError):
+                    material = np.nan
+                if not (np.isfinite(material) and material == int(material)):
+                    raise FloodMeshError(f"a region of {path.name} has {field} = {value!r}; "
+                                         "material ids must be whole numbers")
+                regions.append((shapely.geometry.shape(geom), int(material)))
+    except fiona.errors.FionaError as exc:
+        raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
+    if not regions:
+        raise FloodMeshError(f"{path.name} holds no polygons")
+    return regions
+
+
 def read_points_vector(path) -> np.ndarray:
     """Read the PointZ features of a vector file (e.g. holdout points) as an (N, 3) array."""
     import fiona
@@ -312,66 +357,147 @@ def read_points_vector(path) -> np.ndarray:
 
 
 def vector_crs(path):
+    """The CRS (WKT) of a vector file, or None where it has none."""
     import fiona
 
-    with fiona.open(path) as src:
-        return src.crs_wkt or None
+    path = _require_file(path, "vector layer")
+    try:
+        with fiona.open(path) as src:
+            return src.crs_wkt or None
+    except fiona.errors.FionaError as exc:
+        raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
 
 
 # ---------------------------------------------------------------------------------------------
 # meshes
-def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: int = 1) -> None:
-    """Write a triangular mesh as SMS 2DM (1-based ids; E3T lines, then ND lines with elevation)."""
+def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: int = 1,
+                   materials=None, element_z=None, node_strings=()) -> None:
+    """Write a triangular mesh as SMS 2DM: 1-based ids, ``E3T id n1 n2 n3 matid`` lines, then
+    ``ND id x y z`` (m), then node strings.
+
+    ``materials`` (one integer per triangle) replaces the single ``material``; ``element_z``
+    (m, one per triangle) adds BASEMENT 3's element elevation as the second material column;
+    either writes the ``NUM_MATERIALS_PER_ELEM`` card. ``node_strings`` are sequences of node
+    indices, each written as ``NS`` lines of up to 10 ids, the last negative, then its number.
+    """
     n_tri = len(triangles)
     ids = np.arange(1, n_tri + 1)
-    elements = np.column_stack([ids, triangles + 1, np.full(n_tri, material)])
+    mats = np.full(n_tri, material) if materials is None else np.asarray(materials)
+    columns = [ids, triangles + 1, mats]
+    fmt = "E3T %d %d %d %d %d"
+    if element_z is not None:
+        columns.append(np.asarray(element_z, float))
+        fmt += " %.4f"
+    elements = np.column_stack(columns)
     node_rows = np.column_stack([np.arange(1, len(nodes) + 1), nodes])
     with atomic_output(path) as tmp:
         with open(tmp, "w") as fh:
             fh.write("MESH2D\n")
-            np.savetxt(fh, elements, fmt="E3T %d %d %d %d %d")
+            if materials is not None or element_z is not None:
+                fh.write(f"NUM_MATERIALS_PER_ELEM {1 if element_z is None else 2}\n")
+            np.savetxt(fh, elements, fmt=fmt)
             np.savetxt(fh, node_rows, fmt="ND %d %.4f %.4f %.4f")
+            for number, string in enumerate(node_strings, start=1):
+                ids_ = np.asarray(string, np.int64) + 1
+                for start in range(0, len(ids_), 10):
+                    chunk = ids_[start:start + 10].tolist()
+                    last = start + 10 >= len(ids_)
+                    if last:
+                        chunk[-1] = -chunk[-1]
+                    fh.write("NS " + " ".join(map(str, chunk)) + (f" {number}\n" if last else "\n"))
+
+
+@dataclass(frozen=True)
+class Mesh2DM:
+    """What an SMS 2DM file holds: ``nodes`` (n, 3), ``triangles`` (m, 3) zero-based,
+    ``materials`` (m,) integers (1 where the file gives none), ``element_z`` (m,) or None,
+    ``node_strings`` zero-based node index arrays."""
+
+    nodes: np.ndarray
+    triangles: np.ndarray
+    materials: np.ndarray
+    element_z: np.ndarray | None
+    node_strings: list
+
+
+def read_2dm(path) -> Mesh2DM:
+    """Read an SMS 2DM mesh of triangles (E3T) with its materials and node strings."""
+    path = _require_file(path, "mesh file")
+    nodes, tris, extra, strings, current = {}, [], [], [], []
+    n_materials = None
+    try:
+        with open(path, errors="replace") as fh:
+            first = fh.readline().split()
+            if not first or first[0] != "MESH2D":
+                raise FloodMeshError(f"{path.name} is not an SMS 2DM mesh (no MESH2D line)")
+            for line in fh:
+                parts = line.split("#", 1)[0].split()
+                if not parts:
+                    continue
+                card = parts[0]
+                if card == "ND":
+                    nodes[int(parts[1])] = (float(parts[2]), float(parts[3]), float(parts[4]))
+                elif card == "E3T":
+                    tris.append((int(parts[2]), int(parts[3]), int(parts[4])))
+                    extra.append([float(v) for v in parts[5:]])
+                elif card in ("E4Q", "E6T", "E8Q", "E9Q"):
+                    raise FloodMeshError(f"{path.name} has {card} elements; only triangles (E3T) "
+                                         "are supported")
+                elif card == "NUM_MATERIALS_PER_ELEM":
+                    n_materials = int(parts[1])
+                elif card == "NS":
+                    for token in parts[1:]:
+                        value = int(token)
+                        current.append(abs(value))
+                        if value < 0:
+                            strings.append(current)
+                            current = []
+                            break
+    except FloodMeshError:
+        raise
+    except (ValueError, IndexError, UnicodeDecodeError) as exc:
+        raise FloodMeshError(f"{path.name} is not a readable SMS 2DM mesh ({exc})") from None
+    if not tris:
+        raise FloodMeshError(f"{path.name} holds no triangles (E3T lines): nothing to export")
+    ids = np.array(sorted(nodes))
+    index = {nid: i for i, nid in enumerate(ids)}
+    try:
+        tri_arr = np.array([[index[a], index[b], index[c]] for a, b, c in tris], dtype=np.int64)
+        string_arr = [np.array([index[i] for i in s], dtype=np.int64) for s in strings]
+    except KeyError as exc:
+        raise FloodMeshError(f"{path.name} refers to node {exc} that it does not define") from None
+    node_arr = np.array([nodes[i] for i in ids], dtype=float).reshape(-1, 3)
+    width = min((len(e) for e in extra), default=0)
+    values = np.array([e[:width] for e in extra], float).reshape(len(extra), width)
+    materials = (values[:, 0].astype(np.int64) if width >= 1
+                 else np.ones(len(tris), np.int64))
+    # BASEMENT 3 (and MDAL): the column after the material id is the element's elevation
+    has_z = width >= 2 and (n_materials is None or n_materials >= 2)
+    element_z = values[:, 1].copy() if has_z else None
+    return Mesh2DM(node_arr, tri_arr.reshape(-1, 3), materials, element_z, string_arr)
 
 
 def read_mesh_2dm(path) -> tuple[np.ndarray, np.ndarray]:
     """Read nodes (n, 3) and triangles (m, 3, zero-based) of an SMS 2DM file."""
-    path = _require_file(path, "mesh file")
-    nodes, tris = {}, []
-    with open(path) as fh:
-        first = fh.readline().split()
-        if not first or first[0] != "MESH2D":
-            raise FloodMeshError(f"{path.name} is not an SMS 2DM mesh (no MESH2D line)")
-        for line in fh:
-            parts = line.split()
-            if not parts:
-                continue
-            if parts[0] == "ND":
-                nodes[int(parts[1])] = (float(parts[2]), float(parts[3]), float(parts[4]))
-            elif parts[0] == "E3T":
-                tris.append((int(parts[2]), int(parts[3]), int(parts[4])))
-            elif parts[0] in ("E4Q", "E6T", "E8Q", "E9Q"):
-                raise FloodMeshError(f"{path.name} has {parts[0]} elements; only triangles (E3T) "
-                                     "are supported")
-    ids = np.array(sorted(nodes))
-    index = {nid: i for i, nid in enumerate(ids)}
-    node_arr = np.array([nodes[i] for i in ids], dtype=float).reshape(-1, 3)
-    tri_arr = np.array([[index[a], index[b], index[c]] for a, b, c in tris], dtype=np.int64)
-    return node_arr, tri_arr.reshape(-1, 3)
+    mesh = read_2dm(path)
+    return mesh.nodes, mesh.triangles
 
 
-def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, layer="triangles"):
-    """Write the mesh's triangles as PolygonZ features (id, area_m2, min_angle_deg)."""
+def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, layer="triangles",
+                    attributes=None, atomic: bool = True):
+    """Write the mesh's triangles as PolygonZ features (id, area_m2, min_angle_deg, and any
+    per-triangle ``attributes``)."""
     from .mesh import triangle_angles, triangle_areas
 
     areas = triangle_areas(nodes, triangles)
     min_angles = triangle_angles(nodes, triangles).min(axis=1)
-    coords = nodes[triangles].tolist()
-    records = ({"geometry": {"type": "Polygon", "coordinates": [[*map(tuple, c), tuple(c[0])]]},
-                "properties": {"id": i + 1, "area_m2": float(areas[i]),
-                               "min_angle_deg": float(min_angles[i])}}
-               for i, c in enumerate(coords))
-    _write_gpkg(path, layer, "3D Polygon",
-                {"id": "int", "area_m2": "float", "min_angle_deg": "float"}, records, crs)
+    columns = {"id": np.arange(1, len(triangles) + 1), "area_m2": areas,
+               "min_angle_deg": min_angles, **(attributes or {})}
+    geometries = ({"type": "Polygon", "coordinates": [[*map(tuple, c), tuple(c[0])]]}
+                  for c in nodes[triangles].tolist())
+    props = {name: _field_type(v) for name, v in columns.items()}
+    _write_gpkg(path, layer, "3D Polygon", props, _records(geometries, columns), crs,
+                atomic=atomic)
 
 
 def write_json(path, data: dict) -> None:

@@ -292,3 +292,57 @@ def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
         "n_above_max_area": int((areas > max_area * (1 + 1e-9)).sum()),
         "all_counter_clockwise": bool((areas > 0).all()),
     }
+
+
+def boundary_loops(nodes: np.ndarray, triangles: np.ndarray) -> list[np.ndarray]:
+    """The mesh boundary as closed loops of node indices (the first node not repeated).
+
+    Boundary edges are those used by exactly one triangle. Each loop follows them with the mesh
+    on its left: outer rings run counter-clockwise and come first (largest first), holes run
+    clockwise and follow (largest first). Each loop starts at its lowest node index. Where the
+    boundary touches itself at a node, the walk keeps to the wedge of mesh it is tracing.
+    """
+    tri = np.asarray(triangles, np.int64)
+    xy = np.asarray(nodes, float)[:, :2]
+    ccw = triangle_areas(xy, tri) >= 0
+    tri = np.where(ccw[:, None], tri, tri[:, [0, 2, 1]])
+    directed = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    n = len(xy)
+    keys = directed[:, 0] * n + directed[:, 1]
+    shared = np.unique(keys, return_counts=True)
+    if (shared[1] > 1).any():
+        raise FloodMeshError("the mesh has triangles that overlap or repeat an edge in the same "
+                             "direction; fix the mesh (each edge may border at most two "
+                             "triangles, on opposite sides)")
+    edges = directed[~np.isin(keys, directed[:, 1] * n + directed[:, 0])]
+    outgoing: dict[int, list[int]] = {}
+    for a, b in edges.tolist():
+        outgoing.setdefault(a, []).append(b)
+    loops = []
+    for start in sorted(outgoing):
+        while outgoing.get(start):
+            loop, prev, node = [start], None, start
+            while True:
+                candidates = outgoing[node]
+                if len(candidates) == 1 or prev is None:
+                    nxt = candidates[0]
+                else:  # a pinch node: the first edge clockwise from the way back
+                    back = np.arctan2(*(xy[prev] - xy[node])[::-1])
+                    turn = [(back - np.arctan2(*(xy[c] - xy[node])[::-1])) % (2 * np.pi)
+                            for c in candidates]
+                    nxt = candidates[int(np.argmin(turn))]
+                candidates.remove(nxt)
+                if nxt == start:
+                    break
+                loop.append(nxt)
+                prev, node = node, nxt
+            loops.append(np.array(loop, np.int64))
+    areas = [_ring_area(xy[loop]) for loop in loops]
+    order = sorted(range(len(loops)), key=lambda k: (areas[k] < 0, -abs(areas[k])))
+    return [loops[k] for k in order]
+
+
+def _ring_area(xy: np.ndarray) -> float:
+    """Signed area (m²) of a closed ring of points, positive counter-clockwise."""
+    x, y = xy[:, 0], xy[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))

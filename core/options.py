@@ -12,6 +12,29 @@ BREAKPOINT_METHODS = (*SLOPE_METHOD_NAMES, "log")
 LOG_KERNELS = ("pratt", "analytic")
 TRACING_MODES = ("auto", "flat", "steep")
 SIMPLIFY_METHODS = ("keep-every", "douglas-peucker", "spline")
+# solver export formats (core.export), named by the extension each writes
+EXPORT_FORMATS = ("2dm", "slf", "14", "gr3", "nc", "gpkg")
+EXPORT_EXTENSIONS = {f: f".{f}" for f in EXPORT_FORMATS}
+EXPORT_FORMAT_LABELS = ("SMS 2DM: BASEMENT, TUFLOW FV, SRH-2D (.2dm)",
+                        "TELEMAC Selafin with boundary conditions (.slf, .cli)",
+                        "ADCIRC fort.14 (.14)", "SCHISM hgrid.gr3 (.gr3)",
+                        "UGRID netCDF: D-Flow FM, QGIS (.nc)",
+                        "GeoPackage layers: HEC-RAS (.gpkg)")
+
+
+def export_format(name: str) -> str:
+    """``name`` if it is one of EXPORT_FORMATS, else a FloodMeshError listing them."""
+    if name not in EXPORT_FORMATS:
+        raise FloodMeshError(f"unknown mesh format {name!r}; choose from "
+                             f"{', '.join(EXPORT_FORMATS)}")
+    return name
+
+
+def parse_formats(text) -> tuple[str, ...]:
+    """``"2dm,slf"`` (or a sequence of names) → ``("2dm", "slf")``, each checked, no repeats."""
+    names = text.split(",") if isinstance(text, str) else list(text)
+    names = [n.strip().lower().lstrip(".") for n in names]
+    return tuple(dict.fromkeys(export_format(n) for n in names if n))
 
 
 @dataclass(frozen=True)
@@ -39,6 +62,7 @@ class RunOptions:
     min_length: float = 0.0         # m; shorter break lines are dropped
     crs: str | None = None
     classes: tuple[int, ...] | None = None
+    formats: tuple[str, ...] = ()   # solver exports written beside mesh.2dm (EXPORT_FORMATS)
 
     def __post_init__(self):
         if self.slope_method not in BREAKPOINT_METHODS:
@@ -47,6 +71,8 @@ class RunOptions:
         if self.log_kernel not in LOG_KERNELS:
             raise FloodMeshError(f"unknown LoG kernel {self.log_kernel!r}; choose pratt or "
                                  "analytic")
+        for name in self.formats:
+            export_format(name)
 
     def simplification(self) -> tuple[str, float]:
         """(method, amount): keep-every n, or douglas-peucker / spline within metres."""

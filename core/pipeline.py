@@ -14,6 +14,7 @@ from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled
+from .export import export_formats
 from .grid import grid_points_linear
 from .mesh import build_mesh, mesh_quality
 from .points import PointCloud, split_holdout
@@ -56,7 +57,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                  progress: Callable[[float], None] | None = None,
                  cancelled: Callable[[], bool] | None = None,
                  log: Callable[[str], None] | None = None) -> dict:
-    """Run the whole chain on a point file or DEM and write ``OUTPUT_FILES`` into ``out_dir``.
+    """Run the whole chain on a point file or DEM and write ``OUTPUT_FILES`` into ``out_dir``,
+    and ``mesh.<ext>`` for each of ``options.formats`` (see ``export``).
 
     ``progress`` receives the overall fraction done (0–1), ``cancelled`` is polled between and
     inside long steps (raising ``Cancelled``), ``log`` receives step names. Returns the report.
@@ -111,11 +113,18 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         io.write_raster(out / "slope.tif", slope_grid)
         io.write_raster(out / "breakpoints.tif", breakpoints, valid=valid)
         io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs)
-        io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles)
-        io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
+        # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
+        if "2dm" not in options.formats:
+            io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles)
+        if "gpkg" not in options.formats:
+            io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
         io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
+        if options.formats:
+            return export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
+                                  crs=dem.crs, breaklines=[line.coords for line in lines])
+        return []
 
-    steps.run("write", write_all)
+    exported = steps.run("write", write_all)
     report = {
         "input": str(input_path),
         "crs": dem.crs.to_string(),
@@ -133,6 +142,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                            "max_deviation_m": deviation},
         **quality,
         **stats,
+        "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
         "seconds": steps.seconds,
     }
     io.write_json(out / "report.json", _jsonable(report))

@@ -7,6 +7,7 @@ from qgis.PyQt.QtGui import QIcon
 from ..algorithms.assess_accuracy import AssessAccuracyAlgorithm
 from ..algorithms.breakpoints import ClassifyBreakpointsAlgorithm
 from ..algorithms.build_mesh import BuildMeshAlgorithm
+from ..algorithms.export_mesh import ExportMeshAlgorithm
 from ..algorithms.grid_points import GridPointsAlgorithm
 from ..algorithms.lidar_to_mesh import LidarToMeshAlgorithm
 from ..algorithms.simplify_breaklines import SimplifyBreaklinesAlgorithm
@@ -15,7 +16,7 @@ from ..algorithms.trace_breaklines import TraceBreaklinesAlgorithm
 
 ALGORITHMS = (GridPointsAlgorithm, SlopeAlgorithm, ClassifyBreakpointsAlgorithm,
               TraceBreaklinesAlgorithm, SimplifyBreaklinesAlgorithm, BuildMeshAlgorithm,
-              AssessAccuracyAlgorithm, LidarToMeshAlgorithm)
+              AssessAccuracyAlgorithm, ExportMeshAlgorithm, LidarToMeshAlgorithm)
 
 ROOT = Path(__file__).resolve().parent.parent
 ICON = ROOT / "icons" / "floodmesh.svg"

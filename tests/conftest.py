@@ -33,3 +33,55 @@ def plane_points(a=0.1, b=-0.05, c=12.0, size=40.0, density=4.0, seed=0, origin=
     n = int(size * size * density)
     x, y = rng.uniform(0, size, n), rng.uniform(0, size, n)
     return np.column_stack([x + origin[0], y + origin[1], a * x + b * y + c])
+
+
+UTM_ORIGIN = (412_000.0, 5_652_000.0)
+
+
+def hole_mesh(max_area=40.0):
+    """A 100 x 60 m rectangle with a 20 x 20 m square hole (x 40–60, y 20–40, local metres),
+    meshed by Triangle, at UTM coordinates, z = 10 + 0.01·x + 0.02·y: (nodes (n, 3), triangles)."""
+    from floodmesh.core.mesh import PSLG, triangulate_pslg
+
+    corners = np.array([[0, 0], [100, 0], [100, 60], [0, 60],
+                        [40, 20], [60, 20], [60, 40], [40, 40]], float) + UTM_ORIGIN
+    segments = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4]])
+    hole = np.array([[50.0, 30.0]]) + UTM_ORIGIN
+    xy, triangles = triangulate_pslg(PSLG(corners, segments, hole), min_angle=25.0,
+                                     max_area=max_area)
+    local = xy - UTM_ORIGIN
+    z = 10.0 + 0.01 * local[:, 0] + 0.02 * local[:, 1]
+    return np.column_stack([xy, z]), triangles
+
+
+def write_regions(path, regions, crs="EPSG:25832"):
+    """A GeoPackage of polygons with an integer field ``mat`` and a text field ``label``:
+    ``regions`` is a list of (shapely polygon, material id)."""
+    import fiona
+    import shapely.geometry
+    from pyproj import CRS
+
+    schema = {"geometry": "Polygon", "properties": {"mat": "int", "label": "str"}}
+    with fiona.open(path, "w", driver="GPKG", schema=schema,
+                    crs_wkt=CRS.from_user_input(crs).to_wkt()) as dst:
+        for k, (polygon, material) in enumerate(regions):
+            dst.write({"geometry": shapely.geometry.mapping(polygon),
+                       "properties": {"mat": material, "label": f"r{k}"}})
+
+
+def write_export_inputs(folder, material):
+    """hole_mesh() as mesh.2dm, an open-boundary line along its west edge (y 10–50 m) as
+    open.gpkg and a region over its western 30 m with material id ``material`` as
+    regions.gpkg, all in EPSG:25832; returns the mesh's (nodes, triangles)."""
+    import shapely
+    from pyproj import CRS
+
+    from floodmesh.core import io
+
+    nodes, tris = hole_mesh()
+    io.write_mesh_2dm(folder / "mesh.2dm", nodes, tris)
+    x0, y0 = UTM_ORIGIN
+    io.write_lines_gpkg(folder / "open.gpkg", [np.array([[x0, y0 + 10, 0], [x0, y0 + 50, 0]])],
+                        CRS.from_epsg(25832), layer="open")
+    write_regions(folder / "regions.gpkg", [(shapely.box(x0, y0, x0 + 30, y0 + 60), material)])
+    return nodes, tris

@@ -20,7 +20,8 @@ def test_provider_lists_every_step(processing):
            .algorithms()}
     assert ids == {f"floodmesh:{n}" for n in (
         "gridpoints", "slope", "classifybreakpoints", "tracebreaklines", "simplifybreaklines",
-        "buildmesh", "assessaccuracy", "lidartomesh", "LiDAR to mesh step by step")}
+        "buildmesh", "assessaccuracy", "exportmesh", "lidartomesh",
+        "LiDAR to mesh step by step")}
 
 
 def test_steps_chain_through_processing_run(processing, demo_points_file, tmp_path):

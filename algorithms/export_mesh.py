@@ -1,0 +1,106 @@
+"""Export mesh: a FloodMesh mesh (SMS 2DM) written for a solver."""
+from pathlib import Path
+
+from qgis.core import (QgsProcessing, QgsProcessingOutputFile,
+                       QgsProcessingParameterBoolean, QgsProcessingParameterCrs,
+                       QgsProcessingParameterEnum, QgsProcessingParameterFeatureSource,
+                       QgsProcessingParameterField, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterMeshLayer, QgsProcessingParameterNumber)
+
+from ..core.options import EXPORT_EXTENSIONS as EXTENSIONS
+from ..core.options import EXPORT_FORMAT_LABELS, EXPORT_FORMATS
+from .base import FloodMeshAlgorithm, crs_or_none, layer_file, run_core
+FILE_FILTER = ";;".join(f"{label} (*{EXTENSIONS[f]})"
+                        for f, label in zip(EXPORT_FORMATS, EXPORT_FORMAT_LABELS))
+
+
+class ExportMeshAlgorithm(FloodMeshAlgorithm):
+    NAME = "exportmesh"
+    DISPLAY_NAME = "Export mesh"
+    GROUP, GROUP_ID = "Mesh", "mesh"
+    HELP = ("Writes a FloodMesh mesh (SMS 2DM) in a solver's format: SMS 2DM with material ids "
+            "and node strings (BASEMENT, TUFLOW FV, SRH-2D), TELEMAC Selafin with its boundary "
+            "conditions file (.cli), ADCIRC fort.14 and SCHISM hgrid.gr3 (depth positive down), "
+            "UGRID netCDF (D-Flow FM, QGIS) or GeoPackage layers (HEC-RAS). The whole boundary "
+            "is land (solid wall) except where an open boundary line (inflow, outflow section) "
+            "passes within the snapping distance (m) of its nodes. Region polygons set material "
+            "ids by triangle centroid (their integer field, or 2, 3, … in order; 1 elsewhere). "
+            "The datum offset (m) is added to every elevation.")
+    INPUT, FORMAT, OUTPUT, CRS = "INPUT", "FORMAT", "OUTPUT", "CRS"
+    OPEN_BOUNDARIES, SNAP = "OPEN_BOUNDARIES", "SNAP"
+    REGIONS, MATERIAL_FIELD = "REGIONS", "MATERIAL_FIELD"
+    DATUM_OFFSET, ELEMENT_ELEVATIONS, BREAKLINES = "DATUM_OFFSET", "ELEMENT_ELEVATIONS", "BREAKLINES"
+    CLI = "CLI"
+
+    def initAlgorithm(self, config=None):  # noqa: N802
+        self.addParameter(QgsProcessingParameterMeshLayer(self.INPUT, self.tr("Mesh (SMS 2DM)")))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.FORMAT, self.tr("Format"), options=list(EXPORT_FORMAT_LABELS), defaultValue=0))
+        self.addParameter(QgsProcessingParameterCrs(
+            self.CRS, self.tr("CRS of the mesh (when the layer has none)"), optional=True))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            self.OPEN_BOUNDARIES, self.tr("Open boundary lines (inflow, outflow sections)"),
+            [QgsProcessing.TypeVectorLine], optional=True))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.SNAP, self.tr("Snapping distance to open boundary lines (m)"),
+            QgsProcessingParameterNumber.Double, 1.0, minValue=0.001))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            self.REGIONS, self.tr("Region polygons (material ids)"),
+            [QgsProcessing.TypeVectorPolygon], optional=True))
+        self.addParameter(QgsProcessingParameterField(
+            self.MATERIAL_FIELD, self.tr("Material id field"), parentLayerParameterName=self.REGIONS,
+            type=QgsProcessingParameterField.Numeric, optional=True))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.DATUM_OFFSET, self.tr("Vertical datum offset added to elevations (m)"),
+            QgsProcessingParameterNumber.Double, 0.0))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.ELEMENT_ELEVATIONS, self.tr("2DM: element-centre elevations (BASEMENT 3)"),
+            defaultValue=False))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            self.BREAKLINES, self.tr("Break lines (GeoPackage layer)"),
+            [QgsProcessing.TypeVectorLine], optional=True))
+        self.addParameter(QgsProcessingParameterFileDestination(
+            self.OUTPUT, self.tr("Exported mesh"), fileFilter=FILE_FILTER))
+        self.addOutput(QgsProcessingOutputFile(self.CLI, self.tr("TELEMAC boundary conditions")))
+
+    def process(self, parameters, context, feedback):
+        from ..core import io
+        from ..core.export import export_mesh, layers_crs
+
+        fmt = EXPORT_FORMATS[self.parameterAsEnum(parameters, self.FORMAT, context)]
+        mesh_layer = self.parameterAsMeshLayer(parameters, self.INPUT, context)
+        mesh_path = layer_file(mesh_layer, "Mesh")
+        crs = crs_or_none(self, parameters, self.CRS, context)
+        if crs is None and mesh_layer.crs().isValid():
+            crs = mesh_layer.crs().toWkt()
+        files = {}
+        for name, what in ((self.OPEN_BOUNDARIES, "Open boundary lines"),
+                           (self.REGIONS, "Region polygons"), (self.BREAKLINES, "Break lines")):
+            layer = self.parameterAsVectorLayer(parameters, name, context)
+            files[name] = layer_file(layer, what) if layer is not None else None
+        crs = run_core(layers_crs, crs, {"open boundary": files[self.OPEN_BOUNDARIES],
+                                         "region": files[self.REGIONS],
+                                         "break line": files[self.BREAKLINES]})
+        field = self.parameterAsString(parameters, self.MATERIAL_FIELD, context) or None
+        mesh = run_core(io.read_2dm, mesh_path)
+        out = Path(self.parameterAsFileOutput(parameters, self.OUTPUT, context))
+        if out.suffix.lower() != EXTENSIONS[fmt]:  # the format chosen decides the extension
+            out = out.with_suffix(EXTENSIONS[fmt])
+        written = run_core(
+            export_mesh, out, mesh.nodes, mesh.triangles, fmt=fmt, crs=crs,
+            open_lines=(run_core(io.read_lines_gpkg, files[self.OPEN_BOUNDARIES])
+                        if files[self.OPEN_BOUNDARIES] else ()),
+            snap=self.parameterAsDouble(parameters, self.SNAP, context),
+            regions=(run_core(io.read_regions, files[self.REGIONS], field=field)
+                     if files[self.REGIONS] else ()),
+            materials=mesh.materials,
+            datum_offset=self.parameterAsDouble(parameters, self.DATUM_OFFSET, context),
+            element_elevations=self.parameterAsBool(parameters, self.ELEMENT_ELEVATIONS, context),
+            breaklines=(run_core(io.read_lines_gpkg, files[self.BREAKLINES])
+                        if files[self.BREAKLINES] else ()))
+        feedback.pushInfo(f"{len(mesh.nodes)} nodes, {len(mesh.triangles)} triangles written to "
+                          f"{', '.join(str(p) for p in written)}")
+        results = {self.OUTPUT: str(out)}
+        if fmt == "slf":
+            results[self.CLI] = str(written[1])
+        return results
