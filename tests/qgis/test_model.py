@@ -24,7 +24,7 @@ def test_model_runs_through_processing_run(processing, demo_points_file, tmp_pat
         "assess:residuals": str(tmp_path / "residuals.gpkg")})
     mesh = QgsMeshLayer(result["mesh:mesh"], "mesh", "mdal")
     assert mesh.isValid() and mesh.dataProvider().faceCount() > 1000
-    assert QgsVectorLayer(result["simplify:breaklines"], "l", "ogr").featureCount() > 20
+    assert QgsVectorLayer(result["simplify:breaklines"], "l", "ogr").featureCount() >= 10
     assert QgsVectorLayer(result["assess:residuals"], "r", "ogr").featureCount() == round(
         0.01 * 2 * 300 * 240)
 
