@@ -1,8 +1,7 @@
 """LiDAR to mesh: the whole FloodMesh chain in one Processing algorithm."""
 from pathlib import Path
 
-from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingContext,
-                       QgsProcessingException, QgsProcessingOutputFile,
+from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputFile,
                        QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
                        QgsProcessingParameterCrs, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
@@ -10,7 +9,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingContext,
 
 from ..core.options import BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS, RunOptions
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
-from .styles import style_breaklines, style_mesh, style_residuals
+from .styles import load_on_completion, style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
@@ -122,17 +121,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
                 (QgsMeshLayer(mesh, "Mesh", "mdal"), style_mesh, self.MESH),
                 (QgsVectorLayer(str(out / "residuals.gpkg"), "Residuals", "ogr"),
                  style_residuals, self.REPORT)):
-            _load_on_completion(context, layer, output)
+            load_on_completion(context, layer, output)
             style(layer)
         return {self.OUTPUT_FOLDER: str(out), self.BREAKLINES: breaklines, self.MESH: mesh,
                 self.REPORT: str(out / "report.json"), self.NODES: report["nodes"],
                 self.TRIANGLES: report["triangles"], self.RMSE: report["rmse_m"]}
 
-
-def _load_on_completion(context, layer, output_name):
-    """Hand a finished layer to QGIS to add to the project when the algorithm ends."""
-    if not layer.isValid():
-        raise QgsProcessingException(f"the output {layer.source()} could not be opened by QGIS")
-    context.temporaryLayerStore().addMapLayer(layer)
-    context.addLayerToLoadOnCompletion(
-        layer.id(), QgsProcessingContext.LayerDetails(layer.name(), context.project(), output_name))

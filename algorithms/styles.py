@@ -1,6 +1,7 @@
 """How FloodMesh's results look when they load: break lines by component, residuals by class,
 the mesh shaded by elevation."""
-from qgis.core import (QgsCategorizedSymbolRenderer, QgsProcessingLayerPostProcessorInterface,
+from qgis.core import (QgsCategorizedSymbolRenderer, QgsProcessingContext,
+                       QgsProcessingException, QgsProcessingLayerPostProcessorInterface,
                        QgsRendererCategory, QgsSymbol)
 from qgis.PyQt.QtGui import QColor
 
@@ -60,3 +61,12 @@ def style_when_loaded(context, output_path: str, style) -> None:
         _PENDING.append(styler)
         del _PENDING[:-16]
         context.layerToLoadOnCompletionDetails(output_path).setPostProcessor(styler)
+
+
+def load_on_completion(context, layer, output_name):
+    """Hand a finished layer to QGIS to add to the project when the algorithm ends."""
+    if not layer.isValid():
+        raise QgsProcessingException(f"the output {layer.source()} could not be opened by QGIS")
+    context.temporaryLayerStore().addMapLayer(layer)
+    context.addLayerToLoadOnCompletion(
+        layer.id(), QgsProcessingContext.LayerDetails(layer.name(), context.project(), output_name))

@@ -247,16 +247,9 @@ def cmd_assess(args):
     from . import io
     from .accuracy import accuracy_statistics, residuals
     from .mesh import Mesh
-    from .raster import require_metric_crs
 
     nodes, triangles = io.read_mesh_2dm(args.mesh)
-    if Path(args.points).suffix.lower() in (".gpkg", ".shp", ".geojson"):
-        xyz = io.read_points_vector(args.points)
-        crs = args.crs or io.vector_crs(args.points)
-    else:
-        cloud = io.read_points(args.points, crs=args.crs)
-        xyz, crs = cloud.xyz, cloud.crs
-    crs = require_metric_crs(crs, Path(args.points).name)
+    xyz, crs = _measured_points(args.points, args.crs)
     res = residuals(Mesh(nodes, triangles, crs), xyz)
     io.write_residuals(args.out, xyz, res, crs)
     stats = accuracy_statistics(res)
@@ -282,6 +275,53 @@ def cmd_export(args):
         breaklines=io.read_lines_gpkg(args.breaklines) if args.breaklines else ())
     print(f"{len(mesh.nodes)} nodes, {len(mesh.triangles)} triangles written as {fmt} to "
           f"{', '.join(str(p) for p in written)}")
+
+
+def _measured_points(path, crs=None):
+    """(xyz, CRS) of measured points: a GeoPackage/Shapefile/GeoJSON of points or a point file."""
+    from . import io
+    from .raster import require_metric_crs
+
+    if Path(path).suffix.lower() in (".gpkg", ".shp", ".geojson"):
+        xyz = io.read_points_vector(path)
+        crs = crs or io.vector_crs(path)
+    else:
+        cloud = io.read_points(path, crs=crs)
+        xyz, crs = cloud.xyz, cloud.crs
+    return xyz, require_metric_crs(crs, Path(path).name)
+
+
+def cmd_refine(args):
+    from dataclasses import asdict
+
+    from . import io
+    from .mesh import mesh_quality
+    from .refine import refine_mesh
+
+    dem = io.read_raster(args.dem, crs=args.crs)
+    lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
+    points, _ = _measured_points(args.points, args.crs)
+    check = _measured_points(args.check, args.crs)[0] if args.check else None
+    bar = ProgressBar("refine")
+    try:
+        mesh, rounds = refine_mesh(dem, lines, points, check=check, min_angle=args.min_angle,
+                                   max_area=args.max_area, lower=args.lower, upper=args.upper,
+                                   target_rmse=args.target_rmse, target_max=args.target_max,
+                                   max_nodes=args.max_nodes, max_rounds=args.max_rounds,
+                                   progress=bar)
+    finally:
+        bar.close()
+    io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles)
+    if args.report:
+        io.write_json(args.report, {"rounds": [asdict(r) for r in rounds],
+                                    **mesh_quality(mesh, min_angle=args.min_angle,
+                                                   max_area=args.max_area)})
+    print(f"{'round':>5}{'nodes':>9}{'RMSE cm':>9}{'max cm':>8}{'check RMSE':>12}"
+          f"{'inserted':>10}{'refined':>9}")
+    for k, r in enumerate(rounds, 1):
+        print(f"{k:>5}{r.nodes:>9}{100 * r.rmse_m:>9.1f}{100 * r.max_abs_m:>8.1f}"
+              f"{100 * r.check_rmse_m:>12.1f}{r.inserted:>10}{r.refined:>9}")
+    print(f"{len(mesh.nodes)} nodes written to {args.out}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -380,6 +420,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", help="statistics as JSON")
     p.add_argument("--crs")
     p.set_defaults(func=cmd_assess)
+
+    p = sub.add_parser("refine", help="refine a mesh until its residuals meet a target")
+    p.add_argument("dem")
+    p.add_argument("--points", required=True,
+                   help="measured points driving the refinement (point file or GeoPackage)")
+    p.add_argument("--check", help="held-out check points, assessed each round, never used")
+    p.add_argument("--breaklines")
+    p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle)
+    p.add_argument("--max-area", type=float, default=DEFAULTS.max_area)
+    p.add_argument("--lower", type=float, default=0.10,
+                   help="refine triangles whose points' RMS residual exceeds this, m (0.10)")
+    p.add_argument("--upper", type=float, default=0.25,
+                   help="insert points whose residual exceeds this into the TIN, m (0.25)")
+    p.add_argument("--target-rmse", type=float, help="stop when the RMSE is at most this, m")
+    p.add_argument("--target-max", type=float, help="stop when max |residual| is at most this, m")
+    p.add_argument("--max-nodes", type=int, default=1_000_000, help="node budget")
+    p.add_argument("--max-rounds", type=int, default=8)
+    p.add_argument("--out", required=True, help="SMS 2DM mesh")
+    p.add_argument("--report", help="rounds and mesh quality as JSON")
+    p.add_argument("--crs")
+    p.set_defaults(func=cmd_refine)
 
     p = sub.add_parser("export", help="write a mesh for a solver: 2DM, Selafin, fort.14, "
                                       "hgrid.gr3, UGRID netCDF or GeoPackage")

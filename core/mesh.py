@@ -148,12 +148,15 @@ def _drop_small_angles(vertices, segments, fixed, limit):
 
 
 def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
-                     conforming: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                     conforming: bool = True, points: np.ndarray | None = None,
+                     local_areas: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Quality triangulation of a PSLG with Triangle (Shewchuk 1996, doi:10.1007/BFb0014497).
 
     No angle below ``min_angle`` degrees (except at small input angles), no triangle above
     ``max_area`` m²; ``conforming`` asks for a conforming Delaunay triangulation (switch D).
-    Returns vertices (n, 2), the PSLG's vertices first, and triangles (m, 3).
+    ``points`` (k, 2) become mesh vertices too; ``local_areas`` (k, 3) rows of x, y, area (m²)
+    then refine (switch r) the triangles holding such a point to at most that area.
+    Returns vertices (n, 2), the PSLG's vertices first, then ``points``, and triangles (m, 3).
     """
     import triangle
 
@@ -164,28 +167,55 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     if not max_area > 0:
         raise FloodMeshError(f"maximum triangle area must be positive m², got {max_area}")
     origin = pslg.vertices.min(axis=0)
-    data = {"vertices": pslg.vertices - origin, "segments": pslg.segments}
+    vertices = pslg.vertices if points is None else np.vstack([pslg.vertices, points[:, :2]])
+    data = {"vertices": vertices - origin, "segments": pslg.segments}
     if len(pslg.holes):
         data["holes"] = pslg.holes - origin
-    switches = f"pq{min_angle:.6g}a{max_area:.6g}{'D' if conforming else ''}"
-    result = triangle.triangulate(data, switches)
+    quality = f"q{min_angle:.6g}{'D' if conforming else ''}"
+    result = triangle.triangulate(data, f"p{quality}a{max_area:.6g}")
     if "triangles" not in result or len(result["triangles"]) == 0:
         raise FloodMeshError("Triangle produced no triangles: the domain boundary is not closed "
                              "or a hole point lies outside its hole")
+    if local_areas is not None and len(local_areas):
+        xy, tris = result["vertices"], result["triangles"]
+        limit = np.full(len(tris), float(max_area))
+        found = _containing_triangle(xy, tris, local_areas[:, :2] - origin)
+        inside = found >= 0
+        np.minimum.at(limit, found[inside], local_areas[inside, 2])
+        refine = {"vertices": xy, "triangles": tris, "segments": result["segments"],
+                  "triangle_max_area": limit[:, None]}
+        if len(pslg.holes):
+            refine["holes"] = data["holes"]
+        result = triangle.triangulate(refine, f"rp{quality}a")
     return result["vertices"] + origin, result["triangles"].astype(np.int64)
+
+
+def _containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Index of the triangle holding each point, -1 outside the mesh."""
+    from matplotlib.tri import Triangulation
+
+    return Triangulation(xy[:, 0], xy[:, 1], triangles).get_trifinder()(points[:, 0],
+                                                                        points[:, 1])
 
 
 def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
                max_area: float = 100.0, conforming: bool = True, snap: float | None = None,
-               domain=None) -> Mesh:
+               domain=None, points: np.ndarray | None = None,
+               local_areas: np.ndarray | None = None) -> Mesh:
     """Mesh the DEM's valid area honouring the break lines; node z from the lines where a node is
-    a break-line vertex, else bilinear from the DEM."""
+    a break-line vertex, from ``points`` (k, 3: measurements put into the TIN) at theirs, else
+    bilinear from the DEM. ``local_areas`` (x, y, m²) refine locally (see triangulate_pslg)."""
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
     pslg = build_pslg(lines, domain, snap=snap)
+    if points is not None and len(points):
+        points = _points_apart(np.asarray(points, float), pslg.vertices, domain, snap)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
-                                           conforming=conforming)
+                                           conforming=conforming, points=points,
+                                           local_areas=local_areas)
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
+    if points is not None and len(points):
+        z[len(pslg.vertices):len(pslg.vertices) + len(points)] = points[:, 2]
     known = _line_vertex_z(lines, precision=snap / 5)
     if known:
         keys = map(tuple, np.round(vertices / (snap / 5)).astype(np.int64).tolist())
@@ -198,6 +228,24 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
                              "data; check the domain against the DEM's nodata")
     return Mesh(np.column_stack([vertices, z]), _counter_clockwise(vertices, triangles), dem.crs,
                 pslg.segments.astype(np.int64))
+
+
+def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float) -> np.ndarray:
+    """The points inside ``domain`` (by more than ``snap``) that lie at least ``snap`` from the
+    PSLG's vertices and from each other (first come, first kept)."""
+    from scipy.spatial import cKDTree
+
+    inside = shapely.contains_xy(domain.buffer(-snap), points[:, 0], points[:, 1])
+    points = points[inside]
+    if not len(points):
+        return points.reshape(0, 3)
+    far = cKDTree(vertices).query(points[:, :2])[0] >= snap
+    points = points[far]
+    keep = np.ones(len(points), bool)
+    for i, j in sorted(cKDTree(points[:, :2]).query_pairs(snap)):
+        if keep[i]:
+            keep[j] = False
+    return points[keep]
 
 
 def _line_vertex_z(lines, precision):

@@ -10,13 +10,15 @@ from ..algorithms.build_mesh import BuildMeshAlgorithm
 from ..algorithms.export_mesh import ExportMeshAlgorithm
 from ..algorithms.grid_points import GridPointsAlgorithm
 from ..algorithms.lidar_to_mesh import LidarToMeshAlgorithm
+from ..algorithms.refine_mesh import RefineMeshAlgorithm
 from ..algorithms.simplify_breaklines import SimplifyBreaklinesAlgorithm
 from ..algorithms.slope import SlopeAlgorithm
 from ..algorithms.trace_breaklines import TraceBreaklinesAlgorithm
 
 ALGORITHMS = (GridPointsAlgorithm, SlopeAlgorithm, ClassifyBreakpointsAlgorithm,
               TraceBreaklinesAlgorithm, SimplifyBreaklinesAlgorithm, BuildMeshAlgorithm,
-              AssessAccuracyAlgorithm, ExportMeshAlgorithm, LidarToMeshAlgorithm)
+              RefineMeshAlgorithm, AssessAccuracyAlgorithm, ExportMeshAlgorithm,
+              LidarToMeshAlgorithm)
 
 ROOT = Path(__file__).resolve().parent.parent
 ICON = ROOT / "icons" / "floodmesh.svg"

@@ -20,7 +20,7 @@ def test_provider_lists_every_step(processing):
            .algorithms()}
     assert ids == {f"floodmesh:{n}" for n in (
         "gridpoints", "slope", "classifybreakpoints", "tracebreaklines", "simplifybreaklines",
-        "buildmesh", "assessaccuracy", "exportmesh", "lidartomesh",
+        "buildmesh", "refinemesh", "assessaccuracy", "exportmesh", "lidartomesh",
         "LiDAR to mesh step by step")}
 
 
@@ -187,4 +187,37 @@ def test_trace_and_simplify_load_styled_by_component(processing, demo_rasters, t
     assert {f["component_id"] for f in simple.getFeatures()} <= components
     assert sum(f["n_points"] for f in simple.getFeatures()) < \
         0.5 * sum(f["n_points"] for f in layer.getFeatures())
+    QgsProject.instance().clear()
+
+
+def test_refine_mesh_algorithm(processing, demo_rasters, tmp_path):
+    """Refine mesh from the toolbox: measured points and check points as layers; the refined
+    mesh has more nodes than the unrefined one, meets the RMSE target on its points, loads as a
+    mesh layer shaded by elevation, and the rounds are written as JSON."""
+    from qgis.core import QgsProject
+
+    from floodmesh.core import demo
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform([1, 1], [299, 239], (6000, 2))
+    z = demo.ground_elevation(xy[:, 0], xy[:, 1])
+    origin = np.array(demo.DEMO_ORIGIN)
+    dem = io.read_raster(demo_rasters["dem"])
+    io.write_points_gpkg(tmp_path / "points.gpkg", np.column_stack([xy + origin, z])[:5000],
+                         dem.crs)
+    io.write_points_gpkg(tmp_path / "check.gpkg", np.column_stack([xy + origin, z])[5000:],
+                         dem.crs)
+    QgsProject.instance().clear()
+    result = processing.runAndLoadResults("floodmesh:refinemesh", {
+        "DEM": demo_rasters["dem"], "POINTS": str(tmp_path / "points.gpkg"),
+        "CHECK": str(tmp_path / "check.gpkg"), "MAX_AREA": 100.0, "LOWER": 0.05, "UPPER": 0.15,
+        "TARGET_RMSE": 0.05, "OUTPUT": str(tmp_path / "refined.2dm"),
+        "REPORT": str(tmp_path / "rounds.json")})
+    rounds = json.loads((tmp_path / "rounds.json").read_text())["rounds"]
+    assert len(rounds) >= 2 and rounds[-1]["nodes"] > rounds[0]["nodes"]
+    assert rounds[-1]["rmse_m"] <= 0.05 < rounds[0]["rmse_m"]
+    assert result["NODES"] == rounds[-1]["nodes"]
+    layer = _loaded("Refined mesh")
+    assert isinstance(layer, QgsMeshLayer) and layer.dataProvider().vertexCount() == result["NODES"]
+    assert layer.rendererSettings().activeScalarDatasetGroup() == 0
     QgsProject.instance().clear()

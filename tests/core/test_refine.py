@@ -1,0 +1,122 @@
+"""Error-driven refinement (floodmesh.core.refine) on surfaces whose true error is known."""
+import json
+
+import numpy as np
+import pytest
+from affine import Affine
+from pyproj import CRS
+
+from floodmesh.core import io
+from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.mesh import triangle_angles, triangle_areas
+from floodmesh.core.raster import Grid
+from floodmesh.core.refine import refine_mesh
+
+X0, Y0, SIZE = 500_000.0, 6_000_000.0, 120
+
+
+def hill(x, y):
+    """A smooth hill (2.5 m, σ 12 m) with a ripple: a coarse TIN misses both."""
+    u, v = x - X0 - 60, y - Y0 - 60
+    return 10 + 2.5 * np.exp(-(u ** 2 + v ** 2) / (2 * 12 ** 2)) + 0.3 * np.sin(u / 6)
+
+
+@pytest.fixture(scope="module")
+def terrain():
+    rng = np.random.default_rng(0)
+    cx = X0 + np.arange(SIZE) + 0.5
+    cy = Y0 + SIZE - (np.arange(SIZE) + 0.5)
+    dem = Grid(hill(*np.meshgrid(cx, cy)), Affine(1, 0, X0, 0, -1, Y0 + SIZE),
+               CRS.from_epsg(25832))
+    xy = rng.uniform([X0 + 1, Y0 + 1], [X0 + SIZE - 1, Y0 + SIZE - 1], (6000, 2))
+    check_xy = rng.uniform([X0 + 1, Y0 + 1], [X0 + SIZE - 1, Y0 + SIZE - 1], (800, 2))
+    points = np.column_stack([xy, hill(*xy.T)])
+    check = np.column_stack([check_xy, hill(*check_xy.T)])
+    return dem, points, check
+
+
+def test_refinement_meets_the_target_and_keeps_quality(terrain):
+    """From a 200 m² mesh (RMSE of several cm on the hill), rounds go on until the RMSE target
+    holds; the check points (never used) improve with it; every round's figures are the
+    independent brute-force RMSE of the returned mesh at the end; angle and area bounds hold."""
+    dem, points, check = terrain
+    mesh, rounds = refine_mesh(dem, [], points, check=check, min_angle=25, max_area=200,
+                               lower=0.02, upper=0.06, target_rmse=0.01)
+    assert len(rounds) >= 2
+    assert rounds[0].rmse_m > 0.03
+    assert rounds[-1].rmse_m <= 0.01
+    assert rounds[-1].check_rmse_m < 0.5 * rounds[0].check_rmse_m
+    assert [r.nodes for r in rounds] == sorted(r.nodes for r in rounds)
+    assert triangle_angles(mesh.nodes, mesh.triangles).min() >= 25 - 1e-6
+    assert triangle_areas(mesh.nodes, mesh.triangles).max() <= 200 + 1e-6
+    # the last round's check RMSE, recomputed by barycentric interpolation by hand
+    from matplotlib.tri import Triangulation
+
+    tri = Triangulation(mesh.nodes[:, 0], mesh.nodes[:, 1], mesh.triangles)
+    k = tri.get_trifinder()(check[:, 0], check[:, 1])
+    a, b, c = (mesh.nodes[mesh.triangles[k, i]] for i in range(3))
+    det = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
+    l1 = ((b[:, 1] - c[:, 1]) * (check[:, 0] - c[:, 0])
+          + (c[:, 0] - b[:, 0]) * (check[:, 1] - c[:, 1])) / det
+    l2 = ((c[:, 1] - a[:, 1]) * (check[:, 0] - c[:, 0])
+          + (a[:, 0] - c[:, 0]) * (check[:, 1] - c[:, 1])) / det
+    z = l1 * a[:, 2] + l2 * b[:, 2] + (1 - l1 - l2) * c[:, 2]
+    assert np.sqrt(np.mean((check[:, 2] - z) ** 2)) == pytest.approx(rounds[-1].check_rmse_m,
+                                                                      rel=1e-9)
+
+
+def test_points_above_the_upper_bound_become_nodes_with_their_own_z(terrain):
+    """A spike (a measured point 1 m above the DEM) goes into the TIN as a vertex carrying its
+    measured elevation, not the DEM's."""
+    dem, points, _ = terrain
+    spike = np.array([[X0 + 40.3, Y0 + 70.7, hill(X0 + 40.3, Y0 + 70.7) + 1.0]])
+    mesh, rounds = refine_mesh(dem, [], np.vstack([points, spike]), max_area=50, lower=0.05,
+                               upper=0.5, max_rounds=2)
+    at = np.flatnonzero(np.hypot(*(mesh.nodes[:, :2] - spike[0, :2]).T) < 1e-9)
+    assert len(at) == 1 and mesh.nodes[at[0], 2] == spike[0, 2]
+    assert rounds[0].inserted >= 1
+
+
+def test_the_node_budget_holds(terrain):
+    """With a budget between the first and the unbounded last round, the mesh returned is the
+    last within the budget; a budget below the first mesh is refused with the count."""
+    dem, points, _ = terrain
+    _, free = refine_mesh(dem, [], points, max_area=200, lower=0.02, upper=0.06, max_rounds=4)
+    budget = (free[0].nodes + free[-1].nodes) // 2
+    mesh, rounds = refine_mesh(dem, [], points, max_area=200, lower=0.02, upper=0.06,
+                               max_rounds=4, max_nodes=budget)
+    assert len(mesh.nodes) <= budget and len(mesh.nodes) == rounds[-1].nodes
+    with pytest.raises(FloodMeshError, match="over the budget of 10"):
+        refine_mesh(dem, [], points, max_area=200, max_nodes=10)
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    ({"lower": 0.3, "upper": 0.2}, "lower <= upper"),
+    ({"lower": 0.0}, "lower <= upper"),
+    ({"max_rounds": 0}, "at least one round"),
+])
+def test_bad_refinement_settings(terrain, kwargs, words):
+    dem, points, _ = terrain
+    with pytest.raises(FloodMeshError, match=words):
+        refine_mesh(dem, [], points, **kwargs)
+    with pytest.raises(FloodMeshError, match="measured points"):
+        refine_mesh(dem, [], np.empty((0, 3)))
+
+
+def test_refine_command(terrain, tmp_path):
+    """floodmesh refine: points and check points from files, a 2DM and a JSON of the rounds."""
+    from tests.core.test_cli import floodmesh
+
+    dem, points, check = terrain
+    io.write_raster(tmp_path / "dem.tif", dem)
+    io.write_points_gpkg(tmp_path / "points.gpkg", points, dem.crs)
+    io.write_points_gpkg(tmp_path / "check.gpkg", check, dem.crs)
+    out = floodmesh("refine", tmp_path / "dem.tif", "--points", tmp_path / "points.gpkg",
+                    "--check", tmp_path / "check.gpkg", "--max-area", 200, "--lower", 0.02,
+                    "--upper", 0.06, "--target-rmse", 0.01, "--out", tmp_path / "mesh.2dm",
+                    "--report", tmp_path / "refine.json")
+    report = json.loads((tmp_path / "refine.json").read_text())
+    nodes, _ = io.read_mesh_2dm(tmp_path / "mesh.2dm")
+    assert len(nodes) == report["rounds"][-1]["nodes"] == report["nodes"]
+    assert report["rounds"][-1]["rmse_m"] <= 0.01
+    assert "check RMSE" in out.stdout and f"{len(nodes)} nodes written" in out.stdout
