@@ -339,7 +339,41 @@ def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
         "smallest_input_angle_deg": float(corner.min()) if len(corner) else 180.0,
         "n_above_max_area": int((areas > max_area * (1 + 1e-9)).sum()),
         "all_counter_clockwise": bool((areas > 0).all()),
+        "n_missing_segments": missing_segments(mesh.nodes, mesh.triangles, mesh.segments),
+        "n_duplicate_nodes": int(len(mesh.nodes) - len(np.unique(
+            np.round(mesh.nodes[:, :2] / 1e-6).astype(np.int64), axis=0))),
     }
+
+
+def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndarray) -> int:
+    """How many input segments are not a chain of mesh edges (nodes on the segment, in order,
+    each consecutive pair an edge of a triangle)."""
+    from scipy.spatial import cKDTree
+
+    if not len(segments):
+        return 0
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
+                                    triangles[:, [2, 0]]]), axis=1)
+    edge_set = set(map(tuple, edges.tolist()))
+    split = [seg for seg in np.sort(segments, axis=1).tolist() if tuple(seg) not in edge_set]
+    xy = nodes[:, :2]
+    tree = cKDTree(xy) if split else None
+    missing = 0
+    for a, b in split:  # segments that Triangle split with Steiner points
+        d = xy[b] - xy[a]
+        length = float(np.hypot(*d))
+        near = np.array(tree.query_ball_point((xy[a] + xy[b]) / 2, length / 2 * (1 + 1e-9)
+                                              + 1e-9))
+        rel = xy[near] - xy[a]
+        t = rel @ d / length ** 2
+        off = np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0]) / length
+        on = near[(off <= 1e-6 * max(1.0, length)) & (t >= -1e-9) & (t <= 1 + 1e-9)]
+        chain = on[np.argsort(t[np.isin(near, on)], kind="stable")]
+        pairs = np.sort(np.column_stack([chain[:-1], chain[1:]]), axis=1)
+        if chain[0] != a and chain[0] != b or not all(map(edge_set.__contains__,
+                                                          map(tuple, pairs.tolist()))):
+            missing += 1
+    return missing
 
 
 def boundary_loops(nodes: np.ndarray, triangles: np.ndarray) -> list[np.ndarray]:

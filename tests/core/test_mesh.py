@@ -93,6 +93,7 @@ def test_quality_bounds(plane_mesh):
     assert q["n_below_min_angle"] == 0 and q["n_above_max_area"] == 0
     assert q["all_counter_clockwise"] is True
     assert q["nodes"] == len(mesh.nodes) and q["triangles"] == len(mesh.triangles)
+    assert q["n_missing_segments"] == 0 and q["n_duplicate_nodes"] == 0
 
     angles, areas = _angles_and_areas(mesh.nodes, mesh.triangles)
     np.testing.assert_allclose(angles.sum(axis=1), 180.0, atol=1e-9)
@@ -188,3 +189,24 @@ def test_crossing_break_lines_are_noded():
     for line in (a, b):
         for p, q in ((line[0, :2], crossing), (crossing, line[1, :2])):
             assert _covered_length(mesh.nodes, edges, p, q) == pytest.approx(np.hypot(*(q - p)))
+
+
+def test_missing_segments_and_duplicate_nodes_are_counted(plane_mesh):
+    """The segment check finds a segment whose chain of edges is broken (the triangles along it
+    removed), and the duplicate count finds a node repeated."""
+    from floodmesh.core.mesh import Mesh, missing_segments
+
+    dem, _, mesh = plane_mesh
+    assert missing_segments(mesh.nodes, mesh.triangles, mesh.segments) == 0
+    # a segment split by Triangle (not itself an edge) and one that is an edge
+    edges = {tuple(sorted(e)) for t in mesh.triangles.tolist()
+             for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    split = [s for s in mesh.segments.tolist() if tuple(sorted(s)) not in edges]
+    whole = [s for s in mesh.segments.tolist() if tuple(sorted(s)) in edges]
+    assert split and whole
+    for a, b in (split[0], whole[0]):
+        on_line = np.isin(mesh.triangles, [a, b]).any(axis=1)
+        assert missing_segments(mesh.nodes, mesh.triangles[~on_line], np.array([[a, b]])) == 1
+    doubled = Mesh(np.vstack([mesh.nodes, mesh.nodes[:1]]), mesh.triangles, mesh.crs,
+                   mesh.segments)
+    assert mesh_quality(doubled, min_angle=25, max_area=20)["n_duplicate_nodes"] == 1
