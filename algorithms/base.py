@@ -83,3 +83,27 @@ def layer_file(layer, what: str) -> str:
 def crs_or_none(algorithm, parameters, name, context):
     crs = algorithm.parameterAsCrs(parameters, name, context)
     return crs.toWkt() if crs.isValid() else None
+
+
+BOUNDARY, USER_LINES = "BOUNDARY", "USER_LINES"
+
+
+def add_domain_parameters(algorithm):
+    """The optional model-domain polygon and the modeller's own lines, as in Build mesh."""
+    from qgis.core import QgsProcessing, QgsProcessingParameterFeatureSource
+
+    algorithm.addParameter(QgsProcessingParameterFeatureSource(
+        BOUNDARY, algorithm.tr("Model domain polygon (holes left out; default: the data's "
+                               "extent)"), [QgsProcessing.TypeVectorPolygon], optional=True))
+    algorithm.addParameter(QgsProcessingParameterFeatureSource(
+        USER_LINES, algorithm.tr("Own break or structure lines (2-D lines take z from the DEM)"),
+        [QgsProcessing.TypeVectorLine], optional=True))
+
+
+def domain_files(algorithm, parameters, context) -> tuple:
+    """(boundary file or None, user line file or None) from add_domain_parameters."""
+    def path(name, what):
+        layer = algorithm.parameterAsVectorLayer(parameters, name, context)
+        return layer_file(layer, what) if layer is not None else None
+
+    return path(BOUNDARY, "Model domain polygon"), path(USER_LINES, "Own lines")

@@ -4,7 +4,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
                        QgsProcessingParameterVectorDestination)
 
-from .base import FloodMeshAlgorithm, layer_file, run_core
+from .base import FloodMeshAlgorithm, add_domain_parameters, domain_files, layer_file, run_core
 
 
 class BuildMeshAlgorithm(FloodMeshAlgorithm):
@@ -14,8 +14,10 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
     HELP = ("Meshes the DEM's valid area with Triangle (conforming Delaunay refinement), "
             "honouring the break lines: no angle below the minimum (degrees, default 25, at most "
             "34) and no triangle above the maximum area (m², default 100). Break-line vertices "
-            "keep their z; other nodes take z bilinearly from the DEM. Writes SMS 2DM and, "
-            "optionally, the triangles as PolygonZ.")
+            "keep their z; other nodes take z bilinearly from the DEM. A model domain polygon "
+            "(with holes for buildings or islands) replaces the data's extent; your own lines "
+            "are kept as mesh edges. Writes SMS 2DM and, optionally, the triangles as "
+            "PolygonZ.")
     DEM, BREAKLINES, MIN_ANGLE, MAX_AREA = "DEM", "BREAKLINES", "MIN_ANGLE", "MAX_AREA"
     OUTPUT, TRIANGLES, NODES, TRIANGLE_COUNT = "OUTPUT", "TRIANGLES", "NODES", "TRIANGLE_COUNT"
 
@@ -24,6 +26,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.BREAKLINES, self.tr("Break lines"), [QgsProcessing.TypeVectorLine],
             optional=True))
+        add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum angle (degrees)"),
             QgsProcessingParameterNumber.Double, 25.0, minValue=0.01, maxValue=34.0))
@@ -41,6 +44,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
     def process(self, parameters, context, feedback):
         from ..core import io
         from ..core.mesh import build_mesh, mesh_quality
+        from ..core.pipeline import mesh_constraints
 
         dem = run_core(io.read_raster, layer_file(
             self.parameterAsRasterLayer(parameters, self.DEM, context), "DEM"))
@@ -49,7 +53,10 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
                  if lines_layer is not None else [])
         min_angle = self.parameterAsDouble(parameters, self.MIN_ANGLE, context)
         max_area = self.parameterAsDouble(parameters, self.MAX_AREA, context)
-        mesh = run_core(build_mesh, dem, lines, min_angle=min_angle, max_area=max_area)
+        domain, own_lines = run_core(mesh_constraints, dem, *domain_files(self, parameters,
+                                                                          context))
+        mesh = run_core(build_mesh, dem, lines + own_lines, min_angle=min_angle,
+                        max_area=max_area, domain=domain)
         quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)
         feedback.pushInfo(f"{quality['nodes']} nodes, {quality['triangles']} triangles, smallest "
                           f"angle {quality['min_angle_deg']:.2f}°, largest area "

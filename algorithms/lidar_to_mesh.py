@@ -8,7 +8,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputFile,
                        QgsProcessingParameterNumber, QgsVectorLayer)
 
 from ..core.options import BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS, RunOptions
-from .base import FloodMeshAlgorithm, crs_or_none, run_core
+from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, run_core
 from .styles import load_on_completion, style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
@@ -67,6 +67,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.KEEP_EVERY, self.tr("Keep every n-th break-line point"),
             QgsProcessingParameterNumber.Integer, 4, minValue=1))
+        add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),
             QgsProcessingParameterNumber.Double, defaults.min_angle, minValue=0.01, maxValue=34))
@@ -96,6 +97,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     def process(self, parameters, context, feedback):
         from ..core.pipeline import run_pipeline
 
+        boundary, user_lines = domain_files(self, parameters, context)
         options = run_core(RunOptions,
             cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],
@@ -105,7 +107,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
             holdout=self.parameterAsDouble(parameters, self.HOLDOUT, context),
             seed=self.parameterAsInt(parameters, self.SEED, context),
-            crs=crs_or_none(self, parameters, self.CRS, context),
+            crs=crs_or_none(self, parameters, self.CRS, context), boundary=boundary,
+            user_lines=user_lines,
             formats=tuple(EXPORT_FORMATS[i] for i in
                           self.parameterAsEnums(parameters, self.FORMATS, context)))
         source = self.parameterAsFile(parameters, self.INPUT, context)

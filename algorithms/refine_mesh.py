@@ -5,7 +5,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
 
-from .base import FloodMeshAlgorithm, layer_file, run_core
+from .base import FloodMeshAlgorithm, add_domain_parameters, domain_files, layer_file, run_core
 from .styles import load_on_completion, style_mesh
 
 
@@ -37,6 +37,7 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.CHECK, self.tr("Check points (3-D), never used for refinement"),
             [QgsProcessing.TypeVectorPoint], optional=True))
+        add_domain_parameters(self)
 
         def number(name, label, default, minimum, optional=False, kind=None):
             self.addParameter(QgsProcessingParameterNumber(
@@ -62,6 +63,7 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
 
     def process(self, parameters, context, feedback):
         from ..core import io
+        from ..core.pipeline import mesh_constraints
         from ..core.refine import refine_mesh
 
         dem = run_core(io.read_raster, layer_file(
@@ -69,6 +71,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         lines_layer = self.parameterAsVectorLayer(parameters, self.BREAKLINES, context)
         lines = (run_core(io.read_lines_gpkg, layer_file(lines_layer, "Break lines"))
                  if lines_layer is not None else [])
+        domain, own_lines = run_core(mesh_constraints, dem, *domain_files(self, parameters,
+                                                                          context))
 
         def points(name, what):
             layer = self.parameterAsVectorLayer(parameters, name, context)
@@ -80,8 +84,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
                                                                            context)
 
         mesh, rounds = run_core(
-            refine_mesh, dem, lines, points(self.POINTS, "Measured points"),
-            check=points(self.CHECK, "Check points"),
+            refine_mesh, dem, lines + own_lines, points(self.POINTS, "Measured points"),
+            check=points(self.CHECK, "Check points"), domain=domain,
             min_angle=self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
             max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
             lower=self.parameterAsDouble(parameters, self.LOWER, context),

@@ -74,6 +74,7 @@ def _add_chain_options(p: argparse.ArgumentParser):
                    help="merge break lines (and vertices) closer than this, m (default d/2)")
     p.add_argument("--min-length", type=float, default=DEFAULTS.min_length,
                    help="drop break lines shorter than this, m (default %(default)s)")
+    _add_domain_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle,
                    help="minimum triangle angle in degrees (default %(default)s)")
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area,
@@ -88,6 +89,14 @@ def _add_chain_options(p: argparse.ArgumentParser):
     p.add_argument("--formats", default="",
                    help="solver exports written as mesh.<ext> beside mesh.2dm, comma-separated: "
                         f"{','.join(EXPORT_FORMATS)}")
+
+
+def _add_domain_options(p: argparse.ArgumentParser):
+    p.add_argument("--boundary", help="polygon file: the model domain, holes (buildings, "
+                   "islands) left out (default: the data's extent)")
+    p.add_argument("--lines", dest="user_lines",
+                   help="line file: your own break or structure lines, kept as mesh edges "
+                        "(2-D lines take z from the DEM)")
 
 
 def _add_log_options(p: argparse.ArgumentParser, *, response=True):
@@ -109,6 +118,7 @@ def _options(args) -> RunOptions:
                       log_kernel=args.log_kernel, zero_crossings=args.zero_crossings,
                       keep_every=args.keep_every, tolerance=args.tolerance, spline=args.spline,
                       min_distance=args.min_distance, min_length=args.min_length,
+                      boundary=args.boundary, user_lines=args.user_lines,
                       min_angle=args.min_angle, max_area=args.max_area, holdout=args.holdout,
                       seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes,
                       formats=parse_formats(args.formats))
@@ -229,10 +239,13 @@ def cmd_simplify(args):
 def cmd_mesh(args):
     from . import io
     from .mesh import build_mesh, mesh_quality
+    from .pipeline import mesh_constraints
 
     dem = io.read_raster(args.dem, crs=args.crs)
     lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
-    mesh = build_mesh(dem, lines, min_angle=args.min_angle, max_area=args.max_area)
+    domain, own_lines = mesh_constraints(dem, args.boundary, args.user_lines)
+    mesh = build_mesh(dem, lines + own_lines, min_angle=args.min_angle, max_area=args.max_area,
+                      domain=domain)
     io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles)
     if args.gpkg:
         io.write_mesh_gpkg(args.gpkg, mesh.nodes, mesh.triangles, dem.crs)
@@ -296,15 +309,18 @@ def cmd_refine(args):
 
     from . import io
     from .mesh import mesh_quality
+    from .pipeline import mesh_constraints
     from .refine import refine_mesh
 
     dem = io.read_raster(args.dem, crs=args.crs)
     lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
+    domain, own_lines = mesh_constraints(dem, args.boundary, args.user_lines)
     points, _ = _measured_points(args.points, args.crs)
     check = _measured_points(args.check, args.crs)[0] if args.check else None
     bar = ProgressBar("refine")
     try:
-        mesh, rounds = refine_mesh(dem, lines, points, check=check, min_angle=args.min_angle,
+        mesh, rounds = refine_mesh(dem, lines + own_lines, points, check=check, domain=domain,
+                                   min_angle=args.min_angle,
                                    max_area=args.max_area, lower=args.lower, upper=args.upper,
                                    target_rmse=args.target_rmse, target_max=args.target_max,
                                    max_nodes=args.max_nodes, max_rounds=args.max_rounds,
@@ -406,6 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("mesh", help="quality triangular mesh of a DEM honouring break lines")
     p.add_argument("dem")
     p.add_argument("--breaklines")
+    _add_domain_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle)
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area)
     p.add_argument("--out", required=True, help="SMS 2DM mesh")
@@ -427,6 +444,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="measured points driving the refinement (point file or GeoPackage)")
     p.add_argument("--check", help="held-out check points, assessed each round, never used")
     p.add_argument("--breaklines")
+    _add_domain_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle)
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area)
     p.add_argument("--lower", type=float, default=0.10,

@@ -356,6 +356,11 @@ def read_points_vector(path) -> np.ndarray:
     return np.asarray(xyz, dtype=float)[:, :3]
 
 
+def read_boundary(path) -> list:
+    """The polygons (shapely) of a polygon layer, e.g. a model domain, as drawn (unchecked)."""
+    return [geometry for geometry, _ in read_regions(path)]
+
+
 def vector_crs(path):
     """The CRS (WKT) of a vector file, or None where it has none."""
     import fiona

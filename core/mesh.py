@@ -65,6 +65,32 @@ def domain_from_dem(dem: Grid, *, min_area: float = 0.0):
     return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 
+def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon"):
+    """The mesh domain inside a user's boundary polygons (their union), holes (buildings,
+    islands) included, clipped to the DEM's valid area; refuses invalid or non-overlapping
+    ones."""
+    from shapely.validation import explain_validity
+
+    polygons = [polygons] if isinstance(polygons, shapely.Geometry) else list(polygons)
+    polygons = [p for p in polygons if p is not None and not p.is_empty]
+    if not polygons:
+        raise FloodMeshError(f"{name} holds no polygon; draw the model domain as a polygon")
+    for polygon in polygons:
+        if not polygon.is_valid:
+            raise FloodMeshError(f"{name} is not a valid polygon ({explain_validity(polygon)}); "
+                                 "repair it (QGIS: Fix geometries; GDAL: ogr2ogr -makevalid) "
+                                 "and check that its rings do not cross themselves")
+    boundary = shapely.union_all(polygons)
+    data = domain_from_dem(dem)
+    domain = shapely.intersection(boundary, data)
+    polygons = [p for p in getattr(domain, "geoms", [domain])
+                if p.geom_type == "Polygon" and p.area > 4 * dem.cell_size ** 2]
+    if not polygons:
+        raise FloodMeshError(f"{name} does not overlap the DEM's data (the data cover "
+                             f"{data.bounds}); check that both are in the same CRS")
+    return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
+
+
 def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
                drop_sharp_corners: bool = True) -> PSLG:
     """PSLG of break lines (x, y[, z] arrays) inside ``domain`` plus its boundary.

@@ -62,6 +62,8 @@ class RunOptions:
     min_length: float = 0.0         # m; shorter break lines are dropped
     crs: str | None = None
     classes: tuple[int, ...] | None = None
+    boundary: str | None = None     # polygon file: the model domain (holes allowed)
+    user_lines: str | None = None   # line file: the modeller's own break / structure lines
     formats: tuple[str, ...] = ()   # solver exports written beside mesh.2dm (EXPORT_FORMATS)
 
     def __post_init__(self):

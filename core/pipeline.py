@@ -8,15 +8,16 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from pyproj import CRS
 
 from . import io
 from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
-from .errors import Cancelled
+from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import grid_points_linear
-from .mesh import build_mesh, mesh_quality
+from .mesh import build_mesh, mesh_quality, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
@@ -66,7 +67,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     method, amount = options.simplification()
-    steps = _Steps({"read": 1, "grid": 4, "slope": 1, "breakpoints": 0.5, "breaklines": 1,
+    steps = _Steps({"read": 1, "mesh inputs": 0.1, "grid": 4, "slope": 1, "breakpoints": 0.5, "breaklines": 1,
                     "simplify": 0.5, "mesh": 2, "assess": 1, "write": 2}, progress, cancelled, log)
     data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes)
     if isinstance(data, PointCloud):
@@ -80,6 +81,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         holdout = _dem_check_points(dem, options.holdout, options.seed)
         holdout_source = "DEM cell centres (not independent of the DEM)"
         n_points = 0
+    domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
+                                  options.user_lines)
     if options.slope_method == "log":
         # second order: breakpoints from the LoG; the tracer still follows first-order slope
         response = steps.run("slope", laplacian_of_gaussian, dem, options.sigma,
@@ -98,8 +101,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     min_distance = delta if options.min_distance is None else options.min_distance
     lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
                       min_distance=min_distance)
-    mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines],
-                     min_angle=options.min_angle, max_area=options.max_area)
+    mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines] + own_lines,
+                     min_angle=options.min_angle, max_area=options.max_area, domain=domain)
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
     deviation = max_deviation(traced, lines)
@@ -147,6 +150,24 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     }
     io.write_json(out / "report.json", _jsonable(report))
     return report
+
+
+def mesh_constraints(dem: Grid, boundary=None, user_lines=None):
+    """(domain, lines) from a user's boundary polygon file (None: the DEM's data) and a file of
+    their own break or structure lines (2-D lines take z from the DEM), both checked against the
+    DEM's CRS."""
+    for path, what in ((boundary, "boundary polygon"), (user_lines, "user line")):
+        if path is not None:
+            crs = io.vector_crs(path)
+            if crs is not None and not dem.crs.equals(CRS.from_user_input(crs),
+                                                      ignore_axis_order=True):
+                raise FloodMeshError(f"the {what} file {Path(path).name} is in "
+                                     f"{CRS.from_user_input(crs).name}, the DEM in "
+                                     f"{dem.crs.name}; reproject it to the DEM's CRS")
+    domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name)
+              if boundary is not None else None)
+    lines = io.read_lines_gpkg(user_lines) if user_lines is not None else []
+    return domain, lines
 
 
 def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:

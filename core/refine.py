@@ -38,7 +38,7 @@ class RefineRound:
 
 
 def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
-                check: np.ndarray | None = None, min_angle: float = 25.0,
+                check: np.ndarray | None = None, domain=None, min_angle: float = 25.0,
                 max_area: float = 100.0, lower: float = 0.10, upper: float = 0.25,
                 target_rmse: float | None = None, target_max: float | None = None,
                 max_nodes: int = 1_000_000, max_rounds: int = 8,
@@ -46,7 +46,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                 cancelled: Callable[[], bool] | None = None) -> tuple[Mesh, list[RefineRound]]:
     """Refine until the target holds on ``points`` (n, 3), within ``max_nodes`` nodes and
     ``max_rounds`` rounds. Bounds and targets in metres; with no target, rounds go on until
-    nothing is left to refine. Returns the last mesh within the budget and every round."""
+    nothing is left to refine. ``domain``: the (Multi)Polygon to mesh (default: the DEM's data).
+    Returns the last mesh within the budget and every round."""
     points = np.asarray(points, float)
     if points.ndim != 2 or points.shape[1] != 3 or not len(points):
         raise FloodMeshError("refinement needs measured points (x, y, z); none were given")
@@ -63,7 +64,7 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         if cancelled is not None and cancelled():
             raise Cancelled()
         mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area, points=inserted,
-                          local_areas=local)
+                          local_areas=local, domain=domain)
         if len(mesh.nodes) > max_nodes:
             if best is None:
                 raise FloodMeshError(f"the unrefined mesh already has {len(mesh.nodes)} nodes, "

@@ -7,7 +7,8 @@ from pyproj import CRS
 from scipy.spatial import cKDTree
 
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import build_mesh, build_pslg, domain_from_dem, mesh_quality
+from floodmesh.core.mesh import (build_mesh, build_pslg, domain_from_dem, mesh_quality,
+                                 triangle_areas)
 from floodmesh.core.raster import Grid
 
 ORIGIN = np.array([500_000.0, 6_000_000.0])
@@ -210,3 +211,67 @@ def test_missing_segments_and_duplicate_nodes_are_counted(plane_mesh):
     doubled = Mesh(np.vstack([mesh.nodes, mesh.nodes[:1]]), mesh.triangles, mesh.crs,
                    mesh.segments)
     assert mesh_quality(doubled, min_angle=25, max_area=20)["n_duplicate_nodes"] == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# a user's domain polygon (with holes) and their own lines
+def _write_polygons(path, polygons, crs="EPSG:25832"):
+    import fiona
+
+    schema = {"geometry": "Polygon", "properties": {"name": "str"}}
+    with fiona.open(path, "w", driver="GPKG", schema=schema, crs=crs) as dst:
+        for k, poly in enumerate(polygons):
+            dst.write({"geometry": shapely.geometry.mapping(poly), "properties": {"name": str(k)}})
+
+
+def test_user_boundary_with_a_hole_and_2d_user_lines(plane_mesh, tmp_path):
+    """The mesh covers exactly the user's polygon minus its hole (clipped to the data), every
+    segment of the 2-D user line is a chain of mesh edges, and the line's nodes take z from the
+    DEM."""
+    from floodmesh.core import io
+    from floodmesh.core.pipeline import mesh_constraints
+    from floodmesh.core.raster import bilinear
+
+    dem, _, _ = plane_mesh
+    x0, y0 = dem.transform.c, dem.transform.f - dem.shape[0] * dem.cell_size
+    outer = shapely.box(x0 + 5, y0 + 5, x0 + 45, y0 + 40)
+    hole = shapely.box(x0 + 20, y0 + 15, x0 + 28, y0 + 22)
+    boundary = shapely.Polygon(outer.exterior.coords, [hole.exterior.coords])
+    _write_polygons(tmp_path / "domain.gpkg", [boundary])
+    user_line = np.array([[x0 + 8, y0 + 30], [x0 + 40, y0 + 33]])
+    io.write_lines_gpkg(tmp_path / "own.gpkg", [user_line], dem.crs, layer="lines")
+    domain, own = mesh_constraints(dem, tmp_path / "domain.gpkg", tmp_path / "own.gpkg")
+    mesh = build_mesh(dem, own, min_angle=25, max_area=10, domain=domain)
+    covered = triangle_areas(mesh.nodes, mesh.triangles).sum()
+    assert covered == pytest.approx(boundary.area, rel=1e-9)
+    centroids = shapely.points(mesh.nodes[mesh.triangles][:, :, :2].mean(axis=1))
+    assert not shapely.contains(hole, centroids).any()
+    assert shapely.contains(outer, centroids).all()
+    q = mesh_quality(mesh, min_angle=25, max_area=10)
+    assert q["n_missing_segments"] == 0 and q["n_below_min_angle"] == 0
+    on_line = shapely.distance(shapely.LineString(user_line), shapely.points(mesh.nodes[:, :2]))
+    line_nodes = mesh.nodes[on_line < 1e-6]
+    assert len(line_nodes) >= 4
+    np.testing.assert_allclose(line_nodes[:, 2], bilinear(dem, line_nodes[:, 0],
+                                                          line_nodes[:, 1]), atol=1e-9)
+
+
+@pytest.mark.parametrize("polygon, words", [
+    (shapely.Polygon([(0, 0), (30, 30), (30, 0), (0, 30)]), "not a valid polygon"),
+    (shapely.box(1e4, 1e4, 1e4 + 50, 1e4 + 50), "does not overlap"),
+])
+def test_bad_boundaries_are_refused(plane_mesh, tmp_path, polygon, words):
+    """A self-intersecting (bow-tie) boundary and one away from the data get a message naming
+    the problem and the fix; a boundary in another CRS is refused too."""
+    from floodmesh.core.errors import FloodMeshError
+    from floodmesh.core.pipeline import mesh_constraints
+
+    dem, _, _ = plane_mesh
+    x0, y0 = dem.transform.c, dem.transform.f - dem.shape[0] * dem.cell_size
+    moved = shapely.affinity.translate(polygon, x0, y0)
+    _write_polygons(tmp_path / "b.gpkg", [moved])
+    with pytest.raises(FloodMeshError, match=words):
+        mesh_constraints(dem, tmp_path / "b.gpkg")
+    _write_polygons(tmp_path / "other.gpkg", [shapely.box(0, 0, 1, 1)], crs="EPSG:32633")
+    with pytest.raises(FloodMeshError, match="reproject it"):
+        mesh_constraints(dem, tmp_path / "other.gpkg")

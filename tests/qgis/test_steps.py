@@ -221,3 +221,41 @@ def test_refine_mesh_algorithm(processing, demo_rasters, tmp_path):
     assert isinstance(layer, QgsMeshLayer) and layer.dataProvider().vertexCount() == result["NODES"]
     assert layer.rendererSettings().activeScalarDatasetGroup() == 0
     QgsProject.instance().clear()
+
+
+def test_build_mesh_with_a_domain_polygon_and_own_lines(processing, demo_rasters, tmp_path):
+    """Build mesh with a model domain polygon holding a hole (a building) and a 2-D line of
+    one's own: the mesh covers the polygon minus the hole, and a bow-tie polygon is refused
+    with a message naming the problem and the fix."""
+    import fiona
+    import shapely
+    from qgis.core import QgsProcessingException
+
+    from floodmesh.core import demo
+    from floodmesh.core.mesh import triangle_areas
+
+    x0, y0 = demo.DEMO_ORIGIN
+    hole = shapely.box(x0 + 100, y0 + 60, x0 + 112, y0 + 72)
+    domain = shapely.Polygon(shapely.box(x0 + 20, y0 + 20, x0 + 200, y0 + 100).exterior.coords,
+                             [hole.exterior.coords])
+    bowtie = shapely.Polygon([(x0, y0), (x0 + 50, y0 + 50), (x0 + 50, y0), (x0, y0 + 50)])
+    for name, polygon in (("domain", domain), ("bowtie", bowtie)):
+        with fiona.open(tmp_path / f"{name}.gpkg", "w", driver="GPKG", crs="EPSG:25832",
+                        schema={"geometry": "Polygon", "properties": {}}) as dst:
+            dst.write({"geometry": shapely.geometry.mapping(polygon), "properties": {}})
+    io.write_lines_gpkg(tmp_path / "own.gpkg", [np.array([[x0 + 30, y0 + 30],
+                                                         [x0 + 190, y0 + 90]])],
+                        io.read_raster(demo_rasters["dem"]).crs, layer="own")
+    result = processing.run("floodmesh:buildmesh", {
+        "DEM": demo_rasters["dem"], "BOUNDARY": str(tmp_path / "domain.gpkg"),
+        "USER_LINES": str(tmp_path / "own.gpkg"), "MAX_AREA": 50.0,
+        "OUTPUT": str(tmp_path / "mesh.2dm")})
+    nodes, triangles = io.read_mesh_2dm(result["OUTPUT"])
+    assert triangle_areas(nodes, triangles).sum() == pytest.approx(domain.area, rel=1e-6)
+    assert QgsMeshLayer(result["OUTPUT"], "m", "mdal").dataProvider().faceCount() == \
+        len(triangles)
+    with pytest.raises(QgsProcessingException, match="not a valid polygon.*Fix geometries"):
+        processing.run("floodmesh:buildmesh", {
+            "DEM": demo_rasters["dem"], "BOUNDARY": str(tmp_path / "bowtie.gpkg"),
+            "OUTPUT": str(tmp_path / "bad.2dm")})
+    assert not (tmp_path / "bad.2dm").exists()
