@@ -262,6 +262,12 @@ def cmd_assess(args):
     stats = accuracy_statistics(res)
     if args.report:
         io.write_json(args.report, stats)
+    if args.png:
+        from .report import write_report_pngs
+
+        Path(args.png).mkdir(parents=True, exist_ok=True)
+        for path in write_report_pngs(args.png, nodes, triangles, xyz, res):
+            print(f"{path.name} written to {args.png}", file=sys.stderr)
     print(json.dumps(stats, indent=2))
 
 
@@ -378,6 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--points", required=True, help="check points: GeoPackage or point file")
     p.add_argument("--out", required=True, help="residuals GeoPackage")
     p.add_argument("--report", help="statistics as JSON")
+    p.add_argument("--png", metavar="DIR", help="folder for residual_histogram.png and "
+                   "residual_map.png")
     p.add_argument("--crs")
     p.set_defaults(func=cmd_assess)
 

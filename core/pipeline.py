@@ -21,10 +21,11 @@ from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
 from .options import RunOptions
+from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .slope import laplacian_of_gaussian, slope
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
-                "mesh.gpkg", "residuals.gpkg", "report.json")
+                "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG, "report.json")
 
 
 class _Steps:
@@ -119,6 +120,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         if "gpkg" not in options.formats:
             io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
         io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
+        write_report_pngs(out, mesh.nodes, mesh.triangles, holdout.xyz, res)
         if options.formats:
             return export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
                                   crs=dem.crs, breaklines=[line.coords for line in lines])
