@@ -3,7 +3,7 @@ with every intermediate written to an output folder and a report of figures and 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -69,32 +69,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     method, amount = options.simplification()
     steps = _Steps({"read": 1, "grid": 4, "slope": 1, "breakpoints": 0.5, "breaklines": 1,
                     "simplify": 0.5, "mesh": 2, "assess": 1, "write": 2}, progress, cancelled, log)
-    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes)
-    if isinstance(data, PointCloud):
-        gridding, holdout = split_holdout(data, options.holdout, options.seed)
-        dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
-                        max_gap=options.max_gap, progress=None, cancelled=cancelled)
-        holdout_source = "LiDAR points withheld from gridding"
-        n_points = len(data)
-    else:
-        dem = data  # a DEM keeps its own cell size
-        holdout = _dem_check_points(dem, options.holdout, options.seed)
-        holdout_source = "DEM cell centres (not independent of the DEM)"
-        n_points = 0
-    if options.slope_method == "log":
-        # second order: breakpoints from the LoG; the tracer still follows first-order slope
-        response = steps.run("slope", laplacian_of_gaussian, dem, options.sigma,
-                             kernel=options.log_kernel, cancelled=cancelled)
-        breakpoints = steps.run("breakpoints", log_breakpoints, response, options.sensitivity,
-                                zero_crossings=options.zero_crossings)
-        slope_grid = steps.run("tracing slope", slope, dem, "one-over-distance",
-                               cancelled=cancelled)
-    else:
-        slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
-        breakpoints = steps.run("breakpoints", classify_breakpoints, slope_grid, options.s_crit)
-    traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
-                       options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
-                       min_length=options.min_length, seed=options.seed)
+    front = trace_front(input_path, options, steps, cancelled=cancelled)
+    dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
+                                                     front.breakpoints, front.traced)
     delta = dem.cell_size / 2
     min_distance = delta if options.min_distance is None else options.min_distance
     lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
@@ -131,8 +108,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         "input": str(input_path),
         "crs": dem.crs.to_string(),
         "options": {k: v for k, v in asdict(options).items()},
-        "n_points": n_points,
-        "holdout_source": holdout_source,
+        "n_points": front.n_points,
+        "holdout_source": front.holdout_source,
         "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
                  "valid_cells": int(np.isfinite(dem.values).sum())},
         "n_breakpoints": int(breakpoints.values.sum()),
@@ -149,6 +126,53 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     }
     io.write_json(out / "report.json", _jsonable(report))
     return report
+
+
+@dataclass
+class Front:
+    """The chain up to the traced break lines: what every mesh of one input shares."""
+
+    dem: Grid
+    holdout: PointCloud      # check points: withheld LiDAR points, or DEM cell centres
+    holdout_source: str
+    n_points: int            # points read (0 for a DEM)
+    slope_grid: Grid         # first-order slope (degrees), which the tracer follows
+    breakpoints: Grid
+    traced: list             # BreakLine, before simplification
+
+
+def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, *,
+                cancelled: Callable[[], bool] | None = None) -> Front:
+    """Read, grid (holding points out), slope, breakpoints and trace, as ``options`` say; each
+    step timed through ``steps`` (a silent one if None)."""
+    steps = steps or _Steps({}, None, cancelled, None)
+    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes)
+    if isinstance(data, PointCloud):
+        gridding, holdout = split_holdout(data, options.holdout, options.seed)
+        dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
+                        max_gap=options.max_gap, progress=None, cancelled=cancelled)
+        holdout_source = "LiDAR points withheld from gridding"
+        n_points = len(data)
+    else:
+        dem = data  # a DEM keeps its own cell size
+        holdout = _dem_check_points(dem, options.holdout, options.seed)
+        holdout_source = "DEM cell centres (not independent of the DEM)"
+        n_points = 0
+    if options.slope_method == "log":
+        # second order: breakpoints from the LoG; the tracer still follows first-order slope
+        response = steps.run("slope", laplacian_of_gaussian, dem, options.sigma,
+                             kernel=options.log_kernel, cancelled=cancelled)
+        breakpoints = steps.run("breakpoints", log_breakpoints, response, options.sensitivity,
+                                zero_crossings=options.zero_crossings)
+        slope_grid = steps.run("tracing slope", slope, dem, "one-over-distance",
+                               cancelled=cancelled)
+    else:
+        slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
+        breakpoints = steps.run("breakpoints", classify_breakpoints, slope_grid, options.s_crit)
+    traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
+                       options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
+                       min_length=options.min_length, seed=options.seed)
+    return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced)
 
 
 def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
