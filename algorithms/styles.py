@@ -5,8 +5,10 @@ from qgis.core import (QgsCategorizedSymbolRenderer, QgsProcessingContext,
                        QgsRendererCategory, QgsSymbol)
 from qgis.PyQt.QtGui import QColor
 
-RESIDUAL_CLASSES = ((0, "< 10 cm", "#1a9641"), (1, "10–25 cm", "#fdae61"),
-                    (2, "> 25 cm", "#d7191c"), (-1, "outside the mesh", "#9e9e9e"))
+from ..core.options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS as COLOURS
+
+RESIDUAL_CLASSES = ((0, "< 10 cm", COLOURS[0]), (1, "10–25 cm", COLOURS[1]),
+                    (2, "> 25 cm", COLOURS[2]), (-1, "outside the mesh", OUTSIDE_MESH_COLOUR))
 
 
 def _categorised(layer, field, categories, width=None):

@@ -54,7 +54,16 @@ def _positive(kind):
     return parse
 
 
-def _add_chain_options(p: argparse.ArgumentParser):
+def _list(kind):
+    """``"400,200,100"`` → (400.0, 200.0, 100.0), each parsed by ``kind``."""
+    def parse(text):
+        return tuple(kind(item) for item in text.split(",") if item.strip())
+    return parse
+
+
+def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
+    """The chain's options; for ``series`` lists of maximum areas and simplifications instead of
+    one of each, and no solver formats."""
     p.add_argument("--crs", help="CRS of the input when it has none or a wrong one (EPSG:XXXX)")
     p.add_argument("--cell-size", type=_positive(float), default=DEFAULTS.cell_size,
                    help="grid cell size d in metres (default %(default)s)")
@@ -65,11 +74,21 @@ def _add_chain_options(p: argparse.ArgumentParser):
                    help="critical slope S_crit in degrees (default %(default)s)")
     _add_log_options(p)
     simplify = p.add_mutually_exclusive_group()
-    simplify.add_argument("--keep-every", type=int, help="keep every n-th break-line point "
-                          "(default 4)")
-    simplify.add_argument("--tolerance", type=float, help="Douglas–Peucker tolerance in metres")
-    simplify.add_argument("--spline", type=float, metavar="TOLERANCE",
-                          help="cubic smoothing spline within this many metres")
+    if series:
+        simplify.add_argument("--keep-every", type=_list(_positive(int)), default=(4,),
+                              help="keep every n-th break-line point, one mesh per n and "
+                                   "area, e.g. 2,4,8 (default 4)")
+        simplify.add_argument("--tolerances", type=_list(_positive(float)),
+                              help="Douglas–Peucker tolerances in metres, one mesh per "
+                                   "tolerance and area, e.g. 0.5,1,2")
+        p.set_defaults(tolerance=None, spline=None, formats="", max_area=DEFAULTS.max_area)
+    else:
+        simplify.add_argument("--keep-every", type=int, help="keep every n-th break-line point "
+                              "(default 4)")
+        simplify.add_argument("--tolerance", type=float,
+                              help="Douglas–Peucker tolerance in metres")
+        simplify.add_argument("--spline", type=float, metavar="TOLERANCE",
+                              help="cubic smoothing spline within this many metres")
     p.add_argument("--min-distance", type=float,
                    help="merge break lines (and vertices) closer than this, m (default d/2)")
     p.add_argument("--min-length", type=float, default=DEFAULTS.min_length,
@@ -77,8 +96,12 @@ def _add_chain_options(p: argparse.ArgumentParser):
     _add_domain_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle,
                    help="minimum triangle angle in degrees (default %(default)s)")
-    p.add_argument("--max-area", type=float, default=DEFAULTS.max_area,
-                   help="maximum triangle area in m² (default %(default)s)")
+    if series:
+        p.add_argument("--max-areas", type=_list(_positive(float)), default=(400, 200, 100, 50),
+                       help="maximum triangle areas in m², one mesh each (default 400,200,100,50)")
+    else:
+        p.add_argument("--max-area", type=float, default=DEFAULTS.max_area,
+                       help="maximum triangle area in m² (default %(default)s)")
     p.add_argument("--holdout", type=float, default=DEFAULTS.holdout,
                    help="fraction of points held out for assessment (default %(default)s)")
     p.add_argument("--seed", type=int, default=DEFAULTS.seed, help="random seed (default 0)")
@@ -86,9 +109,10 @@ def _add_chain_options(p: argparse.ArgumentParser):
                    help="longest triangle edge bridged when gridding, m (default 10 cells)")
     p.add_argument("--classes", type=lambda s: tuple(int(c) for c in s.split(",")),
                    help="LAS classes to grid, e.g. 2,9 (default: 2 when classified)")
-    p.add_argument("--formats", default="",
-                   help="solver exports written as mesh.<ext> beside mesh.2dm, comma-separated: "
-                        f"{','.join(EXPORT_FORMATS)}")
+    if not series:
+        p.add_argument("--formats", default="",
+                       help="solver exports written as mesh.<ext> beside mesh.2dm, "
+                            f"comma-separated: {','.join(EXPORT_FORMATS)}")
 
 
 def _add_domain_options(p: argparse.ArgumentParser):
@@ -144,6 +168,30 @@ def cmd_run(args):
     finally:
         bar.close()
     print(_summary(report, Path(args.out)))
+
+
+def cmd_series(args):
+    from .series import run_series, settings_grid
+
+    if args.tolerances:
+        settings = settings_grid(args.max_areas, "douglas-peucker", args.tolerances)
+    else:
+        settings = settings_grid(args.max_areas, "keep-every", args.keep_every)
+    args.keep_every = None  # the series' simplifications are in settings
+    bar = ProgressBar("series")
+    try:
+        result = run_series(args.input, args.out, _options(args), settings, log=bar.log)
+    finally:
+        bar.close()
+    print(f"{'setting':<14}{'nodes':>8}{'RMSE cm':>9}{'max cm':>8}{'>25 cm':>8}")
+    for row in result["rows"]:
+        rmse, top = row["rmse_m"], row["max_abs_m"]
+        print(f"{row['label']:<14}{row['nodes']:>8}"
+              f"{'n/a' if rmse is None else format(100 * rmse, '.1f'):>9}"
+              f"{'n/a' if top is None else format(100 * top, '.1f'):>8}"
+              f"{100 * row['share_over_25cm']:>7.1f}%")
+    print(f"series.csv, series.json, series.png and {len(result['rows'])} meshes written to "
+          f"{args.out}/")
 
 
 def cmd_demo(args):
@@ -268,6 +316,12 @@ def cmd_assess(args):
     stats = accuracy_statistics(res)
     if args.report:
         io.write_json(args.report, stats)
+    if args.png:
+        from .report import write_report_pngs
+
+        Path(args.png).mkdir(parents=True, exist_ok=True)
+        for path in write_report_pngs(args.png, nodes, triangles, xyz, res):
+            print(f"{path.name} written to {args.png}", file=sys.stderr)
     print(json.dumps(stats, indent=2))
 
 
@@ -350,6 +404,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder")
     _add_chain_options(p)
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("series", help="one mesh per maximum area and simplification, and a "
+                                      "table and plot of nodes against holdout error")
+    p.add_argument("input", help="LAS/LAZ/XYZ point file or GeoTIFF DEM")
+    p.add_argument("--out", required=True, help="output folder")
+    _add_chain_options(p, series=True)
+    p.set_defaults(func=cmd_series)
 
     p = sub.add_parser("demo", help="run the whole chain on a built-in synthetic floodplain")
     p.add_argument("--out", default="demo_output", help="output folder (default %(default)s)")
@@ -435,6 +496,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--points", required=True, help="check points: GeoPackage or point file")
     p.add_argument("--out", required=True, help="residuals GeoPackage")
     p.add_argument("--report", help="statistics as JSON")
+    p.add_argument("--png", metavar="DIR", help="folder for residual_histogram.png and "
+                   "residual_map.png")
     p.add_argument("--crs")
     p.set_defaults(func=cmd_assess)
 

@@ -12,6 +12,10 @@ BREAKPOINT_METHODS = (*SLOPE_METHOD_NAMES, "log")
 LOG_KERNELS = ("pratt", "analytic")
 TRACING_MODES = ("auto", "flat", "steep")
 SIMPLIFY_METHODS = ("keep-every", "douglas-peucker", "spline")
+# colours of the residual classes <10 cm, 10–25 cm, >25 cm and of points outside the mesh, in
+# the QGIS style (algorithms/styles.py) and the report's pictures (core/report.py)
+RESIDUAL_CLASS_COLOURS = ("#1a9641", "#fdae61", "#d7191c")
+OUTSIDE_MESH_COLOUR = "#9e9e9e"
 # solver export formats (core.export), named by the extension each writes
 EXPORT_FORMATS = ("2dm", "slf", "14", "gr3", "nc", "gpkg")
 EXPORT_EXTENSIONS = {f: f".{f}" for f in EXPORT_FORMATS}

@@ -3,7 +3,7 @@ with every intermediate written to an output folder and a report of figures and 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -22,10 +22,11 @@ from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
 from .options import RunOptions
+from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .slope import laplacian_of_gaussian, slope
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
-                "mesh.gpkg", "residuals.gpkg", "report.json")
+                "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG, "report.json")
 
 
 class _Steps:
@@ -67,8 +68,89 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     method, amount = options.simplification()
-    steps = _Steps({"read": 1, "mesh inputs": 0.1, "grid": 4, "slope": 1, "breakpoints": 0.5, "breaklines": 1,
-                    "simplify": 0.5, "mesh": 2, "assess": 1, "write": 2}, progress, cancelled, log)
+    steps = _Steps({"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
+                    "breaklines": 1, "simplify": 0.5, "mesh": 2, "assess": 1, "write": 2},
+                   progress, cancelled, log)
+    front = trace_front(input_path, options, steps, cancelled=cancelled)
+    dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
+                                                     front.breakpoints, front.traced)
+    delta = dem.cell_size / 2
+    min_distance = delta if options.min_distance is None else options.min_distance
+    lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
+                      min_distance=min_distance)
+    mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines] + front.own_lines,
+                     min_angle=options.min_angle, max_area=options.max_area,
+                     domain=front.domain)
+    res = steps.run("assess", residuals, mesh, holdout.xyz)
+
+    deviation = max_deviation(traced, lines)
+    alpha = deviation / delta if method == "keep-every" else amount / delta
+    quality = mesh_quality(mesh, min_angle=options.min_angle, max_area=options.max_area)
+    stats = accuracy_statistics(res, alpha=alpha, delta=delta)
+
+    def write_all():
+        valid = np.isfinite(dem.values)
+        io.write_raster(out / "dem.tif", dem)
+        io.write_raster(out / "slope.tif", slope_grid)
+        io.write_raster(out / "breakpoints.tif", breakpoints, valid=valid)
+        io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs)
+        # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
+        if "2dm" not in options.formats:
+            io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles)
+        if "gpkg" not in options.formats:
+            io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
+        io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
+        write_report_pngs(out, mesh.nodes, mesh.triangles, holdout.xyz, res)
+        if options.formats:
+            return export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
+                                  crs=dem.crs, breaklines=[line.coords for line in lines])
+        return []
+
+    exported = steps.run("write", write_all)
+    report = {
+        "input": str(input_path),
+        "crs": dem.crs.to_string(),
+        "options": {k: v for k, v in asdict(options).items()},
+        "n_points": front.n_points,
+        "holdout_source": front.holdout_source,
+        "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
+                 "valid_cells": int(np.isfinite(dem.values).sum())},
+        "n_breakpoints": int(breakpoints.values.sum()),
+        "n_breaklines_traced": len(traced),
+        "n_breaklines": len(lines),
+        "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
+        "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
+        "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
+                           "max_deviation_m": deviation},
+        **quality,
+        **stats,
+        "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
+        "seconds": steps.seconds,
+    }
+    io.write_json(out / "report.json", _jsonable(report))
+    return report
+
+
+@dataclass
+class Front:
+    """The chain up to the traced break lines: what every mesh of one input shares."""
+
+    dem: Grid
+    holdout: PointCloud      # check points: withheld LiDAR points, or DEM cell centres
+    holdout_source: str
+    n_points: int            # points read (0 for a DEM)
+    slope_grid: Grid         # first-order slope (degrees), which the tracer follows
+    breakpoints: Grid
+    traced: list             # BreakLine, before simplification
+    domain: object = None    # the user's domain (Multi)Polygon, None: the DEM's data
+    own_lines: list = field(default_factory=list)  # the modeller's own lines (k, 3) arrays
+
+
+def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, *,
+                cancelled: Callable[[], bool] | None = None) -> Front:
+    """Read, grid (holding points out), slope, breakpoints and trace, as ``options`` say; each
+    step timed through ``steps`` (a silent one if None)."""
+    steps = steps or _Steps({}, None, cancelled, None)
     data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes)
     if isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
@@ -97,59 +179,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
                        min_length=options.min_length, seed=options.seed)
-    delta = dem.cell_size / 2
-    min_distance = delta if options.min_distance is None else options.min_distance
-    lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
-                      min_distance=min_distance)
-    mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines] + own_lines,
-                     min_angle=options.min_angle, max_area=options.max_area, domain=domain)
-    res = steps.run("assess", residuals, mesh, holdout.xyz)
-
-    deviation = max_deviation(traced, lines)
-    alpha = deviation / delta if method == "keep-every" else amount / delta
-    quality = mesh_quality(mesh, min_angle=options.min_angle, max_area=options.max_area)
-    stats = accuracy_statistics(res, alpha=alpha, delta=delta)
-
-    def write_all():
-        valid = np.isfinite(dem.values)
-        io.write_raster(out / "dem.tif", dem)
-        io.write_raster(out / "slope.tif", slope_grid)
-        io.write_raster(out / "breakpoints.tif", breakpoints, valid=valid)
-        io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs)
-        # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
-        if "2dm" not in options.formats:
-            io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles)
-        if "gpkg" not in options.formats:
-            io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
-        io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
-        if options.formats:
-            return export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
-                                  crs=dem.crs, breaklines=[line.coords for line in lines])
-        return []
-
-    exported = steps.run("write", write_all)
-    report = {
-        "input": str(input_path),
-        "crs": dem.crs.to_string(),
-        "options": {k: v for k, v in asdict(options).items()},
-        "n_points": n_points,
-        "holdout_source": holdout_source,
-        "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
-                 "valid_cells": int(np.isfinite(dem.values).sum())},
-        "n_breakpoints": int(breakpoints.values.sum()),
-        "n_breaklines_traced": len(traced),
-        "n_breaklines": len(lines),
-        "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
-        "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
-        "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
-                           "max_deviation_m": deviation},
-        **quality,
-        **stats,
-        "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
-        "seconds": steps.seconds,
-    }
-    io.write_json(out / "report.json", _jsonable(report))
-    return report
+    return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
+                 domain, own_lines)
 
 
 def mesh_constraints(dem: Grid, boundary=None, user_lines=None):

@@ -53,7 +53,9 @@ def test_each_step_as_its_own_command(demo_points_file, tmp_path):
     floodmesh("mesh", t / "dem.tif", "--breaklines", t / "simple.gpkg", "--min-angle", 28,
               "--max-area", 50, "--out", t / "mesh.2dm", "--gpkg", t / "mesh.gpkg")
     stats = json.loads(floodmesh("assess", t / "mesh.2dm", "--points", t / "holdout.gpkg",
-                                 "--out", t / "res.gpkg").stdout)
+                                 "--out", t / "res.gpkg", "--png", t / "pics").stdout)
+    for name in ("residual_histogram.png", "residual_map.png"):
+        assert (t / "pics" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
     traced, simple = io.read_lines_gpkg(t / "lines.gpkg"), io.read_lines_gpkg(t / "simple.gpkg")
     assert len(traced) == len(simple) > 10
     assert sum(map(len, simple)) < sum(map(len, traced))

@@ -54,9 +54,9 @@ def demo_run(demo_points_file, tmp_path_factory):
 
 
 def test_all_outputs_written(demo_run):
-    """All eight OUTPUT_FILES exist and no temporary (.partial, hidden) file is left behind."""
+    """All ten OUTPUT_FILES exist and no temporary (.partial, hidden) file is left behind."""
     out, _, _, _ = demo_run
-    assert len(OUTPUT_FILES) == 8
+    assert len(OUTPUT_FILES) == 10
     names = os.listdir(out)
     assert set(OUTPUT_FILES) <= set(names)
     assert [n for n in names if "partial" in n or n.startswith(".")] == []
@@ -75,6 +75,23 @@ def test_report_json(demo_run):
     assert {"read", "grid", "slope", "breakpoints", "breaklines", "mesh", "assess", "write"} \
         <= set(written["seconds"])
     assert all(v >= 0 for v in written["seconds"].values())
+
+
+def test_report_pictures(demo_run):
+    """The run's residual histogram and map are PNGs listed in the report, the map with green
+    points (most of the demo's residuals are under 10 cm)."""
+    from matplotlib.image import imread
+
+    from floodmesh.core.options import RESIDUAL_CLASS_COLOURS
+
+    from .test_report import colour_pixels
+
+    out, report, _, _ = demo_run
+    assert {"residual_histogram.png", "residual_map.png"} <= set(report["files"])
+    for name in ("residual_histogram.png", "residual_map.png"):
+        image = imread(out / name)
+        assert image.ndim == 3 and image.shape[0] > 200
+        assert colour_pixels(image, RESIDUAL_CLASS_COLOURS[0]) > 20, name
 
 
 def test_progress_and_log(demo_run):

@@ -1,0 +1,137 @@
+"""The report's pictures: a histogram of the holdout residuals and a map of them over the mesh,
+as PNG, drawn by matplotlib's Agg renderer and written atomically (``io.atomic_output``)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from . import io
+from .accuracy import CLASS_LIMITS_M, accuracy_statistics, residual_class
+from .options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS
+
+HISTOGRAM_PNG = "residual_histogram.png"
+MAP_PNG = "residual_map.png"
+CLASS_LABELS = ("< 10 cm", "10–25 cm", "> 25 cm")
+
+
+def new_figure(width_in: float, height_in: float):
+    """A matplotlib Figure on an Agg canvas: no window, no change to pyplot's global backend
+    (which QGIS, or a user's session, may have set to Qt)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width_in, height_in), dpi=100)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_png(fig, path) -> Path:
+    """Write ``fig`` as PNG to ``path`` under a temporary name, renamed when complete."""
+    path = Path(path)
+    with io.atomic_output(path) as tmp:
+        fig.savefig(tmp, format="png")
+    return path
+
+
+def histogram_bins_cm(res_cm: np.ndarray) -> np.ndarray:
+    """Bin edges (cm) symmetric about 0, 1, 2.5 or 5 cm wide so that ±10 and ±25 cm are edges,
+    spanning 99.5 % of |res_cm| but at least ±30 and at most ±250 cm (at most 100 bins)."""
+    top = float(np.percentile(np.abs(res_cm), 99.5)) if res_cm.size else 0.0
+    limit = min(250.0, 5.0 * math.ceil(max(30.0, 1.05 * top) / 5.0))
+    width = 1.0 if limit <= 50 else 2.5 if limit <= 125 else 5.0
+    n = math.ceil(limit / width)
+    return width * np.arange(-n, n + 1)
+
+
+def write_residual_histogram(path, res: np.ndarray) -> Path:
+    """Histogram of residuals ``res`` (m; NaN = outside the mesh, counted in the title) in cm,
+    bars coloured by class, the class edges ±10 and ±25 cm dashed, RMSE, mean and n in the title.
+    Residuals beyond the outer bins are counted in the end bins; the title gives the largest."""
+    res = np.asarray(res, float)
+    stats = accuracy_statistics(res)
+    inside_cm = 100 * res[np.isfinite(res)]
+    edges = histogram_bins_cm(inside_cm)
+    counts, _ = np.histogram(np.clip(inside_cm, edges[0], edges[-1]), bins=edges)
+    centres = (edges[:-1] + edges[1:]) / 2
+    colours = [RESIDUAL_CLASS_COLOURS[k] for k in residual_class(centres / 100)]
+
+    fig = new_figure(8, 5)
+    ax = fig.add_subplot()
+    ax.bar(edges[:-1], counts, width=np.diff(edges), align="edge", color=colours,
+           edgecolor="white", linewidth=0.3)
+    for k, limit in enumerate(CLASS_LIMITS_M):
+        for sign in (-1, 1):
+            ax.axvline(sign * 100 * limit, color="0.25", linestyle="--" if k else ":",
+                       linewidth=1, label=f"±{100 * limit:.0f} cm" if sign > 0 else None)
+    if stats["n_assessed"]:
+        title = (f"n = {stats['n_assessed']}, RMSE = {100 * stats['rmse_m']:.1f} cm, "
+                 f"mean = {100 * stats['mean_m']:.1f} cm, "
+                 f"max |r| = {100 * stats['max_abs_residual_m']:.0f} cm")
+    else:
+        title = "n = 0: no held-out point inside the mesh"
+        ax.text(0.5, 0.5, "no residuals", transform=ax.transAxes, ha="center")
+    if stats["n_outside_mesh"]:
+        title += f" ({stats['n_outside_mesh']} outside the mesh)"
+    ax.set_title(title)
+    ax.set_xlabel("residual: measured − mesh (cm)")
+    ax.set_ylabel("held-out points")
+    ax.set_xlim(edges[0], edges[-1])
+    ax.legend(loc="upper right")
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
+def mesh_edges(triangles: np.ndarray) -> np.ndarray:
+    """The unique edges of ``triangles`` (m, 3) as (k, 2) node index pairs, smaller first."""
+    pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    return np.unique(np.sort(pairs, axis=1), axis=0)
+
+
+def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray,
+                       res: np.ndarray) -> Path:
+    """Map of the mesh's edges (faint grey) and the held-out points ``xyz`` (m) coloured by the
+    class of ``res`` (m): <10 cm green, 10–25 cm orange, >25 cm red, outside the mesh grey;
+    equal aspect, easting and northing in metres."""
+    from matplotlib.collections import LineCollection
+
+    res = np.asarray(res, float)
+    cls = residual_class(res)
+    lo, hi = nodes[:, :2].min(axis=0), nodes[:, :2].max(axis=0)
+    span = np.maximum(hi - lo, 1e-9)
+    scale = 9.0 / max(span)
+    fig = new_figure(max(3.0, span[0] * scale) + 1.8, max(3.0, span[1] * scale) + 1.2)
+    ax = fig.add_subplot()
+    segments = nodes[mesh_edges(np.asarray(triangles))][:, :, :2]
+    ax.add_collection(LineCollection(segments, colors="0.6", linewidths=0.3, alpha=0.6,
+                                     zorder=1))
+    size = float(np.clip(4000.0 / max(len(xyz), 1), 6.0, 25.0))
+    classes = [(-1, "outside the mesh", OUTSIDE_MESH_COLOUR)] + [
+        (k, label, colour) for k, (label, colour)
+        in enumerate(zip(CLASS_LABELS, RESIDUAL_CLASS_COLOURS))]
+    for k, label, colour in classes:
+        pick = cls == k
+        if pick.any():
+            ax.scatter(xyz[pick, 0], xyz[pick, 1], s=size, c=colour, edgecolors="none",
+                       label=f"{label} ({int(pick.sum())})", zorder=2 + (k >= 0) + k)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.ticklabel_format(useOffset=False, style="plain")
+    ax.set_xlabel("easting (m)")
+    ax.set_ylabel("northing (m)")
+    ax.set_title(f"holdout residuals on the mesh ({len(nodes)} nodes)")
+    if len(xyz):
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
+                  title="|residual|")
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
+def write_report_pngs(folder, nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray,
+                      res: np.ndarray) -> list[Path]:
+    """``residual_histogram.png`` and ``residual_map.png`` in ``folder``; returns their paths."""
+    folder = Path(folder)
+    return [write_residual_histogram(folder / HISTOGRAM_PNG, res),
+            write_residual_map(folder / MAP_PNG, nodes, triangles, xyz, res)]

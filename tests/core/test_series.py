@@ -1,0 +1,104 @@
+"""Scale series (floodmesh.core.series): one mesh per setting on the demo floodplain, the table,
+the plot and the meshes agree."""
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+
+from floodmesh.core import io
+from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.options import RunOptions
+from floodmesh.core.series import COLUMNS, Setting, run_series, settings_grid
+
+AREAS = (400.0, 100.0, 25.0)
+
+
+@pytest.fixture(scope="module")
+def series_run(demo_points_file, tmp_path_factory):
+    out = tmp_path_factory.mktemp("series")
+    steps = []
+    result = run_series(demo_points_file, out, RunOptions(holdout=0.01),
+                        settings_grid(AREAS, "keep-every", (4,)), log=steps.append)
+    return out, result, steps
+
+
+def test_smaller_triangles_give_more_nodes_and_no_larger_error(series_run):
+    _, result, steps = series_run
+    rows = result["rows"]
+    assert [r["max_area_m2"] for r in rows] == list(AREAS)
+    assert steps == [f"mesh {r['label']}..." for r in rows]
+    nodes = [r["nodes"] for r in rows]
+    rmse = [r["rmse_m"] for r in rows]
+    assert nodes[0] < nodes[1] < nodes[2]
+    # monotone within 2 mm: refinement adds nodes bilinear from the DEM
+    assert all(b <= a + 0.002 for a, b in zip(rmse, rmse[1:])), rmse
+    assert all(0 < r < 0.15 for r in rmse)
+    # the same check points for every mesh (a few at the grid's edge fall outside each)
+    assert len({r["n_assessed"] for r in rows}) == 1
+    assert 0.98 * result["n_holdout"] < rows[0]["n_assessed"] <= result["n_holdout"]
+
+
+def test_csv_and_json_agree(series_run):
+    out, result, _ = series_run
+    stored = json.loads((out / "series.json").read_text())
+    assert stored == result
+    with open(out / "series.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert list(table[0]) == list(COLUMNS)
+    assert len(table) == len(stored["rows"])
+    for line, row in zip(table, stored["rows"]):
+        assert line["label"] == row["label"]
+        assert int(line["nodes"]) == row["nodes"] and int(line["triangles"]) == row["triangles"]
+        for key in ("rmse_m", "max_abs_m", "share_over_25cm", "max_area_m2"):
+            assert float(line[key]) == pytest.approx(row[key], rel=1e-12)
+        assert line["nssda_pass"] == str(row["nssda_pass"])
+
+
+def test_each_mesh_file_has_the_tables_node_count(series_run):
+    out, result, _ = series_run
+    for row in result["rows"]:
+        nodes, triangles = io.read_mesh_2dm(out / f"mesh_{row['label']}.2dm")
+        assert (len(nodes), len(triangles)) == (row["nodes"], row["triangles"])
+        areas = 0.5 * np.abs(np.cross(nodes[triangles[:, 1], :2] - nodes[triangles[:, 0], :2],
+                                      nodes[triangles[:, 2], :2] - nodes[triangles[:, 0], :2]))
+        assert areas.max() <= row["max_area_m2"] * (1 + 1e-9)
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(result["files"])  # nothing else, no temporary file
+
+
+def test_plot_is_a_png(series_run):
+    out, _, _ = series_run
+    image = imread(out / "series.png")
+    assert image.ndim == 3 and image.shape[0] >= 300
+    assert len(np.unique((image[:, :, :3] * 255).astype(np.uint8).reshape(-1, 3), axis=0)) > 10
+
+
+def test_settings_grid_and_labels():
+    grid = settings_grid([200, 50], "douglas-peucker", [0.5, 2])
+    assert [s.label for s in grid] == ["a200-dp0.5", "a200-dp2", "a50-dp0.5", "a50-dp2"]
+    assert Setting(100.0).label == "a100-k4"
+    for bad in (([], "keep-every", [4]), ([100], "keep-every", []), ([0], "keep-every", [4]),
+                ([100], "bezier", [1])):
+        with pytest.raises(FloodMeshError):
+            settings_grid(*bad)
+
+
+def test_series_command_with_tolerances(demo_points_file, tmp_path):
+    floodmesh = str(Path(sys.executable).parent / "floodmesh")
+    out = tmp_path / "s"
+    result = subprocess.run([floodmesh, "series", str(demo_points_file), "--out", str(out),
+                             "--max-areas", "200", "--tolerances", "0.25,2", "--holdout", "0.01"],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    rows = json.loads((out / "series.json").read_text())["rows"]
+    assert [r["label"] for r in rows] == ["a200-dp0.25", "a200-dp2"]
+    assert rows[0]["nodes"] > rows[1]["nodes"]  # a tighter tolerance keeps more vertices
+    assert "a200-dp2" in result.stdout
+    bad = subprocess.run([floodmesh, "series", str(demo_points_file), "--out", str(out),
+                          "--max-areas", "0"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2
