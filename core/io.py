@@ -505,8 +505,22 @@ def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, laye
                 atomic=atomic)
 
 
+def jsonable(value):
+    """``value`` with numpy numbers as Python ones and non-finite floats as None (null)."""
+    if isinstance(value, dict):
+        return {k: jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, (np.floating, float)):
+        return None if not np.isfinite(value) else float(value)
+    return value
+
+
 def write_json(path, data: dict) -> None:
+    """Write ``data`` as indented JSON (see ``jsonable``), atomically."""
     with atomic_output(path) as tmp:
         with open(tmp, "w") as fh:
-            json.dump(data, fh, indent=2, sort_keys=False)
+            json.dump(jsonable(data), fh, indent=2, sort_keys=False)
             fh.write("\n")

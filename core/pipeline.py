@@ -127,7 +127,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
         "seconds": steps.seconds,
     }
-    io.write_json(out / "report.json", _jsonable(report))
+    io.write_json(out / "report.json", report)
     return report
 
 
@@ -208,14 +208,3 @@ def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
     x, y = dem.cell_centres(rows[pick], cols[pick])
     return PointCloud(np.column_stack([x, y, dem.values[rows[pick], cols[pick]]]), dem.crs)
 
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (np.floating, float)):
-        return None if not np.isfinite(value) else float(value)
-    return value

@@ -136,7 +136,7 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
     mesh and assess once per setting; write ``SERIES_FILES`` and ``mesh_<label>.2dm`` per row
     into ``out_dir``. Returns the series.json content."""
     from .accuracy import nssda_threshold_m
-    from .pipeline import _jsonable, trace_front
+    from .pipeline import trace_front
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -157,6 +157,5 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
               "n_holdout": len(front.holdout), "holdout_source": front.holdout_source,
               "n_breaklines_traced": len(front.traced), "rows": rows,
               "files": [*SERIES_FILES, *(f"mesh_{r['label']}.2dm" for r in rows)]}
-    result = _jsonable(result)
     io.write_json(out / "series.json", result)
-    return result
+    return io.jsonable(result)
