@@ -16,9 +16,11 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             "34) and no triangle above the maximum area (m², default 100). Break-line vertices "
             "keep their z; other nodes take z bilinearly from the DEM. A model domain polygon "
             "(with holes for buildings or islands) replaces the data's extent; your own lines "
-            "are kept as mesh edges. Writes SMS 2DM and, optionally, the triangles as "
+            "are kept as mesh edges. A size field raster (m², nodata: no limit) sets a local "
+            "maximum area. Writes SMS 2DM and, optionally, the triangles as "
             "PolygonZ.")
     DEM, BREAKLINES, MIN_ANGLE, MAX_AREA = "DEM", "BREAKLINES", "MIN_ANGLE", "MAX_AREA"
+    SIZE_FIELD = "SIZE_FIELD"
     OUTPUT, TRIANGLES, NODES, TRIANGLE_COUNT = "OUTPUT", "TRIANGLES", "NODES", "TRIANGLE_COUNT"
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -33,6 +35,8 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_AREA, self.tr("Maximum triangle area (m²)"),
             QgsProcessingParameterNumber.Double, 100.0, minValue=0.0001))
+        self.addParameter(QgsProcessingParameterRasterLayer(
+            self.SIZE_FIELD, self.tr("Size field: local maximum area (m²)"), optional=True))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, self.tr("Mesh (SMS 2DM)"), fileFilter="SMS 2DM (*.2dm)"))
         self.addParameter(QgsProcessingParameterVectorDestination(
@@ -44,7 +48,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
     def process(self, parameters, context, feedback):
         from ..core import io
         from ..core.mesh import build_mesh, mesh_quality
-        from ..core.pipeline import mesh_constraints
+        from ..core.pipeline import mesh_constraints, size_field
 
         dem = run_core(io.read_raster, layer_file(
             self.parameterAsRasterLayer(parameters, self.DEM, context), "DEM"))
@@ -55,8 +59,11 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         max_area = self.parameterAsDouble(parameters, self.MAX_AREA, context)
         domain, own_lines = run_core(mesh_constraints, dem, *domain_files(self, parameters,
                                                                           context))
+        size_layer = self.parameterAsRasterLayer(parameters, self.SIZE_FIELD, context)
+        size = (run_core(size_field, layer_file(size_layer, "Size field"), dem,
+                         max_area=max_area) if size_layer is not None else None)
         mesh = run_core(build_mesh, dem, lines + own_lines, min_angle=min_angle,
-                        max_area=max_area, domain=domain)
+                        max_area=max_area, domain=domain, size_field=size)
         quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)
         feedback.pushInfo(f"{quality['nodes']} nodes, {quality['triangles']} triangles, smallest "
                           f"angle {quality['min_angle_deg']:.2f}°, largest area "

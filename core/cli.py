@@ -102,6 +102,7 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
     else:
         p.add_argument("--max-area", type=float, default=DEFAULTS.max_area,
                        help="maximum triangle area in m² (default %(default)s)")
+        _add_size_options(p)
     p.add_argument("--holdout", type=float, default=DEFAULTS.holdout,
                    help="fraction of points held out for assessment (default %(default)s)")
     p.add_argument("--seed", type=int, default=DEFAULTS.seed, help="random seed (default 0)")
@@ -113,6 +114,14 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
         p.add_argument("--formats", default="",
                        help="solver exports written as mesh.<ext> beside mesh.2dm, "
                             f"comma-separated: {','.join(EXPORT_FORMATS)}")
+
+
+def _add_size_options(p: argparse.ArgumentParser):
+    p.add_argument("--size-field", metavar="RASTER|slope",
+                   help="local maximum triangle areas: a raster of m², or 'slope' (max area on "
+                        "flat ground down to --min-area where the slope reaches S_crit)")
+    p.add_argument("--min-area", type=float,
+                   help="smallest area of the slope size field, m² (default max area / 25)")
 
 
 def _add_domain_options(p: argparse.ArgumentParser):
@@ -143,6 +152,8 @@ def _options(args) -> RunOptions:
                       keep_every=args.keep_every, tolerance=args.tolerance, spline=args.spline,
                       min_distance=args.min_distance, min_length=args.min_length,
                       boundary=args.boundary, user_lines=args.user_lines,
+                      size_field=getattr(args, "size_field", None),
+                      min_area=getattr(args, "min_area", None),
                       min_angle=args.min_angle, max_area=args.max_area, holdout=args.holdout,
                       seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes,
                       formats=parse_formats(args.formats))
@@ -287,13 +298,14 @@ def cmd_simplify(args):
 def cmd_mesh(args):
     from . import io
     from .mesh import build_mesh, mesh_quality
-    from .pipeline import mesh_constraints
+    from .pipeline import mesh_constraints, size_field
 
     dem = io.read_raster(args.dem, crs=args.crs)
     lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
     domain, own_lines = mesh_constraints(dem, args.boundary, args.user_lines)
+    size = size_field(args.size_field, dem, max_area=args.max_area, min_area=args.min_area)
     mesh = build_mesh(dem, lines + own_lines, min_angle=args.min_angle, max_area=args.max_area,
-                      domain=domain)
+                      domain=domain, size_field=size)
     io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles)
     if args.gpkg:
         io.write_mesh_gpkg(args.gpkg, mesh.nodes, mesh.triangles, dem.crs)
@@ -484,6 +496,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dem")
     p.add_argument("--breaklines")
     _add_domain_options(p)
+    _add_size_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle)
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area)
     p.add_argument("--out", required=True, help="SMS 2DM mesh")

@@ -175,13 +175,16 @@ def _drop_small_angles(vertices, segments, fixed, limit):
 
 def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
                      conforming: bool = True, points: np.ndarray | None = None,
-                     local_areas: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     local_areas: np.ndarray | None = None,
+                     size_field=None) -> tuple[np.ndarray, np.ndarray]:
     """Quality triangulation of a PSLG with Triangle (Shewchuk 1996, doi:10.1007/BFb0014497).
 
     No angle below ``min_angle`` degrees (except at small input angles), no triangle above
     ``max_area`` m²; ``conforming`` asks for a conforming Delaunay triangulation (switch D).
     ``points`` (k, 2) become mesh vertices too; ``local_areas`` (k, 3) rows of x, y, area (m²)
-    then refine (switch r) the triangles holding such a point to at most that area.
+    then refine (switch r) the triangles holding such a point to at most that area, and
+    ``size_field(x, y)`` (m², NaN: no limit) those whose centroid or corners lie where it asks
+    for less than their area.
     Returns vertices (n, 2), the PSLG's vertices first, then ``points``, and triangles (m, 3).
     """
     import triangle
@@ -202,18 +205,41 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     if "triangles" not in result or len(result["triangles"]) == 0:
         raise FloodMeshError("Triangle produced no triangles: the domain boundary is not closed "
                              "or a hole point lies outside its hole")
-    if local_areas is not None and len(local_areas):
+    has_local = local_areas is not None and len(local_areas)
+    for _ in range(12 if (has_local or size_field is not None) else 0):
         xy, tris = result["vertices"], result["triangles"]
         limit = np.full(len(tris), float(max_area))
-        found = _containing_triangle(xy, tris, local_areas[:, :2] - origin)
-        inside = found >= 0
-        np.minimum.at(limit, found[inside], local_areas[inside, 2])
+        if has_local:
+            found = _containing_triangle(xy, tris, local_areas[:, :2] - origin)
+            inside = found >= 0
+            np.minimum.at(limit, found[inside], local_areas[inside, 2])
+        if size_field is not None:
+            corners = xy[tris] + origin
+            at = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)
+            wanted = np.asarray(size_field(at[..., 0].ravel(), at[..., 1].ravel()), float)
+            wanted = np.where(np.isfinite(wanted), wanted, np.inf).reshape(-1, 4).min(axis=1)
+            if (wanted <= 0).any():
+                raise FloodMeshError("the size field asks for triangles of 0 m² or less; give "
+                                     "positive maximum areas (NaN where there is no limit)")
+            limit = np.minimum(limit, wanted)
+        if (triangle_areas(xy, tris) <= limit * (1 + 1e-9)).all():
+            break
         refine = {"vertices": xy, "triangles": tris, "segments": result["segments"],
                   "triangle_max_area": limit[:, None]}
         if len(pslg.holes):
             refine["holes"] = data["holes"]
         result = triangle.triangulate(refine, f"rp{quality}a")
     return result["vertices"] + origin, result["triangles"].astype(np.int64)
+
+
+def size_from_slope(slope: Grid, *, max_area: float, min_area: float, s_crit: float) -> Grid:
+    """A size field (local maximum triangle area, m²) from slope (degrees): ``max_area`` on
+    flat ground, falling geometrically to ``min_area`` where the slope reaches ``s_crit``."""
+    if not 0 < min_area <= max_area:
+        raise FloodMeshError(f"the size field needs 0 < minimum area <= maximum area, got "
+                             f"{min_area} and {max_area} m²")
+    t = np.clip(slope.values / s_crit, 0.0, 1.0)
+    return slope.with_values(max_area * (min_area / max_area) ** t)
 
 
 def _containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -227,10 +253,11 @@ def _containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarr
 def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
                max_area: float = 100.0, conforming: bool = True, snap: float | None = None,
                domain=None, points: np.ndarray | None = None,
-               local_areas: np.ndarray | None = None) -> Mesh:
+               local_areas: np.ndarray | None = None, size_field: Grid | None = None) -> Mesh:
     """Mesh the DEM's valid area honouring the break lines; node z from the lines where a node is
     a break-line vertex, from ``points`` (k, 3: measurements put into the TIN) at theirs, else
-    bilinear from the DEM. ``local_areas`` (x, y, m²) refine locally (see triangulate_pslg)."""
+    bilinear from the DEM. ``local_areas`` (x, y, m²) refine locally; ``size_field`` is a grid of
+    local maximum areas (m², NaN: no limit; see ``size_from_slope``)."""
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
     pslg = build_pslg(lines, domain, snap=snap)
@@ -238,7 +265,9 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
         points = _points_apart(np.asarray(points, float), pslg.vertices, domain, snap)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
                                            conforming=conforming, points=points,
-                                           local_areas=local_areas)
+                                           local_areas=local_areas,
+                                           size_field=None if size_field is None else
+                                           lambda x, y: _nearest_value(size_field, x, y))
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
     if points is not None and len(points):
         z[len(pslg.vertices):len(pslg.vertices) + len(points)] = points[:, 2]
@@ -254,6 +283,16 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
                              "data; check the domain against the DEM's nodata")
     return Mesh(np.column_stack([vertices, z]), _counter_clockwise(vertices, triangles), dem.crs,
                 pslg.segments.astype(np.int64))
+
+
+def _nearest_value(grid: Grid, x, y) -> np.ndarray:
+    """The grid's value in the cell holding each point (NaN outside the grid)."""
+    r, c = grid.fractional_index(x, y)
+    r, c = np.rint(r).astype(np.int64), np.rint(c).astype(np.int64)
+    inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
+    out = np.full(np.shape(r), np.nan)
+    out[inside] = grid.values[r[inside], c[inside]]
+    return out
 
 
 def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float) -> np.ndarray:

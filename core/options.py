@@ -66,6 +66,8 @@ class RunOptions:
     min_length: float = 0.0         # m; shorter break lines are dropped
     crs: str | None = None
     classes: tuple[int, ...] | None = None
+    size_field: str | None = None   # raster of local maximum areas (m²), or "slope"
+    min_area: float | None = None   # m², the slope size field's smallest (default max_area/25)
     boundary: str | None = None     # polygon file: the model domain (holes allowed)
     user_lines: str | None = None   # line file: the modeller's own break / structure lines
     formats: tuple[str, ...] = ()   # solver exports written beside mesh.2dm (EXPORT_FORMATS)

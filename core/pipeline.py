@@ -17,7 +17,7 @@ from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import grid_points_linear
-from .mesh import build_mesh, mesh_quality, user_domain
+from .mesh import build_mesh, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
@@ -78,9 +78,11 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     min_distance = delta if options.min_distance is None else options.min_distance
     lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
                       min_distance=min_distance)
+    size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
+                      min_area=options.min_area, s_crit=options.s_crit)
     mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines] + front.own_lines,
                      min_angle=options.min_angle, max_area=options.max_area,
-                     domain=front.domain)
+                     domain=front.domain, size_field=size)
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
     deviation = max_deviation(traced, lines)
@@ -181,6 +183,24 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
                  domain, own_lines)
+
+
+def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: float,
+               min_area: float | None = None, s_crit: float = 10.0) -> Grid | None:
+    """The size field a user asked for: None, "slope" (from ``slope_grid``, or the DEM's
+    one-over-distance slope; ``min_area`` defaults to ``max_area``/25) or a raster file of local
+    maximum areas (m²) in the DEM's CRS."""
+    if source is None:
+        return None
+    if source == "slope":
+        slope_grid = slope(dem, "one-over-distance") if slope_grid is None else slope_grid
+        return size_from_slope(slope_grid, max_area=max_area, s_crit=s_crit,
+                               min_area=max_area / 25 if min_area is None else min_area)
+    field = io.read_raster(source, crs=dem.crs)
+    if not field.crs.equals(dem.crs, ignore_axis_order=True):
+        raise FloodMeshError(f"the size field {Path(source).name} is in {field.crs.name}, the "
+                             f"DEM in {dem.crs.name}; reproject it to the DEM's CRS")
+    return field
 
 
 def mesh_constraints(dem: Grid, boundary=None, user_lines=None):

@@ -149,3 +149,28 @@ def test_tracing_and_simplification_options(demo_points_file, tmp_path):
     # within the tolerance, plus the minimum distance (d/2) where lines or vertices merged
     assert report["simplification"]["max_deviation_m"] <= 0.9 + 0.5 + 1e-9
     assert report["n_below_min_angle"] == 0
+
+
+def test_mesh_and_run_with_a_size_field(demo_points_file, tmp_path):
+    """mesh --size-field slope refines steep ground (more nodes, smaller triangles where the
+    slope is steep); a size-field raster is honoured; run --size-field slope reports it."""
+    from floodmesh.core.mesh import triangle_areas
+
+    t = tmp_path
+    floodmesh("grid", demo_points_file, "--cell-size", 1, "--out", t / "dem.tif")
+    floodmesh("mesh", t / "dem.tif", "--max-area", 100, "--out", t / "plain.2dm")
+    floodmesh("mesh", t / "dem.tif", "--max-area", 100, "--size-field", "slope",
+              "--min-area", 4, "--out", t / "sloped.2dm")
+    plain, _ = io.read_mesh_2dm(t / "plain.2dm")
+    nodes, tris = io.read_mesh_2dm(t / "sloped.2dm")
+    assert len(nodes) > 2 * len(plain)
+    dem = io.read_raster(t / "dem.tif")
+    io.write_raster(t / "size.tif", dem.with_values(np.full(dem.shape, 9.0)))
+    floodmesh("mesh", t / "dem.tif", "--max-area", 100, "--size-field", t / "size.tif",
+              "--out", t / "sized.2dm")
+    nodes, tris = io.read_mesh_2dm(t / "sized.2dm")
+    assert triangle_areas(nodes, tris).max() <= 9 * (1 + 1e-9)
+    floodmesh("run", demo_points_file, "--out", t / "run", "--size-field", "slope",
+              "--holdout", 0.01)
+    report = json.loads((t / "run" / "report.json").read_text())
+    assert report["options"]["size_field"] == "slope" and report["nodes"] > 1.5 * len(plain)

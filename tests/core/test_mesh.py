@@ -275,3 +275,40 @@ def test_bad_boundaries_are_refused(plane_mesh, tmp_path, polygon, words):
     _write_polygons(tmp_path / "other.gpkg", [shapely.box(0, 0, 1, 1)], crs="EPSG:32633")
     with pytest.raises(FloodMeshError, match="reproject it"):
         mesh_constraints(dem, tmp_path / "other.gpkg")
+
+
+def test_size_field_sets_the_local_maximum_area(plane_mesh):
+    """A size raster asking for 2 m² on the western half and nothing (NaN) on the eastern: every
+    triangle meets the field at its centroid and corners, the west is refined and the east keeps
+    the global maximum; a slope-driven field is smallest where the slope is steepest."""
+    from floodmesh.core.mesh import _nearest_value, size_from_slope
+    from floodmesh.core.slope import slope
+
+    dem, lines, coarse = plane_mesh
+    field = np.full(dem.shape, np.nan)
+    field[:, : dem.shape[1] // 2] = 2.0
+    size = dem.with_values(field)
+    mesh = build_mesh(dem, lines, min_angle=25, max_area=20, size_field=size)
+    areas = triangle_areas(mesh.nodes, mesh.triangles)
+    corners = mesh.nodes[mesh.triangles][:, :, :2]
+    at = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)
+    wanted = np.nanmin(np.where(np.isnan(v := _nearest_value(size, at[..., 0].ravel(),
+                                                            at[..., 1].ravel())), np.inf, v)
+                       .reshape(-1, 4), axis=1)
+    assert (areas <= np.minimum(wanted, 20) * (1 + 1e-9)).all()
+    centre_x = mesh.nodes[mesh.triangles][:, :, 0].mean(axis=1)
+    west = centre_x < dem.transform.c + dem.shape[1] / 2 * dem.cell_size - 3
+    assert areas[west].max() <= 2 + 1e-9 and areas[~west].max() > 10
+    assert len(mesh.nodes) > 3 * len(coarse.nodes)
+    assert mesh_quality(mesh, min_angle=25, max_area=20)["n_below_min_angle"] == 0
+
+    # z = x²/100: slope rises from 0 at the west edge past 10° at x = 8.8 m
+    x = np.arange(dem.shape[1]) * dem.cell_size
+    bowl = dem.with_values(np.tile(x ** 2 / 100, (dem.shape[0], 1)))
+    by_slope = size_from_slope(slope(bowl), max_area=100, min_area=4, s_crit=10)
+    row = by_slope.values[dem.shape[0] // 2, 1:-1]
+    assert (np.diff(row) <= 1e-9).all(), "the size does not fall as the slope rises"
+    assert row[0] > 50 and row[-1] == pytest.approx(4)
+    from floodmesh.core.errors import FloodMeshError
+    with pytest.raises(FloodMeshError, match="size field"):
+        build_mesh(dem, lines, max_area=20, size_field=dem.with_values(np.zeros(dem.shape)))

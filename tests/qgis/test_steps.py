@@ -246,12 +246,15 @@ def test_build_mesh_with_a_domain_polygon_and_own_lines(processing, demo_rasters
     io.write_lines_gpkg(tmp_path / "own.gpkg", [np.array([[x0 + 30, y0 + 30],
                                                          [x0 + 190, y0 + 90]])],
                         io.read_raster(demo_rasters["dem"]).crs, layer="own")
+    dem = io.read_raster(demo_rasters["dem"])
+    io.write_raster(tmp_path / "size.tif", dem.with_values(np.full(dem.shape, 12.0)))
     result = processing.run("floodmesh:buildmesh", {
         "DEM": demo_rasters["dem"], "BOUNDARY": str(tmp_path / "domain.gpkg"),
         "USER_LINES": str(tmp_path / "own.gpkg"), "MAX_AREA": 50.0,
-        "OUTPUT": str(tmp_path / "mesh.2dm")})
+        "SIZE_FIELD": str(tmp_path / "size.tif"), "OUTPUT": str(tmp_path / "mesh.2dm")})
     nodes, triangles = io.read_mesh_2dm(result["OUTPUT"])
     assert triangle_areas(nodes, triangles).sum() == pytest.approx(domain.area, rel=1e-6)
+    assert triangle_areas(nodes, triangles).max() <= 12 * (1 + 1e-9)
     assert QgsMeshLayer(result["OUTPUT"], "m", "mdal").dataProvider().faceCount() == \
         len(triangles)
     with pytest.raises(QgsProcessingException, match="not a valid polygon.*Fix geometries"):
