@@ -11,6 +11,7 @@ test: setup
 	bash scripts/test.sh
 
 bench: setup
+	.venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -e ".[test,bench]"
 	.venv/bin/python benchmarks/run.py
 
 plugin-zip: setup

@@ -194,14 +194,71 @@ def bench_mesh():
     coords = [line.coords for line in simplify_keep_every(lines, 4)]
     print("\n## Break-line mesh vs uniform mesh on the demo floodplain (25°)")
     print(f"{'mesh':<34}{'max area':>9}{'nodes':>8}{'RMSE cm':>9}{'max cm':>8}")
+    results = {}
     for label, lines_used, areas in (("break lines (FloodMesh)", coords, (100, 50)),
                                      ("uniform, no break lines (peer)", [], (100, 25, 10, 5, 2))):
         for area in areas:
             mesh = build_mesh(dem, lines_used, min_angle=25, max_area=area)
             r = residuals(mesh, holdout.xyz)
             r = r[np.isfinite(r)]
-            print(f"{label:<34}{area:>9}{len(mesh.nodes):>8}{100 * np.sqrt(np.mean(r ** 2)):>9.1f}"
+            rmse = float(np.sqrt(np.mean(r ** 2)))
+            results.setdefault(label, []).append((len(mesh.nodes), rmse))
+            print(f"{label:<34}{area:>9}{len(mesh.nodes):>8}{100 * rmse:>9.1f}"
                   f"{100 * np.abs(r).max():>8.1f}")
+    ours, uniform = results["break lines (FloodMesh)"][0], results["uniform, no break lines (peer)"]
+    nodes_u, rmse_u = np.array([u[0] for u in uniform]), np.array([u[1] for u in uniform])
+    order = np.argsort(rmse_u)
+    # uniform nodes at our RMSE, interpolated in log-log between the two neighbouring meshes
+    needed = np.exp(np.interp(np.log(ours[1]), np.log(rmse_u[order]), np.log(nodes_u[order])))
+    print(f"uniform nodes for the break-line mesh's {100 * ours[1]:.1f} cm: about {needed:,.0f}, "
+          f"{needed / ours[0]:.1f}x the break-line mesh's {ours[0]:,} (bar: 3x)")
+    bench_delatin(dem, coords, holdout)
+
+
+def bench_delatin(dem, coords, holdout):
+    """The break-line mesh against a pure terrain-approximation TIN (pydelatin: greedy point
+    insertion, no angle bound) allowed the same maximum vertical error against the DEM."""
+    from floodmesh.core.accuracy import residuals
+    from floodmesh.core.mesh import Mesh, build_mesh, triangle_angles
+
+    try:
+        from pydelatin import Delatin
+    except ImportError:
+        print("\n(pydelatin is not installed: pip install pydelatin for the TIN comparison)")
+        return
+    mesh = build_mesh(dem, coords, min_angle=25, max_area=100)
+    rows, cols = np.indices(dem.shape)
+    x, y = dem.cell_centres(rows.ravel(), cols.ravel())
+    cells = np.column_stack([x, y, dem.values.ravel()])
+    cells = cells[np.isfinite(cells[:, 2])]
+    max_error = float(np.nanmax(np.abs(residuals(mesh, cells))))
+    z = np.where(np.isfinite(dem.values), dem.values, np.nanmean(dem.values)).astype(np.float32)
+
+    def delatin(error):
+        tin = Delatin(z, width=dem.shape[1], height=dem.shape[0], max_error=error)
+        # pydelatin's y counts rows from the bottom
+        vx, vy = dem.cell_centres(dem.shape[0] - 1 - tin.vertices[:, 1], tin.vertices[:, 0])
+        return Mesh(np.column_stack([vx, vy, tin.vertices[:, 2]]),
+                    tin.triangles.astype(np.int64), dem.crs)
+
+    def rmse(m):
+        r = residuals(m, holdout.xyz)
+        return float(np.sqrt(np.nanmean(r ** 2)))
+
+    ours = rmse(mesh)
+    lo, hi = 0.001, max_error  # bisection for pydelatin's error giving our holdout RMSE
+    for _ in range(12):
+        mid = np.sqrt(lo * hi)
+        lo, hi = (mid, hi) if rmse(delatin(mid)) < ours else (lo, mid)
+    print("\n## Against a terrain-approximation TIN (pydelatin: greedy insertion, no angle bound)")
+    print(f"{'mesh':<44}{'nodes':>8}{'RMSE cm':>9}{'min angle':>11}")
+    for label, m in (("break lines + Triangle (FloodMesh)", mesh),
+                     (f"pydelatin, same max error ({100 * max_error:.0f} cm)", delatin(max_error)),
+                     ("pydelatin, same holdout RMSE", delatin(lo))):
+        angle = triangle_angles(m.nodes, m.triangles).min()
+        print(f"{label:<44}{len(m.nodes):>8}{100 * rmse(m):>9.1f}{angle:>10.1f}°")
+        if label.startswith("pydelatin"):
+            print(f"{'':<4}node ratio pydelatin / FloodMesh: {len(m.nodes) / len(mesh.nodes):.2f}")
 
 
 def main():
