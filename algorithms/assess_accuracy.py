@@ -6,6 +6,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterVectorDestination)
 
 from .base import FloodMeshAlgorithm, layer_file, run_core
+from .styles import style_residuals, style_when_loaded
 
 
 class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
@@ -44,6 +45,7 @@ class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
         res = residuals(Mesh(nodes, triangles, crs), xyz)
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
         run_core(io.write_residuals, out, xyz, res, crs)
+        style_when_loaded(context, out, style_residuals)
         stats = accuracy_statistics(res)
         feedback.pushInfo(json.dumps(stats, indent=1))
         results = {self.OUTPUT: out, self.RMSE: stats["rmse_m"]}

@@ -262,3 +262,29 @@ def test_build_mesh_with_a_domain_polygon_and_own_lines(processing, demo_rasters
             "DEM": demo_rasters["dem"], "BOUNDARY": str(tmp_path / "bowtie.gpkg"),
             "OUTPUT": str(tmp_path / "bad.2dm")})
     assert not (tmp_path / "bad.2dm").exists()
+
+
+def test_assess_accuracy_loads_residuals_styled_by_class(processing, demo_rasters, tmp_path):
+    """Assess accuracy from the toolbox: the residual points load with the three classes (and
+    outside-the-mesh) as categories of the class field."""
+    from qgis.core import QgsCategorizedSymbolRenderer, QgsProject
+
+    from floodmesh.core import demo
+
+    mesh = processing.run("floodmesh:buildmesh", {"DEM": demo_rasters["dem"], "MAX_AREA": 400.0,
+                                                  "OUTPUT": str(tmp_path / "coarse.2dm")})
+    rng = np.random.default_rng(1)
+    xy = rng.uniform([1, 1], [299, 239], (500, 2))
+    xyz = np.column_stack([xy + np.array(demo.DEMO_ORIGIN), demo.ground_elevation(*xy.T)])
+    io.write_points_gpkg(tmp_path / "check.gpkg", xyz, io.read_raster(demo_rasters["dem"]).crs)
+    QgsProject.instance().clear()
+    processing.runAndLoadResults("floodmesh:assessaccuracy", {
+        "MESH": mesh["OUTPUT"], "POINTS": str(tmp_path / "check.gpkg"),
+        "OUTPUT": str(tmp_path / "residuals.gpkg")})
+    layer = _loaded("Residuals")
+    renderer = layer.renderer()
+    assert isinstance(renderer, QgsCategorizedSymbolRenderer) and renderer.classAttribute() == "class"
+    assert {c.value() for c in renderer.categories()} == {0, 1, 2, -1}
+    classes = {f["class"] for f in layer.getFeatures()}
+    assert {0, 2} <= classes  # a 400 m² mesh misses the banks: some residuals over 25 cm
+    QgsProject.instance().clear()
