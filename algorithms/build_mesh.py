@@ -1,10 +1,11 @@
 """Build mesh: break lines and the DEM's extent as a PSLG, refined by Triangle."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
+from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
                        QgsProcessingParameterVectorDestination)
 
 from .base import FloodMeshAlgorithm, add_domain_parameters, domain_files, layer_file, run_core
+from .styles import load_on_completion, style_mesh
 
 
 class BuildMeshAlgorithm(FloodMeshAlgorithm):
@@ -70,6 +71,9 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
                           f"{quality['max_area_m2']:.1f} m²")
         out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         run_core(io.write_mesh_2dm, out, mesh.nodes, mesh.triangles)
+        layer = QgsMeshLayer(out, "Mesh", "mdal")
+        load_on_completion(context, layer, self.OUTPUT)
+        style_mesh(layer)
         results = {self.OUTPUT: out, self.NODES: quality["nodes"],
                    self.TRIANGLE_COUNT: quality["triangles"]}
         triangles_out = self.parameterAsOutputLayer(parameters, self.TRIANGLES, context)

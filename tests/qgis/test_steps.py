@@ -264,15 +264,21 @@ def test_build_mesh_with_a_domain_polygon_and_own_lines(processing, demo_rasters
     assert not (tmp_path / "bad.2dm").exists()
 
 
-def test_assess_accuracy_loads_residuals_styled_by_class(processing, demo_rasters, tmp_path):
-    """Assess accuracy from the toolbox: the residual points load with the three classes (and
-    outside-the-mesh) as categories of the class field."""
+def test_build_mesh_and_assess_accuracy_load_styled(processing, demo_rasters, tmp_path):
+    """From the toolbox, Build mesh loads its mesh as a mesh layer shaded by elevation, and
+    Assess accuracy loads the residual points with the three classes (and outside-the-mesh) as
+    categories of the class field."""
     from qgis.core import QgsCategorizedSymbolRenderer, QgsProject
 
     from floodmesh.core import demo
 
-    mesh = processing.run("floodmesh:buildmesh", {"DEM": demo_rasters["dem"], "MAX_AREA": 400.0,
-                                                  "OUTPUT": str(tmp_path / "coarse.2dm")})
+    QgsProject.instance().clear()
+    mesh = processing.runAndLoadResults("floodmesh:buildmesh", {
+        "DEM": demo_rasters["dem"], "MAX_AREA": 400.0, "OUTPUT": str(tmp_path / "coarse.2dm")})
+    loaded = _loaded("Mesh")  # Build mesh loads its mesh, shaded by elevation
+    assert isinstance(loaded, QgsMeshLayer) and loaded.dataProvider().vertexCount() == \
+        mesh["NODES"]
+    assert loaded.rendererSettings().activeScalarDatasetGroup() == 0
     rng = np.random.default_rng(1)
     xy = rng.uniform([1, 1], [299, 239], (500, 2))
     xyz = np.column_stack([xy + np.array(demo.DEMO_ORIGIN), demo.ground_elevation(*xy.T)])
