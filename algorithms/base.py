@@ -107,3 +107,19 @@ def domain_files(algorithm, parameters, context) -> tuple:
         return layer_file(layer, what) if layer is not None else None
 
     return path(BOUNDARY, "Model domain polygon"), path(USER_LINES, "Own lines")
+
+
+def read_mesh_inputs(algorithm, parameters, context) -> tuple:
+    """(DEM, break lines plus own lines, domain) from the DEM, BREAKLINES, BOUNDARY and
+    USER_LINES parameters of a meshing algorithm."""
+    from ..core import io
+    from ..core.pipeline import mesh_constraints
+
+    dem = run_core(io.read_raster, layer_file(
+        algorithm.parameterAsRasterLayer(parameters, "DEM", context), "DEM"))
+    lines_layer = algorithm.parameterAsVectorLayer(parameters, "BREAKLINES", context)
+    lines = (run_core(io.read_lines_gpkg, layer_file(lines_layer, "Break lines"))
+             if lines_layer is not None else [])
+    domain, own_lines = run_core(mesh_constraints, dem,
+                                 *domain_files(algorithm, parameters, context))
+    return dem, lines + own_lines, domain

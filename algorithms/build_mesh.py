@@ -1,11 +1,12 @@
 """Build mesh: break lines and the DEM's extent as a PSLG, refined by Triangle."""
-from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputNumber,
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
                        QgsProcessingParameterVectorDestination)
 
-from .base import FloodMeshAlgorithm, add_domain_parameters, domain_files, layer_file, run_core
-from .styles import load_on_completion, style_mesh
+from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, read_mesh_inputs,
+                   run_core)
+from .styles import load_mesh
 
 
 class BuildMeshAlgorithm(FloodMeshAlgorithm):
@@ -49,21 +50,15 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
     def process(self, parameters, context, feedback):
         from ..core import io
         from ..core.mesh import build_mesh, mesh_quality
-        from ..core.pipeline import mesh_constraints, size_field
+        from ..core.pipeline import size_field
 
-        dem = run_core(io.read_raster, layer_file(
-            self.parameterAsRasterLayer(parameters, self.DEM, context), "DEM"))
-        lines_layer = self.parameterAsVectorLayer(parameters, self.BREAKLINES, context)
-        lines = (run_core(io.read_lines_gpkg, layer_file(lines_layer, "Break lines"))
-                 if lines_layer is not None else [])
+        dem, lines, domain = read_mesh_inputs(self, parameters, context)
         min_angle = self.parameterAsDouble(parameters, self.MIN_ANGLE, context)
         max_area = self.parameterAsDouble(parameters, self.MAX_AREA, context)
-        domain, own_lines = run_core(mesh_constraints, dem, *domain_files(self, parameters,
-                                                                          context))
         size_layer = self.parameterAsRasterLayer(parameters, self.SIZE_FIELD, context)
         size = (run_core(size_field, layer_file(size_layer, "Size field"), dem,
                          max_area=max_area) if size_layer is not None else None)
-        mesh = run_core(build_mesh, dem, lines + own_lines, min_angle=min_angle,
+        mesh = run_core(build_mesh, dem, lines, min_angle=min_angle,
                         max_area=max_area, domain=domain, size_field=size)
         quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)
         feedback.pushInfo(f"{quality['nodes']} nodes, {quality['triangles']} triangles, smallest "
@@ -71,9 +66,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
                           f"{quality['max_area_m2']:.1f} m²")
         out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         run_core(io.write_mesh_2dm, out, mesh.nodes, mesh.triangles)
-        layer = QgsMeshLayer(out, "Mesh", "mdal")
-        load_on_completion(context, layer, self.OUTPUT)
-        style_mesh(layer)
+        load_mesh(context, out, "Mesh", self.OUTPUT)
         results = {self.OUTPUT: out, self.NODES: quality["nodes"],
                    self.TRIANGLE_COUNT: quality["triangles"]}
         triangles_out = self.parameterAsOutputLayer(parameters, self.TRIANGLES, context)

@@ -1,12 +1,13 @@
 """Refine mesh: local refinement and point insertion until the residuals meet a target."""
 from dataclasses import asdict
 
-from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputNumber,
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
 
-from .base import FloodMeshAlgorithm, add_domain_parameters, domain_files, layer_file, run_core
-from .styles import load_on_completion, style_mesh
+from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, read_mesh_inputs,
+                   run_core)
+from .styles import load_mesh
 
 
 class RefineMeshAlgorithm(FloodMeshAlgorithm):
@@ -63,16 +64,9 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
 
     def process(self, parameters, context, feedback):
         from ..core import io
-        from ..core.pipeline import mesh_constraints
         from ..core.refine import refine_mesh
 
-        dem = run_core(io.read_raster, layer_file(
-            self.parameterAsRasterLayer(parameters, self.DEM, context), "DEM"))
-        lines_layer = self.parameterAsVectorLayer(parameters, self.BREAKLINES, context)
-        lines = (run_core(io.read_lines_gpkg, layer_file(lines_layer, "Break lines"))
-                 if lines_layer is not None else [])
-        domain, own_lines = run_core(mesh_constraints, dem, *domain_files(self, parameters,
-                                                                          context))
+        dem, lines, domain = read_mesh_inputs(self, parameters, context)
 
         def points(name, what):
             layer = self.parameterAsVectorLayer(parameters, name, context)
@@ -84,7 +78,7 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
                                                                            context)
 
         mesh, rounds = run_core(
-            refine_mesh, dem, lines + own_lines, points(self.POINTS, "Measured points"),
+            refine_mesh, dem, lines, points(self.POINTS, "Measured points"),
             check=points(self.CHECK, "Check points"), domain=domain,
             min_angle=self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
             max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
@@ -101,9 +95,7 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
                               f"{r.refined} triangles refined")
         out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         run_core(io.write_mesh_2dm, out, mesh.nodes, mesh.triangles)
-        layer = QgsMeshLayer(out, "Refined mesh", "mdal")
-        load_on_completion(context, layer, self.OUTPUT)
-        style_mesh(layer)
+        load_mesh(context, out, "Refined mesh", self.OUTPUT)
         results = {self.OUTPUT: out, self.NODES: len(mesh.nodes), self.RMSE: rounds[-1].rmse_m}
         report = self.parameterAsFileOutput(parameters, self.REPORT, context)
         if report:

@@ -72,3 +72,12 @@ def load_on_completion(context, layer, output_name):
     context.temporaryLayerStore().addMapLayer(layer)
     context.addLayerToLoadOnCompletion(
         layer.id(), QgsProcessingContext.LayerDetails(layer.name(), context.project(), output_name))
+
+
+def load_mesh(context, path: str, name: str, output_name: str) -> None:
+    """Load a 2DM mesh as a QGIS mesh layer, shaded by elevation, when the algorithm ends."""
+    from qgis.core import QgsMeshLayer
+
+    layer = QgsMeshLayer(path, name, "mdal")
+    load_on_completion(context, layer, output_name)
+    style_mesh(layer)
