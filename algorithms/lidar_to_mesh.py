@@ -9,11 +9,15 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputFile,
 
 from ..core.options import BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS, RunOptions
 from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, run_core
+from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
 from .styles import load_on_completion, style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
 METHODS = list(BREAKPOINT_METHODS)
+
+
+SIMPLIFY_OPTION = ("keep_every", "tolerance", "spline")  # RunOptions field per method
 
 
 class LidarToMeshAlgorithm(FloodMeshAlgorithm):
@@ -36,6 +40,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     SLOPE_METHOD = "SLOPE_METHOD"
     CRITICAL_SLOPE = "CRITICAL_SLOPE"
     KEEP_EVERY = "KEEP_EVERY"
+    SIMPLIFY, TOLERANCE = "SIMPLIFY", "TOLERANCE"
     MIN_ANGLE = "MIN_ANGLE"
     MAX_AREA = "MAX_AREA"
     HOLDOUT = "HOLDOUT"
@@ -67,6 +72,12 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.KEEP_EVERY, self.tr("Keep every n-th break-line point"),
             QgsProcessingParameterNumber.Integer, 4, minValue=1))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.SIMPLIFY, self.tr("Break-line simplification"), options=list(SIMPLIFY_LABELS),
+            defaultValue=0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.TOLERANCE, self.tr("Tolerance for Douglas–Peucker or spline (m)"),
+            QgsProcessingParameterNumber.Double, 0.9, minValue=0.001))
         add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),
@@ -98,11 +109,14 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         from ..core.pipeline import run_pipeline
 
         boundary, user_lines = domain_files(self, parameters, context)
+        simplify = self.parameterAsEnum(parameters, self.SIMPLIFY, context)
         options = run_core(RunOptions,
             cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],
             s_crit=self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
-            keep_every=self.parameterAsInt(parameters, self.KEEP_EVERY, context),
+            **{SIMPLIFY_OPTION[simplify]: (
+                self.parameterAsInt(parameters, self.KEEP_EVERY, context) if simplify == 0
+                else self.parameterAsDouble(parameters, self.TOLERANCE, context))},
             min_angle=self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
             max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
             holdout=self.parameterAsDouble(parameters, self.HOLDOUT, context),
