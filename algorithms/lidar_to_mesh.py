@@ -8,8 +8,9 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingContext,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
                        QgsProcessingParameterNumber, QgsVectorLayer)
 
-from ..core.options import BREAKPOINT_METHODS, RunOptions
+from ..core.options import BREAKPOINT_METHODS, MAX_MIN_ANGLE, RunOptions
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
+from .build_mesh import max_triangles_parameter
 from .styles import style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
@@ -37,6 +38,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     KEEP_EVERY = "KEEP_EVERY"
     MIN_ANGLE = "MIN_ANGLE"
     MAX_AREA = "MAX_AREA"
+    MAX_TRIANGLES = "MAX_TRIANGLES"
     HOLDOUT = "HOLDOUT"
     SEED = "SEED"
     OUTPUT_FOLDER = "OUTPUT_FOLDER"
@@ -55,28 +57,30 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.CRS, self.tr("CRS of the input (when the file has none)"), optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.CELL_SIZE, self.tr("Grid cell size d (m)"), QgsProcessingParameterNumber.Double,
-            defaults.cell_size, minValue=0.01))
+            defaults.cell_size, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
             self.SLOPE_METHOD, self.tr("Slope method"), options=METHODS,
             defaultValue=METHODS.index(defaults.slope_method)))
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
-            QgsProcessingParameterNumber.Double, defaults.s_crit, minValue=0.01, maxValue=89.99))
+            QgsProcessingParameterNumber.Double, defaults.s_crit, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.KEEP_EVERY, self.tr("Keep every n-th break-line point"),
             QgsProcessingParameterNumber.Integer, 4, minValue=1))
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),
-            QgsProcessingParameterNumber.Double, defaults.min_angle, minValue=0.01, maxValue=34))
+            QgsProcessingParameterNumber.Double, defaults.min_angle, minValue=0.0,
+            maxValue=MAX_MIN_ANGLE))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_AREA, self.tr("Maximum triangle area (m²)"),
-            QgsProcessingParameterNumber.Double, defaults.max_area, minValue=0.0001))
+            QgsProcessingParameterNumber.Double, defaults.max_area, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.HOLDOUT, self.tr("Fraction of points held out for assessment"),
-            QgsProcessingParameterNumber.Double, defaults.holdout, minValue=0, maxValue=0.5))
+            QgsProcessingParameterNumber.Double, defaults.holdout, minValue=0.0, maxValue=1.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.SEED, self.tr("Random seed"), QgsProcessingParameterNumber.Integer,
             defaults.seed))
+        self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
         self.addOutput(QgsProcessingOutputVectorLayer(
@@ -87,10 +91,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.TRIANGLES, self.tr("Mesh triangles")))
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("Holdout RMSE (m)")))
 
-    def process(self, parameters, context, feedback):
-        from ..core.pipeline import run_pipeline
-
-        options = run_core(RunOptions,
+    def options(self, parameters, context) -> RunOptions:
+        """The chain's options from the parameters; RunOptions checks their ranges."""
+        return RunOptions(
             cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],
             s_crit=self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
@@ -99,7 +102,16 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
             holdout=self.parameterAsDouble(parameters, self.HOLDOUT, context),
             seed=self.parameterAsInt(parameters, self.SEED, context),
-            crs=crs_or_none(self, parameters, self.CRS, context))
+            crs=crs_or_none(self, parameters, self.CRS, context),
+            max_triangles=self.parameterAsInt(parameters, self.MAX_TRIANGLES, context))
+
+    def check_values(self, parameters, context):
+        self.options(parameters, context)
+
+    def process(self, parameters, context, feedback):
+        from ..core.pipeline import run_pipeline
+
+        options = run_core(self.options, parameters, context)
         source = self.parameterAsFile(parameters, self.INPUT, context)
         out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
         report = run_core(run_pipeline, source, out, options,

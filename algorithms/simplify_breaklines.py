@@ -29,7 +29,7 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
             QgsProcessingParameterNumber.Integer, 4, minValue=1))
         self.addParameter(QgsProcessingParameterNumber(
             self.TOLERANCE, self.tr("Douglas–Peucker tolerance (m)"),
-            QgsProcessingParameterNumber.Double, 0.9, minValue=0.001))
+            QgsProcessingParameterNumber.Double, 0.9, minValue=0.0))
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Simplified break lines"), QgsProcessing.TypeVectorLine))
 

@@ -28,7 +28,7 @@ import numpy as np
 from scipy import ndimage
 
 from .errors import FloodMeshError
-from .options import TRACING_MODES
+from .options import TRACING_MODES, check_choice, check_min_points, check_s_crit
 from .raster import Grid
 
 MODES = TRACING_MODES
@@ -59,10 +59,9 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     ``mode`` is "flat", "steep" or "auto" (steep when the median slope of the DEM is at least
     S_crit). Lines with fewer than ``min_points`` points are dropped.
     """
-    if mode not in MODES:
-        raise FloodMeshError(f"unknown tracing mode {mode!r}; choose one of {', '.join(MODES)}")
-    if not 0 < s_crit < 90:
-        raise FloodMeshError(f"critical slope S_crit must be between 0 and 90 degrees, got {s_crit}")
+    check_choice(mode, MODES, "tracing mode")
+    s_crit = check_s_crit(s_crit)
+    min_points = check_min_points(min_points)
     if breakpoints.shape != slope.shape or slope.shape != dem.shape:
         raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
                              f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")

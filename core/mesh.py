@@ -12,9 +12,11 @@ import shapely
 from pyproj import CRS
 
 from .errors import FloodMeshError
+from .limits import check_triangles
+from .options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles,
+                      check_min_angle)
 from .raster import Grid, bilinear
 
-MAX_MIN_ANGLE = 34.0  # Triangle's refinement stops terminating reliably above about 33.8 degrees
 # Triangle leaves skinny triangles in the concentric shells it builds around input corners
 # sharper than 60 degrees (Miller, Pav & Walkington 2003), so break lines may not form them.
 SHARP_CORNER = 60.0
@@ -66,22 +68,40 @@ def domain_from_dem(dem: Grid, *, min_area: float = 0.0):
 
 
 def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
-               drop_sharp_corners: bool = True) -> PSLG:
+               drop_sharp_corners: bool = True, note=None) -> PSLG:
     """PSLG of break lines (x, y[, z] arrays) inside ``domain`` plus its boundary.
 
     Lines are clipped to the domain shrunk by ``snap`` (m) so that none ends on or near the
-    boundary; all lines are noded at their crossings on a ``snap``/5 precision grid, which also
-    merges vertices closer than that. With ``drop_sharp_corners``, break-line segments that
-    meet another segment at less than ``SHARP_CORNER`` degrees are dropped: Triangle does not
-    refine the triangles in such a corner, so they would break the angle bound.
+    boundary; all lines are noded at their crossings and touches on a ``snap``/5 precision grid
+    (snap rounding), which also merges vertices closer than that and dissolves duplicate or
+    overlapping lines. With ``drop_sharp_corners``, break-line segments that meet another
+    segment at less than ``SHARP_CORNER`` degrees are dropped: Triangle does not refine the
+    triangles in such a corner, so they would break the angle bound. ``note`` receives one line
+    for each kind of repair made.
     """
-    if not snap > 0:
+    if not snap > 0 or not np.isfinite(snap):
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
+    note = note or (lambda message: None)
     inner = domain.buffer(-snap)
-    pieces = [shapely.LineString(np.asarray(c)[:, :2]) for c in lines if len(c) >= 2]
-    clipped = shapely.intersection(pieces, inner) if pieces else []
-    geoms = [domain.boundary] + [g for g in clipped if not g.is_empty]
+    arrays = [np.asarray(c, float) for c in lines]
+    usable = [c[:, :2] for c in arrays
+              if c.ndim == 2 and len(c) >= 2 and np.isfinite(c[:, :2]).all()]
+    if len(usable) < len(arrays):
+        note(f"{len(arrays) - len(usable)} break lines with fewer than 2 points or non-finite "
+             "coordinates were left out")
+    pieces = [shapely.LineString(c) for c in usable]
+    clipped = list(shapely.intersection(pieces, inner)) if pieces else []
+    kept = [g for g in clipped if not g.is_empty]
+    if len(kept) < len(pieces):
+        note(f"{len(pieces) - len(kept)} break lines lie wholly outside the meshed area (or within "
+             f"{snap:g} m of its edge) and were left out")
+    geoms = [domain.boundary] + kept
     noded = shapely.unary_union(geoms, grid_size=snap / 5)
+    overlap = (shapely.length(domain.boundary) + sum(g.length for g in kept)
+               - shapely.length(noded))
+    if overlap > snap:
+        note(f"{overlap:.1f} m of break lines duplicated or ran along another line (or the "
+             "boundary) and were merged into one")
     parts = [g for g in getattr(noded, "geoms", [noded]) if g.geom_type == "LineString"]
     coords = [np.asarray(p.coords)[:, :2] for p in parts]
     allpts = np.concatenate(coords)
@@ -98,15 +118,24 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     segments = segments[segments[:, 0] != segments[:, 1]]
     segments = np.unique(np.sort(segments, axis=1), axis=0)
     vertices = vertices * (snap / 5)
+    degree = np.bincount(segments.ravel(), minlength=len(vertices))
+    if kept and (degree >= 3).any():
+        note(f"break lines were joined at {int((degree >= 3).sum())} nodes where they cross or "
+             "touch one another or the boundary")
     if drop_sharp_corners:
         on_boundary = shapely.distance(
             shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 10
+        before = len(segments)
         segments = _drop_small_angles(vertices, segments, on_boundary, SHARP_CORNER)
+        if len(segments) < before:
+            note(f"{before - len(segments)} break-line segments meeting another at less than "
+                 f"{SHARP_CORNER:g} degrees were left out, so that the angle bound holds there")
         used = np.unique(segments)
         renumber = np.full(len(vertices), -1)
         renumber[used] = np.arange(len(used))
         vertices, segments = vertices[used], renumber[segments]
-    holes = [shapely.Polygon(ring).representative_point().coords[0]
+    # a point of each hole that lies outside the domain (not on an island inside the hole)
+    holes = [shapely.Polygon(ring).difference(domain).representative_point().coords[0]
              for poly in getattr(domain, "geoms", [domain]) for ring in poly.interiors]
     return PSLG(vertices.astype(float), segments.astype(np.int32),
                 np.asarray(holes, float).reshape(-1, 2))
@@ -148,21 +177,24 @@ def _drop_small_angles(vertices, segments, fixed, limit):
 
 
 def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
-                     conforming: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                     conforming: bool = True, max_triangles: int = DEFAULT_MAX_TRIANGLES,
+                     area: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Quality triangulation of a PSLG with Triangle (Shewchuk 1996, doi:10.1007/BFb0014497).
 
     No angle below ``min_angle`` degrees (except at small input angles), no triangle above
     ``max_area`` m²; ``conforming`` asks for a conforming Delaunay triangulation (switch D).
+    A mesh estimated above ``max_triangles`` triangles (or the memory available) is refused
+    before Triangle starts, from the meshed ``area`` (m², default the vertices' bounding box).
     Returns vertices (n, 2), the PSLG's vertices first, and triangles (m, 3).
     """
     import triangle
 
-    if not 0 < min_angle <= MAX_MIN_ANGLE:
-        raise FloodMeshError(
-            f"minimum angle must be above 0 and at most {MAX_MIN_ANGLE} degrees, got {min_angle}: "
-            "above that Delaunay refinement may never finish (25 to 30 is usual)")
-    if not max_area > 0:
-        raise FloodMeshError(f"maximum triangle area must be positive m², got {max_area}")
+    min_angle = check_min_angle(min_angle)
+    max_area = check_max_area(max_area)
+    max_triangles = check_max_triangles(max_triangles)
+    if area is None:
+        area = float(np.prod(np.ptp(pslg.vertices, axis=0)))
+    check_triangles(area, max_area, max_triangles, len(pslg.vertices))
     origin = pslg.vertices.min(axis=0)
     data = {"vertices": pslg.vertices - origin, "segments": pslg.segments}
     if len(pslg.holes):
@@ -177,14 +209,20 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
 
 def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
                max_area: float = 100.0, conforming: bool = True, snap: float | None = None,
-               domain=None) -> Mesh:
+               domain=None, max_triangles: int = DEFAULT_MAX_TRIANGLES, note=None) -> Mesh:
     """Mesh the DEM's valid area honouring the break lines; node z from the lines where a node is
-    a break-line vertex, else bilinear from the DEM."""
+    a break-line vertex, else bilinear from the DEM. A mesh estimated above ``max_triangles``
+    triangles is refused before any work; ``note`` receives the repairs made to the lines."""
+    min_angle = check_min_angle(min_angle)
+    max_area = check_max_area(max_area)
+    max_triangles = check_max_triangles(max_triangles)
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
-    pslg = build_pslg(lines, domain, snap=snap)
+    check_triangles(domain.area, max_area, max_triangles)
+    pslg = build_pslg(lines, domain, snap=snap, note=note)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
-                                           conforming=conforming)
+                                           conforming=conforming, max_triangles=max_triangles,
+                                           area=domain.area)
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
     known = _line_vertex_z(lines, precision=snap / 5)
     if known:

@@ -1,7 +1,14 @@
-"""Names of the methods and the chain's options: plain Python, importable (like the QGIS
-algorithms that declare their parameters from it) before any numerical package is."""
+"""Names of the methods, the chain's options and the checks of their ranges: plain Python,
+importable (like the QGIS algorithms that declare their parameters from it) before any numerical
+package is.
+
+Every range check lives here, once: ``RunOptions.validate`` calls them for the whole chain, and
+the step functions in core (gridding, breakpoints, meshing, …) call the same ones, so the
+command line, the pipeline and QGIS all give the same message for the same mistake.
+"""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from .errors import FloodMeshError
@@ -11,6 +18,143 @@ SLOPE_METHOD_NAMES = ("max-slope", "one-over-distance", "sharpnack-akin", "wood"
 BREAKPOINT_METHODS = (*SLOPE_METHOD_NAMES, "log")
 LOG_KERNELS = ("pratt", "analytic")
 TRACING_MODES = ("auto", "flat", "steep")
+
+MAX_MIN_ANGLE = 34.0  # Triangle's refinement stops terminating reliably above about 33.8 degrees
+DEFAULT_MAX_TRIANGLES = 5_000_000
+# The FEMA/NSSDA test wants at least 20 check points (FGDC-STD-007.3-1998, 3.2.1).
+MIN_CHECK_POINTS = 20
+
+
+def _number(value, what: str) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise FloodMeshError(f"{what} must be a number, got {value!r}") from None
+    if math.isnan(value):
+        raise FloodMeshError(f"{what} must be a number, got NaN")
+    return value
+
+
+def check_cell_size(value) -> float:
+    value = _number(value, "cell size")
+    if not 0 < value < math.inf:
+        raise FloodMeshError(f"cell size must be a positive number of metres, got {value:g}: "
+                             "give the grid spacing d in metres (1 is the method's reference)")
+    return value
+
+
+def check_max_gap(value) -> float | None:
+    if value is None:
+        return None
+    value = _number(value, "max gap")
+    if not 0 < value < math.inf:
+        raise FloodMeshError(f"max gap must be a positive number of metres, got {value:g}; "
+                             "leave it out for the default of 10 cell sizes")
+    return value
+
+
+def check_s_crit(value) -> float:
+    value = _number(value, "critical slope S_crit")
+    if not 0 < value < 90:
+        raise FloodMeshError(f"critical slope S_crit must be above 0 and below 90 degrees, got "
+                             f"{value:g}: give it in degrees (10 is the method's reference)")
+    return value
+
+
+def check_min_angle(value) -> float:
+    value = _number(value, "minimum angle")
+    if not 0 < value:
+        raise FloodMeshError(
+            f"minimum angle must be above 0 and at most {MAX_MIN_ANGLE:g} degrees, got {value:g}: "
+            "give the smallest triangle angle the model may have (25 to 30 is usual)")
+    if not value <= MAX_MIN_ANGLE:
+        raise FloodMeshError(
+            f"minimum angle must be above 0 and at most {MAX_MIN_ANGLE:g} degrees, got {value:g}: "
+            "above that Delaunay refinement may never finish (25 to 30 is usual)")
+    return value
+
+
+def check_max_area(value) -> float:
+    value = _number(value, "maximum triangle area")
+    if not 0 < value < math.inf:
+        raise FloodMeshError(f"maximum triangle area must be a positive number of m², got "
+                             f"{value:g}: give the largest element area the model may have")
+    return value
+
+
+def check_max_triangles(value) -> int:
+    value = _number(value, "maximum number of triangles")
+    if not (value >= 1 and value == int(value)):
+        raise FloodMeshError(f"maximum number of triangles must be a whole number of at least 1, "
+                             f"got {value:g}")
+    return int(value)
+
+
+def check_holdout(fraction) -> float:
+    fraction = _number(fraction, "holdout fraction")
+    if not 0 <= fraction < 1:
+        raise FloodMeshError(f"holdout fraction must be at least 0 and below 1, got {fraction:g}: "
+                             "it is the share of points kept back for the accuracy test "
+                             "(0.001 is the method's reference, 0 skips the test)")
+    return fraction
+
+
+def check_holdout_count(fraction: float, n_points: int) -> int:
+    """The number of check points ``fraction`` of ``n_points`` gives; refused when it is above 0
+    but below what the FEMA/NSSDA test needs."""
+    fraction = check_holdout(fraction)
+    n_out = int(round(fraction * n_points))
+    if fraction > 0 and n_out < MIN_CHECK_POINTS:
+        if n_points < 2 * MIN_CHECK_POINTS:
+            fix = (f"the file has too few points to hold {MIN_CHECK_POINTS} back; give holdout 0 "
+                   "to skip the test")
+        else:
+            needed = math.ceil((MIN_CHECK_POINTS - 0.5) / n_points * 1e4) / 1e4
+            fix = f"give a holdout fraction of at least {needed:g}, or 0 to skip the test"
+        raise FloodMeshError(
+            f"a holdout fraction of {fraction:g} keeps {n_out} of {n_points:,} points back, but "
+            f"the FEMA/NSSDA accuracy test needs at least {MIN_CHECK_POINTS} check points: {fix}")
+    return n_out
+
+
+def check_positive_int(value, what: str, minimum: int = 1) -> int:
+    value = _number(value, what)
+    if not (value >= minimum and value == int(value)):
+        raise FloodMeshError(f"{what} must be a whole number of at least {minimum}, got {value:g}")
+    return int(value)
+
+
+def check_min_points(value) -> int:
+    return check_positive_int(value, "minimum points per break line", 2)
+
+
+def check_tolerance(value) -> float:
+    value = _number(value, "simplification tolerance")
+    if not 0 < value < math.inf:
+        raise FloodMeshError(f"simplification tolerance must be a positive number of metres, got "
+                             f"{value:g}")
+    return value
+
+
+def check_sigma(value) -> float:
+    value = _number(value, "LoG sigma")
+    if not 0 <= value < math.inf:
+        raise FloodMeshError(f"LoG sigma must be zero or a positive number of metres, got {value:g}")
+    return value
+
+
+def check_sensitivity(value) -> float:
+    value = _number(value, "LoG sensitivity")
+    if not 0 <= value < math.inf:
+        raise FloodMeshError(f"LoG sensitivity must be zero or a positive number of metres, got "
+                             f"{value:g}")
+    return value
+
+
+def check_choice(value, choices, what: str) -> str:
+    if value not in choices:
+        raise FloodMeshError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -35,18 +179,33 @@ class RunOptions:
     min_points: int = 3
     crs: str | None = None
     classes: tuple[int, ...] | None = None
+    max_triangles: int = DEFAULT_MAX_TRIANGLES  # refuse meshes estimated to be larger
 
     def __post_init__(self):
-        if self.slope_method not in BREAKPOINT_METHODS:
-            raise FloodMeshError(f"unknown slope method {self.slope_method!r}; choose one of "
-                                 f"{', '.join(BREAKPOINT_METHODS)}")
-        if self.log_kernel not in LOG_KERNELS:
-            raise FloodMeshError(f"unknown LoG kernel {self.log_kernel!r}; choose pratt or "
-                                 "analytic")
+        self.validate()
+
+    def validate(self) -> None:
+        """Check every option's range before any file is read or written."""
+        check_choice(self.slope_method, BREAKPOINT_METHODS, "slope method")
+        check_choice(self.log_kernel, LOG_KERNELS, "LoG kernel")
+        check_choice(self.tracing_mode, TRACING_MODES, "tracing mode")
+        check_cell_size(self.cell_size)
+        check_max_gap(self.max_gap)
+        if self.slope_method == "log":
+            check_sigma(self.sigma)
+            check_sensitivity(self.sensitivity)
+        check_s_crit(self.s_crit)  # the tracer uses it with LoG breakpoints too
+        self.simplification()
+        check_min_angle(self.min_angle)
+        check_max_area(self.max_area)
+        check_max_triangles(self.max_triangles)
+        check_holdout(self.holdout)
+        check_min_points(self.min_points)
 
     def simplification(self) -> tuple[str, float]:
         if self.keep_every is not None and self.tolerance is not None:
             raise FloodMeshError("give either keep-every or tolerance for simplification, not both")
         if self.tolerance is not None:
-            return "douglas-peucker", float(self.tolerance)
-        return "keep-every", float(4 if self.keep_every is None else self.keep_every)
+            return "douglas-peucker", check_tolerance(self.tolerance)
+        keep_every = 4 if self.keep_every is None else self.keep_every
+        return "keep-every", float(check_positive_int(keep_every, "keep-every"))

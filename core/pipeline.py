@@ -14,7 +14,8 @@ from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled
-from .grid import grid_points_linear
+from .grid import check_grid, grid_points_linear
+from .limits import check_memory, check_triangles
 from .mesh import build_mesh, mesh_quality
 from .points import PointCloud, split_holdout
 from .raster import Grid
@@ -59,22 +60,42 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     """Run the whole chain on a point file or DEM and write ``OUTPUT_FILES`` into ``out_dir``.
 
     ``progress`` receives the overall fraction done (0–1), ``cancelled`` is polled between and
-    inside long steps (raising ``Cancelled``), ``log`` receives step names. Returns the report.
+    inside long steps (raising ``Cancelled``), ``log`` receives step names and notes (what was
+    assumed or repaired on the user's behalf, also listed in the report). Returns the report.
     """
+    options.validate()
+    notes = []
+
+    def note(message: str):
+        notes.append(message)
+        if log:
+            log(f"note: {message}")
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     method, amount = options.simplification()
     steps = _Steps({"read": 1, "grid": 4, "slope": 1, "breakpoints": 0.5, "breaklines": 1,
                     "simplify": 0.5, "mesh": 2, "assess": 1, "write": 2}, progress, cancelled, log)
-    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes)
+    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes,
+                     note=note)
     if isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
+        # refuse, before the work, a grid or mesh too large for the limit or the memory
+        plan = check_grid(gridding, options.cell_size, options.max_gap)
+        triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
+        check_memory(points=len(gridding), cells=plan["rows"] * plan["cols"],
+                     triangles=triangles, advice="give a larger cell size or maximum area, or "
+                                                 "split the data into tiles")
         dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
                         max_gap=options.max_gap, progress=None, cancelled=cancelled)
         holdout_source = "LiDAR points withheld from gridding"
         n_points = len(data)
     else:
         dem = data  # a DEM keeps its own cell size
+        valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+        triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
+        check_memory(cells=dem.values.size, triangles=triangles,
+                     advice="resample the DEM to larger cells or split it into tiles")
         holdout = _dem_check_points(dem, options.holdout, options.seed)
         holdout_source = "DEM cell centres (not independent of the DEM)"
         n_points = 0
@@ -96,7 +117,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     else:
         lines = steps.run("simplify", simplify_keep_every, traced, int(amount))
     mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines],
-                     min_angle=options.min_angle, max_area=options.max_area)
+                     min_angle=options.min_angle, max_area=options.max_area,
+                     max_triangles=options.max_triangles, note=note)
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
     delta = dem.cell_size / 2
@@ -133,6 +155,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                            "max_deviation_m": deviation},
         **quality,
         **stats,
+        "notes": notes,
         "seconds": steps.seconds,
     }
     io.write_json(out / "report.json", _jsonable(report))

@@ -4,13 +4,12 @@ from __future__ import annotations
 import numpy as np
 
 from .breaklines import BreakLine
-from .errors import FloodMeshError
+from .options import check_positive_int, check_tolerance
 
 
 def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
     """Keep every ``n``-th point of each line, and always both ends."""
-    if int(n) != n or n < 1:
-        raise FloodMeshError(f"keep-every must be a whole number of at least 1, got {n}")
+    n = check_positive_int(n, "keep-every")
     out = []
     for line in lines:
         keep = np.zeros(len(line.coords), bool)
@@ -23,8 +22,7 @@ def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
 def simplify_douglas_peucker(lines: list[BreakLine], tolerance: float) -> list[BreakLine]:
     """Douglas–Peucker: no dropped point lies farther than ``tolerance`` (m) from the simplified
     line, horizontally or vertically."""
-    if not tolerance > 0:
-        raise FloodMeshError(f"simplification tolerance must be positive metres, got {tolerance}")
+    tolerance = check_tolerance(tolerance)
     out = []
     for line in lines:
         keep = douglas_peucker_mask(line.coords, tolerance)

@@ -1,0 +1,25 @@
+"""Every kind of bad input through the command line: exit code 2, one line on stderr that names
+the problem, no traceback, and no output file (the cases are in tests/bad_inputs.py)."""
+import pytest
+
+from floodmesh.core.cli import main
+
+from ..bad_inputs import CASES
+
+
+def cli_error(case, folder, capsys):
+    """Run the case's command in this process; return (exit code, stderr lines)."""
+    args = [str(a).replace("{out}", str(folder / "out")) for a in case.make(folder)]
+    code = main(args)
+    return code, capsys.readouterr().err.strip().splitlines()
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_bad_input_is_one_line_and_exit_code_2(case, tmp_path, capsys):
+    code, lines = cli_error(case, tmp_path, capsys)
+    assert code == 2, lines
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("floodmesh: error: ")
+    assert case.words in lines[0]
+    out = tmp_path / "out"
+    assert not out.exists() or list(out.iterdir()) == [], "bad input left a file behind"
