@@ -229,14 +229,18 @@ def read_input(path, *, crs=None, classes=None, note=None):
 
 # ---------------------------------------------------------------------------------------------
 # vectors (GeoPackage through fiona/GDAL)
+# GeoPackages record when their content last changed; a fixed time makes the same inputs give
+# byte-identical files (GDAL's OGR_CURRENT_DATE), as reproducible builds do.
+GPKG_TIMESTAMP = "2000-01-01T00:00:00.000Z"
 def _write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, crs) -> None:
     import fiona
 
     schema = {"geometry": geometry_type, "properties": properties}
     with atomic_output(path) as tmp:
-        with fiona.open(tmp, "w", driver="GPKG", layer=layer, schema=schema,
-                        crs_wkt=crs.to_wkt()) as dst:
-            dst.writerecords(records)
+        with fiona.Env(OGR_CURRENT_DATE=GPKG_TIMESTAMP):
+            with fiona.open(tmp, "w", driver="GPKG", layer=layer, schema=schema,
+                            crs_wkt=crs.to_wkt()) as dst:
+                dst.writerecords(records)
 
 
 def _field_type(values) -> str:
