@@ -82,6 +82,7 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     if not snap > 0 or not np.isfinite(snap):
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
     note = note or (lambda message: None)
+    domain = _snapped_domain(domain, snap / 5)
     inner = domain.buffer(-snap)
     arrays = [np.asarray(c, float) for c in lines]
     usable = [c[:, :2] for c in arrays
@@ -122,23 +123,49 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     if kept and (degree >= 3).any():
         note(f"break lines were joined at {int((degree >= 3).sum())} nodes where they cross or "
              "touch one another or the boundary")
+    # break lines lie at least snap inside the boundary, boundary segments within a grid step
+    on_boundary = shapely.distance(
+        shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 2
+    segments, on_boundary = _prune_dangles(segments, on_boundary)
     if drop_sharp_corners:
-        on_boundary = shapely.distance(
-            shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 10
         before = len(segments)
         segments = _drop_small_angles(vertices, segments, on_boundary, SHARP_CORNER)
         if len(segments) < before:
             note(f"{before - len(segments)} break-line segments meeting another at less than "
                  f"{SHARP_CORNER:g} degrees were left out, so that the angle bound holds there")
-        used = np.unique(segments)
-        renumber = np.full(len(vertices), -1)
-        renumber[used] = np.arange(len(used))
-        vertices, segments = vertices[used], renumber[segments]
+    used = np.unique(segments)
+    renumber = np.full(len(vertices), -1)
+    renumber[used] = np.arange(len(used))
+    vertices, segments = vertices[used], renumber[segments]
     # a point of each hole that lies outside the domain (not on an island inside the hole)
     holes = [shapely.Polygon(ring).difference(domain).representative_point().coords[0]
              for poly in getattr(domain, "geoms", [domain]) for ring in poly.interiors]
     return PSLG(vertices.astype(float), segments.astype(np.int32),
                 np.asarray(holes, float).reshape(-1, 2))
+
+
+def _prune_dangles(segments, on_boundary):
+    """Drop boundary segments that end nowhere (a spike that noding on the precision grid
+    collapsed to a line): no area lies beside them, so no triangle could hold them."""
+    while True:
+        degree = np.bincount(segments.ravel())
+        dangling = on_boundary & ((degree[segments[:, 0]] == 1) | (degree[segments[:, 1]] == 1))
+        if not dangling.any():
+            return segments, on_boundary
+        segments, on_boundary = segments[~dangling], on_boundary[~dangling]
+
+
+def _snapped_domain(domain, grid: float):
+    """The domain on the PSLG's precision grid, valid there: spikes and slivers thinner than
+    the grid, which would leave boundary segments with no area beside them, are gone."""
+    snapped = shapely.set_precision(domain, grid)
+    polygons = [g for g in getattr(snapped, "geoms", [snapped])
+                if g.geom_type == "Polygon" and g.area > 0]
+    if not polygons:
+        raise FloodMeshError(
+            f"the area to mesh ({domain.area:.3g} m²) vanishes on a {grid:.3g} m grid: it is "
+            "thinner than the snapping distance; use a smaller cell size or a larger area")
+    return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 
 def _drop_small_angles(vertices, segments, fixed, limit):
@@ -192,6 +219,7 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     min_angle = check_min_angle(min_angle)
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
+    _check_pslg(pslg)
     if area is None:
         area = float(np.prod(np.ptp(pslg.vertices, axis=0)))
     check_triangles(area, max_area, max_triangles, len(pslg.vertices))
@@ -199,12 +227,87 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     data = {"vertices": pslg.vertices - origin, "segments": pslg.segments}
     if len(pslg.holes):
         data["holes"] = pslg.holes - origin
-    switches = f"pq{min_angle:.6g}a{max_area:.6g}{'D' if conforming else ''}"
+    # Triangle reads numbers in its switches without exponents ("a2e-05" is area 2, then
+    # switch e): write them positional
+    switches = (f"pq{_positional(min_angle)}a{_positional(max_area)}"
+                f"{'D' if conforming else ''}")
     result = triangle.triangulate(data, switches)
     if "triangles" not in result or len(result["triangles"]) == 0:
         raise FloodMeshError("Triangle produced no triangles: the domain boundary is not closed "
                              "or a hole point lies outside its hole")
+    # With D, Triangle now and then leaves a triangle below the bound away from any small input
+    # angle (about one random PSLG in a thousand at bounds near 30 degrees, found by
+    # tests/core/test_mesh_fuzz.py); refining its own output again (switch r) removes it.
+    # Triangles at small input angles cannot be refined away: stop when refining gains nothing.
+    sharp = np.nonzero(input_corner_angles(pslg.vertices, pslg.segments) < SHARP_CORNER)[0]
+    for _ in range(3):
+        bad = _count_below(result, min_angle, sharp)
+        if not bad:
+            break
+        again = triangle.triangulate({key: result[key] for key in
+                                      ("vertices", "triangles", "segments")}, "r" + switches)
+        if _count_below(again, min_angle, sharp) >= bad:
+            break
+        result = again
     return result["vertices"] + origin, result["triangles"].astype(np.int64)
+
+
+def _count_below(result: dict, min_angle: float, sharp: np.ndarray) -> int:
+    """Triangles below the angle bound, leaving out those with a sharp input corner as a
+    vertex (the PSLG's vertices keep their numbers in Triangle's output)."""
+    triangles = result["triangles"]
+    below = triangle_angles(result["vertices"], triangles).min(axis=1) < min_angle - 1e-9
+    return int((below & ~np.isin(triangles, sharp).any(axis=1)).sum())
+
+
+def _check_pslg(pslg: PSLG) -> None:
+    """Refuse what Triangle's C code would read out of bounds, crash or loop on: too few
+    vertices or segments, non-finite coordinates, segment ends that are no vertex, zero-length
+    segments, duplicate vertices."""
+    vertices = np.asarray(pslg.vertices, float)
+    segments = np.asarray(pslg.segments)
+    holes = np.asarray(pslg.holes, float).reshape(-1, 2)
+    problem = None
+    if vertices.ndim != 2 or vertices.shape[1:] != (2,) or len(vertices) < 3:
+        problem = "it has fewer than 3 vertices"
+    elif not np.isfinite(vertices).all() or not np.isfinite(holes).all():
+        problem = "it has coordinates that are not finite numbers"
+    elif segments.ndim != 2 or segments.shape[1:] != (2,) or len(segments) < 3:
+        problem = "it has fewer than 3 segments, so no closed boundary"
+    elif not np.issubdtype(segments.dtype, np.integer) or segments.min() < 0 \
+            or segments.max() >= len(vertices):
+        problem = "a segment ends at a vertex that does not exist"
+    elif (segments[:, 0] == segments[:, 1]).any():
+        problem = "a segment has zero length"
+    elif len(np.unique(vertices, axis=0)) < len(vertices):
+        problem = "two vertices coincide"
+    elif _segments_cross(vertices, segments):
+        problem = "segments cross or overlap"
+    if problem:
+        raise FloodMeshError(f"the PSLG cannot be meshed: {problem} (build it with build_pslg, "
+                             "which cleans break lines and the boundary)")
+
+
+def _segments_cross(vertices: np.ndarray, segments: np.ndarray) -> bool:
+    """Whether any two segments meet other than at a shared end (crossing, touching inside,
+    overlapping): Triangle would insert vertices there that no check of ours knows about."""
+    lines = shapely.linestrings(vertices[segments])
+    i, j = shapely.STRtree(lines).query(lines, predicate="intersects")
+    pairs = i < j
+    i, j = i[pairs], j[pairs]
+    if not len(i):
+        return False
+    shared = (segments[i][:, :, None] == segments[j][:, None, :]).any(axis=(1, 2))
+    if not shared.all():
+        return True
+    # segments sharing an end may meet only there: their intersection is that one point
+    return bool((shapely.get_type_id(shapely.intersection(lines[i], lines[j])) != 0).any())
+
+
+def _positional(value: float) -> str:
+    """A number as Triangle's switch parser reads it: digits and a point, no exponent, and as
+    many digits as give the same float back."""
+    return np.format_float_positional(value, trim="-")
 
 
 def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,

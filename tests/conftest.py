@@ -33,3 +33,12 @@ def plane_points(a=0.1, b=-0.05, c=12.0, size=40.0, density=4.0, seed=0, origin=
     n = int(size * size * density)
     x, y = rng.uniform(0, size, n), rng.uniform(0, size, n)
     return np.column_stack([x + origin[0], y + origin[1], a * x + b * y + c])
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Say how many random meshing cases ran (tests/core/test_mesh_fuzz.py)."""
+    from . import fuzz_stats
+
+    line = fuzz_stats.summary()
+    if line:
+        terminalreporter.write_line(line)
