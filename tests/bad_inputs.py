@@ -232,6 +232,18 @@ CASES = [
     BadInput("too-many-triangles", "more than the limit of 10,000",
              _maker(_xyz, "--max-area", 0.1, "--max-triangles", 10_000, crs=UTM),
              _lidar(_xyz, crs=UTM, MAX_AREA=0.1, MAX_TRIANGLES=10_000)),
+    BadInput("mesh-step-too-many-triangles", "more than the limit of 1,000",
+             lambda f: ["mesh", _tif("dem.tif")(f), "--max-area", 0.5, "--max-triangles", 1000,
+                        "--out", "{out}/mesh.2dm"],
+             lambda f: ("floodmesh:buildmesh", {
+                 "DEM": str(_tif("dem.tif")(f)), "MAX_AREA": 0.5, "MAX_TRIANGLES": 1000,
+                 "OUTPUT": str(f / "qgis-out" / "mesh.2dm")})),
+    BadInput("mesh-step-min-angle", "at most 34 degrees",
+             lambda f: ["mesh", _tif("dem.tif")(f), "--min-angle", 35, "--out",
+                        "{out}/mesh.2dm"],
+             lambda f: ("floodmesh:buildmesh", {
+                 "DEM": str(_tif("dem.tif")(f)), "MIN_ANGLE": 35.0,
+                 "OUTPUT": str(f / "qgis-out" / "mesh.2dm")})),
     BadInput("max-triangles-zero", "maximum number of triangles must be a whole number",
              _maker(_xyz, "--max-triangles", 0, crs=UTM),
              _lidar(_xyz, crs=UTM, MAX_TRIANGLES=0)),
