@@ -35,22 +35,25 @@ def _number(value, what: str) -> float:
     return value
 
 
-def check_cell_size(value) -> float:
-    value = _number(value, "cell size")
-    if not 0 < value < math.inf:
-        raise FloodMeshError(f"cell size must be a positive number of metres, got {value:g}: "
-                             "give the grid spacing d in metres (1 is the method's reference)")
+def _positive(value, what: str, unit: str, fix: str = "", *, zero: bool = False) -> float:
+    """``value`` as a finite number above 0 (or at least 0 with ``zero``), else the message
+    '<what> must be a positive number of <unit>, got …[: <fix>]'."""
+    value = _number(value, what)
+    if not ((0 <= value) if zero else (0 < value)) or not value < math.inf:
+        raise FloodMeshError(f"{what} must be {'zero or ' if zero else ''}a positive number of "
+                             f"{unit}, got {value:g}{': ' + fix if fix else ''}")
     return value
+
+
+def check_cell_size(value) -> float:
+    return _positive(value, "cell size", "metres",
+                     "give the grid spacing d in metres (1 is the method's reference)")
 
 
 def check_max_gap(value) -> float | None:
     if value is None:
         return None
-    value = _number(value, "max gap")
-    if not 0 < value < math.inf:
-        raise FloodMeshError(f"max gap must be a positive number of metres, got {value:g}; "
-                             "leave it out for the default of 10 cell sizes")
-    return value
+    return _positive(value, "max gap", "metres", "leave it out for the default of 10 cell sizes")
 
 
 def check_s_crit(value) -> float:
@@ -75,11 +78,8 @@ def check_min_angle(value) -> float:
 
 
 def check_max_area(value) -> float:
-    value = _number(value, "maximum triangle area")
-    if not 0 < value < math.inf:
-        raise FloodMeshError(f"maximum triangle area must be a positive number of m², got "
-                             f"{value:g}: give the largest element area the model may have")
-    return value
+    return _positive(value, "maximum triangle area", "m²",
+                     "give the largest element area the model may have")
 
 
 def check_max_triangles(value) -> int:
@@ -129,26 +129,15 @@ def check_min_points(value) -> int:
 
 
 def check_tolerance(value) -> float:
-    value = _number(value, "simplification tolerance")
-    if not 0 < value < math.inf:
-        raise FloodMeshError(f"simplification tolerance must be a positive number of metres, got "
-                             f"{value:g}")
-    return value
+    return _positive(value, "simplification tolerance", "metres")
 
 
 def check_sigma(value) -> float:
-    value = _number(value, "LoG sigma")
-    if not 0 <= value < math.inf:
-        raise FloodMeshError(f"LoG sigma must be zero or a positive number of metres, got {value:g}")
-    return value
+    return _positive(value, "LoG sigma", "metres", zero=True)
 
 
 def check_sensitivity(value) -> float:
-    value = _number(value, "LoG sensitivity")
-    if not 0 <= value < math.inf:
-        raise FloodMeshError(f"LoG sensitivity must be zero or a positive number of metres, got "
-                             f"{value:g}")
-    return value
+    return _positive(value, "LoG sensitivity", "metres", zero=True)
 
 
 def check_choice(value, choices, what: str) -> str:

@@ -163,6 +163,27 @@ def _maker(fn, *extra, crs=None):
     return lambda folder: _run(fn(folder), *extra, crs=crs)
 
 
+# LiDAR to mesh's parameters and the command-line options that set the same RunOptions field
+OPTION_FLAGS = {"CELL_SIZE": "--cell-size", "CRITICAL_SLOPE": "--s-crit",
+                "MIN_ANGLE": "--min-angle", "MAX_AREA": "--max-area",
+                "MAX_TRIANGLES": "--max-triangles", "HOLDOUT": "--holdout"}
+
+
+def _options_case(id_, words, **parameters):
+    """Good points (with a CRS given) and bad options: floodmesh run, and LiDAR to mesh."""
+    flags = [str(x) for name, value in parameters.items() for x in (OPTION_FLAGS[name], value)]
+    return BadInput(id_, words, _maker(_xyz, *flags, crs=UTM),
+                    _lidar(_xyz, crs=UTM, **parameters))
+
+
+def _mesh_step(cli_options, qgis_parameters):
+    """``floodmesh mesh`` and QGIS's Build mesh on the bank DEM with the given options."""
+    dem = _tif("dem.tif")
+    return (lambda f: ["mesh", dem(f), *cli_options, "--out", "{out}/mesh.2dm"],
+            lambda f: ("floodmesh:buildmesh", {"DEM": str(dem(f)), **qgis_parameters,
+                                               "OUTPUT": str(f / "qgis-out" / "mesh.2dm")}))
+
+
 CASES = [
     BadInput("missing-file", "does not exist",
              lambda f: _run(f / "missing.laz"), _lidar(lambda f: f / "missing.laz")),
@@ -209,48 +230,29 @@ CASES = [
     BadInput("south-up-raster", "not north-up",
              _maker(_tif("southup.tif", transform=Affine(1.0, 0, ORIGIN[0], 0, 1.0, ORIGIN[1]))),
              _lidar(_tif("southup.tif", transform=Affine(1.0, 0, ORIGIN[0], 0, 1.0, ORIGIN[1])))),
-    BadInput("cell-size-larger-than-data", "fewer than 3 cells",
-             _maker(_xyz, "--cell-size", 30, crs=UTM),
-             _lidar(_xyz, crs=UTM, CELL_SIZE=30.0)),
-    BadInput("cell-size-below-point-spacing", "would leave most grid cells empty",
-             _maker(_xyz, "--cell-size", 0.02, crs=UTM),
-             _lidar(_xyz, crs=UTM, CELL_SIZE=0.02)),
-    BadInput("cell-size-zero", "cell size must be a positive",
-             _maker(_xyz, "--cell-size", 0, crs=UTM), _lidar(_xyz, crs=UTM, CELL_SIZE=0.0)),
-    BadInput("s-crit-zero", "S_crit must be above 0 and below 90",
-             _maker(_xyz, "--s-crit", 0, crs=UTM), _lidar(_xyz, crs=UTM, CRITICAL_SLOPE=0.0)),
-    BadInput("s-crit-90", "S_crit must be above 0 and below 90",
-             _maker(_xyz, "--s-crit", 90, crs=UTM), _lidar(_xyz, crs=UTM, CRITICAL_SLOPE=90.0)),
-    BadInput("min-angle-above-34", "at most 34 degrees",
-             _maker(_xyz, "--min-angle", 34.5, crs=UTM), _lidar(_xyz, crs=UTM, MIN_ANGLE=34.5)),
-    BadInput("min-angle-zero", "minimum angle must be above 0",
-             _maker(_xyz, "--min-angle", 0, crs=UTM), _lidar(_xyz, crs=UTM, MIN_ANGLE=0.0)),
-    BadInput("max-area-zero", "maximum triangle area must be a positive",
-             _maker(_xyz, "--max-area", 0, crs=UTM), _lidar(_xyz, crs=UTM, MAX_AREA=0.0)),
-    BadInput("max-area-negative", "maximum triangle area must be a positive",
-             _maker(_xyz, "--max-area", -5, crs=UTM), _lidar(_xyz, crs=UTM, MAX_AREA=-5.0)),
-    BadInput("too-many-triangles", "more than the limit of 10,000",
-             _maker(_xyz, "--max-area", 0.1, "--max-triangles", 10_000, crs=UTM),
-             _lidar(_xyz, crs=UTM, MAX_AREA=0.1, MAX_TRIANGLES=10_000)),
+    _options_case("cell-size-larger-than-data", "fewer than 3 cells", CELL_SIZE=30.0),
+    _options_case("cell-size-below-point-spacing", "would leave most grid cells empty",
+                  CELL_SIZE=0.02),
+    _options_case("cell-size-zero", "cell size must be a positive", CELL_SIZE=0.0),
+    _options_case("s-crit-zero", "S_crit must be above 0 and below 90", CRITICAL_SLOPE=0.0),
+    _options_case("s-crit-90", "S_crit must be above 0 and below 90", CRITICAL_SLOPE=90.0),
+    _options_case("min-angle-above-34", "at most 34 degrees", MIN_ANGLE=34.5),
+    _options_case("min-angle-zero", "minimum angle must be above 0", MIN_ANGLE=0.0),
+    _options_case("max-area-zero", "maximum triangle area must be a positive", MAX_AREA=0.0),
+    _options_case("max-area-negative", "maximum triangle area must be a positive",
+                  MAX_AREA=-5.0),
+    _options_case("too-many-triangles", "more than the limit of 10,000", MAX_AREA=0.1,
+                  MAX_TRIANGLES=10_000),
     BadInput("mesh-step-too-many-triangles", "more than the limit of 1,000",
-             lambda f: ["mesh", _tif("dem.tif")(f), "--max-area", 0.5, "--max-triangles", 1000,
-                        "--out", "{out}/mesh.2dm"],
-             lambda f: ("floodmesh:buildmesh", {
-                 "DEM": str(_tif("dem.tif")(f)), "MAX_AREA": 0.5, "MAX_TRIANGLES": 1000,
-                 "OUTPUT": str(f / "qgis-out" / "mesh.2dm")})),
+             *_mesh_step(["--max-area", 0.5, "--max-triangles", 1000],
+                         {"MAX_AREA": 0.5, "MAX_TRIANGLES": 1000})),
     BadInput("mesh-step-min-angle", "at most 34 degrees",
-             lambda f: ["mesh", _tif("dem.tif")(f), "--min-angle", 35, "--out",
-                        "{out}/mesh.2dm"],
-             lambda f: ("floodmesh:buildmesh", {
-                 "DEM": str(_tif("dem.tif")(f)), "MIN_ANGLE": 35.0,
-                 "OUTPUT": str(f / "qgis-out" / "mesh.2dm")})),
-    BadInput("max-triangles-zero", "maximum number of triangles must be a whole number",
-             _maker(_xyz, "--max-triangles", 0, crs=UTM),
-             _lidar(_xyz, crs=UTM, MAX_TRIANGLES=0)),
-    BadInput("holdout-too-small", "needs at least 20 check points",
-             _maker(_xyz, "--holdout", 0.0005, crs=UTM), _lidar(_xyz, crs=UTM, HOLDOUT=0.0005)),
-    BadInput("holdout-one", "holdout fraction must be at least 0 and below 1",
-             _maker(_xyz, "--holdout", 1, crs=UTM), _lidar(_xyz, crs=UTM, HOLDOUT=1.0)),
+             *_mesh_step(["--min-angle", 35], {"MIN_ANGLE": 35.0})),
+    _options_case("max-triangles-zero", "maximum number of triangles must be a whole number",
+                  MAX_TRIANGLES=0),
+    _options_case("holdout-too-small", "needs at least 20 check points", HOLDOUT=0.0005),
+    _options_case("holdout-one", "holdout fraction must be at least 0 and below 1",
+                  HOLDOUT=1.0),
     BadInput("grid-too-large-for-memory", "of memory",
              lambda f: ["grid", _xyz(f), "--crs", UTM, "--cell-size", 0.001, "--max-gap", 5,
                         "--out", "{out}/dem.tif"],
