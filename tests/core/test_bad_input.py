@@ -23,3 +23,19 @@ def test_bad_input_is_one_line_and_exit_code_2(case, tmp_path, capsys):
     assert case.words in lines[0]
     out = tmp_path / "out"
     assert not out.exists() or list(out.iterdir()) == [], "bad input left a file behind"
+
+
+@pytest.mark.parametrize("args", [
+    ["run"],
+    ["run", "points.laz", "--out", "o", "--cell-size", "one"],
+    ["run", "points.laz", "--out", "o", "--slope-method", "steepest"],
+    ["mesh", "dem.tif", "--out", "m.2dm", "--max-triangles", "1.5"],
+    ["frobnicate"],
+])
+def test_usage_errors_are_one_line_too(args, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(args)
+    assert exit_.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("floodmesh: error: ")
+    assert lines[0].endswith("--help)")
