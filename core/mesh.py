@@ -261,9 +261,10 @@ def _count_below(result: dict, min_angle: float, sharp: np.ndarray) -> int:
 
 
 def _check_pslg(pslg: PSLG) -> None:
-    """Refuse what Triangle's C code would read out of bounds, crash or loop on: too few
-    vertices or segments, non-finite coordinates, segment ends that are no vertex, zero-length
-    segments, duplicate vertices."""
+    """Refuse what Triangle's C code would read out of bounds, crash or loop on, or mesh in a
+    way no check of ours can follow: too few vertices or segments, non-finite coordinates,
+    segment ends that are no vertex, zero-length segments, duplicate vertices, segments that
+    cross or overlap."""
     vertices = np.asarray(pslg.vertices, float)
     segments = np.asarray(pslg.segments)
     holes = np.asarray(pslg.holes, float).reshape(-1, 2)
