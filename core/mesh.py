@@ -264,7 +264,7 @@ def _check_pslg(pslg: PSLG) -> None:
     """Refuse what Triangle's C code would read out of bounds, crash or loop on, or mesh in a
     way no check of ours can follow: too few vertices or segments, non-finite coordinates,
     segment ends that are no vertex, zero-length segments, duplicate vertices, segments that
-    cross or overlap."""
+    cross or overlap, hole points outside or on the boundary."""
     vertices = np.asarray(pslg.vertices, float)
     segments = np.asarray(pslg.segments)
     holes = np.asarray(pslg.holes, float).reshape(-1, 2)
@@ -284,6 +284,8 @@ def _check_pslg(pslg: PSLG) -> None:
         problem = "two vertices coincide"
     elif _segments_cross(vertices, segments):
         problem = "segments cross or overlap"
+    elif len(holes) and not _holes_inside(vertices, segments, holes):
+        problem = "a hole point lies outside the vertices' hull or on a segment"
     if problem:
         raise FloodMeshError(f"the PSLG cannot be meshed: {problem} (build it with build_pslg, "
                              "which cleans break lines and the boundary)")
@@ -303,6 +305,17 @@ def _segments_cross(vertices: np.ndarray, segments: np.ndarray) -> bool:
         return True
     # segments sharing an end may meet only there: their intersection is that one point
     return bool((shapely.get_type_id(shapely.intersection(lines[i], lines[j])) != 0).any())
+
+
+def _holes_inside(vertices: np.ndarray, segments: np.ndarray, holes: np.ndarray) -> bool:
+    """Whether every hole point lies strictly inside the vertices' convex hull and off every
+    segment: Triangle crashed (segmentation fault) on a hole point on its bounding box."""
+    points = shapely.points(holes)
+    hull = shapely.MultiPoint(vertices).convex_hull
+    lines = shapely.MultiLineString(list(vertices[segments]))
+    tolerance = 1e-9 * float(np.ptp(vertices, axis=0).max())
+    return bool(shapely.contains(hull, points).all()
+                and (shapely.distance(points, lines) > tolerance).all())
 
 
 def _positional(value: float) -> str:

@@ -226,6 +226,18 @@ def test_conforming_refinement_leaves_no_triangle_below_the_bound():
     np.testing.assert_array_equal(vertices[:len(FUZZ_PSLG_31.vertices)], FUZZ_PSLG_31.vertices)
 
 
+def test_hole_point_on_the_bounding_box_is_refused_not_a_crash():
+    """Triangle crashed with a segmentation fault on this hexagon with a hole point outside it
+    at the bounding box's edge (found by the fuzz test): it is refused before Triangle runs."""
+    pslg = PSLG(np.array([[58.28367861, 24.12484253], [90.85922587, 0.0],
+                          [25.36434167, 94.79197394], [28.98888217, 28.5714], [0.0, 0.0],
+                          [14.76912979, 0.37040256]]) + [500_000.0, 5_700_000.0],
+                np.array([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 0]], np.int32),
+                np.array([[0.0, 50.92378231]]) + [500_000.0, 5_700_000.0])
+    with pytest.raises(FloodMeshError, match="hole point lies outside"):
+        triangulate_pslg(pslg, min_angle=31.44310859687332, max_area=0.029743290100072917)
+
+
 @pytest.mark.parametrize("vertices, segments, problem", [
     ([[0, 0], [1, 0]], [[0, 1], [1, 0], [0, 1]], "fewer than 3 vertices"),
     ([[0, 0], [1, 0], [np.nan, 1]], [[0, 1], [1, 2], [2, 0]], "not finite"),

@@ -162,8 +162,10 @@ def _check(vertices, triangles, pslg, min_angle, max_area) -> str:
     edge_keys = np.unique(edges[:, 0] * n + edges[:, 1])
     local_pslg = pslg.vertices - origin
     scale = max(float(np.ptp(xy, axis=0).max()), 1e-9)
-    tol = 1e-7 * scale
     lines = shapely.linestrings(local_pslg[pslg.segments])
+    # on a segment: within a rounding error of the extent, and far less than the segment's
+    # length (Steiner points beside a very short segment are not on it)
+    tol = np.minimum(1e-7 * scale, 1e-3 * shapely.length(lines))
     tree = shapely.STRtree(shapely.points(xy))
     seg_idx, vert_idx = tree.query(lines, predicate="dwithin", distance=tol)
     for s in np.unique(seg_idx):
@@ -400,8 +402,8 @@ def raw_pslgs(draw):
     size = draw(SIZES)
     origin = np.array(draw(ORIGINS))
     vertices = np.array(draw(st.lists(st.tuples(st.floats(0, 1), st.floats(0, 1)), min_size=n,
-                                      max_size=n))).reshape(-1, 2) * size + origin
-    if n and draw(st.booleans()):
+                                      max_size=n, unique=True))).reshape(-1, 2) * size + origin
+    if n and draw(dice()) < 0.2:
         vertices = np.vstack([vertices, vertices[draw(st.integers(0, n - 1))]])  # a duplicate
     if n and draw(st.integers(0, 9)) == 0:
         vertices[draw(st.integers(0, n - 1))] = np.nan
