@@ -35,7 +35,15 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         missing = missing_dependencies()
         if missing:
             return False, install_hint(missing)
+        try:
+            self.check_values(parameters, context)
+        except FloodMeshError as exc:  # core's own message, before QGIS's generic range check
+            return False, str(exc)
         return super().checkParameterValues(parameters, context)
+
+    def check_values(self, parameters, context):
+        """Check parameter values with core's checks (raising FloodMeshError) before the run;
+        subclasses override it. Core checks them again when it runs, with the same message."""
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         missing = missing_dependencies()
@@ -81,8 +89,12 @@ def layer_file(layer, what: str) -> str:
 
 
 def crs_or_none(algorithm, parameters, name, context):
+    """The CRS parameter as core takes it: its EPSG code where it has one (so that messages name
+    it as the command line does), else its WKT; None when not given."""
     crs = algorithm.parameterAsCrs(parameters, name, context)
-    return crs.toWkt() if crs.isValid() else None
+    if not crs.isValid():
+        return None
+    return crs.authid() if crs.authid().upper().startswith("EPSG:") else crs.toWkt()
 
 
 BOUNDARY, USER_LINES = "BOUNDARY", "USER_LINES"

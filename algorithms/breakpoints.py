@@ -2,6 +2,7 @@
 from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
 
+from ..core.options import check_s_crit, check_sensitivity
 from .base import FloodMeshAlgorithm, layer_file, run_core
 
 
@@ -21,7 +22,7 @@ class ClassifyBreakpointsAlgorithm(FloodMeshAlgorithm):
             self.INPUT, self.tr("Slope (degrees) or LoG response (m)")))
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
-            QgsProcessingParameterNumber.Double, 10.0, minValue=0.01, maxValue=89.99))
+            QgsProcessingParameterNumber.Double, 10.0, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.LOG_SENSITIVITY, self.tr("LoG sensitivity (m; only for a LoG response)"),
             QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
@@ -29,6 +30,12 @@ class ClassifyBreakpointsAlgorithm(FloodMeshAlgorithm):
             self.ZERO_CROSSINGS, self.tr("LoG: breakpoints at zero crossings"), False))
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.OUTPUT, self.tr("Breakpoints")))
+
+    def check_values(self, parameters, context):
+        if parameters.get(self.LOG_SENSITIVITY) not in (None, ""):
+            check_sensitivity(self.parameterAsDouble(parameters, self.LOG_SENSITIVITY, context))
+        else:
+            check_s_crit(self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context))
 
     def process(self, parameters, context, feedback):
         import numpy as np

@@ -1,9 +1,11 @@
 """Build mesh: break lines and the DEM's extent as a PSLG, refined by Triangle."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterDefinition,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
                        QgsProcessingParameterVectorDestination)
 
+from ..core.options import (DEFAULT_MAX_TRIANGLES, MAX_MIN_ANGLE, check_max_area,
+                            check_max_triangles, check_min_angle)
 from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, read_mesh_inputs,
                    run_core)
 from .styles import load_mesh
@@ -22,7 +24,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             "maximum area. Writes SMS 2DM and, optionally, the triangles as "
             "PolygonZ.")
     DEM, BREAKLINES, MIN_ANGLE, MAX_AREA = "DEM", "BREAKLINES", "MIN_ANGLE", "MAX_AREA"
-    SIZE_FIELD = "SIZE_FIELD"
+    SIZE_FIELD, MAX_TRIANGLES = "SIZE_FIELD", "MAX_TRIANGLES"
     OUTPUT, TRIANGLES, NODES, TRIANGLE_COUNT = "OUTPUT", "TRIANGLES", "NODES", "TRIANGLE_COUNT"
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -33,12 +35,13 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum angle (degrees)"),
-            QgsProcessingParameterNumber.Double, 25.0, minValue=0.01, maxValue=34.0))
+            QgsProcessingParameterNumber.Double, 25.0, minValue=0.0, maxValue=MAX_MIN_ANGLE))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_AREA, self.tr("Maximum triangle area (m²)"),
-            QgsProcessingParameterNumber.Double, 100.0, minValue=0.0001))
+            QgsProcessingParameterNumber.Double, 100.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterRasterLayer(
             self.SIZE_FIELD, self.tr("Size field: local maximum area (m²)"), optional=True))
+        self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, self.tr("Mesh (SMS 2DM)"), fileFilter="SMS 2DM (*.2dm)"))
         self.addParameter(QgsProcessingParameterVectorDestination(
@@ -46,6 +49,11 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             createByDefault=False))
         self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Nodes")))
         self.addOutput(QgsProcessingOutputNumber(self.TRIANGLE_COUNT, self.tr("Triangles")))
+
+    def check_values(self, parameters, context):
+        check_min_angle(self.parameterAsDouble(parameters, self.MIN_ANGLE, context))
+        check_max_area(self.parameterAsDouble(parameters, self.MAX_AREA, context))
+        check_max_triangles(self.parameterAsInt(parameters, self.MAX_TRIANGLES, context))
 
     def process(self, parameters, context, feedback):
         from ..core import io
@@ -58,8 +66,11 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         size_layer = self.parameterAsRasterLayer(parameters, self.SIZE_FIELD, context)
         size = (run_core(size_field, layer_file(size_layer, "Size field"), dem,
                          max_area=max_area) if size_layer is not None else None)
-        mesh = run_core(build_mesh, dem, lines, min_angle=min_angle,
-                        max_area=max_area, domain=domain, size_field=size)
+        mesh = run_core(build_mesh, dem, lines, min_angle=min_angle, max_area=max_area,
+                        domain=domain, size_field=size,
+                        max_triangles=self.parameterAsInt(parameters, self.MAX_TRIANGLES,
+                                                          context),
+                        note=feedback.pushWarning)
         quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)
         feedback.pushInfo(f"{quality['nodes']} nodes, {quality['triangles']} triangles, smallest "
                           f"angle {quality['min_angle_deg']:.2f}°, largest area "
@@ -74,3 +85,12 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             run_core(io.write_mesh_gpkg, triangles_out, mesh.nodes, mesh.triangles, dem.crs)
             results[self.TRIANGLES] = triangles_out
         return results
+
+
+def max_triangles_parameter(name, tr):
+    """The advanced parameter that caps the mesh size, shared with LiDAR to mesh."""
+    parameter = QgsProcessingParameterNumber(
+        name, tr("Maximum number of triangles (refused before meshing above it)"),
+        QgsProcessingParameterNumber.Integer, DEFAULT_MAX_TRIANGLES, minValue=1)
+    parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+    return parameter

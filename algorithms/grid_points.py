@@ -4,6 +4,7 @@ from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterString,
                        QgsProcessingParameterVectorDestination)
 
+from ..core.options import check_cell_size, check_holdout, check_max_gap
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
 
 POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
@@ -31,19 +32,28 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
             optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.CELL_SIZE, self.tr("Cell size d (m)"), QgsProcessingParameterNumber.Double, 1.0,
-            minValue=0.01))
+            minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_GAP, self.tr("Maximum gap bridged (m; empty: 10 cells)"),
-            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.01))
+            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.HOLDOUT, self.tr("Fraction of points held out"),
-            QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=0.5))
+            QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=1.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.SEED, self.tr("Random seed"), QgsProcessingParameterNumber.Integer, 0))
         self.addParameter(QgsProcessingParameterRasterDestination(self.OUTPUT, self.tr("DEM")))
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.HOLDOUT_OUTPUT, self.tr("Held-out points"), optional=True,
             createByDefault=False))
+
+    def max_gap(self, parameters, context):
+        return (self.parameterAsDouble(parameters, self.MAX_GAP, context)
+                if parameters.get(self.MAX_GAP) not in (None, "") else None)
+
+    def check_values(self, parameters, context):
+        check_cell_size(self.parameterAsDouble(parameters, self.CELL_SIZE, context))
+        check_max_gap(self.max_gap(parameters, context))
+        check_holdout(self.parameterAsDouble(parameters, self.HOLDOUT, context))
 
     def process(self, parameters, context, feedback):
         from ..core import io
@@ -57,12 +67,12 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
             raise QgsProcessingException(f"LAS classes must be whole numbers separated by "
                                          f"commas, e.g. 2,9; got {text!r}") from None
         points = run_core(io.read_points, self.parameterAsFile(parameters, self.INPUT, context),
-                          crs=crs_or_none(self, parameters, self.CRS, context), classes=classes)
+                          crs=crs_or_none(self, parameters, self.CRS, context), classes=classes,
+                          note=feedback.pushWarning)
         gridding, holdout = run_core(split_holdout, points,
                                      self.parameterAsDouble(parameters, self.HOLDOUT, context),
                                      self.parameterAsInt(parameters, self.SEED, context))
-        max_gap = (self.parameterAsDouble(parameters, self.MAX_GAP, context)
-                   if parameters.get(self.MAX_GAP) not in (None, "") else None)
+        max_gap = self.max_gap(parameters, context)
         dem = run_core(grid_points_linear, gridding,
                        self.parameterAsDouble(parameters, self.CELL_SIZE, context),
                        max_gap=max_gap, progress=lambda f: feedback.setProgress(100 * f))

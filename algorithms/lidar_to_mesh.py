@@ -7,8 +7,10 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputFile,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
                        QgsProcessingParameterNumber, QgsVectorLayer)
 
-from ..core.options import BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS, RunOptions
+from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
+                            MAX_MIN_ANGLE, RunOptions)
 from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, run_core
+from .build_mesh import max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
 from .styles import load_on_completion, style_breaklines, style_mesh, style_residuals
 
@@ -43,6 +45,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     SIMPLIFY, TOLERANCE = "SIMPLIFY", "TOLERANCE"
     MIN_ANGLE = "MIN_ANGLE"
     MAX_AREA = "MAX_AREA"
+    MAX_TRIANGLES = "MAX_TRIANGLES"
     HOLDOUT = "HOLDOUT"
     SEED = "SEED"
     FORMATS = "FORMATS"
@@ -62,13 +65,13 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.CRS, self.tr("CRS of the input (when the file has none)"), optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.CELL_SIZE, self.tr("Grid cell size d (m)"), QgsProcessingParameterNumber.Double,
-            defaults.cell_size, minValue=0.01))
+            defaults.cell_size, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
             self.SLOPE_METHOD, self.tr("Slope method"), options=METHODS,
             defaultValue=METHODS.index(defaults.slope_method)))
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
-            QgsProcessingParameterNumber.Double, defaults.s_crit, minValue=0.01, maxValue=89.99))
+            QgsProcessingParameterNumber.Double, defaults.s_crit, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.KEEP_EVERY, self.tr("Keep every n-th break-line point"),
             QgsProcessingParameterNumber.Integer, 4, minValue=1))
@@ -81,13 +84,14 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),
-            QgsProcessingParameterNumber.Double, defaults.min_angle, minValue=0.01, maxValue=34))
+            QgsProcessingParameterNumber.Double, defaults.min_angle, minValue=0.0,
+            maxValue=MAX_MIN_ANGLE))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_AREA, self.tr("Maximum triangle area (m²)"),
-            QgsProcessingParameterNumber.Double, defaults.max_area, minValue=0.0001))
+            QgsProcessingParameterNumber.Double, defaults.max_area, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.HOLDOUT, self.tr("Fraction of points held out for assessment"),
-            QgsProcessingParameterNumber.Double, defaults.holdout, minValue=0, maxValue=0.5))
+            QgsProcessingParameterNumber.Double, defaults.holdout, minValue=0.0, maxValue=1.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.SEED, self.tr("Random seed"), QgsProcessingParameterNumber.Integer,
             defaults.seed))
@@ -95,6 +99,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.FORMATS, self.tr("Also write the mesh for solvers"),
             options=list(EXPORT_FORMAT_LABELS), allowMultiple=True, optional=True,
             defaultValue=[]))
+        self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
         self.addOutput(QgsProcessingOutputVectorLayer(
@@ -105,12 +110,11 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.TRIANGLES, self.tr("Mesh triangles")))
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("Holdout RMSE (m)")))
 
-    def process(self, parameters, context, feedback):
-        from ..core.pipeline import run_pipeline
-
+    def options(self, parameters, context) -> RunOptions:
+        """The chain's options from the parameters; RunOptions checks their ranges."""
         boundary, user_lines = domain_files(self, parameters, context)
         simplify = self.parameterAsEnum(parameters, self.SIMPLIFY, context)
-        options = run_core(RunOptions,
+        return RunOptions(
             cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],
             s_crit=self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
@@ -124,7 +128,16 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             crs=crs_or_none(self, parameters, self.CRS, context), boundary=boundary,
             user_lines=user_lines,
             formats=tuple(EXPORT_FORMATS[i] for i in
-                          self.parameterAsEnums(parameters, self.FORMATS, context)))
+                          self.parameterAsEnums(parameters, self.FORMATS, context)),
+            max_triangles=self.parameterAsInt(parameters, self.MAX_TRIANGLES, context))
+
+    def check_values(self, parameters, context):
+        self.options(parameters, context)
+
+    def process(self, parameters, context, feedback):
+        from ..core.pipeline import run_pipeline
+
+        options = run_core(self.options, parameters, context)
         source = self.parameterAsFile(parameters, self.INPUT, context)
         out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
         report = run_core(run_pipeline, source, out, options,

@@ -34,7 +34,7 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
             QgsProcessingParameterNumber.Integer, 4, minValue=1))
         self.addParameter(QgsProcessingParameterNumber(
             self.TOLERANCE, self.tr("Tolerance for Douglas–Peucker or spline (m)"),
-            QgsProcessingParameterNumber.Double, 0.9, minValue=0.001))
+            QgsProcessingParameterNumber.Double, 0.9, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_DISTANCE, self.tr("Minimum distance between lines (m)"),
             QgsProcessingParameterNumber.Double, 0.5, minValue=0.0))

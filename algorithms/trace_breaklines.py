@@ -4,6 +4,7 @@ from qgis.core import (QgsProcessing, QgsProcessingParameterBoolean, QgsProcessi
                        QgsProcessingParameterRasterLayer, QgsProcessingParameterVectorDestination)
 
 from ..core.options import TRACING_MODES as MODES
+from ..core.options import check_min_points, check_s_crit
 from .base import FloodMeshAlgorithm, layer_file, run_core
 from .styles import style_breaklines, style_when_loaded
 
@@ -33,7 +34,7 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterRasterLayer(self.DEM, self.tr("DEM")))
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
-            QgsProcessingParameterNumber.Double, 10.0, minValue=0.01, maxValue=89.99))
+            QgsProcessingParameterNumber.Double, 10.0, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterEnum(self.MODE, self.tr("Terrain"),
                                                      options=list(MODES), defaultValue=0))
         self.addParameter(QgsProcessingParameterNumber(
@@ -50,6 +51,10 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(seed)
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Break lines"), QgsProcessing.TypeVectorLine))
+
+    def check_values(self, parameters, context):
+        check_s_crit(self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context))
+        check_min_points(self.parameterAsDouble(parameters, self.MIN_POINTS, context))
 
     def process(self, parameters, context, feedback):
         from ..core import io

@@ -33,7 +33,8 @@ import numba
 import numpy as np
 
 from .errors import FloodMeshError
-from .options import TRACING_MODES
+from .options import (TRACING_MODES, check_choice, check_min_length, check_min_points,
+                      check_s_crit)
 from .raster import Grid
 
 MODES = TRACING_MODES
@@ -71,12 +72,10 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     bands oblique to the grid (see ``_join_fragments``); without it every line obeys the slope
     continuity rule strictly. ``seed`` settles ties that the 7x7 kernel leaves.
     """
-    if mode not in MODES:
-        raise FloodMeshError(f"unknown tracing mode {mode!r}; choose one of {', '.join(MODES)}")
-    if not 0 < s_crit < 90:
-        raise FloodMeshError(f"critical slope S_crit must be between 0 and 90 degrees, got {s_crit}")
-    if not min_length >= 0:
-        raise FloodMeshError(f"minimum break-line length must be 0 m or more, got {min_length}")
+    check_choice(mode, MODES, "tracing mode")
+    s_crit = check_s_crit(s_crit)
+    min_points = check_min_points(min_points)
+    min_length = check_min_length(min_length)
     if breakpoints.shape != slope.shape or slope.shape != dem.shape:
         raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
                              f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")

@@ -8,14 +8,13 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from .errors import FloodMeshError
+from .options import check_s_crit, check_sensitivity
 from .raster import Grid
 
 
 def classify_breakpoints(slope: Grid, s_crit: float, *, thin: bool = True) -> Grid:
     """Binary (uint8) breakpoint grid: slope ≥ ``s_crit`` degrees, then thinned."""
-    if not 0 < s_crit < 90:
-        raise FloodMeshError(f"critical slope S_crit must be between 0 and 90 degrees, got {s_crit}")
+    s_crit = check_s_crit(s_crit)
     with np.errstate(invalid="ignore"):
         breakpoints = slope.values >= s_crit
     if thin:
@@ -42,8 +41,7 @@ def log_breakpoints(response: Grid, sensitivity: float, *, zero_crossings: bool 
     least ``sensitivity``; the cell of the pair nearer to zero is marked (Marr & Hildreth 1980,
     doi:10.1098/rspb.1980.0020): the mid-slope edges.
     """
-    if not sensitivity >= 0 or not np.isfinite(sensitivity):
-        raise FloodMeshError(f"LoG sensitivity must be zero or positive metres, got {sensitivity}")
+    sensitivity = check_sensitivity(sensitivity)
     valid = np.isfinite(response.values)
     r = np.where(valid, response.values, 0.0)
     if not zero_crossings:

@@ -12,9 +12,18 @@ import time
 from pathlib import Path
 
 from .errors import Cancelled, FloodMeshError
-from .options import BREAKPOINT_METHODS, EXPORT_FORMATS, LOG_KERNELS, RunOptions, parse_formats
+from .options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
+                      RunOptions, parse_formats)
 
 DEFAULTS = RunOptions()
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line on stderr (and exit code 2), like every other
+    error; ``--help`` still prints the full usage."""
+
+    def error(self, message):
+        self.exit(2, f"floodmesh: error: {message} (see {self.prog} --help)\n")
 
 
 class ProgressBar:
@@ -65,7 +74,7 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
     """The chain's options; for ``series`` lists of maximum areas and simplifications instead of
     one of each, and no solver formats."""
     p.add_argument("--crs", help="CRS of the input when it has none or a wrong one (EPSG:XXXX)")
-    p.add_argument("--cell-size", type=_positive(float), default=DEFAULTS.cell_size,
+    p.add_argument("--cell-size", type=float, default=DEFAULTS.cell_size,
                    help="grid cell size d in metres (default %(default)s)")
     p.add_argument("--slope-method", choices=BREAKPOINT_METHODS, default=DEFAULTS.slope_method,
                    help="slope kernel, or log for Laplacian-of-Gaussian breakpoints "
@@ -97,16 +106,17 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle,
                    help="minimum triangle angle in degrees (default %(default)s)")
     if series:
-        p.add_argument("--max-areas", type=_list(_positive(float)), default=(400, 200, 100, 50),
+        p.add_argument("--max-areas", type=_list(float), default=(400, 200, 100, 50),
                        help="maximum triangle areas in m², one mesh each (default 400,200,100,50)")
     else:
         p.add_argument("--max-area", type=float, default=DEFAULTS.max_area,
                        help="maximum triangle area in m² (default %(default)s)")
         _add_size_options(p)
+    _add_max_triangles(p)
     p.add_argument("--holdout", type=float, default=DEFAULTS.holdout,
                    help="fraction of points held out for assessment (default %(default)s)")
     p.add_argument("--seed", type=int, default=DEFAULTS.seed, help="random seed (default 0)")
-    p.add_argument("--max-gap", type=_positive(float),
+    p.add_argument("--max-gap", type=float,
                    help="longest triangle edge bridged when gridding, m (default 10 cells)")
     p.add_argument("--classes", type=lambda s: tuple(int(c) for c in s.split(",")),
                    help="LAS classes to grid, e.g. 2,9 (default: 2 when classified)")
@@ -130,6 +140,12 @@ def _add_domain_options(p: argparse.ArgumentParser):
     p.add_argument("--lines", dest="user_lines",
                    help="line file: your own break or structure lines, kept as mesh edges "
                         "(2-D lines take z from the DEM)")
+
+
+def _add_max_triangles(p: argparse.ArgumentParser):
+    p.add_argument("--max-triangles", type=int, default=DEFAULT_MAX_TRIANGLES,
+                   help="refuse, before meshing, a mesh estimated to have more triangles than "
+                        "this (default %(default)s)")
 
 
 def _add_log_options(p: argparse.ArgumentParser, *, response=True):
@@ -156,7 +172,8 @@ def _options(args) -> RunOptions:
                       min_area=getattr(args, "min_area", None),
                       min_angle=args.min_angle, max_area=args.max_area, holdout=args.holdout,
                       seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes,
-                      formats=parse_formats(args.formats))
+                      formats=parse_formats(args.formats),
+                      max_triangles=args.max_triangles)
 
 
 def _summary(report: dict, out: Path) -> str:
@@ -178,6 +195,7 @@ def cmd_run(args):
         report = run_pipeline(args.input, args.out, _options(args), progress=bar, log=bar.log)
     finally:
         bar.close()
+    _print_notes(report["notes"])
     print(_summary(report, Path(args.out)))
 
 
@@ -205,6 +223,12 @@ def cmd_series(args):
           f"{args.out}/")
 
 
+def _print_notes(notes):
+    """What FloodMesh assumed or repaired on the user's behalf, one line each on stderr."""
+    for message in notes:
+        print(f"floodmesh: note: {message}", file=sys.stderr)
+
+
 def cmd_demo(args):
     from . import io
     from .demo import synthetic_floodplain
@@ -224,9 +248,15 @@ def cmd_demo(args):
 def cmd_grid(args):
     from . import io
     from .grid import grid_points_linear
+    from .options import check_cell_size, check_holdout, check_max_gap
     from .points import split_holdout
 
-    points = io.read_points(args.input, crs=args.crs, classes=args.classes)
+    check_cell_size(args.cell_size)
+    check_max_gap(args.max_gap)
+    check_holdout(args.holdout)
+    notes = []
+    points = io.read_points(args.input, crs=args.crs, classes=args.classes, note=notes.append)
+    _print_notes(notes)
     gridding, holdout = split_holdout(points, args.holdout, args.seed)
     dem = grid_points_linear(gridding, args.cell_size, max_gap=args.max_gap)
     io.write_raster(args.out, dem)
@@ -298,14 +328,21 @@ def cmd_simplify(args):
 def cmd_mesh(args):
     from . import io
     from .mesh import build_mesh, mesh_quality
+    from .options import check_max_area, check_max_triangles, check_min_angle
     from .pipeline import mesh_constraints, size_field
 
+    check_min_angle(args.min_angle)
+    check_max_area(args.max_area)
+    check_max_triangles(args.max_triangles)
     dem = io.read_raster(args.dem, crs=args.crs)
     lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
     domain, own_lines = mesh_constraints(dem, args.boundary, args.user_lines)
     size = size_field(args.size_field, dem, max_area=args.max_area, min_area=args.min_area)
+    notes = []
     mesh = build_mesh(dem, lines + own_lines, min_angle=args.min_angle, max_area=args.max_area,
-                      domain=domain, size_field=size)
+                      domain=domain, size_field=size, max_triangles=args.max_triangles,
+                      note=notes.append)
+    _print_notes(notes)
     io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles)
     if args.gpkg:
         io.write_mesh_gpkg(args.gpkg, mesh.nodes, mesh.triangles, dem.crs)
@@ -407,9 +444,10 @@ def cmd_refine(args):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="floodmesh", description="LiDAR to finite-element meshes for 2D hydrodynamic models.")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                parser_class=_Parser)
 
     p = sub.add_parser("run", help="the whole chain: points or DEM to mesh and report")
     p.add_argument("input", help="LAS/LAZ/XYZ point file or GeoTIFF DEM")
@@ -431,10 +469,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("grid", help="grid points to a DEM by linear (TIN) interpolation")
     p.add_argument("input")
-    p.add_argument("--cell-size", type=_positive(float), required=True)
+    p.add_argument("--cell-size", type=float, required=True)
     p.add_argument("--out", required=True, help="DEM GeoTIFF")
     p.add_argument("--crs")
-    p.add_argument("--max-gap", type=_positive(float))
+    p.add_argument("--max-gap", type=float)
     p.add_argument("--classes", type=lambda s: tuple(int(c) for c in s.split(",")))
     p.add_argument("--holdout", type=float, default=0.0)
     p.add_argument("--holdout-out", help="held-out points (default holdout.gpkg beside --out)")
@@ -499,6 +537,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_size_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle)
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area)
+    _add_max_triangles(p)
     p.add_argument("--out", required=True, help="SMS 2DM mesh")
     p.add_argument("--gpkg", help="also write the triangles to this GeoPackage")
     p.add_argument("--crs")

@@ -21,10 +21,11 @@ from affine import Affine
 
 from .delaunay import delaunay
 from .errors import Cancelled, FloodMeshError
+from .limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
+from .options import check_cell_size, check_max_gap
 from .points import PointCloud
 from .raster import Grid
 
-MAX_CELLS = 400_000_000
 TILE = 256
 
 
@@ -36,27 +37,10 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
     nodata. Duplicate points are harmless (the triangulation skips them). Progress and
     cancellation are polled per tile.
     """
-    if not cell_size > 0 or not math.isfinite(cell_size):
-        raise FloodMeshError(f"cell size must be a positive number of metres, got {cell_size}")
-    if max_gap is None:
-        max_gap = 10.0 * cell_size
-    if not max_gap > 0:
-        raise FloodMeshError(f"max gap must be positive, got {max_gap}")
+    cell_size = check_cell_size(cell_size)
+    plan = check_grid(points, cell_size, max_gap)
+    max_gap, rows, cols, x0, y1 = (plan[k] for k in ("max_gap", "rows", "cols", "x0", "y1"))
     xyz = points.xyz
-    xmin, ymin = xyz[:, 0].min(), xyz[:, 1].min()
-    xmax, ymax = xyz[:, 0].max(), xyz[:, 1].max()
-    x0 = math.floor(xmin / cell_size) * cell_size
-    y1 = math.ceil(ymax / cell_size) * cell_size
-    cols = max(1, math.ceil((xmax - x0) / cell_size))
-    rows = max(1, math.ceil((y1 - ymin) / cell_size))
-    if rows * cols > MAX_CELLS:
-        raise FloodMeshError(
-            f"a {cell_size} m grid over {xmax - xmin:.0f} x {ymax - ymin:.0f} m needs {rows * cols:,} "
-            f"cells (limit {MAX_CELLS:,}); choose a larger cell size or split the data into tiles")
-    if rows < 3 or cols < 3:
-        raise FloodMeshError(
-            f"the data covers only {xmax - xmin:.2f} x {ymax - ymin:.2f} m, fewer than 3 cells of "
-            f"{cell_size} m each way; choose a smaller cell size")
     values = np.full((rows, cols), np.nan)
     tiles = [(r, c) for r in range(0, rows, TILE) for c in range(0, cols, TILE)]
     halo = max(max_gap, 4 * cell_size)
@@ -103,6 +87,49 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
         progress(1.0)
     transform = Affine(cell_size, 0.0, x0, 0.0, -cell_size, y1)
     return Grid(values, transform, points.crs)
+
+
+def check_grid(points: PointCloud, cell_size: float, max_gap: float | None = None, *,
+               memory: int | None = None) -> dict:
+    """Check, before any cell is allocated, that a grid of ``cell_size`` suits the points: at
+    least 3 cells each way, a max gap (default 10 cells) that bridges the point spacing, and
+    memory for the points and the cells. Returns the grid's layout
+    (``rows``, ``cols``, ``x0``, ``y1``, ``max_gap``) and the points' ``area`` (m²) and
+    ``spacing`` (m)."""
+    cell_size = check_cell_size(cell_size)
+    max_gap = check_max_gap(max_gap)
+    default_gap = max_gap is None
+    if default_gap:
+        max_gap = 10.0 * cell_size
+    xyz = points.xyz
+    xmin, ymin = xyz[:, 0].min(), xyz[:, 1].min()
+    xmax, ymax = xyz[:, 0].max(), xyz[:, 1].max()
+    x0 = math.floor(xmin / cell_size) * cell_size
+    y1 = math.ceil(ymax / cell_size) * cell_size
+    cols = max(1, math.ceil((xmax - x0) / cell_size))
+    rows = max(1, math.ceil((y1 - ymin) / cell_size))
+    area, spacing = footprint(xyz[:, :2])
+    if rows < 3 or cols < 3:
+        raise FloodMeshError(
+            f"the data covers only {xmax - xmin:.2f} x {ymax - ymin:.2f} m, fewer than 3 cells of "
+            f"{cell_size:g} m each way; choose a smaller cell size (the points are about "
+            f"{spacing:.2g} m apart)")
+    if max_gap < MIN_GAP_IN_SPACINGS * spacing:
+        fix = (f"give a cell size of at least {MIN_GAP_IN_SPACINGS * spacing / 10:.2g} m (the "
+               f"point spacing, {spacing:.2g} m, is a good choice) or a larger max gap"
+               if default_gap else
+               f"give a max gap of at least {MIN_GAP_IN_SPACINGS * spacing:.2g} m, or leave it "
+               "out (10 cells)")
+        raise FloodMeshError(
+            f"the points are about {spacing:.2g} m apart ({len(xyz):,} points over "
+            f"{area:,.0f} m²), so gaps of at most {max_gap:.2g} m "
+            f"({'10 cells of ' + format(cell_size, 'g') + ' m' if default_gap else 'max gap'}) "
+            f"would leave most grid cells empty: {fix}")
+    check_memory(points=len(xyz), cells=rows * cols, memory=memory,
+                 advice=f"give a cell size larger than {cell_size:g} m, or split the data "
+                        "into tiles")
+    return {"rows": rows, "cols": cols, "x0": float(x0), "y1": float(y1), "max_gap": max_gap,
+            "area": area, "spacing": spacing}
 
 
 @numba.njit(cache=True, nogil=True)

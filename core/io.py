@@ -16,11 +16,13 @@ import numpy as np
 
 from .errors import FloodMeshError
 from .points import PointCloud, clean_points
-from .raster import Grid, require_metric_crs
+from .limits import check_memory
+from .raster import Grid, check_transform, require_metric_crs
 
 POINT_EXTENSIONS = (".las", ".laz", ".xyz", ".txt", ".csv", ".pts")
 RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
 GROUND_CLASS = 2
+UNCLASSIFIED = (0, 1)  # LAS "created, never classified" and "unclassified"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -52,38 +54,60 @@ def _require_file(path, what: str) -> Path:
 
 # ---------------------------------------------------------------------------------------------
 # points
-def read_points(path, *, crs=None, classes=None) -> PointCloud:
+def read_points(path, *, crs=None, classes=None, note=None) -> PointCloud:
     """Read ground points from LAS/LAZ (class 2 when classified, or ``classes``) or XYZ/CSV text.
 
-    ``crs`` overrides the file's own CRS (needed for text files, which carry none).
+    ``crs`` overrides the file's own CRS (needed for text files, which carry none). ``note``
+    receives what was assumed on the user's behalf (e.g. an unclassified file used whole).
     """
     path = _require_file(path, "point file")
     ext = path.suffix.lower()
     if ext in (".las", ".laz"):
-        xyz, file_crs = _read_las(path, classes)
+        xyz, file_crs = _read_las(path, classes, note)
     elif ext in (".xyz", ".txt", ".csv", ".pts"):
         xyz, file_crs = _read_xyz(path), None
     else:
         raise FloodMeshError(f"{path.name}: unknown point file type '{ext}'; use LAS/LAZ or "
                              "XYZ/CSV text (x y z per line), or a GeoTIFF DEM")
-    return clean_points(xyz, crs if crs is not None else file_crs, f"point file {path.name}")
+    return clean_points(xyz, crs if crs is not None else file_crs, f"point file {path.name}",
+                        kind="points")
 
 
-def _read_las(path: Path, classes):
+def _read_las(path: Path, classes, note=None):
     import laspy
 
     try:
         with laspy.open(path) as reader:
+            count = int(reader.header.point_count)
+            if count == 0:
+                raise FloodMeshError(f"{path.name} holds no points (its header counts 0): check "
+                                     "that the export or tiling wrote this tile")
+            check_memory(points=count, advice="split the point file into tiles (e.g. pdal "
+                                              "tile or lastile) and mesh them one by one")
             las = reader.read()
+    except FloodMeshError:
+        raise
     except Exception as exc:
         raise FloodMeshError(f"{path.name} is not a readable LAS/LAZ file ({exc})") from None
     cls = np.asarray(las.classification)
+    present = ", ".join(str(c) for c in np.unique(cls)) or "none"
     if classes is None:
-        keep = cls == GROUND_CLASS if np.any(cls == GROUND_CLASS) else np.ones(len(cls), bool)
+        if np.any(cls == GROUND_CLASS):
+            keep = cls == GROUND_CLASS
+        elif np.isin(cls, UNCLASSIFIED).all():
+            keep = np.ones(len(cls), bool)
+            if note:
+                note(f"{path.name} is not classified (classes {present} only): all {len(cls):,} "
+                     "points are used as ground; classify the ground first (e.g. pdal "
+                     "filters.smrf) if they include vegetation or buildings")
+        else:
+            raise FloodMeshError(
+                f"{path.name} is classified but has no ground points (class 2; classes present: "
+                f"{present}): give the classes to grid (--classes, 'LAS classes' in QGIS), or "
+                "classify the ground first (e.g. pdal translate with filters.smrf)")
     else:
         keep = np.isin(cls, list(classes))
         if not keep.any():
-            present = ", ".join(str(c) for c in np.unique(cls)) or "none"
             raise FloodMeshError(f"{path.name} has no points of classes {sorted(classes)} "
                                  f"(classes present: {present}); choose other classes")
     xyz = np.column_stack([np.asarray(las.x)[keep], np.asarray(las.y)[keep],
@@ -96,8 +120,12 @@ def _read_las(path: Path, classes):
 
 
 def _read_xyz(path: Path) -> np.ndarray:
-    if path.stat().st_size == 0:
+    size = path.stat().st_size
+    if size == 0:
         raise FloodMeshError(f"{path.name} is empty: it holds no points")
+    # a line "x y z" takes at least about 20 characters at millimetre precision
+    check_memory(points=size // 20, advice="split the point file into tiles and mesh them one "
+                                           "by one")
     with open(path, "r", errors="replace") as fh:
         head = [fh.readline() for _ in range(5)]
     delimiter = "," if any("," in line for line in head) else (";" if any(";" in line for line in head) else None)
@@ -139,14 +167,24 @@ def read_raster(path, *, crs=None) -> Grid:
     path = _require_file(path, "raster")
     try:
         with rasterio.open(path) as src:
-            values = src.read(1, masked=True).astype(np.float64).filled(np.nan)
             transform, file_crs = src.transform, src.crs
+            if src.gcps[0] and transform.is_identity:
+                raise FloodMeshError(
+                    f"raster {path.name} is georeferenced by control points, not a geotransform: "
+                    "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
+            check_transform(transform, f"raster {path.name}")
+            crs = require_metric_crs(crs if crs is not None else
+                                     (file_crs.to_wkt() if file_crs else None),
+                                     f"raster {path.name}", kind="raster")
+            check_memory(cells=src.width * src.height,
+                         advice="resample it to larger cells or split it into tiles")
+            values = src.read(1, masked=True).astype(np.float64).filled(np.nan)
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
-    crs = require_metric_crs(crs if crs is not None else (file_crs.to_wkt() if file_crs else None),
-                             f"raster {path.name}")
+    values[~np.isfinite(values)] = np.nan  # ±inf cells are nodata too
     if not np.isfinite(values).any():
-        raise FloodMeshError(f"raster {path.name} has no valid cells (all nodata or NaN)")
+        raise FloodMeshError(f"raster {path.name} has no valid cells (all nodata or NaN): check "
+                             "its nodata value and that it is the right file")
     return Grid(values, transform, crs)
 
 
@@ -178,13 +216,13 @@ def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
             dst.write(values, 1)
 
 
-def read_input(path, *, crs=None, classes=None):
+def read_input(path, *, crs=None, classes=None, note=None):
     """A point file (→ PointCloud) or a raster DEM (→ Grid), by extension."""
     ext = Path(path).suffix.lower()
     if ext in RASTER_EXTENSIONS:
         return read_raster(path, crs=crs)
     if ext in POINT_EXTENSIONS:
-        return read_points(path, crs=crs, classes=classes)
+        return read_points(path, crs=crs, classes=classes, note=note)
     _require_file(path, "input")
     raise FloodMeshError(f"{Path(path).name}: unknown input type '{ext}'; give a LAS/LAZ or XYZ/CSV "
                          "point file, or a GeoTIFF/ASCII-grid DEM")
@@ -192,6 +230,11 @@ def read_input(path, *, crs=None, classes=None):
 
 # ---------------------------------------------------------------------------------------------
 # vectors (GeoPackage through fiona/GDAL)
+# GeoPackages record when their content last changed; a fixed time makes the same inputs give
+# byte-identical files (GDAL's OGR_CURRENT_DATE), as reproducible builds do.
+GPKG_TIMESTAMP = "2000-01-01T00:00:00.000Z"
+
+
 def _write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, crs, *,
                 atomic: bool = True) -> None:
     """Write one layer; ``atomic=False`` adds it to ``path`` as it is (a GeoPackage being
@@ -200,9 +243,10 @@ def _write_gpkg(path, layer: str, geometry_type: str, properties: dict, records,
 
     schema = {"geometry": geometry_type, "properties": properties}
     with atomic_output(path) if atomic else contextlib.nullcontext(path) as target:
-        with fiona.open(target, "w", driver="GPKG", layer=layer, schema=schema,
-                        crs_wkt=crs.to_wkt()) as dst:
-            dst.writerecords(records)
+        with fiona.Env(OGR_CURRENT_DATE=GPKG_TIMESTAMP):
+            with fiona.open(target, "w", driver="GPKG", layer=layer, schema=schema,
+                            crs_wkt=crs.to_wkt()) as dst:
+                dst.writerecords(records)
 
 
 def _field_type(values) -> str:

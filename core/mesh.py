@@ -12,9 +12,11 @@ import shapely
 from pyproj import CRS
 
 from .errors import FloodMeshError
+from .limits import check_triangles
+from .options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles,
+                      check_min_angle)
 from .raster import Grid, bilinear
 
-MAX_MIN_ANGLE = 34.0  # Triangle's refinement stops terminating reliably above about 33.8 degrees
 # Triangle leaves skinny triangles in the concentric shells it builds around input corners
 # sharper than 60 degrees (Miller, Pav & Walkington 2003), so break lines may not form them.
 SHARP_CORNER = 60.0
@@ -92,22 +94,41 @@ def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon"):
 
 
 def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
-               drop_sharp_corners: bool = True) -> PSLG:
+               drop_sharp_corners: bool = True, note=None) -> PSLG:
     """PSLG of break lines (x, y[, z] arrays) inside ``domain`` plus its boundary.
 
     Lines are clipped to the domain shrunk by ``snap`` (m) so that none ends on or near the
-    boundary; all lines are noded at their crossings on a ``snap``/5 precision grid, which also
-    merges vertices closer than that. With ``drop_sharp_corners``, break-line segments that
-    meet another segment at less than ``SHARP_CORNER`` degrees are dropped: Triangle does not
-    refine the triangles in such a corner, so they would break the angle bound.
+    boundary; all lines are noded at their crossings and touches on a ``snap``/5 precision grid
+    (snap rounding), which also merges vertices closer than that and dissolves duplicate or
+    overlapping lines. With ``drop_sharp_corners``, break-line segments that meet another
+    segment at less than ``SHARP_CORNER`` degrees are dropped: Triangle does not refine the
+    triangles in such a corner, so they would break the angle bound. ``note`` receives one line
+    for each kind of repair made.
     """
-    if not snap > 0:
+    if not snap > 0 or not np.isfinite(snap):
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
+    note = note or (lambda message: None)
+    domain = _snapped_domain(domain, snap / 5)
     inner = domain.buffer(-snap)
-    pieces = [shapely.LineString(np.asarray(c)[:, :2]) for c in lines if len(c) >= 2]
-    clipped = shapely.intersection(pieces, inner) if pieces else []
-    geoms = [domain.boundary] + [g for g in clipped if not g.is_empty]
+    arrays = [np.asarray(c, float) for c in lines]
+    usable = [c[:, :2] for c in arrays
+              if c.ndim == 2 and len(c) >= 2 and np.isfinite(c[:, :2]).all()]
+    if len(usable) < len(arrays):
+        note(f"{len(arrays) - len(usable)} break lines with fewer than 2 points or non-finite "
+             "coordinates were left out")
+    pieces = [shapely.LineString(c) for c in usable]
+    clipped = list(shapely.intersection(pieces, inner)) if pieces else []
+    kept = [g for g in clipped if not g.is_empty]
+    if len(kept) < len(pieces):
+        note(f"{len(pieces) - len(kept)} break lines lie wholly outside the meshed area (or within "
+             f"{snap:g} m of its edge) and were left out")
+    geoms = [domain.boundary] + kept
     noded = shapely.unary_union(geoms, grid_size=snap / 5)
+    overlap = (shapely.length(domain.boundary) + sum(g.length for g in kept)
+               - shapely.length(noded))
+    if overlap > snap:
+        note(f"{overlap:.1f} m of break lines duplicated or ran along another line (or the "
+             "boundary) and were merged into one")
     parts = [g for g in getattr(noded, "geoms", [noded]) if g.geom_type == "LineString"]
     coords = [np.asarray(p.coords)[:, :2] for p in parts]
     allpts = np.concatenate(coords)
@@ -124,18 +145,53 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     segments = segments[segments[:, 0] != segments[:, 1]]
     segments = np.unique(np.sort(segments, axis=1), axis=0)
     vertices = vertices * (snap / 5)
+    degree = np.bincount(segments.ravel(), minlength=len(vertices))
+    if kept and (degree >= 3).any():
+        note(f"break lines were joined at {int((degree >= 3).sum())} nodes where they cross or "
+             "touch one another or the boundary")
+    # break lines lie at least snap inside the boundary, boundary segments within a grid step
+    on_boundary = shapely.distance(
+        shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 2
+    segments, on_boundary = _prune_dangles(segments, on_boundary)
     if drop_sharp_corners:
-        on_boundary = shapely.distance(
-            shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 10
+        before = len(segments)
         segments = _drop_small_angles(vertices, segments, on_boundary, SHARP_CORNER)
-        used = np.unique(segments)
-        renumber = np.full(len(vertices), -1)
-        renumber[used] = np.arange(len(used))
-        vertices, segments = vertices[used], renumber[segments]
-    holes = [shapely.Polygon(ring).representative_point().coords[0]
+        if len(segments) < before:
+            note(f"{before - len(segments)} break-line segments meeting another at less than "
+                 f"{SHARP_CORNER:g} degrees were left out, so that the angle bound holds there")
+    used = np.unique(segments)
+    renumber = np.full(len(vertices), -1)
+    renumber[used] = np.arange(len(used))
+    vertices, segments = vertices[used], renumber[segments]
+    # a point of each hole that lies outside the domain (not on an island inside the hole)
+    holes = [shapely.Polygon(ring).difference(domain).representative_point().coords[0]
              for poly in getattr(domain, "geoms", [domain]) for ring in poly.interiors]
     return PSLG(vertices.astype(float), segments.astype(np.int32),
                 np.asarray(holes, float).reshape(-1, 2))
+
+
+def _prune_dangles(segments, on_boundary):
+    """Drop boundary segments that end nowhere (a spike that noding on the precision grid
+    collapsed to a line): no area lies beside them, so no triangle could hold them."""
+    while True:
+        degree = np.bincount(segments.ravel())
+        dangling = on_boundary & ((degree[segments[:, 0]] == 1) | (degree[segments[:, 1]] == 1))
+        if not dangling.any():
+            return segments, on_boundary
+        segments, on_boundary = segments[~dangling], on_boundary[~dangling]
+
+
+def _snapped_domain(domain, grid: float):
+    """The domain on the PSLG's precision grid, valid there: spikes and slivers thinner than
+    the grid, which would leave boundary segments with no area beside them, are gone."""
+    snapped = shapely.set_precision(domain, grid)
+    polygons = [g for g in getattr(snapped, "geoms", [snapped])
+                if g.geom_type == "Polygon" and g.area > 0]
+    if not polygons:
+        raise FloodMeshError(
+            f"the area to mesh ({domain.area:.3g} m²) vanishes on a {grid:.3g} m grid: it is "
+            "thinner than the snapping distance; use a smaller cell size or a larger area")
+    return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 
 def _drop_small_angles(vertices, segments, fixed, limit):
@@ -175,8 +231,9 @@ def _drop_small_angles(vertices, segments, fixed, limit):
 
 def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
                      conforming: bool = True, points: np.ndarray | None = None,
-                     local_areas: np.ndarray | None = None,
-                     size_field=None) -> tuple[np.ndarray, np.ndarray]:
+                     local_areas: np.ndarray | None = None, size_field=None,
+                     max_triangles: int = DEFAULT_MAX_TRIANGLES,
+                     area: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Quality triangulation of a PSLG with Triangle (Shewchuk 1996, doi:10.1007/BFb0014497).
 
     No angle below ``min_angle`` degrees (except at small input angles), no triangle above
@@ -185,23 +242,29 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     then refine (switch r) the triangles holding such a point to at most that area, and
     ``size_field(x, y)`` (m², NaN: no limit) those whose centroid or corners lie where it asks
     for less than their area.
+    A mesh estimated above ``max_triangles`` triangles (or the memory available) is refused
+    before Triangle starts, from the meshed ``area`` (m², default the vertices' bounding box).
     Returns vertices (n, 2), the PSLG's vertices first, then ``points``, and triangles (m, 3).
     """
     import triangle
 
-    if not 0 < min_angle <= MAX_MIN_ANGLE:
-        raise FloodMeshError(
-            f"minimum angle must be above 0 and at most {MAX_MIN_ANGLE} degrees, got {min_angle}: "
-            "above that Delaunay refinement may never finish (25 to 30 is usual)")
-    if not max_area > 0:
-        raise FloodMeshError(f"maximum triangle area must be positive m², got {max_area}")
+    min_angle = check_min_angle(min_angle)
+    max_area = check_max_area(max_area)
+    max_triangles = check_max_triangles(max_triangles)
+    _check_pslg(pslg)
+    if area is None:
+        area = float(np.prod(np.ptp(pslg.vertices, axis=0)))
+    check_triangles(area, max_area, max_triangles, len(pslg.vertices))
     origin = pslg.vertices.min(axis=0)
     vertices = pslg.vertices if points is None else np.vstack([pslg.vertices, points[:, :2]])
     data = {"vertices": vertices - origin, "segments": pslg.segments}
     if len(pslg.holes):
         data["holes"] = pslg.holes - origin
-    quality = f"q{min_angle:.6g}{'D' if conforming else ''}"
-    result = triangle.triangulate(data, f"p{quality}a{max_area:.6g}")
+    # Triangle reads numbers in its switches without exponents ("a2e-05" is area 2, then
+    # switch e): write them positional
+    quality = f"q{_positional(min_angle)}{'D' if conforming else ''}"
+    switches = f"p{quality}a{_positional(max_area)}"
+    result = triangle.triangulate(data, switches)
     if "triangles" not in result or len(result["triangles"]) == 0:
         raise FloodMeshError("Triangle produced no triangles: the domain boundary is not closed "
                              "or a hole point lies outside its hole")
@@ -222,14 +285,104 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
                 raise FloodMeshError("the size field asks for triangles of 0 m² or less; give "
                                      "positive maximum areas (NaN where there is no limit)")
             limit = np.minimum(limit, wanted)
-        if (triangle_areas(xy, tris) <= limit * (1 + 1e-9)).all():
+        areas = triangle_areas(xy, tris)
+        if (areas <= limit * (1 + 1e-9)).all():
             break
+        # the refined mesh, as if every triangle were refined to its limit at once
+        equivalent = float(areas.sum() / max(1, (areas / np.minimum(limit, areas)).sum()))
+        check_triangles(float(areas.sum()), equivalent, max_triangles)
         refine = {"vertices": xy, "triangles": tris, "segments": result["segments"],
                   "triangle_max_area": limit[:, None]}
         if len(pslg.holes):
             refine["holes"] = data["holes"]
         result = triangle.triangulate(refine, f"rp{quality}a")
+    # With D, Triangle now and then leaves a triangle below the bound away from any small input
+    # angle (about one random PSLG in a thousand at bounds near 30 degrees, found by
+    # tests/core/test_mesh_fuzz.py); refining its own output again (switch r) removes it.
+    # Triangles at small input angles cannot be refined away: stop when refining gains nothing.
+    sharp = np.nonzero(input_corner_angles(pslg.vertices, pslg.segments) < SHARP_CORNER)[0]
+    for _ in range(3):
+        bad = _count_below(result, min_angle, sharp)
+        if not bad:
+            break
+        again = triangle.triangulate({key: result[key] for key in
+                                      ("vertices", "triangles", "segments")}, "r" + switches)
+        if _count_below(again, min_angle, sharp) >= bad:
+            break
+        result = again
     return result["vertices"] + origin, result["triangles"].astype(np.int64)
+
+
+def _count_below(result: dict, min_angle: float, sharp: np.ndarray) -> int:
+    """Triangles below the angle bound, leaving out those with a sharp input corner as a
+    vertex (the PSLG's vertices keep their numbers in Triangle's output)."""
+    triangles = result["triangles"]
+    below = triangle_angles(result["vertices"], triangles).min(axis=1) < min_angle - 1e-9
+    return int((below & ~np.isin(triangles, sharp).any(axis=1)).sum())
+
+
+def _check_pslg(pslg: PSLG) -> None:
+    """Refuse what Triangle's C code would read out of bounds, crash or loop on, or mesh in a
+    way no check of ours can follow: too few vertices or segments, non-finite coordinates,
+    segment ends that are no vertex, zero-length segments, duplicate vertices, segments that
+    cross or overlap, hole points outside or on the boundary."""
+    vertices = np.asarray(pslg.vertices, float)
+    segments = np.asarray(pslg.segments)
+    holes = np.asarray(pslg.holes, float).reshape(-1, 2)
+    problem = None
+    if vertices.ndim != 2 or vertices.shape[1:] != (2,) or len(vertices) < 3:
+        problem = "it has fewer than 3 vertices"
+    elif not np.isfinite(vertices).all() or not np.isfinite(holes).all():
+        problem = "it has coordinates that are not finite numbers"
+    elif segments.ndim != 2 or segments.shape[1:] != (2,) or len(segments) < 3:
+        problem = "it has fewer than 3 segments, so no closed boundary"
+    elif not np.issubdtype(segments.dtype, np.integer) or segments.min() < 0 \
+            or segments.max() >= len(vertices):
+        problem = "a segment ends at a vertex that does not exist"
+    elif (segments[:, 0] == segments[:, 1]).any():
+        problem = "a segment has zero length"
+    elif len(np.unique(vertices, axis=0)) < len(vertices):
+        problem = "two vertices coincide"
+    elif _segments_cross(vertices, segments):
+        problem = "segments cross or overlap"
+    elif len(holes) and not _holes_inside(vertices, segments, holes):
+        problem = "a hole point lies outside the vertices' hull or on a segment"
+    if problem:
+        raise FloodMeshError(f"the PSLG cannot be meshed: {problem} (build it with build_pslg, "
+                             "which cleans break lines and the boundary)")
+
+
+def _segments_cross(vertices: np.ndarray, segments: np.ndarray) -> bool:
+    """Whether any two segments meet other than at a shared end (crossing, touching inside,
+    overlapping): Triangle would insert vertices there that no check of ours knows about."""
+    lines = shapely.linestrings(vertices[segments])
+    i, j = shapely.STRtree(lines).query(lines, predicate="intersects")
+    pairs = i < j
+    i, j = i[pairs], j[pairs]
+    if not len(i):
+        return False
+    shared = (segments[i][:, :, None] == segments[j][:, None, :]).any(axis=(1, 2))
+    if not shared.all():
+        return True
+    # segments sharing an end may meet only there: their intersection is that one point
+    return bool((shapely.get_type_id(shapely.intersection(lines[i], lines[j])) != 0).any())
+
+
+def _holes_inside(vertices: np.ndarray, segments: np.ndarray, holes: np.ndarray) -> bool:
+    """Whether every hole point lies strictly inside the vertices' convex hull and off every
+    segment: Triangle crashed (segmentation fault) on a hole point on its bounding box."""
+    points = shapely.points(holes)
+    hull = shapely.MultiPoint(vertices).convex_hull
+    lines = shapely.MultiLineString(list(vertices[segments]))
+    tolerance = 1e-9 * float(np.ptp(vertices, axis=0).max())
+    return bool(shapely.contains(hull, points).all()
+                and (shapely.distance(points, lines) > tolerance).all())
+
+
+def _positional(value: float) -> str:
+    """A number as Triangle's switch parser reads it: digits and a point, no exponent, and as
+    many digits as give the same float back."""
+    return np.format_float_positional(value, trim="-")
 
 
 def size_from_slope(slope: Grid, *, max_area: float, min_area: float, s_crit: float) -> Grid:
@@ -253,21 +406,29 @@ def _containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarr
 def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
                max_area: float = 100.0, conforming: bool = True, snap: float | None = None,
                domain=None, points: np.ndarray | None = None,
-               local_areas: np.ndarray | None = None, size_field: Grid | None = None) -> Mesh:
+               local_areas: np.ndarray | None = None, size_field: Grid | None = None,
+               max_triangles: int = DEFAULT_MAX_TRIANGLES, note=None) -> Mesh:
     """Mesh the DEM's valid area honouring the break lines; node z from the lines where a node is
     a break-line vertex, from ``points`` (k, 3: measurements put into the TIN) at theirs, else
     bilinear from the DEM. ``local_areas`` (x, y, m²) refine locally; ``size_field`` is a grid of
-    local maximum areas (m², NaN: no limit; see ``size_from_slope``)."""
+    local maximum areas (m², NaN: no limit; see ``size_from_slope``). A mesh estimated above
+    ``max_triangles`` triangles is refused before any work; ``note`` receives the repairs made
+    to the lines."""
+    min_angle = check_min_angle(min_angle)
+    max_area = check_max_area(max_area)
+    max_triangles = check_max_triangles(max_triangles)
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
-    pslg = build_pslg(lines, domain, snap=snap)
+    check_triangles(domain.area, max_area, max_triangles)
+    pslg = build_pslg(lines, domain, snap=snap, note=note)
     if points is not None and len(points):
         points = _points_apart(np.asarray(points, float), pslg.vertices, domain, snap)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
                                            conforming=conforming, points=points,
                                            local_areas=local_areas,
                                            size_field=None if size_field is None else
-                                           lambda x, y: _nearest_value(size_field, x, y))
+                                           lambda x, y: _nearest_value(size_field, x, y),
+                                           max_triangles=max_triangles, area=domain.area)
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
     if points is not None and len(points):
         z[len(pslg.vertices):len(pslg.vertices) + len(points)] = points[:, 2]

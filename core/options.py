@@ -1,7 +1,14 @@
-"""Names of the methods and the chain's options: plain Python, importable (like the QGIS
-algorithms that declare their parameters from it) before any numerical package is."""
+"""Names of the methods, the chain's options and the checks of their ranges: plain Python,
+importable (like the QGIS algorithms that declare their parameters from it) before any numerical
+package is.
+
+Every range check lives here, once: ``RunOptions.validate`` calls them for the whole chain, and
+the step functions in core (gridding, breakpoints, meshing, …) call the same ones, so the
+command line, the pipeline and QGIS all give the same message for the same mistake.
+"""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from .errors import FloodMeshError
@@ -40,6 +47,140 @@ def parse_formats(text) -> tuple[str, ...]:
     names = [n.strip().lower().lstrip(".") for n in names]
     return tuple(dict.fromkeys(export_format(n) for n in names if n))
 
+MAX_MIN_ANGLE = 34.0  # Triangle's refinement stops terminating reliably above about 33.8 degrees
+DEFAULT_MAX_TRIANGLES = 5_000_000
+# The FEMA/NSSDA test wants at least 20 check points (FGDC-STD-007.3-1998, 3.2.1).
+MIN_CHECK_POINTS = 20
+
+
+def _number(value, what: str) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise FloodMeshError(f"{what} must be a number, got {value!r}") from None
+    if math.isnan(value):
+        raise FloodMeshError(f"{what} must be a number, got NaN")
+    return value
+
+
+def _positive(value, what: str, unit: str, fix: str = "", *, zero: bool = False) -> float:
+    """``value`` as a finite number above 0 (or at least 0 with ``zero``), else the message
+    '<what> must be a positive number of <unit>, got …[: <fix>]'."""
+    value = _number(value, what)
+    if not ((0 <= value) if zero else (0 < value)) or not value < math.inf:
+        raise FloodMeshError(f"{what} must be {'zero or ' if zero else ''}a positive number of "
+                             f"{unit}, got {value:g}{': ' + fix if fix else ''}")
+    return value
+
+
+def check_cell_size(value) -> float:
+    return _positive(value, "cell size", "metres",
+                     "give the grid spacing d in metres (1 is the method's reference)")
+
+
+def check_max_gap(value) -> float | None:
+    if value is None:
+        return None
+    return _positive(value, "max gap", "metres", "leave it out for the default of 10 cell sizes")
+
+
+def check_s_crit(value) -> float:
+    value = _number(value, "critical slope S_crit")
+    if not 0 < value < 90:
+        raise FloodMeshError(f"critical slope S_crit must be above 0 and below 90 degrees, got "
+                             f"{value:g}: give it in degrees (10 is the method's reference)")
+    return value
+
+
+def check_min_angle(value) -> float:
+    value = _number(value, "minimum angle")
+    if not 0 < value:
+        raise FloodMeshError(
+            f"minimum angle must be above 0 and at most {MAX_MIN_ANGLE:g} degrees, got {value:g}: "
+            "give the smallest triangle angle the model may have (25 to 30 is usual)")
+    if not value <= MAX_MIN_ANGLE:
+        raise FloodMeshError(
+            f"minimum angle must be above 0 and at most {MAX_MIN_ANGLE:g} degrees, got {value:g}: "
+            "above that Delaunay refinement may never finish (25 to 30 is usual)")
+    return value
+
+
+def check_max_area(value) -> float:
+    return _positive(value, "maximum triangle area", "m²",
+                     "give the largest element area the model may have")
+
+
+def check_max_triangles(value) -> int:
+    value = _number(value, "maximum number of triangles")
+    if not (value >= 1 and value == int(value)):
+        raise FloodMeshError(f"maximum number of triangles must be a whole number of at least 1, "
+                             f"got {value:g}")
+    return int(value)
+
+
+def check_holdout(fraction) -> float:
+    fraction = _number(fraction, "holdout fraction")
+    if not 0 <= fraction < 1:
+        raise FloodMeshError(f"holdout fraction must be at least 0 and below 1, got {fraction:g}: "
+                             "it is the share of points kept back for the accuracy test "
+                             "(0.001 is the method's reference, 0 skips the test)")
+    return fraction
+
+
+def check_holdout_count(fraction: float, n_points: int) -> int:
+    """The number of check points ``fraction`` of ``n_points`` gives; refused when it is above 0
+    but below what the FEMA/NSSDA test needs."""
+    fraction = check_holdout(fraction)
+    n_out = int(round(fraction * n_points))
+    if fraction > 0 and n_out < MIN_CHECK_POINTS:
+        if n_points < 2 * MIN_CHECK_POINTS:
+            fix = (f"the file has too few points to hold {MIN_CHECK_POINTS} back; give holdout 0 "
+                   "to skip the test")
+        else:
+            needed = math.ceil((MIN_CHECK_POINTS - 0.5) / n_points * 1e4) / 1e4
+            fix = f"give a holdout fraction of at least {needed:g}, or 0 to skip the test"
+        raise FloodMeshError(
+            f"a holdout fraction of {fraction:g} keeps {n_out} of {n_points:,} points back, but "
+            f"the FEMA/NSSDA accuracy test needs at least {MIN_CHECK_POINTS} check points: {fix}")
+    return n_out
+
+
+def check_positive_int(value, what: str, minimum: int = 1) -> int:
+    value = _number(value, what)
+    if not (value >= minimum and value == int(value)):
+        raise FloodMeshError(f"{what} must be a whole number of at least {minimum}, got {value:g}")
+    return int(value)
+
+
+def check_min_points(value) -> int:
+    return check_positive_int(value, "minimum points per break line", 2)
+
+
+def check_tolerance(value) -> float:
+    return _positive(value, "simplification tolerance", "metres")
+
+
+def check_min_distance(value) -> float:
+    return _positive(value, "minimum distance between lines", "metres", zero=True)
+
+
+def check_min_length(value) -> float:
+    return _positive(value, "minimum break-line length", "metres", zero=True)
+
+
+def check_sigma(value) -> float:
+    return _positive(value, "LoG sigma", "metres", zero=True)
+
+
+def check_sensitivity(value) -> float:
+    return _positive(value, "LoG sensitivity", "metres", zero=True)
+
+
+def check_choice(value, choices, what: str) -> str:
+    if value not in choices:
+        raise FloodMeshError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")
+    return value
+
 
 @dataclass(frozen=True)
 class RunOptions:
@@ -71,14 +212,33 @@ class RunOptions:
     boundary: str | None = None     # polygon file: the model domain (holes allowed)
     user_lines: str | None = None   # line file: the modeller's own break / structure lines
     formats: tuple[str, ...] = ()   # solver exports written beside mesh.2dm (EXPORT_FORMATS)
+    max_triangles: int = DEFAULT_MAX_TRIANGLES  # refuse meshes estimated to be larger
 
     def __post_init__(self):
-        if self.slope_method not in BREAKPOINT_METHODS:
-            raise FloodMeshError(f"unknown slope method {self.slope_method!r}; choose one of "
-                                 f"{', '.join(BREAKPOINT_METHODS)}")
-        if self.log_kernel not in LOG_KERNELS:
-            raise FloodMeshError(f"unknown LoG kernel {self.log_kernel!r}; choose pratt or "
-                                 "analytic")
+        self.validate()
+
+    def validate(self) -> None:
+        """Check every option's range before any file is read or written."""
+        check_choice(self.slope_method, BREAKPOINT_METHODS, "slope method")
+        check_choice(self.log_kernel, LOG_KERNELS, "LoG kernel")
+        check_choice(self.tracing_mode, TRACING_MODES, "tracing mode")
+        check_cell_size(self.cell_size)
+        check_max_gap(self.max_gap)
+        if self.slope_method == "log":
+            check_sigma(self.sigma)
+            check_sensitivity(self.sensitivity)
+        check_s_crit(self.s_crit)  # the tracer uses it with LoG breakpoints too
+        self.simplification()
+        if self.min_distance is not None:
+            check_min_distance(self.min_distance)
+        check_min_length(self.min_length)
+        check_min_angle(self.min_angle)
+        check_max_area(self.max_area)
+        if self.min_area is not None:
+            _positive(self.min_area, "minimum area of the size field", "m²")
+        check_max_triangles(self.max_triangles)
+        check_holdout(self.holdout)
+        check_min_points(self.min_points)
         for name in self.formats:
             export_format(name)
 
@@ -91,4 +251,6 @@ class RunOptions:
             raise FloodMeshError("give one simplification (keep-every, tolerance or spline), not "
                                  + " and ".join(name for name, _ in given))
         name, value = given[0] if given else ("keep-every", 4)
-        return name, float(value)
+        if name == "keep-every":
+            return name, float(check_positive_int(value, "keep-every"))
+        return name, check_tolerance(value)

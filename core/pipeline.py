@@ -16,7 +16,8 @@ from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
-from .grid import grid_points_linear
+from .grid import check_grid, grid_points_linear
+from .limits import check_memory, check_triangles
 from .mesh import build_mesh, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
@@ -63,15 +64,32 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     and ``mesh.<ext>`` for each of ``options.formats`` (see ``export``).
 
     ``progress`` receives the overall fraction done (0–1), ``cancelled`` is polled between and
-    inside long steps (raising ``Cancelled``), ``log`` receives step names. Returns the report.
+    inside long steps (raising ``Cancelled``), ``log`` receives step names and notes (what was
+    assumed or repaired on the user's behalf, also listed in the report). Returns the report.
     """
+    options.validate()
+    notes = []
+
+    def note(message: str):
+        notes.append(message)
+        if log:
+            log(f"note: {message}")
+
+    options.validate()
+    notes = []
+
+    def note(message: str):
+        notes.append(message)
+        if log:
+            log(f"note: {message}")
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     method, amount = options.simplification()
     steps = _Steps({"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
                     "breaklines": 1, "simplify": 0.5, "mesh": 2, "assess": 1, "write": 2},
                    progress, cancelled, log)
-    front = trace_front(input_path, options, steps, cancelled=cancelled)
+    front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
                                                      front.breakpoints, front.traced)
     delta = dem.cell_size / 2
@@ -82,7 +100,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                       min_area=options.min_area, s_crit=options.s_crit)
     mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines] + front.own_lines,
                      min_angle=options.min_angle, max_area=options.max_area,
-                     domain=front.domain, size_field=size)
+                     domain=front.domain, size_field=size,
+                     max_triangles=options.max_triangles, note=note)
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
     deviation = max_deviation(traced, lines)
@@ -126,6 +145,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                            "max_deviation_m": deviation},
         **quality,
         **stats,
+        "notes": notes,
         "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
         "seconds": steps.seconds,
     }
@@ -149,19 +169,33 @@ class Front:
 
 
 def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, *,
-                cancelled: Callable[[], bool] | None = None) -> Front:
+                cancelled: Callable[[], bool] | None = None,
+                note: Callable[[str], None] | None = None) -> Front:
     """Read, grid (holding points out), slope, breakpoints and trace, as ``options`` say; each
-    step timed through ``steps`` (a silent one if None)."""
+    step timed through ``steps`` (a silent one if None); ``note`` receives what was assumed or
+    repaired on the user's behalf. Grids and meshes too large for the triangle limit or the
+    memory are refused before the work."""
     steps = steps or _Steps({}, None, cancelled, None)
-    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes)
+    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes,
+                     note=note)
     if isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
+        # refuse, before the work, a grid or mesh too large for the limit or the memory
+        plan = check_grid(gridding, options.cell_size, options.max_gap)
+        triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
+        check_memory(points=len(gridding), cells=plan["rows"] * plan["cols"],
+                     triangles=triangles, advice="give a larger cell size or maximum area, or "
+                                                 "split the data into tiles")
         dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
                         max_gap=options.max_gap, progress=None, cancelled=cancelled)
         holdout_source = "LiDAR points withheld from gridding"
         n_points = len(data)
     else:
         dem = data  # a DEM keeps its own cell size
+        valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+        triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
+        check_memory(cells=dem.values.size, triangles=triangles,
+                     advice="resample the DEM to larger cells or split it into tiles")
         holdout = _dem_check_points(dem, options.holdout, options.seed)
         holdout_source = "DEM cell centres (not independent of the DEM)"
         n_points = 0

@@ -7,6 +7,7 @@ import numpy as np
 from pyproj import CRS
 
 from .errors import FloodMeshError
+from .options import check_holdout_count
 from .raster import require_metric_crs
 
 
@@ -25,9 +26,9 @@ class PointCloud:
         return len(self.xyz)
 
 
-def clean_points(xyz: np.ndarray, crs, source: str) -> PointCloud:
+def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points") -> PointCloud:
     """Drop non-finite points and check what is left is usable terrain data."""
-    crs = require_metric_crs(crs, source)
+    crs = require_metric_crs(crs, source, kind)
     xyz = np.asarray(xyz, dtype=np.float64)
     finite = np.isfinite(xyz).all(axis=1)
     xyz = xyz[finite]
@@ -46,10 +47,8 @@ def split_holdout(points: PointCloud, fraction: float, seed: int) -> tuple[Point
 
     Returns (points for gridding, held-out points); the same seed gives the same split.
     """
-    if not 0 <= fraction < 1:
-        raise FloodMeshError(f"holdout fraction must be in [0, 1), got {fraction}")
     n = len(points)
-    n_out = int(round(fraction * n))
+    n_out = check_holdout_count(fraction, n)
     rng = np.random.default_rng(seed)
     mask = np.zeros(n, dtype=bool)
     mask[rng.choice(n, size=n_out, replace=False)] = True

@@ -10,30 +10,70 @@ from pyproj import CRS
 from .errors import FloodMeshError
 
 METRE_NAMES = {"metre", "meter", "metres", "meters"}
+REPROJECT_POINTS = ("pdal translate IN OUT -f filters.reprojection "
+                    "--filters.reprojection.out_srs=EPSG:{code}")
+REPROJECT_RASTER = "gdalwarp -t_srs EPSG:{code} IN OUT"
 
 
-def require_metric_crs(crs, what: str) -> CRS:
-    """Return ``crs`` as a pyproj CRS, refusing none, geographic and non-metre CRSs."""
+def _reproject_hint(kind: str | None, code: str = "XXXX") -> str:
+    points, raster = REPROJECT_POINTS.format(code=code), REPROJECT_RASTER.format(code=code)
+    if kind == "points":
+        return f"`{points}`"
+    if kind == "raster":
+        return f"`{raster}`"
+    return f"`{points}` for points, `{raster}` for rasters"
+
+
+def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
+    """Return ``crs`` as a pyproj CRS, refusing none, geographic, and horizontal or vertical
+    units other than metres. ``kind`` ("points" or "raster") picks the reprojection command the
+    message suggests."""
     if crs is None:
         raise FloodMeshError(
-            f"{what} has no coordinate reference system: give one with --crs EPSG:XXXX "
-            "(a projected CRS in metres, e.g. the UTM zone of the survey)")
+            f"{what} has no coordinate reference system: give one (--crs EPSG:XXXX, or the CRS "
+            "parameter in QGIS), a projected CRS in metres such as the survey's UTM zone")
     try:
         crs = CRS.from_user_input(crs)
     except Exception as exc:  # pyproj raises CRSError with a technical message
         raise FloodMeshError(f"{what}: cannot understand the CRS {crs!r} ({exc}); "
                              "give it as EPSG:XXXX") from None
-    if crs.is_geographic:
+    horizontal = crs.sub_crs_list[0] if crs.is_compound and crs.sub_crs_list else crs
+    if crs.is_geographic or horizontal.is_geographic:
         raise FloodMeshError(
             f"{what} is in a geographic CRS ({crs.name}, degrees): slopes and areas need metres. "
-            "Reproject it to a projected CRS in metres first (e.g. gdalwarp -t_srs EPSG:326XX, "
-            "or pdal translate with filters.reprojection for point clouds)")
-    unit = crs.axis_info[0].unit_name.lower() if crs.axis_info else ""
-    if unit not in METRE_NAMES:
+            f"Reproject it to a projected CRS in metres (e.g. the UTM zone) first: "
+            f"{_reproject_hint(kind)}")
+    for axis in crs.axis_info:
+        if axis.unit_conversion_factor == 1.0 and axis.unit_name.lower() in METRE_NAMES:
+            continue
+        unit = axis.unit_name or "unknown"
+        if axis.direction.lower() in ("up", "down"):
+            raise FloodMeshError(
+                f"{what} has elevations in '{unit}' ({crs.name}); FloodMesh works in metres: "
+                f"convert z to metres first, e.g. {_reproject_hint(kind, 'HHHH+VVVV')} with "
+                "VVVV a vertical CRS in metres")
         raise FloodMeshError(
-            f"{what} has horizontal units of '{unit or 'unknown'}' ({crs.name}); FloodMesh works in "
-            "metres. Reproject the data to a CRS in metres (e.g. the matching UTM zone) first")
+            f"{what} has horizontal units of '{unit}' ({crs.name}); FloodMesh works in metres "
+            "and does not convert, as a file in feet may hold elevations in either unit: "
+            f"reproject x, y and z to metres first, e.g. {_reproject_hint(kind)} with a CRS in "
+            "metres (the UTM zone)")
     return crs
+
+
+def check_transform(t: Affine, what: str = "the raster") -> None:
+    """Refuse geotransforms that are not north-up with square cells, naming the GDAL fix."""
+    if t.b != 0 or t.d != 0:
+        raise FloodMeshError(
+            f"{what} is rotated (its geotransform has rotation terms {t.b:g}, {t.d:g}): warp it "
+            "to a north-up grid with square cells first (gdalwarp -tr D D IN OUT)")
+    if t.e >= 0 or t.a <= 0:
+        raise FloodMeshError(
+            f"{what} is not north-up (pixel size {t.a:g} x {t.e:g}): warp it to a north-up grid "
+            "first (gdalwarp -tr D D IN OUT)")
+    if not np.isclose(t.a, -t.e, rtol=1e-6):
+        raise FloodMeshError(
+            f"{what} has cells that are not square ({t.a:g} x {-t.e:g} m): resample it to square "
+            f"cells first (gdalwarp -tr D D IN OUT, e.g. D = {min(t.a, -t.e):g})")
 
 
 @dataclass(frozen=True)
@@ -52,17 +92,7 @@ class Grid:
     def __post_init__(self):
         if self.values.ndim != 2:
             raise FloodMeshError(f"a grid must be 2-D, got {self.values.ndim}-D")
-        t = self.transform
-        if t.b != 0 or t.d != 0:
-            raise FloodMeshError("the raster is rotated (its geotransform has rotation terms): "
-                                 "warp it to a north-up grid first (gdalwarp)")
-        if t.e >= 0:
-            raise FloodMeshError("the raster is not north-up (positive y pixel size): "
-                                 "warp it to a north-up grid first (gdalwarp)")
-        if not np.isclose(t.a, -t.e, rtol=1e-6):
-            raise FloodMeshError(
-                f"the raster's cells are not square ({t.a} x {-t.e} m): resample it to square "
-                "cells first (gdalwarp -tr D D)")
+        check_transform(self.transform)
 
     @property
     def cell_size(self) -> float:

@@ -15,13 +15,13 @@ import numpy as np
 import shapely
 
 from .breaklines import BreakLine
-from .errors import FloodMeshError
-from .options import SIMPLIFY_METHODS
+from .options import (SIMPLIFY_METHODS, check_choice, check_min_distance, check_positive_int,
+                      check_tolerance)
 
 
 def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
     """Keep every ``n``-th point of each line, and always both ends."""
-    _check_keep_every(n)
+    n = check_positive_int(n, "keep-every")
     out = []
     for line in lines:
         keep = _keep_every_mask(len(line.coords), int(n))
@@ -32,7 +32,7 @@ def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
 def simplify_douglas_peucker(lines: list[BreakLine], tolerance: float) -> list[BreakLine]:
     """Douglas–Peucker: no dropped point lies farther than ``tolerance`` (m) from the simplified
     line, horizontally or vertically."""
-    _check_tolerance(tolerance)
+    tolerance = check_tolerance(tolerance)
     out = []
     for line in lines:
         keep = douglas_peucker_mask(line.coords, tolerance)
@@ -92,17 +92,13 @@ def simplify_breaklines(lines: list[BreakLine], method: str, amount: float, *,
     "douglas-peucker" or "spline": within ``amount`` metres), then repair crossings and merge
     slivers and near-duplicate vertices closer than ``min_distance`` metres (see the module
     docstring)."""
-    if method not in SIMPLIFY_METHODS:
-        raise FloodMeshError(f"unknown simplification {method!r}; choose one of "
-                             f"{', '.join(SIMPLIFY_METHODS)}")
-    if not min_distance >= 0:
-        raise FloodMeshError(f"minimum distance between lines must be 0 m or more, got "
-                             f"{min_distance}")
+    check_choice(method, SIMPLIFY_METHODS, "simplification")
+    min_distance = check_min_distance(min_distance)
     if method == "keep-every":
-        _check_keep_every(amount)
-        plans = [(line.coords, _keep_every_mask(len(line.coords), int(amount))) for line in lines]
+        amount = check_positive_int(amount, "keep-every")
+        plans = [(line.coords, _keep_every_mask(len(line.coords), amount)) for line in lines]
     else:
-        _check_tolerance(amount)
+        amount = check_tolerance(amount)
         if method == "douglas-peucker":
             plans = [(line.coords, douglas_peucker_mask(line.coords, amount)) for line in lines]
         else:
@@ -148,16 +144,6 @@ def spline_plan(coords: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.nd
         else:
             hi = mid
     return best, douglas_peucker_mask(best, half)
-
-
-def _check_keep_every(n):
-    if int(n) != n or n < 1:
-        raise FloodMeshError(f"keep-every must be a whole number of at least 1, got {n}")
-
-
-def _check_tolerance(tolerance):
-    if not tolerance > 0:
-        raise FloodMeshError(f"simplification tolerance must be positive metres, got {tolerance}")
 
 
 def _keep_every_mask(n_points: int, n: int) -> np.ndarray:

@@ -24,7 +24,7 @@ import numpy as np
 
 from .blocks import map_overlap
 from .errors import FloodMeshError
-from .options import LOG_KERNELS, SLOPE_METHOD_NAMES
+from .options import LOG_KERNELS, SLOPE_METHOD_NAMES, check_choice, check_sigma
 from .raster import Grid
 
 SQRT2 = math.sqrt(2.0)
@@ -186,10 +186,8 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
     Reference: Pratt, Digital Image Processing (2007), ch. 15; Marr & Hildreth (1980)
     doi:10.1098/rspb.1980.0020.
     """
-    if kernel not in LOG_KERNELS:
-        raise FloodMeshError(f"unknown LoG kernel {kernel!r}; choose pratt or analytic")
-    if not sigma >= 0 or not math.isfinite(sigma):
-        raise FloodMeshError(f"LoG sigma must be zero or positive metres, got {sigma}")
+    check_choice(kernel, LOG_KERNELS, "LoG kernel")
+    sigma = check_sigma(sigma)
     d = dem.cell_size
     if kernel == "analytic" and sigma < d:
         raise FloodMeshError(f"the analytic LoG kernel needs sigma of at least one cell ({d} m), "

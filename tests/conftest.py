@@ -85,3 +85,12 @@ def write_export_inputs(folder, material):
                         CRS.from_epsg(25832), layer="open")
     write_regions(folder / "regions.gpkg", [(shapely.box(x0, y0, x0 + 30, y0 + 60), material)])
     return nodes, tris
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Say how many random meshing cases ran (tests/core/test_mesh_fuzz.py)."""
+    from . import fuzz_stats
+
+    line = fuzz_stats.summary()
+    if line:
+        terminalreporter.write_line(line)

@@ -7,8 +7,8 @@ from pyproj import CRS
 from scipy.spatial import cKDTree
 
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import (build_mesh, build_pslg, domain_from_dem, mesh_quality,
-                                 triangle_areas)
+from floodmesh.core.mesh import (PSLG, build_mesh, build_pslg, domain_from_dem, mesh_quality,
+                                 triangle_angles, triangle_areas, triangulate_pslg)
 from floodmesh.core.raster import Grid
 
 ORIGIN = np.array([500_000.0, 6_000_000.0])
@@ -312,3 +312,67 @@ def test_size_field_sets_the_local_maximum_area(plane_mesh):
     from floodmesh.core.errors import FloodMeshError
     with pytest.raises(FloodMeshError, match="size field"):
         build_mesh(dem, lines, max_area=20, size_field=dem.with_values(np.zeros(dem.shape)))
+
+
+# ---------------------------------------------------------------------------------------------
+# regressions found by tests/core/test_mesh_fuzz.py
+def test_tiny_max_area_reaches_triangle_unchanged():
+    """Triangle reads its switches without exponents: 2e-05 m² was read as 2 m² (then switch
+    e). A 0.1 m square at 2e-05 m² has every triangle within the bound."""
+    square = PSLG(np.array([[0, 0], [0.1, 0], [0.1, 0.1], [0, 0.1]]) + ORIGIN,
+                  np.array([[0, 1], [1, 2], [2, 3], [3, 0]], np.int32), np.empty((0, 2)))
+    vertices, triangles = triangulate_pslg(square, min_angle=25, max_area=2e-5)
+    _, areas = _angles_and_areas(np.column_stack([vertices, np.zeros(len(vertices))]), triangles)
+    assert areas.max() <= 2e-5 * (1 + 1e-9) and len(triangles) > 500
+
+
+FUZZ_PSLG_31 = PSLG(
+    np.array([[0.0, 2.242], [3.448, 6.044], [3.998, 4.4], [5.822, 6.282], [7.236, 2.202],
+              [7.444, 0.0], [7.916, 2.202], [13.64, 2.234], [16.398, 5.276], [16.84, 3.96],
+              [18.298, 5.466], [19.428, 2.202], [19.596, 0.44], [19.972, 2.202]]),
+    np.array([[0, 1], [0, 5], [1, 2], [2, 3], [3, 6], [4, 5], [4, 6], [7, 8], [7, 12], [8, 9],
+              [9, 10], [10, 13], [11, 12], [11, 13]], np.int32), np.empty((0, 2)))
+
+
+def test_conforming_refinement_leaves_no_triangle_below_the_bound():
+    """Two quadrilaterals, no input angle below 71 degrees: Triangle with q31 and D leaves one
+    24.7-degree triangle; triangulate_pslg refines its output again until none is left."""
+    import triangle
+
+    raw = triangle.triangulate({"vertices": FUZZ_PSLG_31.vertices,
+                                "segments": FUZZ_PSLG_31.segments},
+                               "pq31.008265836121716a15.871787322642925D")
+    assert triangle_angles(raw["vertices"], raw["triangles"]).min() < 25  # Triangle's own result
+    vertices, triangles = triangulate_pslg(FUZZ_PSLG_31, min_angle=31.008265836121716,
+                                           max_area=15.871787322642925)
+    assert triangle_angles(vertices, triangles).min() >= 31.008265836121716
+    np.testing.assert_array_equal(vertices[:len(FUZZ_PSLG_31.vertices)], FUZZ_PSLG_31.vertices)
+
+
+def test_hole_point_on_the_bounding_box_is_refused_not_a_crash():
+    """Triangle crashed with a segmentation fault on this hexagon with a hole point outside it
+    at the bounding box's edge (found by the fuzz test): it is refused before Triangle runs."""
+    pslg = PSLG(np.array([[58.28367861, 24.12484253], [90.85922587, 0.0],
+                          [25.36434167, 94.79197394], [28.98888217, 28.5714], [0.0, 0.0],
+                          [14.76912979, 0.37040256]]) + [500_000.0, 5_700_000.0],
+                np.array([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 0]], np.int32),
+                np.array([[0.0, 50.92378231]]) + [500_000.0, 5_700_000.0])
+    with pytest.raises(FloodMeshError, match="hole point lies outside"):
+        triangulate_pslg(pslg, min_angle=31.44310859687332, max_area=0.029743290100072917)
+
+
+@pytest.mark.parametrize("vertices, segments, problem", [
+    ([[0, 0], [1, 0]], [[0, 1], [1, 0], [0, 1]], "fewer than 3 vertices"),
+    ([[0, 0], [1, 0], [np.nan, 1]], [[0, 1], [1, 2], [2, 0]], "not finite"),
+    ([[0, 0], [1, 0], [0, 1]], [[0, 1], [1, 2]], "fewer than 3 segments"),
+    ([[0, 0], [1, 0], [0, 1]], [[0, 1], [1, 2], [2, 3]], "does not exist"),
+    ([[0, 0], [1, 0], [0, 1]], [[0, 1], [1, 2], [2, 2]], "zero length"),
+    ([[0, 0], [1, 0], [0, 1], [1, 0]], [[0, 1], [1, 2], [2, 0]], "coincide"),
+    ([[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 2], [1, 3], [0, 1], [2, 3]], "cross"),
+    ([[0, 0], [2, 0], [1, 0], [1, 1]], [[0, 1], [0, 2], [1, 3], [3, 0]], "overlap"),
+])
+def test_triangle_is_handed_only_sound_pslgs(vertices, segments, problem):
+    pslg = PSLG(np.array(vertices, float) + ORIGIN, np.array(segments, np.int32),
+                np.empty((0, 2)))
+    with pytest.raises(FloodMeshError, match=problem):
+        triangulate_pslg(pslg, min_angle=25, max_area=1)

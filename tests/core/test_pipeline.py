@@ -192,7 +192,9 @@ def merewether_run(tmp_path_factory):
 def topography_run(tmp_path_factory):
     path = _real("Topography.laz")
     out = tmp_path_factory.mktemp("topography")
-    return out, run_pipeline(path, out, RunOptions(cell_size=2.0))
+    # 0.5 % of the 8159 ground points: 41 check points (the default 0.1 % would give 8, too
+    # few for the FEMA/NSSDA test, and is refused)
+    return out, run_pipeline(path, out, RunOptions(cell_size=2.0, holdout=0.005))
 
 
 def _assert_valid_mesh(out, report):

@@ -1,0 +1,262 @@
+"""Bad inputs of every kind FloodMesh checks, as real files written to a folder, each with the
+command line that feeds it to ``floodmesh`` and, where a QGIS algorithm takes it, the algorithm
+and parameters that feed it to QGIS. tests/core/test_bad_input.py runs them through the command
+line, tests/qgis/test_bad_input.py through QGIS, and both compare the messages.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import laspy
+import numpy as np
+import rasterio
+from affine import Affine
+from pyproj import CRS
+
+REAL_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "real"
+UTM = "EPSG:25832"
+ORIGIN = (412_000.0, 5_652_000.0)
+
+
+@dataclass
+class BadInput:
+    """``make(folder)`` writes the input and returns the arguments after ``floodmesh``;
+    ``qgis(folder)`` returns (algorithm id, parameters) or None. ``words`` must be in the
+    message: they name the problem. Memory messages end with the memory available, which
+    changes from one call to the next; ``stable`` is the part to compare."""
+
+    id: str
+    words: str
+    make: Callable[[Path], list]
+    qgis: Callable[[Path], tuple] | None = None
+
+    @staticmethod
+    def stable(message: str) -> str:
+        return message.split(" is available")[0].rsplit(" but ", 1)[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# files
+def plane_xyz(n=20_000, size=50.0, seed=0):
+    """8 points/m² on a tilted plane: the default 0.1 % holdout gives exactly 20 check points."""
+    rng = np.random.default_rng(seed)
+    x, y = rng.uniform(0, size, n), rng.uniform(0, size, n)
+    return np.column_stack([x + ORIGIN[0], y + ORIGIN[1], 0.3 * x + 12.0])
+
+
+def write_xyz(path, xyz):
+    np.savetxt(path, xyz, fmt="%.3f")
+    return path
+
+
+def write_las(path, xyz, *, classes=2, crs: str | None = UTM):
+    """A LAS/LAZ file written by laspy, with a WKT CRS (compound ones too) or none."""
+    header = laspy.LasHeader(point_format=3, version="1.4")
+    if len(xyz):
+        header.offsets = np.floor(xyz.min(axis=0))
+    header.scales = np.array([0.001, 0.001, 0.001])
+    if crs is not None:
+        header.add_crs(CRS.from_user_input(crs), keep_compatibility=False)
+    las = laspy.LasData(header)
+    if len(xyz):
+        las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+        las.classification = np.broadcast_to(np.asarray(classes, np.uint8), (len(xyz),)).copy()
+    las.write(str(path))
+    return path
+
+
+def write_tif(path, values, *, transform=None, crs: str | None = UTM, nodata=-9999.0):
+    """A GeoTIFF written with rasterio as given: any geotransform, CRS or none, NaN kept."""
+    values = np.asarray(values, np.float32)
+    if transform is None:
+        transform = Affine(1.0, 0.0, ORIGIN[0], 0.0, -1.0, ORIGIN[1] + values.shape[0])
+    with rasterio.open(path, "w", driver="GTiff", width=values.shape[1], height=values.shape[0],
+                       count=1, dtype="float32", transform=transform, crs=crs,
+                       nodata=nodata) as dst:
+        dst.write(values, 1)
+    return path
+
+
+def slope_dem(rows=60, cols=60):
+    """A tilted plane with a bank: z rises 0.3 m per m in x and steps 3 m across column 30."""
+    yy, xx = np.mgrid[0:rows, 0:cols].astype(float)
+    return 0.05 * xx + np.where(xx > 30, 3.0, 0.0) + 10.0
+
+
+# ---------------------------------------------------------------------------------------------
+# the cases
+def _run(path, *extra, crs=None):
+    return ["run", path, "--out", "{out}", *(["--crs", crs] if crs else []), *map(str, extra)]
+
+
+def _lidar(path, crs=None, **params):
+    def qgis(folder):
+        p = {"INPUT": str(path(folder)), "OUTPUT_FOLDER": str(folder / "qgis-out")}
+        if crs:
+            p["CRS"] = crs
+        p.update(params)
+        return "floodmesh:lidartomesh", p
+    return qgis
+
+
+def _xyz(folder):
+    return write_xyz(folder / "points.xyz", plane_xyz())
+
+
+def _text_as(name):
+    def make(folder):
+        path = folder / name
+        path.write_text("this is not what the extension says\n" * 40)
+        return path
+    return make
+
+
+def _binary_xyz(folder):
+    path = folder / "binary.xyz"
+    path.write_bytes(bytes(range(256)) * 64)
+    return path
+
+
+def _empty_xyz(folder):
+    path = folder / "empty.xyz"
+    path.write_text("")
+    return path
+
+
+def _empty_las(folder):
+    return write_las(folder / "empty.las", np.empty((0, 3)))
+
+
+def _no_ground_las(folder):
+    xyz = plane_xyz()
+    return write_las(folder / "noground.laz", xyz, classes=np.where(np.arange(len(xyz)) % 2, 5, 6))
+
+
+def _las_without_crs(folder):
+    return write_las(folder / "nocrs.laz", plane_xyz(), crs=None)
+
+
+def _las_vertical_feet(folder):
+    xyz = plane_xyz() - [ORIGIN[0] - 500_000.0, ORIGIN[1] - 4_000_000.0, 0.0]
+    return write_las(folder / "zfeet.laz", xyz, crs="EPSG:26910+6360")
+
+
+def _tif(name, values_fn=slope_dem, **kwargs):
+    def make(folder):
+        return write_tif(folder / name, values_fn(), **kwargs)
+    return make
+
+
+def _autzen(folder):
+    return REAL_DATA / "autzen_trim.laz"
+
+
+def _rotated(folder):
+    return write_tif(folder / "rotated.tif", slope_dem(),
+                     transform=Affine.translation(*ORIGIN) * Affine.rotation(20.0)
+                     * Affine.scale(1.0, -1.0))
+
+
+def _maker(fn, *extra, crs=None):
+    return lambda folder: _run(fn(folder), *extra, crs=crs)
+
+
+# LiDAR to mesh's parameters and the command-line options that set the same RunOptions field
+OPTION_FLAGS = {"CELL_SIZE": "--cell-size", "CRITICAL_SLOPE": "--s-crit",
+                "MIN_ANGLE": "--min-angle", "MAX_AREA": "--max-area",
+                "MAX_TRIANGLES": "--max-triangles", "HOLDOUT": "--holdout"}
+
+
+def _options_case(id_, words, **parameters):
+    """Good points (with a CRS given) and bad options: floodmesh run, and LiDAR to mesh."""
+    flags = [str(x) for name, value in parameters.items() for x in (OPTION_FLAGS[name], value)]
+    return BadInput(id_, words, _maker(_xyz, *flags, crs=UTM),
+                    _lidar(_xyz, crs=UTM, **parameters))
+
+
+def _mesh_step(cli_options, qgis_parameters):
+    """``floodmesh mesh`` and QGIS's Build mesh on the bank DEM with the given options."""
+    dem = _tif("dem.tif")
+    return (lambda f: ["mesh", dem(f), *cli_options, "--out", "{out}/mesh.2dm"],
+            lambda f: ("floodmesh:buildmesh", {"DEM": str(dem(f)), **qgis_parameters,
+                                               "OUTPUT": str(f / "qgis-out" / "mesh.2dm")}))
+
+
+CASES = [
+    BadInput("missing-file", "does not exist",
+             lambda f: _run(f / "missing.laz"), _lidar(lambda f: f / "missing.laz")),
+    BadInput("laz-holding-text", "not a readable LAS/LAZ",
+             _maker(_text_as("text.laz")), _lidar(_text_as("text.laz"))),
+    BadInput("tif-holding-text", "not a readable raster",
+             _maker(_text_as("text.tif")), _lidar(_text_as("text.tif"))),
+    BadInput("xyz-holding-binary", "not an XYZ text file",
+             _maker(_binary_xyz, crs=UTM), _lidar(_binary_xyz, crs=UTM)),
+    BadInput("empty-xyz", "is empty", _maker(_empty_xyz, crs=UTM), _lidar(_empty_xyz, crs=UTM)),
+    BadInput("empty-las", "holds no points", _maker(_empty_las), _lidar(_empty_las)),
+    BadInput("no-ground-points", "no ground points", _maker(_no_ground_las),
+             _lidar(_no_ground_las)),
+    BadInput("all-nodata-raster", "no valid cells",
+             _maker(_tif("nodata.tif", lambda: np.full((40, 40), -9999.0))),
+             _lidar(_tif("nodata.tif", lambda: np.full((40, 40), -9999.0)))),
+    BadInput("all-nan-raster", "no valid cells",
+             _maker(_tif("nan.tif", lambda: np.full((40, 40), np.nan), nodata=None)),
+             _lidar(_tif("nan.tif", lambda: np.full((40, 40), np.nan), nodata=None))),
+    BadInput("geographic-points", "geographic", _maker(_xyz, crs="EPSG:4326"),
+             _lidar(_xyz, crs="EPSG:4326")),
+    BadInput("geographic-raster", "geographic",
+             _maker(_tif("degrees.tif", transform=Affine(1e-5, 0, 7.0, 0, -1e-5, 51.0),
+                         crs="EPSG:4326")),
+             _lidar(_tif("degrees.tif", transform=Affine(1e-5, 0, 7.0, 0, -1e-5, 51.0),
+                         crs="EPSG:4326"))),
+    BadInput("feet-points", "horizontal units of 'foot'", _maker(_xyz, crs="EPSG:2994"),
+             _lidar(_xyz, crs="EPSG:2994")),
+    BadInput("feet-raster", "horizontal units of 'US survey foot'",
+             _maker(_tif("feet.tif", crs="EPSG:2229")),
+             _lidar(_tif("feet.tif", crs="EPSG:2229"))),
+    BadInput("feet-real-autzen", "horizontal units of 'foot'", _maker(_autzen), _lidar(_autzen)),
+    BadInput("vertical-feet", "elevations in 'US survey foot'", _maker(_las_vertical_feet),
+             _lidar(_las_vertical_feet)),
+    BadInput("no-crs-text", "no coordinate reference system", _maker(_xyz), _lidar(_xyz)),
+    BadInput("no-crs-las", "no coordinate reference system", _maker(_las_without_crs),
+             _lidar(_las_without_crs)),
+    BadInput("no-crs-raster", "no coordinate reference system",
+             _maker(_tif("nocrs.tif", crs=None)), _lidar(_tif("nocrs.tif", crs=None))),
+    BadInput("rotated-raster", "is rotated", _maker(_rotated), _lidar(_rotated)),
+    BadInput("non-square-cells", "not square",
+             _maker(_tif("rect.tif", transform=Affine(1.0, 0, ORIGIN[0], 0, -2.0, ORIGIN[1]))),
+             _lidar(_tif("rect.tif", transform=Affine(1.0, 0, ORIGIN[0], 0, -2.0, ORIGIN[1])))),
+    BadInput("south-up-raster", "not north-up",
+             _maker(_tif("southup.tif", transform=Affine(1.0, 0, ORIGIN[0], 0, 1.0, ORIGIN[1]))),
+             _lidar(_tif("southup.tif", transform=Affine(1.0, 0, ORIGIN[0], 0, 1.0, ORIGIN[1])))),
+    _options_case("cell-size-larger-than-data", "fewer than 3 cells", CELL_SIZE=30.0),
+    _options_case("cell-size-below-point-spacing", "would leave most grid cells empty",
+                  CELL_SIZE=0.02),
+    _options_case("cell-size-zero", "cell size must be a positive", CELL_SIZE=0.0),
+    _options_case("s-crit-zero", "S_crit must be above 0 and below 90", CRITICAL_SLOPE=0.0),
+    _options_case("s-crit-90", "S_crit must be above 0 and below 90", CRITICAL_SLOPE=90.0),
+    _options_case("min-angle-above-34", "at most 34 degrees", MIN_ANGLE=34.5),
+    _options_case("min-angle-zero", "minimum angle must be above 0", MIN_ANGLE=0.0),
+    _options_case("max-area-zero", "maximum triangle area must be a positive", MAX_AREA=0.0),
+    _options_case("max-area-negative", "maximum triangle area must be a positive",
+                  MAX_AREA=-5.0),
+    _options_case("too-many-triangles", "more than the limit of 10,000", MAX_AREA=0.1,
+                  MAX_TRIANGLES=10_000),
+    BadInput("mesh-step-too-many-triangles", "more than the limit of 1,000",
+             *_mesh_step(["--max-area", 0.5, "--max-triangles", 1000],
+                         {"MAX_AREA": 0.5, "MAX_TRIANGLES": 1000})),
+    BadInput("mesh-step-min-angle", "at most 34 degrees",
+             *_mesh_step(["--min-angle", 35], {"MIN_ANGLE": 35.0})),
+    _options_case("max-triangles-zero", "maximum number of triangles must be a whole number",
+                  MAX_TRIANGLES=0),
+    _options_case("holdout-too-small", "needs at least 20 check points", HOLDOUT=0.0005),
+    _options_case("holdout-one", "holdout fraction must be at least 0 and below 1",
+                  HOLDOUT=1.0),
+    BadInput("grid-too-large-for-memory", "of memory",
+             lambda f: ["grid", _xyz(f), "--crs", UTM, "--cell-size", 0.001, "--max-gap", 5,
+                        "--out", "{out}/dem.tif"],
+             lambda f: ("floodmesh:gridpoints", {
+                 "INPUT": str(_xyz(f)), "CRS": UTM, "CELL_SIZE": 0.001, "MAX_GAP": 5.0,
+                 "OUTPUT": str(f / "qgis-out" / "dem.tif")})),
+]
