@@ -75,14 +75,6 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         if log:
             log(f"note: {message}")
 
-    options.validate()
-    notes = []
-
-    def note(message: str):
-        notes.append(message)
-        if log:
-            log(f"note: {message}")
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     method, amount = options.simplification()
