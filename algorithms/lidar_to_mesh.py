@@ -2,6 +2,7 @@
 from pathlib import Path
 
 from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputFile,
+                       QgsProcessingParameterBoolean,
                        QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
                        QgsProcessingParameterCrs, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
@@ -42,7 +43,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     SLOPE_METHOD = "SLOPE_METHOD"
     CRITICAL_SLOPE = "CRITICAL_SLOPE"
     KEEP_EVERY = "KEEP_EVERY"
-    SIMPLIFY, TOLERANCE = "SIMPLIFY", "TOLERANCE"
+    SIMPLIFY, TOLERANCE, REFINE = "SIMPLIFY", "TOLERANCE", "REFINE"
     MIN_ANGLE = "MIN_ANGLE"
     MAX_AREA = "MAX_AREA"
     MAX_TRIANGLES = "MAX_TRIANGLES"
@@ -99,6 +100,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.FORMATS, self.tr("Also write the mesh for solvers"),
             options=list(EXPORT_FORMAT_LABELS), allowMultiple=True, optional=True,
             defaultValue=[]))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.REFINE, self.tr("Refine until no triangle's points misfit by more than 10 cm "
+                                 "RMS and none by more than 25 cm (step 9)"), defaultValue=False))
         self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
@@ -129,7 +133,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             user_lines=user_lines,
             formats=tuple(EXPORT_FORMATS[i] for i in
                           self.parameterAsEnums(parameters, self.FORMATS, context)),
-            max_triangles=self.parameterAsInt(parameters, self.MAX_TRIANGLES, context))
+            max_triangles=self.parameterAsInt(parameters, self.MAX_TRIANGLES, context),
+            refine=self.parameterAsBool(parameters, self.REFINE, context))
 
     def check_values(self, parameters, context):
         self.options(parameters, context)

@@ -112,6 +112,14 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
         p.add_argument("--max-area", type=float, default=DEFAULTS.max_area,
                        help="maximum triangle area in m² (default %(default)s)")
         _add_size_options(p)
+        p.add_argument("--refine", action="store_true",
+                       help="refine until the residual bounds hold (the method's step 9): "
+                            "triangles whose points' RMS residual exceeds --lower get smaller, "
+                            "points beyond --upper go into the mesh")
+        p.add_argument("--lower", type=float, default=DEFAULTS.refine_lower,
+                       help="with --refine, m (default %(default)s)")
+        p.add_argument("--upper", type=float, default=DEFAULTS.refine_upper,
+                       help="with --refine, m (default %(default)s)")
     _add_max_triangles(p)
     p.add_argument("--holdout", type=float, default=DEFAULTS.holdout,
                    help="fraction of points held out for assessment (default %(default)s)")
@@ -170,6 +178,9 @@ def _options(args) -> RunOptions:
                       boundary=args.boundary, user_lines=args.user_lines,
                       size_field=getattr(args, "size_field", None),
                       min_area=getattr(args, "min_area", None),
+                      refine=getattr(args, "refine", False),
+                      refine_lower=getattr(args, "lower", DEFAULTS.refine_lower),
+                      refine_upper=getattr(args, "upper", DEFAULTS.refine_upper),
                       min_angle=args.min_angle, max_area=args.max_area, holdout=args.holdout,
                       seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes,
                       formats=parse_formats(args.formats),

@@ -213,6 +213,9 @@ class RunOptions:
     user_lines: str | None = None   # line file: the modeller's own break / structure lines
     formats: tuple[str, ...] = ()   # solver exports written beside mesh.2dm (EXPORT_FORMATS)
     max_triangles: int = DEFAULT_MAX_TRIANGLES  # refuse meshes estimated to be larger
+    refine: bool = False            # refine until the residual bounds hold (step 9)
+    refine_lower: float = 0.10      # m: refine triangles whose points' RMS residual exceeds it
+    refine_upper: float = 0.25      # m: insert points whose residual exceeds it
 
     def __post_init__(self):
         self.validate()
@@ -237,6 +240,12 @@ class RunOptions:
         if self.min_area is not None:
             _positive(self.min_area, "minimum area of the size field", "m²")
         check_max_triangles(self.max_triangles)
+        if self.refine:
+            lower = _positive(self.refine_lower, "refinement lower bound", "metres")
+            upper = _positive(self.refine_upper, "refinement upper bound", "metres")
+            if lower > upper:
+                raise FloodMeshError(f"the refinement lower bound ({lower:g} m) is above the "
+                                     f"upper bound ({upper:g} m); 0.10 and 0.25 are usual")
         check_holdout(self.holdout)
         check_min_points(self.min_points)
         for name in self.formats:

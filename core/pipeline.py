@@ -23,6 +23,7 @@ from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
 from .options import RunOptions
+from .refine import refine_mesh
 from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .slope import laplacian_of_gaussian, slope
 
@@ -78,9 +79,11 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     method, amount = options.simplification()
-    steps = _Steps({"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
-                    "breaklines": 1, "simplify": 0.5, "mesh": 2, "assess": 1, "write": 2},
-                   progress, cancelled, log)
+    weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
+               "breaklines": 1, "simplify": 0.5, "mesh": 2, "refine": 4, "assess": 1, "write": 2}
+    if not options.refine:
+        del weights["refine"]
+    steps = _Steps(weights, progress, cancelled, log)
     front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
                                                      front.breakpoints, front.traced)
@@ -90,10 +93,18 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                       min_distance=min_distance)
     size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
-    mesh = steps.run("mesh", build_mesh, dem, [line.coords for line in lines] + front.own_lines,
-                     min_angle=options.min_angle, max_area=options.max_area,
-                     domain=front.domain, size_field=size,
+    mesh_lines = [line.coords for line in lines] + front.own_lines
+    mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
+                     max_area=options.max_area, domain=front.domain, size_field=size,
                      max_triangles=options.max_triangles, note=note)
+    rounds = []
+    if options.refine:
+        # the points gridded drive the refinement; the held-out ones stay independent
+        mesh, rounds = steps.run("refine", refine_mesh, dem, mesh_lines, front.measured,
+                                 check=holdout.xyz, domain=front.domain, size_field=size,
+                                 min_angle=options.min_angle, max_area=options.max_area,
+                                 lower=options.refine_lower, upper=options.refine_upper,
+                                 max_nodes=options.max_triangles, cancelled=cancelled)
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
     deviation = max_deviation(traced, lines)
@@ -137,6 +148,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                            "max_deviation_m": deviation},
         **quality,
         **stats,
+        "refinement": [asdict(r) for r in rounds],
         "notes": notes,
         "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
         "seconds": steps.seconds,
@@ -158,6 +170,7 @@ class Front:
     traced: list             # BreakLine, before simplification
     domain: object = None    # the user's domain (Multi)Polygon, None: the DEM's data
     own_lines: list = field(default_factory=list)  # the modeller's own lines (k, 3) arrays
+    measured: np.ndarray | None = None  # (n, 3) points gridded (or DEM cell centres): refinement
 
 
 def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, *,
@@ -172,6 +185,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                      note=note)
     if isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
+        measured = gridding.xyz
         # refuse, before the work, a grid or mesh too large for the limit or the memory
         plan = check_grid(gridding, options.cell_size, options.max_gap)
         triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
@@ -189,6 +203,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         check_memory(cells=dem.values.size, triangles=triangles,
                      advice="resample the DEM to larger cells or split it into tiles")
         holdout = _dem_check_points(dem, options.holdout, options.seed)
+        measured = _dem_check_points(dem, 1.0, options.seed).xyz
         holdout_source = "DEM cell centres (not independent of the DEM)"
         n_points = 0
     domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
@@ -208,7 +223,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
-                 domain, own_lines)
+                 domain, own_lines, measured)
 
 
 def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: float,

@@ -3,9 +3,11 @@
 Each round meshes the DEM with its break lines, then measures the residual (point − TIN) of
 the refinement points (the LiDAR points used for gridding, or DEM cell centres): a point whose
 |residual| exceeds the ``upper`` bound goes into the TIN as a vertex with its measured
-elevation; a triangle whose points' RMS residual exceeds the ``lower`` bound (a systematic
-misfit, not one noisy point) gets a quarter of its area as its local maximum. Rounds stop when the target holds (RMSE and/or largest |residual| of the
-refinement points), when the node budget would be passed, or when nothing is left to refine.
+elevation (the worst one per triangle and round); a triangle whose points' RMS residual
+exceeds the ``lower`` bound (a systematic misfit, not one noisy point) gets a quarter of its
+area as its local maximum. Rounds stop when the target holds (RMSE and/or largest |residual|
+of the refinement points), when the node budget would be passed, or when nothing is left to
+refine.
 Check points (held out, never used for refinement) are assessed every round, so the error
 reported is independent of the refinement.
 """
@@ -38,7 +40,8 @@ class RefineRound:
 
 
 def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
-                check: np.ndarray | None = None, domain=None, min_angle: float = 25.0,
+                check: np.ndarray | None = None, domain=None, size_field=None,
+                min_angle: float = 25.0,
                 max_area: float = 100.0, lower: float = 0.10, upper: float = 0.25,
                 target_rmse: float | None = None, target_max: float | None = None,
                 max_nodes: int = 1_000_000, max_rounds: int = 8,
@@ -46,7 +49,7 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                 cancelled: Callable[[], bool] | None = None) -> tuple[Mesh, list[RefineRound]]:
     """Refine until the target holds on ``points`` (n, 3), within ``max_nodes`` nodes and
     ``max_rounds`` rounds. Bounds and targets in metres; with no target, rounds go on until
-    nothing is left to refine. ``domain``: the (Multi)Polygon to mesh (default: the DEM's data).
+    nothing is left to refine. ``domain`` and ``size_field`` as for ``build_mesh``.
     Returns the last mesh within the budget and every round."""
     points = np.asarray(points, float)
     if points.ndim != 2 or points.shape[1] != 3 or not len(points):
@@ -64,17 +67,20 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         if cancelled is not None and cancelled():
             raise Cancelled()
         mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area, points=inserted,
-                          local_areas=local, domain=domain)
+                          local_areas=local, domain=domain, size_field=size_field)
         if len(mesh.nodes) > max_nodes:
             if best is None:
                 raise FloodMeshError(f"the unrefined mesh already has {len(mesh.nodes)} nodes, "
                                      f"over the budget of {max_nodes}; raise the budget or the "
                                      "maximum triangle area")
             break
+        if rounds and len(mesh.nodes) == rounds[-1].nodes:
+            break  # what is left to insert lies too close to a node or the boundary
         res = residuals(mesh, points)
         check_res = residuals(mesh, check) if check is not None and len(check) else np.array([])
-        new_points = points[np.abs(np.nan_to_num(res)) > upper]
-        misfit = _misfit_triangles(mesh, points, res, lower, floor)
+        found = _containing_triangles(mesh, points)
+        new_points = _worst_per_triangle(points, res, found, upper)
+        misfit = _misfit_triangles(mesh, found, res, lower, floor)
         rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), _rmse(res),
                                   _max_abs(res), _rmse(check_res), _max_abs(check_res),
                                   len(new_points), len(misfit)))
@@ -88,13 +94,29 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     return best, rounds
 
 
-def _misfit_triangles(mesh: Mesh, points, res, lower, floor) -> np.ndarray:
-    """Centroid x, y and a quarter of the area of each triangle whose points' RMS residual
-    exceeds ``lower``, where that quarter is at least ``floor`` m²."""
+def _containing_triangles(mesh: Mesh, points: np.ndarray) -> np.ndarray:
+    """The triangle holding each point, -1 outside the mesh."""
     from matplotlib.tri import Triangulation
 
-    found = Triangulation(mesh.nodes[:, 0], mesh.nodes[:, 1],
-                          mesh.triangles).get_trifinder()(points[:, 0], points[:, 1])
+    return Triangulation(mesh.nodes[:, 0], mesh.nodes[:, 1],
+                         mesh.triangles).get_trifinder()(points[:, 0], points[:, 1])
+
+
+def _worst_per_triangle(points, res, found, upper) -> np.ndarray:
+    """The point of largest |residual| in each triangle, where it exceeds ``upper``: one new
+    vertex per triangle and round, as greedy TIN insertion does (its neighbours' residuals
+    change once it is in)."""
+    big = np.flatnonzero((np.abs(np.nan_to_num(res)) > upper) & (found >= 0))
+    if not len(big):
+        return points[:0]
+    order = big[np.lexsort((-np.abs(res[big]), found[big]))]
+    first = np.r_[True, found[order][1:] != found[order][:-1]]
+    return points[order[first]]
+
+
+def _misfit_triangles(mesh: Mesh, found, res, lower, floor) -> np.ndarray:
+    """Centroid x, y and a quarter of the area of each triangle whose points' RMS residual
+    exceeds ``lower``, where that quarter is at least ``floor`` m²."""
     ok = (found >= 0) & np.isfinite(res)
     n_tri = len(mesh.triangles)
     count = np.bincount(found[ok], minlength=n_tri)

@@ -174,3 +174,24 @@ def test_mesh_and_run_with_a_size_field(demo_points_file, tmp_path):
               "--holdout", 0.01)
     report = json.loads((t / "run" / "report.json").read_text())
     assert report["options"]["size_field"] == "slope" and report["nodes"] > 1.5 * len(plain)
+
+
+def test_run_with_refinement(demo_points_file, tmp_path):
+    """run --refine (step 9): the gridded points drive the rounds, the held-out ones are only
+    assessed; the holdout error falls and no more held-out residuals exceed 25 cm than without
+    refinement; the report lists every round."""
+    floodmesh("run", demo_points_file, "--out", tmp_path / "plain", "--holdout", 0.01)
+    floodmesh("run", demo_points_file, "--out", tmp_path / "refined", "--holdout", 0.01,
+              "--refine")
+    plain = json.loads((tmp_path / "plain" / "report.json").read_text())
+    refined = json.loads((tmp_path / "refined" / "report.json").read_text())
+    rounds = refined["refinement"]
+    assert plain["refinement"] == [] and len(rounds) >= 2
+    assert rounds[0]["nodes"] == plain["nodes"] and refined["nodes"] == rounds[-1]["nodes"]
+    assert refined["rmse_m"] == pytest.approx(rounds[-1]["check_rmse_m"])
+    assert refined["rmse_m"] < plain["rmse_m"]
+    assert refined["classes"][">25 cm"] <= plain["classes"][">25 cm"]
+    assert refined["n_below_min_angle"] == 0 and refined["max_area_m2"] <= 100
+    bad = floodmesh("run", demo_points_file, "--out", tmp_path / "bad", "--refine",
+                    "--lower", 0.3, "--upper", 0.2, check=False)
+    assert bad.returncode == 2 and "lower bound" in bad.stderr

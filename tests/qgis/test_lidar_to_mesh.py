@@ -111,15 +111,16 @@ def test_cancel_mid_run_leaves_no_partial_output(processing, demo_points_file, t
     assert [p.name for p in out.glob("*partial*")] == []
 
 
-def test_spline_simplification_through_the_one_step_algorithm(processing, demo_points_file,
+def test_spline_and_refinement_through_the_one_step_algorithm(processing, demo_points_file,
                                                                tmp_path):
     """The simplification enum reaches the chain: the report names the spline and its
     tolerance, and fewer break-line points are kept than traced."""
     out = tmp_path / "spline"
     processing.run("floodmesh:lidartomesh", {
         "INPUT": str(demo_points_file), "SIMPLIFY": 2, "TOLERANCE": 0.75, "HOLDOUT": 0.01,
-        "OUTPUT_FOLDER": str(out)})
+        "REFINE": True, "OUTPUT_FOLDER": str(out)})
     report = json.loads((out / "report.json").read_text())
     assert report["simplification"]["method"] == "spline"
     assert report["simplification"]["value"] == 0.75
     assert report["breakline_points_kept"] < 0.5 * report["breakline_points_traced"]
+    assert len(report["refinement"]) >= 2  # and the refinement switch reaches it too
