@@ -184,7 +184,49 @@ def _mesh_step(cli_options, qgis_parameters):
                                                "OUTPUT": str(f / "qgis-out" / "mesh.2dm")}))
 
 
+def _boundary_case(id_, words, polygon, crs=UTM):
+    """``floodmesh mesh --boundary`` and Build mesh's BOUNDARY with a polygon layer holding
+    ``polygon`` (local coordinates from ORIGIN) on the bank DEM."""
+    import fiona
+    import shapely
+    import shapely.affinity
+
+    dem = _tif("dem.tif")
+
+    def boundary(folder):
+        path = folder / f"{id_}.gpkg"
+        if not path.exists():
+            with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(crs).to_wkt(),
+                            schema={"geometry": "Polygon", "properties": {}}) as dst:
+                moved = shapely.affinity.translate(polygon, *ORIGIN)
+                dst.write({"geometry": shapely.geometry.mapping(moved), "properties": {}})
+        return path
+
+    return BadInput(id_, words,
+                    lambda f: ["mesh", dem(f), "--boundary", boundary(f), "--out",
+                               "{out}/mesh.2dm"],
+                    lambda f: ("floodmesh:buildmesh", {
+                        "DEM": str(dem(f)), "BOUNDARY": str(boundary(f)),
+                        "OUTPUT": str(f / "qgis-out" / "mesh.2dm")}))
+
+
+def _bowtie():
+    import shapely
+    return shapely.Polygon([(5, 5), (50, 50), (50, 5), (5, 50)])
+
+
+def _box(x0, y0, x1, y1):
+    import shapely
+    return shapely.box(x0, y0, x1, y1)
+
+
 CASES = [
+    _boundary_case("boundary-self-intersecting", "is not a valid polygon (Self-intersection",
+                   _bowtie()),
+    _boundary_case("boundary-off-the-data", "does not overlap the DEM's data",
+                   _box(5000, 5000, 5100, 5100)),
+    _boundary_case("boundary-in-another-crs", "reproject it to the DEM's CRS",
+                   _box(5, 5, 50, 50), crs="EPSG:32633"),
     BadInput("missing-file", "does not exist",
              lambda f: _run(f / "missing.laz"), _lidar(lambda f: f / "missing.laz")),
     BadInput("laz-holding-text", "not a readable LAS/LAZ",
