@@ -134,6 +134,28 @@ def _turns_ok(seq, m, cols, backwards):
 
 
 @numba.njit(cache=True)
+def _root(parent, a):
+    """Union–find: the root of ``a``, halving the path on the way."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@numba.njit(cache=True)
+def _crosses_link(links, cell, k, cols):
+    """Whether a diagonal step from ``cell`` in direction ``k`` crosses the link between the
+    two cells beside it: (r, c + dc) linked to (r + dr, c) by the direction (dr, -dc)."""
+    if DR[k] == 0 or DC[k] == 0:
+        return False
+    side = cell + DC[k]
+    for j in range(8):
+        if DR[j] == DR[k] and DC[j] == -DC[k] and links[side] & (1 << j):
+            return True
+    return False
+
+
+@numba.njit(cache=True)
 def _join_fragments(cells, starts, rows, cols):
     """Join paths end to end where an end cell is a grid neighbour of another path's end cell,
     the two ends point at each other (their chords over six steps within 45°) and the joined
@@ -216,23 +238,13 @@ def _join_fragments(cells, starts, rows, cols):
         e, f = cand_a[t], cand_b[t]
         if partner[e] >= 0 or partner[f] >= 0:
             continue
-        a, b = e // 2, f // 2
-        while chain[a] != a:
-            a = chain[a]
-        while chain[b] != b:
-            b = chain[b]
+        a, b = _root(chain, e // 2), _root(chain, f // 2)
         if a == b:
             continue
         j = cand_dir[t]
         here = end_cell[e]
-        if DR[j] != 0 and DC[j] != 0:  # a diagonal joint must not cross a link beside it
-            side = here + DC[j]  # (r, c + dc), linked to (r + dr, c) by direction (dr, -dc)
-            crosses = False
-            for q in range(8):
-                if DR[q] == DR[j] and DC[q] == -DC[j] and links[side] & (1 << q):
-                    crosses = True
-            if crosses:
-                continue
+        if _crosses_link(links, here, j, cols):  # a diagonal joint must not cross a link
+            continue
         links[here] |= 1 << j
         links[end_cell[f]] |= 1 << ((j + 4) % 8)
         chain[max(a, b)] = min(a, b)
@@ -327,22 +339,14 @@ def _components(cells, starts, rows, cols):
                     continue
                 other = owner[rr * cols + cc]
                 if other >= 0:
-                    a, b = k, other
-                    while parent[a] != a:
-                        parent[a] = parent[parent[a]]
-                        a = parent[a]
-                    while parent[b] != b:
-                        parent[b] = parent[parent[b]]
-                        b = parent[b]
+                    a, b = _root(parent, k), _root(parent, other)
                     if a != b:
                         parent[max(a, b)] = min(a, b)
     label = np.zeros(n_paths, dtype=np.int64)
     ids = np.zeros(n_paths, dtype=np.int64)
     n_ids = 0
     for k in range(n_paths):
-        a = k
-        while parent[a] != a:
-            a = parent[a]
+        a = _root(parent, k)
         if ids[a] == 0:
             n_ids += 1
             ids[a] = n_ids
@@ -454,15 +458,8 @@ def _extend(start, trend_r, trend_c, bp, slope, used, links, s_crit, steep, seed
                 if cos < -1e-9:
                     continue  # turns more than 90 degrees from the trend
                 turn = 1.0 - cos
-            if DR[k] != 0 and DC[k] != 0:
-                # a diagonal step crosses the link between the two cells beside it
-                side = cr * cols + nc  # (cr, nc) linked to (nr, cc) by the direction (DR, -DC)
-                crosses = False
-                for j in range(8):
-                    if DR[j] == DR[k] and DC[j] == -DC[k] and links[side] & (1 << j):
-                        crosses = True
-                if crosses:
-                    continue
+            if _crosses_link(links, cur, k, cols):  # a diagonal step across another link
+                continue
             cand_k[n_cand] = k
             cand_score[n_cand] = ds if steep else slope[nr, nc]
             cand_turn[n_cand] = turn

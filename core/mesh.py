@@ -273,7 +273,7 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
         xy, tris = result["vertices"], result["triangles"]
         limit = np.full(len(tris), float(max_area))
         if has_local:
-            found = _containing_triangle(xy, tris, local_areas[:, :2] - origin)
+            found = containing_triangle(xy, tris, local_areas[:, :2] - origin)
             inside = found >= 0
             np.minimum.at(limit, found[inside], local_areas[inside, 2])
         if size_field is not None:
@@ -395,7 +395,7 @@ def size_from_slope(slope: Grid, *, max_area: float, min_area: float, s_crit: fl
     return slope.with_values(max_area * (min_area / max_area) ** t)
 
 
-def _containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+def containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Index of the triangle holding each point, -1 outside the mesh."""
     from matplotlib.tri import Triangulation
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from .accuracy import residuals
 from .errors import Cancelled, FloodMeshError
-from .mesh import Mesh, build_mesh, triangle_areas
+from .mesh import Mesh, build_mesh, containing_triangle, triangle_areas
 from .raster import Grid
 
 
@@ -78,7 +78,7 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
             break  # what is left to insert lies too close to a node or the boundary
         res = residuals(mesh, points)
         check_res = residuals(mesh, check) if check is not None and len(check) else np.array([])
-        found = _containing_triangles(mesh, points)
+        found = containing_triangle(mesh.nodes[:, :2], mesh.triangles, points)
         new_points = _worst_per_triangle(points, res, found, upper)
         misfit = _misfit_triangles(mesh, found, res, lower, floor)
         rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), _rmse(res),
@@ -92,14 +92,6 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         inserted = np.vstack([inserted, new_points])
         local = np.vstack([local, misfit])
     return best, rounds
-
-
-def _containing_triangles(mesh: Mesh, points: np.ndarray) -> np.ndarray:
-    """The triangle holding each point, -1 outside the mesh."""
-    from matplotlib.tri import Triangulation
-
-    return Triangulation(mesh.nodes[:, 0], mesh.nodes[:, 1],
-                         mesh.triangles).get_trifinder()(points[:, 0], points[:, 1])
 
 
 def _worst_per_triangle(points, res, found, upper) -> np.ndarray:
