@@ -49,7 +49,40 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         missing = missing_dependencies()
         if missing:
             raise QgsProcessingException(install_hint(missing))
+        from ..core.outputs import check_outputs
+
+        run_core(check_outputs, *self.files(parameters, context))
         return self.process(parameters, context, feedback)
+
+    def files(self, parameters, context) -> tuple[list, list]:
+        """(files read, files written) by the parameters, for core's check that no output is
+        or replaces an input (a folder output is checked by the core call it goes to)."""
+        from qgis.core import (QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
+                               QgsProcessingParameterFileDestination,
+                               QgsProcessingParameterMeshLayer,
+                               QgsProcessingParameterRasterLayer,
+                               QgsProcessingParameterVectorLayer)
+
+        inputs, outputs = [], []
+        for p in self.parameterDefinitions():
+            name = p.name()
+            if isinstance(p, QgsProcessingParameterFileDestination):
+                outputs.append(self.parameterAsFileOutput(parameters, name, context))
+            elif p.isDestination() and p.type() in ("rasterDestination", "vectorDestination"):
+                outputs.append(self.parameterAsOutputLayer(parameters, name, context))
+            elif isinstance(p, QgsProcessingParameterFile):
+                inputs.append(self.parameterAsFile(parameters, name, context))
+            elif isinstance(p, QgsProcessingParameterRasterLayer):
+                layer = self.parameterAsRasterLayer(parameters, name, context)
+                inputs.append(layer.source() if layer else None)
+            elif isinstance(p, QgsProcessingParameterMeshLayer):
+                layer = self.parameterAsMeshLayer(parameters, name, context)
+                inputs.append(layer.source() if layer else None)
+            elif isinstance(p, (QgsProcessingParameterFeatureSource,
+                                QgsProcessingParameterVectorLayer)):
+                layer = self.parameterAsVectorLayer(parameters, name, context)
+                inputs.append(layer.source().split("|")[0] if layer else None)
+        return inputs, [o for o in outputs if o and not o.startswith("memory:")]
 
     def process(self, parameters, context, feedback):
         raise NotImplementedError

@@ -20,6 +20,8 @@ def tin_elevation(mesh: Mesh, x, y) -> np.ndarray:
     """Linear interpolation of the mesh's node elevations at (x, y); NaN outside the mesh."""
     from matplotlib.tri import LinearTriInterpolator, Triangulation
 
+    if np.size(x) == 0:  # no check points (holdout 0): matplotlib's finder refuses empty input
+        return np.empty(0)
     origin = mesh.nodes[:, :2].min(axis=0)
     tri = Triangulation(mesh.nodes[:, 0] - origin[0], mesh.nodes[:, 1] - origin[1],
                         mesh.triangles)

@@ -259,12 +259,13 @@ def cmd_demo(args):
 def cmd_grid(args):
     from . import io
     from .grid import grid_points_linear
-    from .options import check_cell_size, check_holdout, check_max_gap
+    from .options import check_cell_size, check_holdout, check_max_gap, check_seed
     from .points import split_holdout
 
     check_cell_size(args.cell_size)
     check_max_gap(args.max_gap)
     check_holdout(args.holdout)
+    check_seed(args.seed)
     notes = []
     points = io.read_points(args.input, crs=args.crs, classes=args.classes, note=notes.append)
     _print_notes(notes)
@@ -272,10 +273,48 @@ def cmd_grid(args):
     dem = grid_points_linear(gridding, args.cell_size, max_gap=args.max_gap)
     io.write_raster(args.out, dem)
     if len(holdout):
-        target = args.holdout_out or str(Path(args.out).with_name("holdout.gpkg"))
+        target = _holdout_target(args)
         io.write_points_gpkg(target, holdout.xyz, points.crs, layer="holdout")
         print(f"{len(holdout)} held-out points written to {target}")
     print(f"DEM {dem.shape[1]} x {dem.shape[0]} cells of {dem.cell_size} m written to {args.out}")
+
+
+def _holdout_target(args) -> str:
+    return args.holdout_out or str(Path(args.out).with_name("holdout.gpkg"))
+
+
+# per command: the arguments naming files it reads, and those naming files it writes
+_FILES = {
+    "grid": (("input",), ("out",)),
+    "slope": (("dem",), ("out",)),
+    "breakpoints": (("slope",), ("out",)),
+    "breaklines": (("breakpoints", "slope", "dem"), ("out",)),
+    "simplify": (("breaklines",), ("out",)),
+    "mesh": (("dem", "breaklines", "boundary", "user_lines", "size_field"), ("out", "gpkg")),
+    "assess": (("mesh", "points"), ("out", "report")),
+    "refine": (("dem", "points", "check", "breaklines", "boundary", "user_lines"),
+               ("out", "report")),
+    "export": (("mesh", "open_boundaries", "regions", "breaklines"), ("output",)),
+}
+RASTER_OUTPUTS = (".tif", ".tiff")
+
+
+def _check_files(args) -> None:
+    """Before any work: no output may be (or replace) an input, each output's folder must be
+    writable, and the rasters written are GeoTIFFs (run and series check their folder in
+    core)."""
+    from .outputs import check_outputs, require_suffix
+
+    reads, writes = _FILES.get(args.command, ((), ()))
+    inputs = [getattr(args, name) for name in reads if getattr(args, name) != "slope"]
+    outputs = [getattr(args, name) for name in writes]
+    if args.command == "grid" and args.holdout:
+        outputs.append(_holdout_target(args))
+    if args.command == "export" and Path(args.output).suffix.lower() == ".slf":
+        outputs.append(Path(args.output).with_suffix(".cli"))
+    check_outputs(inputs, outputs)
+    if args.command in ("grid", "slope", "breakpoints"):
+        require_suffix(args.out, RASTER_OUTPUTS, "a GeoTIFF")
 
 
 def cmd_slope(args):
@@ -616,6 +655,7 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     start = time.perf_counter()
     try:
+        _check_files(args)
         args.func(args)
     except FloodMeshError as exc:
         print(f"floodmesh: error: {exc}", file=sys.stderr)

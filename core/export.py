@@ -25,6 +25,7 @@ import numpy as np
 from . import io
 from .errors import FloodMeshError
 from .mesh import boundary_loops
+from .raster import require_metric_crs
 from .options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
 
 ADCIRC_MAINLAND, ADCIRC_ISLAND = 20, 21  # no normal flow, natural (weak), free tangential slip
@@ -119,10 +120,12 @@ def prepare(nodes, triangles, *, crs=None, open_lines=(), snap: float = 1.0, reg
     p = nodes[triangles][:, :, :2]
     cross = ((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
              - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+    _refuse_flat_triangles(p, cross)
     triangles = np.where((cross < 0)[:, None], triangles[:, [0, 2, 1]], triangles)
     shifted = nodes.copy()
     shifted[:, 2] += datum_offset
     boundary = mesh_boundary(nodes, triangles, open_lines, snap=snap)
+    _refuse_pinched(boundary, nodes)
     mats = (np.ones(len(triangles), np.int64) if materials is None
             else np.asarray(materials, np.int64).copy())
     if len(mats) != len(triangles):
@@ -131,25 +134,64 @@ def prepare(nodes, triangles, *, crs=None, open_lines=(), snap: float = 1.0, reg
     return SolverMesh(shifted, triangles, mats, boundary, _crs(crs))
 
 
+def _refuse_flat_triangles(corners: np.ndarray, cross: np.ndarray) -> None:
+    """Refuse triangles without area (three nodes on one line): solvers divide by the area."""
+    longest = np.max([np.hypot(*(corners[:, (k + 1) % 3] - corners[:, k]).T) for k in range(3)],
+                     axis=0)
+    flat = np.abs(cross) <= 1e-9 * longest ** 2
+    if flat.any():
+        first = int(np.argmax(flat))
+        x, y = corners[first].mean(axis=0)
+        raise FloodMeshError(
+            f"{int(flat.sum())} triangles of the mesh have no area (their three nodes lie on one "
+            f"line; the first is triangle {first + 1}, at {x:.2f}, {y:.2f}): solvers fail on "
+            "them; mesh again (floodmesh mesh) or remove them in the mesh editor")
+
+
+def _refuse_pinched(boundary: "Boundary", nodes: np.ndarray) -> None:
+    """Refuse a boundary that touches itself at a node: solvers number each boundary node
+    once (TELEMAC's IPOBO) and take each boundary for a simple ring (ADCIRC, SCHISM)."""
+    numbering = boundary.numbering
+    ids, counts = np.unique(numbering, return_counts=True)
+    if (counts > 1).any():
+        node = int(ids[np.argmax(counts > 1)])
+        x, y = np.asarray(nodes)[node, :2]
+        raise FloodMeshError(
+            f"the mesh boundary touches itself at node {node + 1} ({x:.2f}, {y:.2f}) and "
+            f"{int((counts > 1).sum()) - 1} other nodes: solvers need boundaries that do not; "
+            "separate the parts of the domain that touch there (remove a triangle at the node, "
+            "or mesh again with a domain polygon that keeps them apart)")
+
+
 def _crs(crs):
+    """The mesh's CRS: projected, in metres, as FloodMesh's meshes are."""
     if crs is None:
         return None
     from pyproj import CRS
     from pyproj.exceptions import CRSError
 
     try:
-        return CRS.from_user_input(crs)
+        parsed = CRS.from_user_input(crs)
     except CRSError as exc:
         raise FloodMeshError(f"{crs!r} is not a CRS ({exc}); give one such as EPSG:25832") from None
+    try:
+        return require_metric_crs(parsed, f"the mesh's CRS {parsed.name}")
+    except FloodMeshError:
+        raise FloodMeshError(
+            f"the mesh's CRS cannot be {parsed.name}: it is not a projected CRS in metres, and a "
+            "mesh's x, y and z are metres (as FloodMesh makes them); give the CRS of the data the "
+            "mesh was made from, e.g. its UTM zone (EPSG:25832)") from None
 
 
 def mesh_boundary(nodes, triangles, open_lines=(), *, snap: float = 1.0) -> Boundary:
     """Boundary loops split into open sections (boundary nodes within ``snap`` m of an
-    open-boundary line, two or more in a row) and land between them."""
+    open-boundary line, two or more in a row; a node near two lines goes to the nearer) and
+    land between them. Each line makes sections of its own: two lines meeting end to end give
+    two sections sharing the node where they meet."""
     loops = boundary_loops(nodes, triangles)
     xy = np.asarray(nodes, float)[:, :2]
     islands = [_signed_area(xy[loop]) < 0 for loop in loops]
-    masks = [np.zeros(len(loop), bool) for loop in loops]
+    labels = [np.zeros(len(loop), np.int64) for loop in loops]  # 0 land, k: open line k
     if len(open_lines):
         import shapely
 
@@ -158,16 +200,20 @@ def mesh_boundary(nodes, triangles, open_lines=(), *, snap: float = 1.0) -> Boun
                                  f"metres, got {snap}")
         points = shapely.points(xy[np.concatenate(loops)])
         starts = np.cumsum([0] + [len(loop) for loop in loops])
+        nearest = [np.full(len(loop), np.inf) for loop in loops]
         for number, line in enumerate(open_lines, start=1):
             line = np.asarray(line, float)
             if len(line) < 2:
                 raise FloodMeshError(f"open boundary line {number} has fewer than two points")
             distance = shapely.distance(points, shapely.LineString(line[:, :2]))
             touched = False
-            for k, mask in enumerate(masks):
-                near = _drop_single_nodes(distance[starts[k]:starts[k + 1]] <= snap)
+            for k, label in enumerate(labels):
+                d = distance[starts[k]:starts[k + 1]]
+                near = _drop_single_nodes(d <= snap)
                 touched |= bool(near.any())
-                mask |= near
+                closer = near & (d < nearest[k])
+                label[closer] = number
+                nearest[k][closer] = d[closer]
             if not touched:
                 raise FloodMeshError(
                     f"open boundary line {number} touches the mesh boundary at fewer than two "
@@ -175,25 +221,26 @@ def mesh_boundary(nodes, triangles, open_lines=(), *, snap: float = 1.0) -> Boun
                     f"snapping distance {snap:g} m): draw it along the boundary section or raise "
                     "the snapping distance")
     ordered, segments = [], []
-    for k, (loop, mask) in enumerate(zip(loops, masks)):
-        if mask.all() or not mask.any():
+    for k, (loop, label) in enumerate(zip(loops, labels)):
+        if (label == label[0]).all():
             ordered.append(loop)
-            segments.append(Segment("open" if mask.all() else "land", loop, k, islands[k], True))
+            segments.append(Segment("open" if label[0] else "land", loop, k, islands[k], True))
             continue
-        first = int(np.nonzero(mask & ~np.roll(mask, 1))[0][0])  # where an open run starts
-        loop, mask = np.roll(loop, -first), np.roll(mask, -first)
+        # start where an open section starts
+        first = int(np.nonzero((label != np.roll(label, 1)) & (label != 0))[0][0])
+        loop, label = np.roll(loop, -first), np.roll(label, -first)
         ordered.append(loop)
         ring = np.append(loop, loop[0])
-        start = 0
-        while start < len(loop):
-            kind = "open" if mask[start] else "land"
-            end = start
-            while end + 1 < len(loop) and mask[end + 1] == mask[start]:
-                end += 1
-            # land runs share their end nodes with the open sections on either side
-            lo, hi = (start, end + 1) if kind == "open" else (start - 1, end + 2)
-            segments.append(Segment(kind, ring[lo:hi], k, islands[k], False))
-            start = end + 1
+        runs = np.flatnonzero(np.diff(label)) + 1
+        bounds = list(zip([0, *runs.tolist()], [*(runs - 1).tolist(), len(loop) - 1]))
+        for i, (start, end) in enumerate(bounds):
+            after = label[bounds[(i + 1) % len(bounds)][0]]
+            if label[start]:
+                # an open section ends where the next one starts when they meet end to end
+                lo, hi = start, end + 1 + (after != 0)
+                segments.append(Segment("open", ring[lo:hi], k, islands[k], False))
+            else:  # land shares its end nodes with the open sections on either side
+                segments.append(Segment("land", ring[start - 1:end + 2], k, islands[k], False))
     return Boundary(ordered, islands, segments)
 
 
@@ -317,10 +364,7 @@ def write_selafin(path, mesh: SolverMesh, *, title: str = "FloodMesh mesh") -> l
     (32 characters), IPARAM (10), NELEM NPOIN NDP 1, IKLE (1-based), IPOBO, X, Y, then one
     time step: time, BOTTOM.
     """
-    numbering = mesh.boundary.numbering
-    if len(np.unique(numbering)) != len(numbering):
-        raise FloodMeshError("the mesh boundary touches itself at a node; TELEMAC cannot number "
-                             "such a boundary: separate the parts of the domain that touch")
+    numbering = mesh.boundary.numbering  # each node once (prepare refuses pinched boundaries)
     n, m = len(mesh.nodes), len(mesh.triangles)
     ipobo = np.zeros(n, np.int64)
     ipobo[numbering] = np.arange(1, len(numbering) + 1)
@@ -343,7 +387,13 @@ def write_selafin(path, mesh: SolverMesh, *, title: str = "FloodMesh mesh") -> l
             record(fh, mesh.nodes[:, 1].astype(">f8").tobytes())
             record(fh, np.array([0.0], ">f8").tobytes())
             record(fh, mesh.nodes[:, 2].astype(">f8").tobytes())
-        open_nodes = {int(i) for s in mesh.boundary.of_kind("open") for i in s.nodes}
+        sections = [s.nodes for s in mesh.boundary.of_kind("open")]
+        open_nodes = {int(i) for nodes in sections for i in nodes}
+        # where two sections meet end to end, their shared node is a wall, so that TELEMAC
+        # (which joins neighbouring liquid nodes into one boundary) keeps them apart
+        shared = np.unique(np.concatenate(sections or [np.empty(0, np.int64)]),
+                           return_counts=True)
+        open_nodes -= set(shared[0][shared[1] > 1].tolist())
         with open(tmp_cli, "w") as fh:
             for k, node in enumerate(numbering.tolist(), start=1):
                 lih, liu, liv, lit = TELEMAC_FREE if node in open_nodes else TELEMAC_WALL
@@ -383,7 +433,8 @@ def write_grid14(path, mesh: SolverMesh, *, schism: bool = False,
     depth = -mesh.nodes[:, 2]
     with io.atomic_output(path) as tmp:
         with open(tmp, "w") as fh:
-            fh.write(f"{title[:24]}\n{m} {n} ! NE NP\n")
+            # NE NP alone: adcircpy and pyschism read this line as two integers and nothing else
+            fh.write(f"{title[:24]}\n{m} {n}\n")
             np.savetxt(fh, np.column_stack([np.arange(1, n + 1), mesh.nodes[:, :2], depth]),
                        fmt="%d %.4f %.4f %.4f")
             np.savetxt(fh, np.column_stack([np.arange(1, m + 1), np.full(m, 3),

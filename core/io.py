@@ -8,7 +8,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import numpy as np
 from .errors import FloodMeshError
 from .points import PointCloud, clean_points
 from .limits import check_memory
+from .outputs import remove_stale_temporaries, temp_name
 from .raster import Grid, check_transform, require_metric_crs
 
 POINT_EXTENSIONS = (".las", ".laz", ".xyz", ".txt", ".csv", ".pts")
@@ -29,11 +29,12 @@ UNCLASSIFIED = (0, 1)  # LAS "created, never classified" and "unclassified"
 # atomic output
 @contextlib.contextmanager
 def atomic_output(path):
-    """Yield a temporary path beside ``path``; move it into place only if the block succeeds."""
+    """Yield a temporary path beside ``path`` (making its folder if missing); move it into
+    place only if the block succeeds."""
     path = Path(path)
-    if path.parent and not path.parent.exists():
-        raise FloodMeshError(f"output folder {path.parent} does not exist: create it first")
-    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.partial{path.suffix}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path.parent)  # of this target and others, from killed runs
+    tmp = temp_name(path)
     try:
         yield tmp
         os.replace(tmp, path)
@@ -70,7 +71,7 @@ def read_points(path, *, crs=None, classes=None, note=None) -> PointCloud:
         raise FloodMeshError(f"{path.name}: unknown point file type '{ext}'; use LAS/LAZ or "
                              "XYZ/CSV text (x y z per line), or a GeoTIFF DEM")
     return clean_points(xyz, crs if crs is not None else file_crs, f"point file {path.name}",
-                        kind="points")
+                        kind="points", note=note)
 
 
 def _read_las(path: Path, classes, note=None):
@@ -130,13 +131,20 @@ def _read_xyz(path: Path) -> np.ndarray:
         head = [fh.readline() for _ in range(5)]
     delimiter = "," if any("," in line for line in head) else (";" if any(";" in line for line in head) else None)
     first = head[0].replace(",", " ").replace(";", " ").split()
+    columns = (0, 1, 2)
     try:
         [float(v) for v in first[:3]]
         skip = 0
     except ValueError:
-        skip = 1  # a header line such as "x,y,z"
+        skip = 1  # a header line such as "x,y,z": take the columns it names
+        names = [name.strip("\"'").lower() for name in first]
+        for aliases in (("x", "y", "z"), ("easting", "northing", "elevation"),
+                        ("east", "north", "height"), ("lon", "lat", "z")):
+            if all(a in names for a in aliases):
+                columns = tuple(names.index(a) for a in aliases)
+                break
     try:
-        data = np.loadtxt(path, delimiter=delimiter, skiprows=skip, usecols=(0, 1, 2), ndmin=2)
+        data = np.loadtxt(path, delimiter=delimiter, skiprows=skip, usecols=columns, ndmin=2)
     except (ValueError, IndexError) as exc:
         raise FloodMeshError(f"{path.name} is not an XYZ text file with x, y, z in the first "
                              f"three columns ({exc})") from None
@@ -160,8 +168,19 @@ def write_points_las(path, points: PointCloud, *, classes=GROUND_CLASS) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # rasters
-def read_raster(path, *, crs=None) -> Grid:
-    """Read band 1 of a raster as a float64 Grid with NaN for nodata."""
+# values DEM exports use for "no data" without always saying so in the file's nodata tag
+NODATA_SENTINELS = (-9999.0, -99999.0, -32768.0, -32767.0, 32767.0, 65535.0,
+                    float(np.finfo(np.float32).min), float(np.finfo(np.float32).max))
+SENTINEL_GAP_M = 100.0  # an untagged sentinel is nodata when this far beyond every other cell
+
+
+def read_raster(path, *, crs=None, note=None) -> Grid:
+    """Read band 1 of a raster as a float64 Grid with NaN for nodata.
+
+    Without a nodata tag, cells holding a common sentinel (``NODATA_SENTINELS``) far beyond
+    every other cell are nodata too. ``note`` (given for DEMs) receives what was assumed: such
+    sentinels, further bands left unused, elevations stored as whole numbers.
+    """
     import rasterio
 
     path = _require_file(path, "raster")
@@ -179,13 +198,41 @@ def read_raster(path, *, crs=None) -> Grid:
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
             values = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+            tagged, count, dtype = src.nodata is not None, src.count, src.dtypes[0]
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
     values[~np.isfinite(values)] = np.nan  # ±inf cells are nodata too
+    if not tagged:
+        _untagged_nodata(values, path.name, note)
+    if note and count > 1:
+        note(f"raster {path.name} has {count} bands: band 1 is used as the elevations; "
+             f"extract another one first if it holds them (gdal_translate -b N IN OUT)")
+    if note and np.issubdtype(np.dtype(dtype), np.integer):
+        note(f"raster {path.name} stores elevations as whole numbers ({dtype}): its 1-unit "
+             "steps are terraces whose edges the slope sees and break lines may follow; use a "
+             "DEM with floating-point elevations (float32) where there is one")
     if not np.isfinite(values).any():
         raise FloodMeshError(f"raster {path.name} has no valid cells (all nodata or NaN): check "
                              "its nodata value and that it is the right file")
     return Grid(values, transform, crs)
+
+
+def _untagged_nodata(values: np.ndarray, name: str, note=None) -> None:
+    """Set to NaN the cells of an untagged raster holding a nodata sentinel that lies more
+    than ``SENTINEL_GAP_M`` beyond every other cell, and say so."""
+    for sentinel in NODATA_SENTINELS:
+        hit = values == sentinel
+        if not hit.any():
+            continue
+        rest = values[~hit & np.isfinite(values)]
+        if rest.size and not (rest.min() - SENTINEL_GAP_M > sentinel
+                              or rest.max() + SENTINEL_GAP_M < sentinel):
+            continue
+        values[hit] = np.nan
+        if note:
+            note(f"raster {name} has no nodata value, but {int(hit.sum()):,} cells hold "
+                 f"{sentinel:g}, far from every other cell: they are taken as nodata; set it in "
+                 f"the file (gdal_edit.py -a_nodata {sentinel:g} {name}) to say so")
 
 
 def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
@@ -220,7 +267,7 @@ def read_input(path, *, crs=None, classes=None, note=None):
     """A point file (→ PointCloud) or a raster DEM (→ Grid), by extension."""
     ext = Path(path).suffix.lower()
     if ext in RASTER_EXTENSIONS:
-        return read_raster(path, crs=crs)
+        return read_raster(path, crs=crs, note=note)
     if ext in POINT_EXTENSIONS:
         return read_points(path, crs=crs, classes=classes, note=note)
     _require_file(path, "input")
@@ -351,7 +398,7 @@ def _line_parts(path) -> list[tuple[np.ndarray, dict]]:
     return parts_out
 
 
-def read_regions(path, *, field: str | None = None) -> list:
+def read_regions(path, *, field: str | None = None, what: str = "regions") -> list:
     """Polygon features as (shapely geometry, material id): the integer attribute ``field``, or
     2, 3, … in feature order (1 being the rest of the domain)."""
     import fiona
@@ -370,8 +417,9 @@ def read_regions(path, *, field: str | None = None) -> list:
                 if geom is None:
                     continue
                 if geom["type"] not in ("Polygon", "MultiPolygon"):
-                    raise FloodMeshError(f"{path.name} holds {geom['type']} features; regions "
-                                         "must be polygons")
+                    raise FloodMeshError(f"{path.name} holds {geom['type']} features; {what} "
+                                         "must be polygons: give a polygon layer (QGIS: "
+                                         "Lines to polygons)")
                 value = len(regions) + 2 if not field else feat["properties"][field]
                 try:
                     material = float(value)
@@ -402,7 +450,7 @@ def read_points_vector(path) -> np.ndarray:
 
 def read_boundary(path) -> list:
     """The polygons (shapely) of a polygon layer, e.g. a model domain, as drawn (unchecked)."""
-    return [geometry for geometry, _ in read_regions(path)]
+    return [geometry for geometry, _ in read_regions(path, what="a model domain (boundary)")]
 
 
 def vector_crs(path):

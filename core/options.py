@@ -145,6 +145,14 @@ def check_holdout_count(fraction: float, n_points: int) -> int:
     return n_out
 
 
+def check_seed(value) -> int:
+    """A random seed: a whole number of at least 0 (numpy's generators take no negative one)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise FloodMeshError(f"the random seed must be a whole number of at least 0, got "
+                             f"{value!r}: any such number gives a reproducible split (0 is usual)")
+    return value
+
+
 def check_positive_int(value, what: str, minimum: int = 1) -> int:
     value = _number(value, what)
     if not (value >= minimum and value == int(value)):
@@ -170,6 +178,22 @@ def check_min_length(value) -> float:
 
 def check_sigma(value) -> float:
     return _positive(value, "LoG sigma", "metres", zero=True)
+
+
+def check_sigma_fits(sigma: float, rows: int, cols: int, cell_size: float) -> float:
+    """Refuse a LoG sigma whose kernel (4σ and one cell each way) is wider than the grid: no
+    cell would get a response, and the kernel's cost grows with σ² per cell."""
+    sigma = check_sigma(sigma)
+    reach = math.ceil(4 * sigma / cell_size) + 1
+    if 2 * reach + 1 > min(rows, cols):
+        largest = math.floor(((min(rows, cols) - 1) // 2 - 1) * cell_size / 4 * 100) / 100
+        fix = (f"give a sigma of at most {largest:g} m (1 to 3 cells is usual)" if largest > 0
+               else "the grid is too small for the LoG: use a slope method")
+        raise FloodMeshError(f"a LoG sigma of {sigma:g} m reaches 4 sigma = {4 * sigma:g} m each "
+                             f"way, more than the grid ({cols * cell_size:g} x "
+                             f"{rows * cell_size:g} m) allows: no cell would get a response; "
+                             f"{fix}")
+    return sigma
 
 
 def check_sensitivity(value) -> float:
@@ -247,6 +271,7 @@ class RunOptions:
                 raise FloodMeshError(f"the refinement lower bound ({lower:g} m) is above the "
                                      f"upper bound ({upper:g} m); 0.10 and 0.25 are usual")
         check_holdout(self.holdout)
+        check_seed(self.seed)
         check_min_points(self.min_points)
         for name in self.formats:
             export_format(name)

@@ -22,7 +22,8 @@ from .mesh import build_mesh, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
-from .options import RunOptions
+from .options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_fits
+from .outputs import check_output_folder, staged_folder
 from .refine import refine_mesh
 from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .slope import laplacian_of_gaussian, slope
@@ -77,7 +78,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             log(f"note: {message}")
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    inputs = run_inputs(input_path, options)
+    check_output_folder(out, inputs, run_outputs(options.formats))
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
                "breaklines": 1, "simplify": 0.5, "mesh": 2, "refine": 4, "assess": 1, "write": 2}
@@ -112,7 +114,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     quality = mesh_quality(mesh, min_angle=options.min_angle, max_area=options.max_area)
     stats = accuracy_statistics(res, alpha=alpha, delta=delta)
 
-    def write_all():
+    def write_all(out):
         valid = np.isfinite(dem.values)
         io.write_raster(out / "dem.tif", dem)
         io.write_raster(out / "slope.tif", slope_grid)
@@ -130,31 +132,45 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                                   crs=dem.crs, breaklines=[line.coords for line in lines])
         return []
 
-    exported = steps.run("write", write_all)
-    report = {
-        "input": str(input_path),
-        "crs": dem.crs.to_string(),
-        "options": {k: v for k, v in asdict(options).items()},
-        "n_points": front.n_points,
-        "holdout_source": front.holdout_source,
-        "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
-                 "valid_cells": int(np.isfinite(dem.values).sum())},
-        "n_breakpoints": int(breakpoints.values.sum()),
-        "n_breaklines_traced": len(traced),
-        "n_breaklines": len(lines),
-        "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
-        "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
-        "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
-                           "max_deviation_m": deviation},
-        **quality,
-        **stats,
-        "refinement": [asdict(r) for r in rounds],
-        "notes": notes,
-        "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
-        "seconds": steps.seconds,
-    }
-    io.write_json(out / "report.json", report)
+    # the folder is replaced as a whole: an interrupt leaves the old run's files or these
+    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage:
+        exported = steps.run("write", write_all, stage)
+        report = {
+            "input": str(input_path),
+            "crs": dem.crs.to_string(),
+            "options": {k: v for k, v in asdict(options).items()},
+            "n_points": front.n_points,
+            "holdout_source": front.holdout_source,
+            "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
+                     "valid_cells": int(np.isfinite(dem.values).sum())},
+            "n_breakpoints": int(breakpoints.values.sum()),
+            "n_breaklines_traced": len(traced),
+            "n_breaklines": len(lines),
+            "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
+            "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
+            "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
+                               "max_deviation_m": deviation},
+            **quality,
+            **stats,
+            "refinement": [asdict(r) for r in rounds],
+            "notes": notes,
+            "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
+            "seconds": steps.seconds,
+        }
+        io.write_json(stage / "report.json", report)
     return report
+
+
+def run_inputs(input_path, options: RunOptions) -> list:
+    """The files a run reads: never to be replaced by its outputs."""
+    size = options.size_field if options.size_field != "slope" else None
+    return [input_path, options.boundary, options.user_lines, size]
+
+
+def run_outputs(formats) -> list:
+    """The names a run with these solver formats writes into its folder."""
+    return [*OUTPUT_FILES, *(f"mesh{EXPORT_EXTENSIONS[f]}" for f in formats),
+            *(["mesh.cli"] if "slf" in formats else [])]
 
 
 @dataclass
@@ -188,6 +204,8 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         measured = gridding.xyz
         # refuse, before the work, a grid or mesh too large for the limit or the memory
         plan = check_grid(gridding, options.cell_size, options.max_gap)
+        if options.slope_method == "log":
+            check_sigma_fits(options.sigma, plan["rows"], plan["cols"], options.cell_size)
         triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
         check_memory(points=len(gridding), cells=plan["rows"] * plan["cols"],
                      triangles=triangles, advice="give a larger cell size or maximum area, or "

@@ -7,7 +7,7 @@ import numpy as np
 from pyproj import CRS
 
 from .errors import FloodMeshError
-from .options import check_holdout_count
+from .options import check_holdout_count, check_seed
 from .raster import require_metric_crs
 
 
@@ -26,20 +26,52 @@ class PointCloud:
         return len(self.xyz)
 
 
-def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points") -> PointCloud:
-    """Drop non-finite points and check what is left is usable terrain data."""
+def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
+                 note=None) -> PointCloud:
+    """Drop non-finite points and check what is left is usable terrain data; ``note``
+    receives what was left out or found doubtful (points without x, y or z, points at one x, y
+    with different z)."""
     crs = require_metric_crs(crs, source, kind)
     xyz = np.asarray(xyz, dtype=np.float64)
     finite = np.isfinite(xyz).all(axis=1)
+    if note and not finite.all():
+        note(f"{source}: {int((~finite).sum()):,} points without a finite x, y and z (empty or "
+             "NaN values) were left out")
     xyz = xyz[finite]
     if len(xyz) < 3:
         raise FloodMeshError(f"{source} has {len(xyz)} usable points (finite x, y, z); at least 3 "
                              "are needed to make a terrain model. Check the file and its classes")
-    span = np.ptp(xyz[:, :2], axis=0)
-    if span.min() <= 0:
-        raise FloodMeshError(f"{source}: all points lie on one line ({span[0]:.3g} x {span[1]:.3g} "
-                             "m); a terrain model needs an area")
+    _check_area(xyz[:, :2], source)
+    if note:
+        _note_duplicates(xyz, source, note)
     return PointCloud(xyz, crs)
+
+
+def _check_area(xy: np.ndarray, source: str) -> None:
+    """Refuse points that all lie at one place or on one straight line (in any direction)."""
+    span = np.ptp(xy, axis=0)
+    if span.max() <= 0:
+        raise FloodMeshError(f"{source}: all points lie at one place ({xy[0, 0]:.3f}, "
+                             f"{xy[0, 1]:.3f}); a terrain model needs points spread over an area")
+    centred = xy - xy.mean(axis=0)
+    _, axes = np.linalg.eigh(centred.T @ centred)
+    across, along = np.ptp(centred @ axes, axis=0)
+    if across <= max(1e-6 * along, 0.005):  # 5 mm: coordinates rounded to the millimetre
+        raise FloodMeshError(f"{source}: all points lie on one straight line ({along:.3g} m long, "
+                             f"{across:.2g} m across); a terrain model needs points spread over "
+                             "an area: check the file's x and y columns")
+
+
+def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
+    """Say how many points repeat another's x, y with a different z, and by how much."""
+    order = np.lexsort((xyz[:, 1], xyz[:, 0]))
+    ordered = xyz[order]
+    same = (ordered[1:, 0] == ordered[:-1, 0]) & (ordered[1:, 1] == ordered[:-1, 1])
+    dz = np.abs(np.diff(ordered[:, 2]))[same]
+    if dz.size and dz.max() > 0:
+        note(f"{source}: {int((dz > 0).sum()):,} points repeat the x, y of another with a "
+             f"different z (up to {dz.max():.3g} m apart); the grid keeps one of each: check for "
+             "overlapping flight lines or tiles merged twice")
 
 
 def split_holdout(points: PointCloud, fraction: float, seed: int) -> tuple[PointCloud, PointCloud]:
@@ -49,6 +81,7 @@ def split_holdout(points: PointCloud, fraction: float, seed: int) -> tuple[Point
     """
     n = len(points)
     n_out = check_holdout_count(fraction, n)
+    check_seed(seed)
     rng = np.random.default_rng(seed)
     mask = np.zeros(n, dtype=bool)
     mask[rng.choice(n, size=n_out, replace=False)] = True

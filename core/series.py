@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import itertools
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -16,9 +17,18 @@ from .accuracy import accuracy_statistics, residuals
 from .errors import FloodMeshError
 from .mesh import Mesh, build_mesh
 from .options import RunOptions
+from .outputs import check_output_folder, staged_folder
 from .simplify import simplify_breaklines
 
+_OWN_MESH = re.compile(r"^mesh_.+\.2dm$")
 SERIES_FILES = ("series.csv", "series.json", "series.png")
+
+
+def _is_own(name: str) -> bool:
+    """Whether a series writes files of this name (see ``outputs.staged_folder``)."""
+    return name in SERIES_FILES or bool(_OWN_MESH.match(name))
+
+
 COLUMNS = ("label", "max_area_m2", "simplification", "amount", "nodes", "triangles",
            "n_assessed", "rmse_m", "mean_m", "max_abs_m", "share_over_25cm", "nssda_pass")
 _SHORT = {"keep-every": "k", "douglas-peucker": "dp", "spline": "sp"}
@@ -136,26 +146,29 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
     mesh and assess once per setting; write ``SERIES_FILES`` and ``mesh_<label>.2dm`` per row
     into ``out_dir``. Returns the series.json content."""
     from .accuracy import nssda_threshold_m
-    from .pipeline import trace_front
+    from .pipeline import run_inputs, trace_front
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    inputs = run_inputs(input_path, options)
+    check_output_folder(out, inputs, [*SERIES_FILES, *(f"mesh_{s.label}.2dm" for s in settings)])
     front = trace_front(input_path, options, cancelled=cancelled)
     rows, meshes = scale_series(front.dem, front.traced, front.holdout.xyz, settings,
                                 min_angle=options.min_angle,
                                 min_distance=options.min_distance, domain=front.domain,
                                 own_lines=front.own_lines, log=log)
-    for row, mesh in zip(rows, meshes):
-        io.write_mesh_2dm(out / f"mesh_{row['label']}.2dm", mesh.nodes, mesh.triangles)
-    n = max((r["n_assessed"] for r in rows), default=0)
-    threshold = nssda_threshold_m(n)
-    write_series_csv(out / "series.csv", rows)
-    write_series_png(out / "series.png", rows,
-                     nssda_threshold_m=None if np.isnan(threshold) else threshold)
-    result = {"input": str(input_path), "crs": front.dem.crs.to_string(),
-              "cell_size_m": front.dem.cell_size, "min_angle_deg": options.min_angle,
-              "n_holdout": len(front.holdout), "holdout_source": front.holdout_source,
-              "n_breaklines_traced": len(front.traced), "rows": rows,
-              "files": [*SERIES_FILES, *(f"mesh_{r['label']}.2dm" for r in rows)]}
-    io.write_json(out / "series.json", result)
+    # the folder is replaced as a whole: an interrupt leaves the old series' files or these
+    with staged_folder(out, own=_is_own, keep=inputs) as stage:
+        for row, mesh in zip(rows, meshes):
+            io.write_mesh_2dm(stage / f"mesh_{row['label']}.2dm", mesh.nodes, mesh.triangles)
+        n = max((r["n_assessed"] for r in rows), default=0)
+        threshold = nssda_threshold_m(n)
+        write_series_csv(stage / "series.csv", rows)
+        write_series_png(stage / "series.png", rows,
+                         nssda_threshold_m=None if np.isnan(threshold) else threshold)
+        result = {"input": str(input_path), "crs": front.dem.crs.to_string(),
+                  "cell_size_m": front.dem.cell_size, "min_angle_deg": options.min_angle,
+                  "n_holdout": len(front.holdout), "holdout_source": front.holdout_source,
+                  "n_breaklines_traced": len(front.traced), "rows": rows,
+                  "files": [*SERIES_FILES, *(f"mesh_{r['label']}.2dm" for r in rows)]}
+        io.write_json(stage / "series.json", result)
     return io.jsonable(result)

@@ -24,7 +24,7 @@ import numpy as np
 
 from .blocks import map_overlap
 from .errors import FloodMeshError
-from .options import LOG_KERNELS, SLOPE_METHOD_NAMES, check_choice, check_sigma
+from .options import LOG_KERNELS, SLOPE_METHOD_NAMES, check_choice, check_sigma_fits
 from .raster import Grid
 
 SQRT2 = math.sqrt(2.0)
@@ -187,8 +187,8 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
     doi:10.1098/rspb.1980.0020.
     """
     check_choice(kernel, LOG_KERNELS, "LoG kernel")
-    sigma = check_sigma(sigma)
     d = dem.cell_size
+    sigma = check_sigma_fits(sigma, *dem.shape, d)
     if kernel == "analytic" and sigma < d:
         raise FloodMeshError(f"the analytic LoG kernel needs sigma of at least one cell ({d} m), "
                              f"got {sigma}; use the pratt kernel for less smoothing")

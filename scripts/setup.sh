@@ -32,6 +32,11 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt
     .venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -e ".[test]"
     touch "$stamp"
 fi
+# the fort.14/hgrid.gr3 readers ADCIRC and SCHISM users script with, for the export tests: their
+# parsers only, without the dependencies (which would pull in a second numpy)
+if ! .venv/bin/python -c "import importlib.util as u, sys; sys.exit(not (u.find_spec('pyschism') and u.find_spec('adcircpy')))"; then
+    .venv/bin/pip install -q --disable-pip-version-check --no-deps pyschism==0.1.15 adcircpy==1.2.7
+fi
 
 # pyproj looks for PROJ's data under sys.prefix, which in a venv is the venv: point it at Debian's.
 mkdir -p .venv/share

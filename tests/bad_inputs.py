@@ -166,7 +166,7 @@ def _maker(fn, *extra, crs=None):
 # LiDAR to mesh's parameters and the command-line options that set the same RunOptions field
 OPTION_FLAGS = {"CELL_SIZE": "--cell-size", "CRITICAL_SLOPE": "--s-crit",
                 "MIN_ANGLE": "--min-angle", "MAX_AREA": "--max-area",
-                "MAX_TRIANGLES": "--max-triangles", "HOLDOUT": "--holdout"}
+                "MAX_TRIANGLES": "--max-triangles", "HOLDOUT": "--holdout", "SEED": "--seed"}
 
 
 def _options_case(id_, words, **parameters):
@@ -218,6 +218,56 @@ def _bowtie():
 def _box(x0, y0, x1, y1):
     import shapely
     return shapely.box(x0, y0, x1, y1)
+
+
+def _collinear_xyz(folder):
+    """Points along one tilted line (x and y both vary): no area to grid."""
+    t = np.linspace(0, 100, 20_000)
+    return write_xyz(folder / "line.xyz", np.column_stack([ORIGIN[0] + 0.8 * t,
+                                                         ORIGIN[1] + 0.6 * t, 10 + 0.01 * t]))
+
+
+def _one_place_xyz(folder):
+    xyz = np.tile([ORIGIN[0], ORIGIN[1], 10.0], (50, 1))
+    xyz[:, 2] += np.linspace(0, 1, 50)
+    return write_xyz(folder / "oneplace.xyz", xyz)
+
+
+def _line_layer(folder):
+    """A line layer where a polygon layer belongs (a domain boundary)."""
+    import fiona
+
+    path = folder / "domain_line.gpkg"
+    if not path.exists():
+        with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(UTM).to_wkt(),
+                        schema={"geometry": "LineString", "properties": {}}) as dst:
+            dst.write({"geometry": {"type": "LineString", "coordinates": [
+                (ORIGIN[0] + 5, ORIGIN[1] + 5), (ORIGIN[0] + 50, ORIGIN[1] + 50)]},
+                "properties": {}})
+    return path
+
+
+def _mesh_2dm(folder):
+    """A small valid mesh (two triangles of a 10 m square)."""
+    path = folder / "mesh.2dm"
+    x, y = ORIGIN
+    path.write_text(f"MESH2D\nE3T 1 1 2 3 1\nE3T 2 1 3 4 1\nND 1 {x} {y} 1\n"
+                    f"ND 2 {x + 10} {y} 1\nND 3 {x + 10} {y + 10} 1\nND 4 {x} {y + 10} 1\n")
+    return path
+
+
+def _export_case(id_, words, crs):
+    return BadInput(id_, words,
+                    lambda f: ["export", _mesh_2dm(f), "{out}/mesh.nc", "--crs", crs],
+                    lambda f: ("floodmesh:exportmesh", {
+                        "INPUT": str(_mesh_2dm(f)), "FORMAT": 4, "CRS": crs,
+                        "OUTPUT": str(f / "qgis-out" / "mesh.nc")}))
+
+
+def _existing_file(folder):
+    path = folder / "results"
+    path.write_text("a file where the output folder should be\n")
+    return path
 
 
 CASES = [
@@ -295,6 +345,33 @@ CASES = [
     _options_case("holdout-too-small", "needs at least 20 check points", HOLDOUT=0.0005),
     _options_case("holdout-one", "holdout fraction must be at least 0 and below 1",
                   HOLDOUT=1.0),
+    BadInput("output-is-the-input", "FloodMesh never overwrites an input",
+             lambda f: ["slope", _tif("dem.tif")(f), "--out", f / "dem.tif"],
+             lambda f: ("floodmesh:slope", {"INPUT": str(_tif("dem.tif")(f)),
+                                            "OUTPUT": str(f / "dem.tif")})),
+    BadInput("grid-output-named-laz", "this writes a GeoTIFF",
+             lambda f: ["grid", _xyz(f), "--crs", UTM, "--cell-size", 1, "--out",
+                        "{out}/dem.laz"]),
+    BadInput("run-output-folder-holds-the-input", "FloodMesh never overwrites an input",
+             lambda f: ["run", _tif("dem.tif")(f), "--out", f]),
+    BadInput("run-output-folder-is-a-file", "is a file, not a folder",
+             lambda f: ["run", _xyz(f), "--crs", UTM, "--out", _existing_file(f)]),
+    BadInput("output-folder-not-writable", "cannot write to the output folder",
+             lambda f: ["run", _xyz(f), "--crs", UTM, "--out", "/proc/floodmesh-out"],
+             _lidar(_xyz, crs=UTM, OUTPUT_FOLDER="/proc/floodmesh-out")),
+    _options_case("seed-negative", "random seed must be a whole number of at least 0",
+                  SEED=-1),
+    BadInput("log-sigma-beyond-the-data", "no cell would get a response",
+             _maker(_xyz, "--slope-method", "log", "--sigma", 1000, crs=UTM)),
+    BadInput("points-on-one-tilted-line", "all points lie on one straight line",
+             _maker(_collinear_xyz, crs=UTM), _lidar(_collinear_xyz, crs=UTM)),
+    BadInput("points-at-one-place", "all points lie at one place",
+             _maker(_one_place_xyz, crs=UTM), _lidar(_one_place_xyz, crs=UTM)),
+    BadInput("boundary-given-lines", "must be polygons",
+             lambda f: ["mesh", _tif("dem.tif")(f), "--boundary", _line_layer(f), "--out",
+                        "{out}/mesh.2dm"]),
+    _export_case("export-geographic-crs", "is not a projected CRS in metres", "EPSG:4326"),
+    _export_case("export-feet-crs", "is not a projected CRS in metres", "EPSG:2229"),
     BadInput("grid-too-large-for-memory", "of memory",
              lambda f: ["grid", _xyz(f), "--crs", UTM, "--cell-size", 0.001, "--max-gap", 5,
                         "--out", "{out}/dem.tif"],

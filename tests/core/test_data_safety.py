@@ -1,0 +1,297 @@
+"""Data safety as a hostile user tries it (issue 13): outputs never replace inputs however they
+are spelled, a holdout of 0 runs through, untagged nodata sentinels stay out of the terrain,
+the mesh exports refuse what solvers cannot read, their boundaries keep the sections drawn, and
+the messages name the real problem. Folder atomicity under interrupts is in test_interrupt.py."""
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+from pyproj import CRS
+
+from floodmesh.core import io
+from floodmesh.core.cli import main
+from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.export import export_mesh, mesh_boundary
+from floodmesh.core.points import PointCloud
+
+from ..bad_inputs import ORIGIN, UTM, plane_xyz, slope_dem, write_tif, write_xyz
+from ..conftest import plane_points
+
+FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
+
+
+def _digest(path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _square_mesh(n=6, size=10.0):
+    """A structured triangulation of an ``n`` x ``n`` grid of nodes (local coordinates)."""
+    xs = np.linspace(0, size, n)
+    xx, yy = np.meshgrid(xs, xs)
+    nodes = np.column_stack([xx.ravel() + ORIGIN[0], yy.ravel() + ORIGIN[1],
+                             np.full(n * n, 5.0)])
+    tris = []
+    for r in range(n - 1):
+        for c in range(n - 1):
+            a, b, d, e = r * n + c, r * n + c + 1, (r + 1) * n + c, (r + 1) * n + c + 1
+            tris += [(a, b, e), (a, e, d)]
+    return nodes, np.array(tris)
+
+
+# ---------------------------------------------------------------------------------------------
+# 1. an output that is an input
+@pytest.fixture
+def dem(tmp_path):
+    return write_tif(tmp_path / "dem.tif", slope_dem())
+
+
+@pytest.mark.parametrize("spelling", ["same", "relative", "symlink", "hardlink"])
+def test_slope_refuses_to_overwrite_its_input_however_spelled(dem, tmp_path, spelling, capsys,
+                                                              monkeypatch):
+    before = _digest(dem)
+    target = {"same": str(dem), "relative": "./sub/../dem.tif"}.get(spelling)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub").mkdir()
+    if spelling == "symlink":
+        os.symlink(dem, tmp_path / "link.tif")
+        target = "link.tif"
+    elif spelling == "hardlink":
+        os.link(dem, tmp_path / "hard.tif")
+        target = "hard.tif"
+    assert main(["slope", str(dem), "--out", target]) == 2
+    assert "FloodMesh never overwrites an input" in capsys.readouterr().err
+    assert _digest(dem) == before
+
+
+def test_grid_refuses_its_own_point_file_and_a_laz_name(tmp_path, capsys):
+    points = write_xyz(tmp_path / "pts.xyz", plane_xyz())
+    before = _digest(points)
+    assert main(["grid", str(points), "--crs", UTM, "--cell-size", "1", "--out",
+                 str(points)]) == 2
+    assert "never overwrites an input" in capsys.readouterr().err
+    assert main(["grid", str(points), "--crs", UTM, "--cell-size", "1", "--out",
+                 str(tmp_path / "dem.laz")]) == 2
+    assert "this writes a GeoTIFF" in capsys.readouterr().err
+    assert _digest(points) == before and not (tmp_path / "dem.laz").exists()
+
+
+def test_run_into_the_folder_of_its_dem_and_export_onto_its_mesh_are_refused(dem, tmp_path,
+                                                                            capsys):
+    before = _digest(dem)
+    assert main(["run", str(dem), "--out", str(tmp_path)]) == 2
+    assert "never overwrites an input" in capsys.readouterr().err
+    assert _digest(dem) == before
+    nodes, tris = _square_mesh()
+    mesh = tmp_path / "m.2dm"
+    io.write_mesh_2dm(mesh, nodes, tris)
+    before = _digest(mesh)
+    assert main(["export", str(mesh), str(mesh)]) == 2
+    assert "never overwrites an input" in capsys.readouterr().err
+    assert _digest(mesh) == before
+
+
+def test_run_keeps_the_users_files_in_its_folder_and_drops_its_own_stale_ones(tmp_path):
+    """An input and a file of the user's in the output folder stay; a solver export of an
+    earlier run that this run does not write goes (the folder holds one run)."""
+    from floodmesh.core.pipeline import RunOptions, run_pipeline
+
+    out = tmp_path / "out"
+    out.mkdir()
+    source = out / "points.laz"
+    io.write_points_las(source, PointCloud(plane_points(size=30.0, density=3.0), CRS.from_epsg(
+        25832)))
+    (out / "notes.txt").write_text("mine\n")
+    (out / "mesh.slf").write_bytes(b"an earlier run's export")
+    before = _digest(source)
+    run_pipeline(source, out, RunOptions(holdout=0.05, cell_size=2.0, max_area=80.0))
+    names = {p.name for p in out.iterdir()}
+    assert {"points.laz", "notes.txt", "report.json", "mesh.2dm"} <= names
+    assert "mesh.slf" not in names
+    assert _digest(source) == before and (out / "notes.txt").read_text() == "mine\n"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+# ---------------------------------------------------------------------------------------------
+# 2. holdout 0
+@pytest.mark.parametrize("command", ["run", "series"])
+def test_holdout_zero_runs_through(tmp_path, command, capsys):
+    points = write_xyz(tmp_path / "pts.xyz", plane_xyz(n=4000, size=30.0))
+    extra = ["--max-areas", "100"] if command == "series" else []
+    code = main([command, str(points), "--crs", UTM, "--cell-size", "2", "--holdout", "0",
+                 "--out", str(tmp_path / "out"), *extra])
+    assert code == 0, capsys.readouterr().err
+    if command == "run":
+        import json
+
+        report = json.loads((tmp_path / "out" / "report.json").read_text())
+        assert report["n_holdout"] == 0 and report["rmse_m"] is None
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. an unwritable home and install folder: numba caches elsewhere
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root to run a command as user nobody")
+def test_a_user_who_can_write_neither_home_nor_install_folder_can_run():
+    """User nobody, home /nonexistent, the install folder root's: numba's default cache
+    locations are all unwritable ('no locator available' before the fix)."""
+    import shutil
+    import tempfile
+
+    out = Path(tempfile.mkdtemp(prefix="floodmesh-nobody-"))
+    out.chmod(0o777)
+    dem = write_tif(out / "dem.tif", slope_dem())
+    env = {"PATH": os.environ["PATH"], "HOME": "/nonexistent"}
+    proc = subprocess.run(["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups",
+                           FLOODMESH, "slope", str(dem), "--out", str(out / "slope.tif")],
+                          env=env, capture_output=True, text=True, timeout=600)
+    try:
+        assert proc.returncode == 0, proc.stderr
+        assert "Traceback" not in proc.stderr and (out / "slope.tif").exists()
+    finally:
+        shutil.rmtree(out)
+
+
+# ---------------------------------------------------------------------------------------------
+# 5. and 12: what a raster or point file does not say
+def _raster(path, values, *, dtype="float32", nodata=None, count=1):
+    values = np.asarray(values)
+    with rasterio.open(path, "w", driver="GTiff", width=values.shape[1], height=values.shape[0],
+                       count=count, dtype=dtype, crs=UTM, nodata=nodata,
+                       transform=Affine(1.0, 0, ORIGIN[0], 0, -1.0, ORIGIN[1] + 60)) as dst:
+        for band in range(1, count + 1):
+            dst.write(values.astype(dtype), band)
+    return path
+
+
+@pytest.mark.parametrize("sentinel", [-9999.0, -32768.0, float(np.finfo(np.float32).min)])
+def test_untagged_nodata_sentinels_are_nodata_with_a_note(tmp_path, sentinel):
+    values = slope_dem()
+    values[10:20, 10:20] = sentinel
+    notes = []
+    grid = io.read_input(_raster(tmp_path / "untagged.tif", values), note=notes.append)
+    assert np.isnan(grid.values[10:20, 10:20]).all()
+    assert np.nanmin(grid.values) >= 10.0
+    assert any("taken as nodata" in n and "gdal_edit.py -a_nodata" in n for n in notes)
+
+
+def test_integer_and_multi_band_dems_get_a_note(tmp_path):
+    notes = []
+    io.read_input(_raster(tmp_path / "int.tif", np.round(slope_dem()), dtype="int16",
+                          nodata=-32768), note=notes.append)
+    assert any("whole numbers (int16)" in n for n in notes)
+    notes.clear()
+    io.read_input(_raster(tmp_path / "bands.tif", slope_dem(), count=3), note=notes.append)
+    assert any("has 3 bands: band 1 is used" in n for n in notes)
+
+
+def test_nan_rows_and_duplicate_points_with_other_z_get_a_note(tmp_path):
+    xyz = plane_xyz()
+    xyz[:5, 2] = np.nan
+    xyz[100:110] = xyz[200:210] + [0, 0, 1.0]
+    path = tmp_path / "dups.xyz"
+    np.savetxt(path, xyz, fmt="%.3f")
+    notes = []
+    io.read_points(path, crs=UTM, note=notes.append)
+    assert any("5 points without a finite x, y and z" in n for n in notes)
+    assert any("10 points repeat the x, y of another with a different z (up to 1 m" in n
+               for n in notes)
+
+
+def test_a_header_naming_the_columns_in_another_order_is_followed(tmp_path):
+    xyz = plane_xyz(n=2000)
+    path = tmp_path / "zxy.csv"
+    with open(path, "w") as fh:
+        fh.write("z,x,y\n")
+        np.savetxt(fh, xyz[:, [2, 0, 1]], fmt="%.3f", delimiter=",")
+    np.testing.assert_allclose(io.read_points(path, crs=UTM).xyz, xyz, atol=1e-3)
+
+
+# ---------------------------------------------------------------------------------------------
+# 7. degenerate meshes
+FORMATS = ["2dm", "slf", "14", "gr3", "nc", "gpkg"]
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_export_refuses_triangles_without_area(tmp_path, fmt):
+    nodes, tris = _square_mesh()
+    nodes = np.vstack([nodes, [ORIGIN[0] + 5.0, ORIGIN[1] - 1.0, 5.0],
+                       [ORIGIN[0] + 7.0, ORIGIN[1] - 1.0, 5.0], [ORIGIN[0] + 9.0,
+                                                                  ORIGIN[1] - 1.0, 5.0]])
+    n = len(nodes)
+    tris = np.vstack([tris, [n - 3, n - 2, n - 1]])  # three nodes on one line
+    with pytest.raises(FloodMeshError, match="have no area"):
+        export_mesh(tmp_path / f"m.{fmt}", nodes, tris, crs=UTM)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_export_refuses_a_boundary_that_touches_itself(tmp_path, fmt):
+    """Two squares meeting at one corner node (node 3, 1-based)."""
+    local = [(0, 0), (10, 0), (10, 10), (0, 10), (20, 10), (20, 20), (10, 20)]
+    nodes = np.array([(ORIGIN[0] + x, ORIGIN[1] + y, 5.0) for x, y in local])
+    tris = np.array([(0, 1, 2), (0, 2, 3), (2, 4, 5), (2, 5, 6)])
+    with pytest.raises(FloodMeshError, match="touches itself at node 3"):
+        export_mesh(tmp_path / f"m.{fmt}", nodes, tris, crs=UTM)
+
+
+# ---------------------------------------------------------------------------------------------
+# 8. fort.14 and hgrid.gr3 through the readers ADCIRC and SCHISM users script with
+def _solver_parser(package: str):
+    """The fort.14/gr3 parser module of pyschism (or adcircpy), loaded from its installed
+    files without the package's heavy __init__ (setup installs both without dependencies)."""
+    import importlib.util
+
+    spec = importlib.util.find_spec(package)
+    if spec is None:
+        pytest.fail(f"{package} is not installed: run make setup")
+    path = Path(spec.submodule_search_locations[0]) / "mesh" / "parsers" / "grd.py"
+    module_spec = importlib.util.spec_from_file_location(f"_{package}_grd", path)
+    module = importlib.util.module_from_spec(module_spec)
+    module_spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("fmt", ["14", "gr3"])
+def test_pyschism_reads_our_fort14_and_gr3_as_the_mesh(tmp_path, fmt):
+    nodes, tris = _square_mesh()
+    nodes[:, 2] = np.linspace(-2.0, 3.0, len(nodes))
+    open_line = np.array([[ORIGIN[0] - 0.1, ORIGIN[1] + 2.0], [ORIGIN[0] - 0.1, ORIGIN[1] + 8.0]])
+    path = tmp_path / f"mesh.{fmt}"
+    export_mesh(path, nodes, tris, open_lines=[open_line])
+    grd = _solver_parser("pyschism").read(path, crs=False)
+    ids = sorted(grd["nodes"], key=int)
+    assert len(ids) == len(nodes) and len(grd["elements"]) == len(tris)
+    xy = np.array([grd["nodes"][i][0] for i in ids])
+    depth = np.array([grd["nodes"][i][1] for i in ids])
+    np.testing.assert_allclose(xy, nodes[:, :2], atol=1e-4)
+    np.testing.assert_allclose(depth, -nodes[:, 2], atol=1e-4)
+    elements = np.array([grd["elements"][str(k + 1)] for k in range(len(tris))], int) - 1
+    assert {tuple(sorted(t)) for t in elements} == {tuple(sorted(t)) for t in tris}
+    opened = grd["boundaries"][None]
+    assert len(opened) == 1 and len(opened[0]["indexes"]) >= 2
+
+
+# ---------------------------------------------------------------------------------------------
+# 9. open boundary lines meeting end to end
+def test_two_open_lines_meeting_end_to_end_stay_two_sections(tmp_path):
+    nodes, tris = _square_mesh(n=11, size=10.0)
+    x0, y0 = ORIGIN
+    lower = np.array([[x0, y0 + 1.0], [x0, y0 + 5.0]])   # on the west side, meeting at y 5
+    upper = np.array([[x0, y0 + 5.0], [x0, y0 + 9.0]])
+    boundary = mesh_boundary(nodes, tris, [lower, upper], snap=0.1)
+    sections = boundary.of_kind("open")
+    assert len(sections) == 2
+    ys = [sorted(nodes[s.nodes, 1] - y0) for s in sections]
+    assert sorted((round(y[0]), round(y[-1])) for y in ys) == [(1, 5), (5, 9)]
+    export_mesh(tmp_path / "fort.14", nodes, tris, open_lines=[lower, upper], snap=0.1)
+    lines = (tmp_path / "fort.14").read_text().splitlines()
+    assert next(l for l in lines if "NOPE" in l).split()[0] == "2"
+    export_mesh(tmp_path / "geo.slf", nodes, tris, open_lines=[lower, upper], snap=0.1)
+    codes = "".join("o" if l.startswith("4 4 4") else "w"
+                    for l in (tmp_path / "geo.cli").read_text().splitlines())
+    assert (codes + codes[0]).count("wo") == 2, codes  # two liquid boundaries (the loop)
