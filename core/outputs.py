@@ -164,15 +164,22 @@ def remove_stale_temporaries(folder) -> list[str]:
     return removed
 
 
+_ACTIVE: set = set()  # staging folders this process is writing now (QGIS runs several)
+
+
 def _clean_run_leftovers(out: Path) -> None:
     """Staging and old folders of ``out`` left by a killed run: staging folders go; an old
     folder comes back when the kill fell between moving it aside and moving the new one in."""
-    parent = out.parent
+    entries = []
+    for folder in (out.parent, out):  # staging beside the folder, or inside it
+        with contextlib.suppress(OSError):
+            entries += list(os.scandir(folder))
     with contextlib.suppress(OSError):
-        for entry in os.scandir(parent):
+        for entry in entries:
             match = _TEMP_FOLDER.match(entry.name)
             if not (match and match["name"] == out.name and entry.is_dir(follow_symlinks=False)
-                    and _dead(match["pid"])):
+                    and (_dead(match["pid"]) or int(match["pid"]) == os.getpid())
+                    and os.path.abspath(entry.path) not in _ACTIVE):
                 continue
             if match["kind"] == "old" and not out.exists():
                 os.rename(entry.path, out)
@@ -243,8 +250,9 @@ def staged_folder(out, own=(), keep=()):
     swap = _swap_possible(out, own)
     if not swap:
         out.mkdir(parents=True, exist_ok=True)
-    staging = out.parent / f".{out.name}.{tag}.staging" if swap else out / f".{tag}.staging"
+    staging = (out.parent if swap else out) / f".{out.name}.{tag}.staging"
     staging.mkdir(parents=True)
+    _ACTIVE.add(str(staging))
     try:
         yield staging
         if swap:
@@ -253,6 +261,7 @@ def staged_folder(out, own=(), keep=()):
             _replace_in(out, staging, own, keep)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+        _ACTIVE.discard(str(staging))
 
 
 def _carried(out: Path, new: set, own, keep: set) -> list:

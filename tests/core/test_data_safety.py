@@ -295,3 +295,17 @@ def test_two_open_lines_meeting_end_to_end_stay_two_sections(tmp_path):
     codes = "".join("o" if l.startswith("4 4 4") else "w"
                     for l in (tmp_path / "geo.cli").read_text().splitlines())
     assert (codes + codes[0]).count("wo") == 2, codes  # two liquid boundaries (the loop)
+
+
+@pytest.mark.parametrize("fmt", ["14", "gr3"])
+def test_adcircpy_reads_our_fort14_and_gr3(tmp_path, fmt):
+    """adcircpy 1.2.7's read_fort14 (its parser needs pandas, which setup does not install:
+    where pandas is missing this is skipped; pyschism's test above reads line 2 the same way,
+    as two integers)."""
+    pytest.importorskip("pandas")
+    nodes, tris = _square_mesh()
+    path = tmp_path / f"mesh.{fmt}"
+    export_mesh(path, nodes, tris)
+    grd = _solver_parser("adcircpy").read_fort14(path)
+    assert len(grd["nodes"]) == len(nodes) and len(grd["elements"]) == len(tris)
+    np.testing.assert_allclose(grd["nodes"][["x", "y"]].to_numpy(), nodes[:, :2], atol=1e-4)

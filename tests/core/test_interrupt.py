@@ -1,7 +1,8 @@
 """Nothing lost: a run interrupted at random points (Ctrl-C at random moments, QGIS-style
-Cancel after a random number of polls, the process killed outright) leaves each output file
-either as it was before the run (or absent) or complete, never truncated; and the same inputs
-and seed give byte-identical outputs, so 'complete' can be checked byte for byte."""
+Cancel after a random number of polls, the process killed outright) leaves the output folder
+as a whole either as it was before the run or complete, never a mix of the two runs and never
+a truncated file; what a killed run leaves beside it is removed by the next run; and the same
+inputs and seed give byte-identical outputs, so 'complete' can be checked byte for byte."""
 import json
 import os
 import shutil
@@ -79,7 +80,15 @@ def _assert_each_file_old_or_new(target, done):
         else:
             assert now[name] == done["after"][name], f"{name} is neither old nor new"
             states[name] = "new"
+    assert len(set(states.values())) == 1, f"the folder mixes two runs: {states}"
     return states
+
+
+def _leftovers(folder: Path) -> list:
+    """Hidden temporaries of FloodMesh in ``folder`` and beside it."""
+    inside = [p.name for p in folder.iterdir() if ".partial" in p.name or ".floodmesh-" in p.name]
+    beside = [p.name for p in folder.parent.iterdir() if p.name.startswith(f".{folder.name}.")]
+    return inside + beside
 
 
 def test_same_inputs_and_seed_give_byte_identical_outputs(runs, tmp_path):
@@ -94,8 +103,8 @@ def test_same_inputs_and_seed_give_byte_identical_outputs(runs, tmp_path):
 # that its (already removed) temporary file is gone: harmless, and not ours to silence.
 @pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 def test_ctrl_c_at_random_moments_leaves_old_or_complete_files(runs, tmp_path):
-    """SIGINT (KeyboardInterrupt) at 12 random moments of an in-process run over the previous
-    outputs, from the first millisecond to past the end."""
+    """SIGINT (KeyboardInterrupt) at 11 random moments of an in-process run over the previous
+    outputs, from the first millisecond to its length when run alone, and one past its end."""
     source, root, done = runs
     start = time.perf_counter()
     run_pipeline(source, tmp_path / "timed", AFTER)
@@ -107,7 +116,8 @@ def test_ctrl_c_at_random_moments_leaves_old_or_complete_files(runs, tmp_path):
 
     previous = signal.signal(signal.SIGALRM, interrupt)
     try:
-        for delay in np.sort(RNG.uniform(0.001, 1.2 * duration, 12)):
+        # the folder changes in one step at the end: the last moment is surely past it
+        for delay in [*np.sort(RNG.uniform(0.001, duration, 11)), 10 * duration]:
             target = tmp_path / "out"
             _start_from_previous(root, target)
             signal.setitimer(signal.ITIMER_REAL, delay)
@@ -146,6 +156,7 @@ def test_command_interrupted_at_random_moments(runs, tmp_path, how):
     when it had finished) and no truncated file. A killed process may leave its hidden
     temporary files; they are never an output's name."""
     source, root, done = runs
+    killed = []
     # from 1 s on: a Ctrl-C while the interpreter itself starts, before floodmesh runs any
     # code, ends Python with its own traceback
     for delay in np.sort(RNG.uniform(1.0, 4.5, 4)):
@@ -160,12 +171,30 @@ def test_command_interrupted_at_random_moments(runs, tmp_path, how):
         if how == "SIGINT":
             assert proc.returncode in (0, 130), stderr
             assert "Traceback" not in stderr
-        partial = [p for p in target.iterdir() if ".partial" in p.name]
-        assert how == "SIGKILL" or partial == []
-        assert all(p.name.startswith(".") for p in partial)
-        for p in partial:
-            p.unlink()
+        # the folder being written lies beside the target: nothing partial is inside it
+        assert [p.name for p in target.iterdir() if ".partial" in p.name] == []
+        assert how == "SIGKILL" or _leftovers(target) == []
+        killed += _leftovers(target)
         _assert_each_file_old_or_new(target, done)
+    # the next run removes what the killed ones left
+    subprocess.run([FLOODMESH, "run", str(source), "--out", str(target), "--holdout", "0.05",
+                    "--cell-size", "1", "--max-area", "30"], check=True, capture_output=True)
+    assert _leftovers(target) == [], killed
+    assert set(_assert_each_file_old_or_new(target, done).values()) == {"new"}
+
+
+def test_temporaries_of_a_killed_earlier_version_are_removed(runs, tmp_path):
+    """Hidden partial files (and SQLite journals) an older FloodMesh left when killed go with
+    the next run; a hidden file of the user's stays."""
+    source, root, done = runs
+    target = tmp_path / "out"
+    _start_from_previous(root, target)
+    stale = [".breaklines.0123abcd.partial.gpkg", ".breaklines.0123abcd.partial.gpkg-journal",
+             ".dem.99999999-89abcdef.partial.tif"]
+    for name in stale + [".mine"]:
+        (target / name).write_bytes(b"x")
+    run_pipeline(source, target, AFTER)
+    assert sorted(p.name for p in target.iterdir() if p.name.startswith(".")) == [".mine"]
 
 
 def test_inputs_are_opened_read_only(runs, tmp_path):

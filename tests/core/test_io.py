@@ -254,10 +254,13 @@ def test_failing_writer_keeps_old_mesh(tmp_path):
 
 
 def test_atomic_output_missing_folder(tmp_path):
-    """Writing into a folder that does not exist is a FloodMeshError naming the folder."""
-    with pytest.raises(FloodMeshError, match="does not exist"):
-        with io.atomic_output(tmp_path / "missing" / "out.txt"):
-            pass
+    """Writing into a folder that does not exist makes it (whether it can be made is checked
+    before the work, core.outputs.check_outputs)."""
+    target = tmp_path / "missing" / "out.txt"
+    with io.atomic_output(target) as tmp:
+        tmp.write_text("x")
+    assert target.read_text() == "x"
+    assert [p.name for p in target.parent.iterdir()] == ["out.txt"]
 
 
 # ---------------------------------------------------------------------------------------------
