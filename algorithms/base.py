@@ -57,8 +57,9 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
     def files(self, parameters, context) -> tuple[list, list]:
         """(files read, files written) by the parameters, for core's check that no output is
         or replaces an input (a folder output is checked by the core call it goes to)."""
-        from qgis.core import (QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
-                               QgsProcessingParameterFileDestination,
+        from qgis.core import (QgsProcessing, QgsProcessingOutputLayerDefinition,
+                               QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
+                               QgsProcessingParameterFolderDestination,
                                QgsProcessingParameterMeshLayer,
                                QgsProcessingParameterRasterLayer,
                                QgsProcessingParameterVectorLayer)
@@ -66,10 +67,14 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         inputs, outputs = [], []
         for p in self.parameterDefinitions():
             name = p.name()
-            if isinstance(p, QgsProcessingParameterFileDestination):
-                outputs.append(self.parameterAsFileOutput(parameters, name, context))
-            elif p.isDestination() and p.type() in ("rasterDestination", "vectorDestination"):
-                outputs.append(self.parameterAsOutputLayer(parameters, name, context))
+            if p.isDestination():
+                # the value as given (parameterAsOutputLayer would add a layer to load)
+                value = parameters.get(name)
+                if isinstance(value, QgsProcessingOutputLayerDefinition):
+                    value = value.sink.staticValue()
+                if (isinstance(value, str) and value != QgsProcessing.TEMPORARY_OUTPUT
+                        and not isinstance(p, QgsProcessingParameterFolderDestination)):
+                    outputs.append(value)
             elif isinstance(p, QgsProcessingParameterFile):
                 inputs.append(self.parameterAsFile(parameters, name, context))
             elif isinstance(p, QgsProcessingParameterRasterLayer):
@@ -82,7 +87,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
                                 QgsProcessingParameterVectorLayer)):
                 layer = self.parameterAsVectorLayer(parameters, name, context)
                 inputs.append(layer.source().split("|")[0] if layer else None)
-        return inputs, [o for o in outputs if o and not o.startswith("memory:")]
+        return inputs, [o for o in outputs if o and not o.startswith(("memory:", "ogr:"))]
 
     def process(self, parameters, context, feedback):
         raise NotImplementedError

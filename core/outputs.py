@@ -103,7 +103,7 @@ def check_output_folder(out, inputs, names) -> None:
         raise FloodMeshError(f"{out} is a file, not a folder: give --out a folder for the "
                              "run's outputs (it is created if missing)")
     parent = _existing_ancestor(out)
-    if parent == out:
+    if parent == Path(os.path.abspath(out)):
         check_outputs(inputs, [out / name for name in names])
     else:
         check_writable(parent)

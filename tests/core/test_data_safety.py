@@ -82,9 +82,12 @@ def test_grid_refuses_its_own_point_file_and_a_laz_name(tmp_path, capsys):
 
 
 def test_run_into_the_folder_of_its_dem_and_export_onto_its_mesh_are_refused(dem, tmp_path,
-                                                                            capsys):
+                                                                            capsys, monkeypatch):
     before = _digest(dem)
     assert main(["run", str(dem), "--out", str(tmp_path)]) == 2
+    assert "never overwrites an input" in capsys.readouterr().err
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "dem.tif", "--out", "."]) == 2
     assert "never overwrites an input" in capsys.readouterr().err
     assert _digest(dem) == before
     nodes, tris = _square_mesh()
@@ -209,6 +212,17 @@ def test_a_header_naming_the_columns_in_another_order_is_followed(tmp_path):
         fh.write("z,x,y\n")
         np.savetxt(fh, xyz[:, [2, 0, 1]], fmt="%.3f", delimiter=",")
     np.testing.assert_allclose(io.read_points(path, crs=UTM).xyz, xyz, atol=1e-3)
+
+
+# ---------------------------------------------------------------------------------------------
+# 6. a mesh in metres labelled with degrees or feet
+@pytest.mark.parametrize("crs", ["EPSG:4326", "EPSG:2229"])
+@pytest.mark.parametrize("fmt", ["nc", "gpkg"])
+def test_export_refuses_a_crs_not_in_metres(tmp_path, crs, fmt):
+    nodes, tris = _square_mesh()
+    with pytest.raises(FloodMeshError, match="is not a projected CRS in metres"):
+        export_mesh(tmp_path / f"m.{fmt}", nodes, tris, crs=crs)
+    assert list(tmp_path.iterdir()) == []
 
 
 # ---------------------------------------------------------------------------------------------

@@ -14,7 +14,9 @@ BEFORE_RUN = "Unable to execute algorithm\n"
 
 
 def test_most_cases_reach_qgis():
-    assert len(QGIS_CASES) >= len(CASES) - 1
+    # command line only: a .laz name for grid's GeoTIFF, a LoG sigma (LiDAR to mesh has no LoG
+    # parameters) and a line layer as the domain (QGIS's polygon-only parameter refuses it)
+    assert len(QGIS_CASES) >= len(CASES) - 3
 
 
 @pytest.mark.parametrize("case", QGIS_CASES, ids=[c.id for c in QGIS_CASES])
