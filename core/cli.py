@@ -237,7 +237,11 @@ def cmd_series(args):
 def _print_notes(notes):
     """What FloodMesh assumed or repaired on the user's behalf, one line each on stderr."""
     for message in notes:
-        print(f"floodmesh: note: {message}", file=sys.stderr)
+        _print_note(message)
+
+
+def _print_note(message: str):
+    print(f"floodmesh: note: {message}", file=sys.stderr)
 
 
 def cmd_demo(args):
@@ -321,7 +325,7 @@ def cmd_slope(args):
     from . import io
     from .slope import laplacian_of_gaussian, slope
 
-    dem = io.read_raster(args.dem, crs=args.crs)
+    dem = io.read_raster(args.dem, crs=args.crs, note=_print_note)
     if args.method == "log":
         io.write_raster(args.out, laplacian_of_gaussian(dem, args.sigma, kernel=args.log_kernel))
         print(f"Laplacian-of-Gaussian response (sigma {args.sigma} m, m) written to {args.out}")
@@ -384,7 +388,7 @@ def cmd_mesh(args):
     check_min_angle(args.min_angle)
     check_max_area(args.max_area)
     check_max_triangles(args.max_triangles)
-    dem = io.read_raster(args.dem, crs=args.crs)
+    dem = io.read_raster(args.dem, crs=args.crs, note=_print_note)
     lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
     domain, own_lines = mesh_constraints(dem, args.boundary, args.user_lines)
     size = size_field(args.size_field, dem, max_area=args.max_area, min_area=args.min_area)

@@ -182,6 +182,16 @@ def test_untagged_nodata_sentinels_are_nodata_with_a_note(tmp_path, sentinel):
     assert any("taken as nodata" in n and "gdal_edit.py -a_nodata" in n for n in notes)
 
 
+def test_a_run_on_an_untagged_dem_meshes_no_pit(tmp_path, capsys):
+    values = slope_dem()
+    values[10:20, 10:20] = -9999.0
+    dem = _raster(tmp_path / "untagged.tif", values)
+    assert main(["run", str(dem), "--out", str(tmp_path / "out")]) == 0
+    assert "taken as nodata" in capsys.readouterr().err
+    nodes, _ = io.read_mesh_2dm(tmp_path / "out" / "mesh.2dm")
+    assert nodes[:, 2].min() >= 10.0
+
+
 def test_integer_and_multi_band_dems_get_a_note(tmp_path):
     notes = []
     io.read_input(_raster(tmp_path / "int.tif", np.round(slope_dem()), dtype="int16",
