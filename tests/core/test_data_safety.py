@@ -120,6 +120,37 @@ def test_run_keeps_the_users_files_in_its_folder_and_drops_its_own_stale_ones(tm
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
+def test_a_kill_between_moving_the_old_folder_aside_and_the_new_in_is_undone(tmp_path):
+    """Where the folder cannot be exchanged in one step, it is moved aside, then the new one in:
+    a kill between the two leaves the old one hidden, and the next run puts it back first."""
+    from floodmesh.core.outputs import _clean_run_leftovers
+
+    aside = tmp_path / ".out.floodmesh-99999999-0123abcd.old"
+    aside.mkdir()
+    (aside / "report.json").write_text("old")
+    staging = tmp_path / ".out.floodmesh-99999999-89abcdef.staging"
+    staging.mkdir()
+    _clean_run_leftovers(tmp_path / "out")
+    assert (tmp_path / "out" / "report.json").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_a_folder_with_folders_of_the_users_is_replaced_file_by_file(tmp_path, monkeypatch):
+    """The working folder, holding a folder of the user's: no swap, the user's things stay,
+    the earlier run's files this run does not write go."""
+    from floodmesh.core.outputs import staged_folder
+
+    (tmp_path / "data").mkdir()
+    (tmp_path / "mesh.slf").write_text("earlier")
+    (tmp_path / "report.json").write_text("earlier")
+    monkeypatch.chdir(tmp_path)
+    with staged_folder(".", own={"report.json", "mesh.slf"}) as stage:
+        assert stage.parent == tmp_path
+        (stage / "report.json").write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["data", "report.json"]
+    assert (tmp_path / "report.json").read_text() == "new"
+
+
 # ---------------------------------------------------------------------------------------------
 # 2. holdout 0
 @pytest.mark.parametrize("command", ["run", "series"])
