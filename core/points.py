@@ -63,11 +63,16 @@ def _check_area(xy: np.ndarray, source: str) -> None:
 
 
 def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
-    """Say how many points repeat another's x, y with a different z, and by how much."""
-    order = np.lexsort((xyz[:, 1], xyz[:, 0]))
-    ordered = xyz[order]
-    same = (ordered[1:, 0] == ordered[:-1, 0]) & (ordered[1:, 1] == ordered[:-1, 1])
-    dz = np.abs(np.diff(ordered[:, 2]))[same]
+    """Say how many points repeat another's x, y (to 0.1 mm) with a different z, and by how
+    much. One integer key per point, sorted: a few seconds for 10 million points."""
+    cell = np.round((xyz[:, :2] - xyz[:, :2].min(axis=0)) / 1e-4).astype(np.int64)
+    rows = int(cell[:, 1].max()) + 1
+    if (int(cell[:, 0].max()) + 1) * rows >= 2 ** 62:  # over ~400 km across: not checked
+        return
+    key = cell[:, 0] * rows + cell[:, 1]
+    order = np.argsort(key)
+    same = key[order][1:] == key[order][:-1]
+    dz = np.abs(np.diff(xyz[order, 2]))[same]
     if dz.size and dz.max() > 0:
         note(f"{source}: {int((dz > 0).sum()):,} points repeat the x, y of another with a "
              f"different z (up to {dz.max():.3g} m apart); the grid keeps one of each: check for "
