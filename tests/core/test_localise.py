@@ -1,0 +1,77 @@
+"""Terrain fits on analytic surfaces: a noisy hinge (bank top) whose crest line is known, and a
+noisy plane whose elevation is known."""
+import numpy as np
+import pytest
+
+from floodmesh.core.localise import (estimate_noise, fit_node_elevations, fit_window,
+                                     localise_breaklines)
+
+ANGLE = np.radians(35.0)  # the crest runs at 35° to the grid, the hard case for the tracer
+TANGENT = np.array([np.cos(ANGLE), np.sin(ANGLE)])
+NORMAL = np.array([-np.sin(ANGLE), np.cos(ANGLE)])
+
+
+def hinge(xy):
+    """Flat to the right of the crest line through (50, 50), a 1:2 bank to its left."""
+    u = (xy - 50.0) @ NORMAL
+    return 10.0 + 0.5 * np.maximum(u, 0.0) + 0.002 * (xy @ TANGENT)
+
+
+def noisy_points(surface, *, density=9.0, noise=0.05, seed=0):
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 100, (int(density * 100 * 100), 2))
+    return np.column_stack([xy, surface(xy) + rng.normal(0, noise, len(xy))])
+
+
+@pytest.mark.parametrize("density, noise, bound", [(9.0, 0.05, 0.10), (2.0, 0.15, 0.30)])
+def test_crest_localised_on_a_noisy_hinge(density, noise, bound):
+    points = noisy_points(hinge, density=density, noise=noise)
+    window = fit_window(points, 100 * 100, 1.0)
+    assert window.noise == pytest.approx(noise, rel=0.25)
+    # a traced line: the crest's staircase, 0.3–0.6 m off it to either side
+    s = np.arange(-25, 26, 4.0)
+    offset = np.where(np.arange(len(s)) % 2, 0.6, -0.3)
+    xy = 50.0 + s[:, None] * TANGENT + offset[:, None] * NORMAL
+    line = np.column_stack([xy, hinge(xy)])
+    [moved], [confidence] = localise_breaklines([line], points, window)
+    off = np.abs((moved[:, :2] - 50.0) @ NORMAL)
+    assert np.isfinite(confidence).mean() > 0.8
+    # the bound: 90 % of the vertices within it, half of them within a third of it
+    assert np.median(off) < bound / 3 and np.percentile(off, 90) < bound
+    assert np.median(np.abs(offset)) > 2 * np.median(off)
+    # z from the fit: the crest's true height, with much less than the noise
+    assert np.median(np.abs(moved[:, 2] - hinge(moved[:, :2]))) < 0.3 * noise
+    assert np.nanmedian(confidence) == pytest.approx(noise, rel=0.3)
+
+
+def test_no_kink_no_move():
+    """On a plane there is no hinge: the vertices stay where they were."""
+    points = noisy_points(lambda xy: 5.0 + 0.05 * xy[:, 0])
+    xy = 50.0 + np.arange(-20, 21, 4.0)[:, None] * TANGENT
+    line = np.column_stack([xy, np.zeros(len(xy))])
+    [moved], [confidence] = localise_breaklines([line], points, fit_window(points, 1e4, 1.0))
+    assert np.isnan(confidence).mean() > 0.8
+    assert np.abs(moved[:, :2] - xy).max(axis=1).mean() < 0.05
+
+
+def test_node_elevations_take_the_noise_out_on_a_plane():
+    def plane(xy):
+        return 3.0 + 0.01 * xy[:, 0] - 0.02 * xy[:, 1]
+
+    noise = 0.05
+    points = noisy_points(plane, noise=noise, seed=1)
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(10, 90, (500, 2))
+    noisy = np.column_stack([xy, plane(xy) + rng.normal(0, noise, len(xy))])
+    line = np.array([[20.0, 20.0, 1.0], [80.0, 20.0, 2.0]])  # a line with its own z
+    noisy[0, :2] = (50.0, 20.0)
+    z, counts = fit_node_elevations(noisy, points, [line], 1.5, on_line=0.05)
+    assert z[0] == pytest.approx(1.5)  # on the line: z along it
+    error = z[1:] - plane(xy[1:])
+    assert counts["plane_fitted"] >= 490
+    assert np.sqrt(np.mean(error ** 2)) < 0.25 * noise
+
+
+def test_noise_estimate():
+    points = noisy_points(hinge, noise=0.10, seed=3)
+    assert estimate_noise(points, 9.0) == pytest.approx(0.10, rel=0.15)
