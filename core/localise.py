@@ -344,10 +344,24 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
                "kept": int((~fitted).sum())}
 
 
+def _failed_fits_left_out(coords, moved, max_gap):
+    """Which vertices to keep: the moved ones, the line's ends, and runs of vertices the fit did
+    not move where the moved vertices on either side are farther apart than ``max_gap`` m (a
+    stretch without a clear kink keeps its traced course)."""
+    keep = moved.copy()
+    keep[0] = keep[-1] = True
+    kept = np.nonzero(keep)[0]
+    for a, b in zip(kept[:-1], kept[1:]):
+        if b - a > 1 and np.hypot(*(coords[b, :2] - coords[a, :2])) > max_gap:
+            keep[a + 1:b] = True
+    return keep
+
+
 def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
-                    s_crit: float = 10.0, tolerance: float = 0.1) -> tuple[list, list[float], dict]:
-    """``localise_breaklines`` on BreakLines, then each line thinned: the vertices the fit did
-    not move (bar its ends) are dropped, and Douglas–Peucker within ``tolerance`` m
+                    s_crit: float = 10.0, tolerance: float = 0.1,
+                    max_gap: float = 12.0) -> tuple[list, list[float], dict]:
+    """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
+    move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within ``tolerance`` m
     (horizontal and vertical) keeps what the smooth, localised line needs. Returns the
     BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN where
     none moved) and counts."""
@@ -358,8 +372,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                                             s_crit=s_crit)
     out, per_line = [], []
     for line, coords, fit in zip(lines, moved, confidence):
-        fitted = np.isfinite(fit)
-        fitted[0] = fitted[-1] = True
+        fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap)
         keep = np.zeros(len(coords), bool)
         keep[np.nonzero(fitted)[0][douglas_peucker_mask(coords[fitted], tolerance)]] = True
         out.append(BreakLine(coords[keep], line.slopes[keep], line.component))
