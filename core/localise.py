@@ -273,14 +273,16 @@ def _tangents(coords: np.ndarray) -> np.ndarray:
 
 def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: FitWindow, *,
                         s_crit: float = 10.0, iterations: int = 2, min_f_ratio: float = 10.0
-                        ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+                        ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """Break-line vertices moved onto the hinge of a two-plane fit to ``points`` (n, 3), z from
     the fit (see the module's docstring). ``lines`` are (k, 3) arrays. Returns the moved lines
-    and, per line, each vertex's fit RMS residual (m; NaN where the vertex was not moved)."""
+    and, per line, each vertex's fit RMS residual (m) and the change of slope across the hinge
+    (negative on a crest, positive at a toe, whichever way the line runs), both NaN where the
+    vertex was not moved."""
     from scipy.spatial import cKDTree
 
     if not lines:
-        return [], []
+        return [], [], []
     tree = cKDTree(points[:, :2])
     px, py, pz = (np.ascontiguousarray(points[:, k], dtype=float) for k in range(3))
     min_kink = 0.5 * np.tan(np.radians(s_crit))
@@ -288,6 +290,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     coords = np.concatenate([np.asarray(c, float)[:, :3] for c in lines])
     starts = np.r_[0, np.cumsum(sizes)]
     confidence = np.full(len(coords), np.nan)
+    kink = np.full(len(coords), np.nan)
     reach = float(np.hypot(window.half_width, window.half_length))
     for _ in range(iterations):
         tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
@@ -301,8 +304,10 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
         coords[good, :2] += fits[good, 0:1] * normal[good]
         coords[good, 2] = fits[good, 1]
         confidence[good] = fits[good, 2]
-    moved = [coords[a:b] for a, b in zip(starts[:-1], starts[1:])]
-    return moved, [confidence[a:b] for a, b in zip(starts[:-1], starts[1:])]
+        kink[good] = fits[good, 3]
+    bounds = list(zip(starts[:-1], starts[1:]))
+    return ([coords[a:b] for a, b in bounds], [confidence[a:b] for a, b in bounds],
+            [kink[a:b] for a, b in bounds])
 
 
 def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.ndarray],
@@ -357,30 +362,46 @@ def _failed_fits_left_out(coords, moved, max_gap):
     return keep
 
 
+def _hops_cut(keep: np.ndarray, kink: np.ndarray) -> list[np.ndarray]:
+    """The kept vertex indices split into pieces where the line hops from a crest to a toe
+    (or back) across a band: between two moved vertices whose slope changes have opposite
+    signs, the segment after the first goes."""
+    signs = np.sign(kink[keep])
+    moved = np.nonzero(np.isfinite(signs))[0]
+    cuts = [i + 1 for i, j in zip(moved[:-1], moved[1:]) if signs[i] != signs[j]]
+    return np.split(keep, cuts)
+
+
 def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
                     max_gap: float = 12.0) -> tuple[list, list[float], dict]:
     """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
-    move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within ``tolerance`` m
-    (horizontal and vertical) keeps what the smooth, localised line needs. Returns the
+    move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within
+    ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
+    are cut where they hop across a band from crest to toe (``_hops_cut``). Returns the
     BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN where
     none moved) and counts."""
     from .breaklines import BreakLine
     from .simplify import douglas_peucker_mask
 
-    moved, confidence = localise_breaklines([line.coords for line in lines], points, window,
-                                            s_crit=s_crit)
-    out, per_line = [], []
-    for line, coords, fit in zip(lines, moved, confidence):
+    moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
+                                                   window, s_crit=s_crit)
+    out, per_line, hops = [], [], 0
+    for line, coords, fit, kink in zip(lines, moved, confidence, kinks):
         fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap)
-        keep = np.zeros(len(coords), bool)
-        keep[np.nonzero(fitted)[0][douglas_peucker_mask(coords[fitted], tolerance)]] = True
-        out.append(BreakLine(coords[keep], line.slopes[keep], line.component))
-        per_line.append(float(np.nanmedian(fit)) if np.isfinite(fit).any() else float("nan"))
+        keep = np.nonzero(fitted)[0][douglas_peucker_mask(coords[fitted], tolerance)]
+        for piece in _hops_cut(keep, kink):
+            hops += 1
+            if len(piece) >= 2:
+                out.append(BreakLine(coords[piece], line.slopes[piece], line.component))
+                per_line.append(float(np.nanmedian(fit[piece])) if np.isfinite(fit[piece]).any()
+                                else float("nan"))
+        hops -= 1
     every = np.concatenate(confidence) if confidence else np.zeros(0)
     done = np.isfinite(every)
     return out, per_line, {"vertices": int(every.size), "vertices_localised": int(done.sum()),
                            "vertices_kept": int(sum(len(line.coords) for line in out)),
+                           "hop_segments_cut": hops,
                            "thinning_tolerance_m": tolerance,
                            "median_fit_rms_m": float(np.median(every[done])) if done.any()
                            else None}

@@ -84,8 +84,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
                "breaklines": 1, "simplify": 0.5, "localise": 0.5, "mesh": 2, "refine": 4,
                "node elevations": 0.5, "assess": 1, "write": 2}
-    if not options.refine:
-        del weights["refine"]
+    del weights["node elevations" if options.refine else "refine"]
+    if not options.localise:
+        del weights["localise"]
     steps = _Steps(weights, progress, cancelled, log)
     front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
@@ -116,6 +117,17 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         size = far if size is None else far.with_values(np.fmin(far.values, size.values))
         max_area = options.far_field_area
     mesh_lines = [line.coords for line in lines] + front.own_lines
+    node_counts = {}
+
+    def elevations(mesh):
+        """Node z with the noise taken out, from the points gridded only (never the held-out)."""
+        if options.node_elevation != "plane":
+            return mesh
+        z, counts = fit_node_elevations(mesh.nodes, front.measured, mesh_lines,
+                                        window.node_radius, on_line=delta / 10)
+        node_counts.update(counts)
+        return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
+
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
                      max_area=max_area, conforming=options.conforming, domain=front.domain,
                      size_field=size, max_triangles=options.max_triangles, note=note)
@@ -125,14 +137,13 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         mesh, rounds = steps.run("refine", refine_mesh, dem, mesh_lines, front.measured,
                                  check=holdout.xyz, domain=front.domain, size_field=size,
                                  min_angle=options.min_angle, max_area=max_area,
+                                 conforming=options.conforming, elevations=elevations,
                                  lower=options.refine_lower, upper=options.refine_upper,
                                  max_nodes=options.max_triangles, cancelled=cancelled)
-    if options.node_elevation == "plane":
-        # from the points gridded only: the held-out ones stay independent
-        z, counts = steps.run("node elevations", fit_node_elevations, mesh.nodes, front.measured,
-                              mesh_lines, window.node_radius, on_line=delta / 10)
-        mesh = replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
-        terrain_fit["nodes"] = counts
+    else:
+        mesh = steps.run("node elevations", elevations, mesh)
+    if node_counts:
+        terrain_fit["nodes"] = node_counts
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
     deviation = max_deviation(traced, simplified)

@@ -33,7 +33,7 @@ def test_crest_localised_on_a_noisy_hinge(density, noise, bound):
     offset = np.where(np.arange(len(s)) % 2, 0.6, -0.3)
     xy = 50.0 + s[:, None] * TANGENT + offset[:, None] * NORMAL
     line = np.column_stack([xy, hinge(xy)])
-    [moved], [confidence] = localise_breaklines([line], points, window)
+    [moved], [confidence], [kink] = localise_breaklines([line], points, window)
     off = np.abs((moved[:, :2] - 50.0) @ NORMAL)
     assert np.isfinite(confidence).mean() > 0.8
     # the bound: 90 % of the vertices within it, half of them within a third of it
@@ -42,6 +42,7 @@ def test_crest_localised_on_a_noisy_hinge(density, noise, bound):
     # z from the fit: the crest's true height, with much less than the noise
     assert np.median(np.abs(moved[:, 2] - hinge(moved[:, :2]))) < 0.3 * noise
     assert np.nanmedian(confidence) == pytest.approx(noise, rel=0.3)
+    assert np.nanmin(kink) > 0.3  # the bank's foot as the hinge sees it: a toe (slope rises)
 
 
 def test_no_kink_no_move():
@@ -49,7 +50,7 @@ def test_no_kink_no_move():
     points = noisy_points(lambda xy: 5.0 + 0.05 * xy[:, 0])
     xy = 50.0 + np.arange(-20, 21, 4.0)[:, None] * TANGENT
     line = np.column_stack([xy, np.zeros(len(xy))])
-    [moved], [confidence] = localise_breaklines([line], points, fit_window(points, 1e4, 1.0))
+    [moved], [confidence], [kink] = localise_breaklines([line], points, fit_window(points, 1e4, 1.0))
     assert np.isnan(confidence).mean() > 0.8
     assert np.abs(moved[:, :2] - xy).max(axis=1).mean() < 0.05
 
@@ -75,3 +76,53 @@ def test_node_elevations_take_the_noise_out_on_a_plane():
 def test_noise_estimate():
     points = noisy_points(hinge, noise=0.10, seed=3)
     assert estimate_noise(points, 9.0) == pytest.approx(0.10, rel=0.15)
+
+
+def test_chain_fits_the_terrain_on_the_demo_floodplain(demo_points_file, tmp_path):
+    """run_pipeline with the fits (the defaults) against the chain without them, scored on the
+    demo's TRUE surface: a lower true RMSE with no more nodes; report.json states the fits."""
+    from floodmesh.core import demo, io
+    from floodmesh.core.accuracy import tin_elevation
+    from floodmesh.core.mesh import Mesh
+    from floodmesh.core.options import RunOptions
+    from floodmesh.core.pipeline import run_pipeline
+
+    rng = np.random.default_rng(0)
+    local = rng.uniform((2, 2), (demo.WIDTH - 2, demo.HEIGHT - 2), (20_000, 2))
+    truth = demo.ground_elevation(local[:, 0], local[:, 1])
+    result = {}
+    for name, options in (("fitted", RunOptions(holdout=0.01)),
+                          ("plain", RunOptions(holdout=0.01, localise=False,
+                                               node_elevation="dem", conforming=True))):
+        report = run_pipeline(demo_points_file, tmp_path / name, options)
+        nodes, triangles = io.read_mesh_2dm(tmp_path / name / "mesh.2dm")
+        z = tin_elevation(Mesh(nodes, triangles, None), *(local + demo.DEMO_ORIGIN).T)
+        result[name] = len(nodes), float(np.sqrt(np.nanmean((z - truth) ** 2))), report
+    (n_fit, rmse_fit, report), (n_plain, rmse_plain, _) = result["fitted"], result["plain"]
+    assert n_fit <= n_plain and rmse_fit < 0.7 * rmse_plain
+    fit = report["terrain_fit"]
+    assert fit["node_radius"] > 0 and fit["half_width"] > 0 and 0.03 < fit["noise"] < 0.08
+    assert fit["vertices_localised"] > 0.7 * fit["vertices"]
+    assert fit["nodes"]["plane_fitted"] > 0.3 * report["nodes"]
+
+
+def test_a_line_hopping_from_crest_to_toe_is_cut():
+    """A traced line that follows a bank's crest, hops across the 3 m wide bank and goes on along
+    its toe (the staircase of an oblique band) comes out as two pieces, on the crest and toe."""
+    from floodmesh.core.breaklines import BreakLine
+    from floodmesh.core.localise import localise_traced
+
+    def bank(xy):
+        u = (xy - 50.0) @ NORMAL
+        return 10.0 - 0.5 * np.clip(u, 0.0, 3.0)  # crest at u = 0, toe at u = 3
+
+    points = noisy_points(bank)
+    s = np.arange(-24, 25, 4.0)
+    u = np.where(s < 0, 0.3, 2.7)
+    xy = 50.0 + s[:, None] * TANGENT + u[:, None] * NORMAL
+    line = BreakLine(np.column_stack([xy, bank(xy)]), np.full(len(s), 20.0))
+    pieces, confidence, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0))
+    assert counts["hop_segments_cut"] == 1 and len(pieces) == len(confidence) == 2
+    for piece, at in zip(pieces, (0.0, 3.0)):
+        off = (piece.coords[:, :2] - 50.0) @ NORMAL - at
+        assert np.abs(off).max() < 0.15
