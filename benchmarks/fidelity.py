@@ -43,10 +43,13 @@ OBLIQUE = demo.Floodplain({
     "road": (shapely.LineString([(175, -10), (240, 50), (320, 90)]), demo.Profile(2.0, 3.5, 6.5)),
 }, terrace=None)
 TERRAINS = {"demo geometry, seed 7": (demo.DEMO, 7), "oblique geometry, seed 11": (OBLIQUE, 11)}
-# option sets of the chain: "landed" is the chain before issue 18's steps, "default" today's
+# option sets of the chain: "landed" is the chain before issue 18's steps (no localisation, node
+# z from the DEM, conforming Delaunay), "default" today's
 CHAINS = {
     "landed": dict(localise=False, node_elevation="dem", conforming=True),
     "default": dict(),
+    "conforming": dict(conforming=True),     # today's chain with Triangle's switch D
+    "far-field": dict(far_field_area=400.0),  # today's chain, up to 400 m² where plane
 }
 UNIFORM_AREAS = (50, 20, 10, 5, 2.5, 1.2, 0.6, 0.3)
 DELATIN_ERRORS = (0.6, 0.4, 0.25, 0.15, 0.1, 0.07, 0.05)
