@@ -12,7 +12,8 @@ Peers, in the same run: uniform 25° Triangle meshes without break lines whose n
 exact elevation (the node count at FloodMesh's RMSE interpolated in log-log), and pydelatin
 (greedy TIN, no angle bound) on the same DEM. Ratios are uniform nodes / FloodMesh nodes at the
 same true RMSE; pydelatin's "never" means no error bound brings its mesh of the noisy DEM down
-to FloodMesh's true RMSE. Bars (issue 18, reference case): ≥ 15x, < 2 pieces, recall and precision ≥ 0.95.
+to FloodMesh's true RMSE. Bars (issue 18, reference case): ≥ 15x, < 2 pieces, recall and
+precision ≥ 0.95.
 """
 from __future__ import annotations
 

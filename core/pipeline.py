@@ -98,8 +98,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     terrain_fit, confidence, window = {"localise": options.localise,
                                        "node_elevation": options.node_elevation}, None, None
     if options.localise or options.node_elevation == "plane":
-        window = fit_window(front.measured, float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2,
-                            dem.cell_size, node_radius=options.node_radius, seed=options.seed)
+        area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+        window = fit_window(front.measured, area, dem.cell_size,
+                            node_radius=options.node_radius, seed=options.seed)
         terrain_fit.update(asdict(window))
     if options.localise:
         lines, confidence, counts = steps.run("localise", localise_traced, lines, front.measured,

@@ -50,7 +50,8 @@ def test_no_kink_no_move():
     points = noisy_points(lambda xy: 5.0 + 0.05 * xy[:, 0])
     xy = 50.0 + np.arange(-20, 21, 4.0)[:, None] * TANGENT
     line = np.column_stack([xy, np.zeros(len(xy))])
-    [moved], [confidence], [kink] = localise_breaklines([line], points, fit_window(points, 1e4, 1.0))
+    window = fit_window(points, 1e4, 1.0)
+    [moved], [confidence], [kink] = localise_breaklines([line], points, window)
     assert np.isnan(confidence).mean() > 0.8
     assert np.abs(moved[:, :2] - xy).max(axis=1).mean() < 0.05
 
