@@ -351,13 +351,14 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
 
 def _failed_fits_left_out(coords, moved, max_gap):
     """Which vertices to keep: the moved ones, the line's ends, and runs of vertices the fit did
-    not move where the moved vertices on either side are farther apart than ``max_gap`` m (a
-    stretch without a clear kink keeps its traced course)."""
+    not move where the moved vertices on either side are farther apart than ``max_gap`` m along
+    the line (a stretch without a clear kink keeps its traced course)."""
     keep = moved.copy()
     keep[0] = keep[-1] = True
     kept = np.nonzero(keep)[0]
+    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(coords[:, :2], axis=0).T))]
     for a, b in zip(kept[:-1], kept[1:]):
-        if b - a > 1 and np.hypot(*(coords[b, :2] - coords[a, :2])) > max_gap:
+        if b - a > 1 and along[b] - along[a] > max_gap:
             keep[a + 1:b] = True
     return keep
 

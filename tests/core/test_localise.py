@@ -127,3 +127,19 @@ def test_a_line_hopping_from_crest_to_toe_is_cut():
     for piece, at in zip(pieces, (0.0, 3.0)):
         off = (piece.coords[:, :2] - 50.0) @ NORMAL - at
         assert np.abs(off).max() < 0.15
+
+
+def test_a_loop_without_a_kink_keeps_its_course():
+    """Thinning drops unmoved vertices only over short stretches along the line: a closed loop
+    on a plane (no kink anywhere, its ends 1 m apart) keeps its whole length."""
+    from floodmesh.core.breaklines import BreakLine
+    from floodmesh.core.localise import localise_traced
+
+    points = noisy_points(lambda xy: 5.0 + 0.3 * xy[:, 0])
+    square = [(30, 30), (70, 30), (70, 70), (30, 70), (30, 31)]
+    xy = np.concatenate([np.linspace(a, b, 10, endpoint=False)
+                         for a, b in zip(square[:-1], square[1:])] + [[square[-1]]])
+    line = BreakLine(np.column_stack([xy, 5.0 + 0.3 * xy[:, 0]]), np.full(len(xy), 16.7))
+    [out], _, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0))
+    assert counts["vertices_localised"] == 0
+    assert out.length == pytest.approx(line.length, rel=1e-6)
