@@ -9,7 +9,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputFile,
                        QgsProcessingParameterNumber, QgsVectorLayer)
 
 from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
-                            MAX_MIN_ANGLE, RunOptions)
+                            MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions)
 from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, run_core
 from .build_mesh import max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
@@ -44,6 +44,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     CRITICAL_SLOPE = "CRITICAL_SLOPE"
     KEEP_EVERY = "KEEP_EVERY"
     SIMPLIFY, TOLERANCE, REFINE = "SIMPLIFY", "TOLERANCE", "REFINE"
+    LOCALISE, NODE_ELEVATION = "LOCALISE", "NODE_ELEVATION"
+    CONFORMING, FAR_FIELD_AREA = "CONFORMING", "FAR_FIELD_AREA"
     MIN_ANGLE = "MIN_ANGLE"
     MAX_AREA = "MAX_AREA"
     MAX_TRIANGLES = "MAX_TRIANGLES"
@@ -103,6 +105,20 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterBoolean(
             self.REFINE, self.tr("Refine until no triangle's points misfit by more than 10 cm "
                                  "RMS and none by more than 25 cm (step 9)"), defaultValue=False))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.LOCALISE, self.tr("Move break lines onto the crest and toe of a two-plane fit to "
+                                   "the points"), defaultValue=defaults.localise))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.NODE_ELEVATION, self.tr("Elevation of nodes off the break lines"),
+            options=[self.tr("Local plane fit of the points"), self.tr("Bilinear from the DEM")],
+            defaultValue=NODE_ELEVATIONS.index(defaults.node_elevation)))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.CONFORMING, self.tr("Conforming Delaunay mesh (Triangle's switch D)"),
+            defaultValue=defaults.conforming))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.FAR_FIELD_AREA, self.tr("Far-field triangle area where the terrain is plane "
+                                         "(m²)"), QgsProcessingParameterNumber.Double,
+            optional=True, minValue=0.0))
         self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
@@ -134,7 +150,13 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             formats=tuple(EXPORT_FORMATS[i] for i in
                           self.parameterAsEnums(parameters, self.FORMATS, context)),
             max_triangles=self.parameterAsInt(parameters, self.MAX_TRIANGLES, context),
-            refine=self.parameterAsBool(parameters, self.REFINE, context))
+            refine=self.parameterAsBool(parameters, self.REFINE, context),
+            localise=self.parameterAsBool(parameters, self.LOCALISE, context),
+            node_elevation=NODE_ELEVATIONS[self.parameterAsEnum(parameters, self.NODE_ELEVATION,
+                                                                context)],
+            conforming=self.parameterAsBool(parameters, self.CONFORMING, context),
+            far_field_area=(self.parameterAsDouble(parameters, self.FAR_FIELD_AREA, context)
+                            if parameters.get(self.FAR_FIELD_AREA) not in (None, "") else None))
 
     def check_values(self, parameters, context):
         self.options(parameters, context)

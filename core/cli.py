@@ -13,7 +13,7 @@ from pathlib import Path
 
 from .errors import Cancelled, FloodMeshError
 from .options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
-                      RunOptions, parse_formats)
+                      NODE_ELEVATIONS, RunOptions, parse_formats)
 
 DEFAULTS = RunOptions()
 
@@ -120,6 +120,7 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
                        help="with --refine, m (default %(default)s)")
         p.add_argument("--upper", type=float, default=DEFAULTS.refine_upper,
                        help="with --refine, m (default %(default)s)")
+        _add_terrain_fit_options(p)
     _add_max_triangles(p)
     p.add_argument("--holdout", type=float, default=DEFAULTS.holdout,
                    help="fraction of points held out for assessment (default %(default)s)")
@@ -140,6 +141,28 @@ def _add_size_options(p: argparse.ArgumentParser):
                         "flat ground down to --min-area where the slope reaches S_crit)")
     p.add_argument("--min-area", type=float,
                    help="smallest area of the slope size field, m² (default max area / 25)")
+
+
+def _add_terrain_fit_options(p: argparse.ArgumentParser):
+    p.add_argument("--localise", action=argparse.BooleanOptionalAction, default=DEFAULTS.localise,
+                   help="move break-line vertices onto the kink of a two-plane (hinge) fit to "
+                        "the measured points, z from the fit (default on)")
+    p.add_argument("--node-elevation", choices=NODE_ELEVATIONS, default=DEFAULTS.node_elevation,
+                   help="z of nodes off the break lines: a local least-squares plane of the "
+                        "measured points, or bilinear from the DEM (default %(default)s)")
+    p.add_argument("--node-radius", type=float,
+                   help="radius of the node elevation plane fit, m (default from the point "
+                        "density and noise)")
+    p.add_argument("--far-field-area", type=float,
+                   help="larger triangles, up to this many m², away from the break lines where "
+                        "the terrain is plane (default: max area everywhere)")
+    _add_conforming(p)
+
+
+def _add_conforming(p: argparse.ArgumentParser):
+    p.add_argument("--conforming-delaunay", dest="conforming", action="store_true",
+                   help="a conforming Delaunay mesh (Triangle's switch D; 8–17%% more nodes), "
+                        "which some solvers want")
 
 
 def _add_domain_options(p: argparse.ArgumentParser):
@@ -184,7 +207,12 @@ def _options(args) -> RunOptions:
                       min_angle=args.min_angle, max_area=args.max_area, holdout=args.holdout,
                       seed=args.seed, max_gap=args.max_gap, crs=args.crs, classes=args.classes,
                       formats=parse_formats(args.formats),
-                      max_triangles=args.max_triangles)
+                      max_triangles=args.max_triangles,
+                      localise=getattr(args, "localise", DEFAULTS.localise),
+                      node_elevation=getattr(args, "node_elevation", DEFAULTS.node_elevation),
+                      node_radius=getattr(args, "node_radius", None),
+                      far_field_area=getattr(args, "far_field_area", None),
+                      conforming=getattr(args, "conforming", DEFAULTS.conforming))
 
 
 def _summary(report: dict, out: Path) -> str:
@@ -394,8 +422,8 @@ def cmd_mesh(args):
     size = size_field(args.size_field, dem, max_area=args.max_area, min_area=args.min_area)
     notes = []
     mesh = build_mesh(dem, lines + own_lines, min_angle=args.min_angle, max_area=args.max_area,
-                      domain=domain, size_field=size, max_triangles=args.max_triangles,
-                      note=notes.append)
+                      conforming=args.conforming, domain=domain, size_field=size,
+                      max_triangles=args.max_triangles, note=notes.append)
     _print_notes(notes)
     io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles)
     if args.gpkg:
@@ -591,6 +619,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_size_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle)
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area)
+    _add_conforming(p)
     _add_max_triangles(p)
     p.add_argument("--out", required=True, help="SMS 2DM mesh")
     p.add_argument("--gpkg", help="also write the triangles to this GeoPackage")

@@ -54,6 +54,18 @@ TERRACE_LINE = shapely.LineString([(-10, 205), (100, 198), (200, 212), (WIDTH + 
 TERRACE_STEP, TERRACE_HALF_WIDTH = 1.0, 2.0
 
 
+@dataclass(frozen=True)
+class Floodplain:
+    """A floodplain's geometry: ``features`` name → (centreline, Profile) (the plain rises gently
+    away from "river"), a terrace step north of ``terrace`` (None: no terrace)."""
+
+    features: dict
+    terrace: shapely.LineString | None = TERRACE_LINE
+
+
+DEMO = Floodplain(FEATURES, TERRACE_LINE)
+
+
 def _distance(line: shapely.LineString, xy: np.ndarray, *, within: float,
               spacing: float = 0.02) -> np.ndarray:
     """Distance (m) from points to a line, inf beyond ``within`` metres; exact to spacing²/8
@@ -74,21 +86,23 @@ def _distance(line: shapely.LineString, xy: np.ndarray, *, within: float,
     return out
 
 
-def ground_elevation(x, y) -> np.ndarray:
+def ground_elevation(x, y, floodplain: Floodplain = DEMO) -> np.ndarray:
     """Noise-free ground elevation (m) at local coordinates (x, y) in metres."""
     x = np.asarray(x, float)
     y = np.asarray(y, float)
     xy = np.column_stack([x.ravel(), y.ravel()])
     z = 20.0 + 0.001 * x + 0.15 * np.sin(x / 23.0) * np.cos(y / 31.0)
     # the plain rises gently away from the river
-    z += 0.004 * np.abs(y - np.interp(x, *FEATURES["river"][0].xy))
-    # terrace: a 1 m step over 4 m, north of TERRACE_LINE up
-    above = y > np.interp(x, *TERRACE_LINE.xy)
-    near = _distance(TERRACE_LINE, xy, within=2 * TERRACE_HALF_WIDTH).reshape(z.shape)
-    signed = near * np.where(above, 1, -1)
-    z += TERRACE_STEP * np.clip((signed + TERRACE_HALF_WIDTH) / (2 * TERRACE_HALF_WIDTH), 0, 1)
+    z += 0.004 * np.abs(y - np.interp(x, *floodplain.features["river"][0].xy))
+    terrace = floodplain.terrace
+    if terrace is not None:  # a 1 m step over 4 m, north of the terrace line up
+        above = y > np.interp(x, *terrace.xy)
+        near = _distance(terrace, xy, within=2 * TERRACE_HALF_WIDTH).reshape(z.shape)
+        signed = near * np.where(above, 1, -1)
+        z += TERRACE_STEP * np.clip((signed + TERRACE_HALF_WIDTH) / (2 * TERRACE_HALF_WIDTH),
+                                    0, 1)
     carve = np.zeros_like(z)
-    for name, (line, profile) in FEATURES.items():
+    for name, (line, profile) in floodplain.features.items():
         offset = profile(_distance(line, xy, within=profile.half_base + 1).reshape(z.shape))
         if profile.height < 0:
             carve = np.minimum(carve, offset)
@@ -97,22 +111,24 @@ def ground_elevation(x, y) -> np.ndarray:
     return z + carve
 
 
-def true_breaklines() -> list[shapely.LineString]:
+def true_breaklines(floodplain: Floodplain = DEMO) -> list[shapely.LineString]:
     """The exact break lines of the noise-free terrain, clipped to the demo area (local coords)."""
     area = shapely.box(0, 0, WIDTH, HEIGHT)
     lines = []
-    for line, profile in FEATURES.values():
+    for line, profile in floodplain.features.values():
         for r in profile.break_offsets:
             for side in (r, -r):
                 lines.append(line.offset_curve(side))
-    for side in (TERRACE_HALF_WIDTH, -TERRACE_HALF_WIDTH):
-        lines.append(TERRACE_LINE.offset_curve(side))
+    if floodplain.terrace is not None:
+        for side in (TERRACE_HALF_WIDTH, -TERRACE_HALF_WIDTH):
+            lines.append(floodplain.terrace.offset_curve(side))
     clipped = [shapely.intersection(g, area) for g in lines]
     return [g for g in clipped if not g.is_empty]
 
 
 def synthetic_floodplain(*, density: float = 9.0, noise: float = 0.05, vegetation: float = 0.1,
-                         seed: int = 0) -> tuple[PointCloud, np.ndarray]:
+                         seed: int = 0, floodplain: Floodplain = DEMO
+                         ) -> tuple[PointCloud, np.ndarray]:
     """Points of the demo floodplain in ``DEMO_CRS``: (ground and vegetation points, classes).
 
     ``density`` ground points per m², Gaussian ``noise`` (m) on z, ``vegetation`` extra points per
@@ -125,7 +141,7 @@ def synthetic_floodplain(*, density: float = 9.0, noise: float = 0.05, vegetatio
     n_veg = int(round(vegetation * n_ground))
     x = rng.uniform(0, WIDTH, n_ground + n_veg)
     y = rng.uniform(0, HEIGHT, n_ground + n_veg)
-    z = ground_elevation(x, y) + rng.normal(0, noise, x.size)
+    z = ground_elevation(x, y, floodplain) + rng.normal(0, noise, x.size)
     z[n_ground:] += rng.uniform(0.5, 12.0, n_veg)
     classes = np.r_[np.full(n_ground, 2, np.uint8), np.full(n_veg, 1, np.uint8)]
     xyz = np.column_stack([x + DEMO_ORIGIN[0], y + DEMO_ORIGIN[1], z])

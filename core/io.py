@@ -320,8 +320,9 @@ def write_lines_gpkg(path, lines, crs, *, layer="breaklines", attributes=None,
                 atomic=atomic)
 
 
-def write_breaklines(path, lines, crs) -> None:
-    """Write BreakLines with their id, point count, length and slope figures."""
+def write_breaklines(path, lines, crs, *, fit_rms=None) -> None:
+    """Write BreakLines with their id, point count, length and slope figures, and with
+    ``fit_rms`` (one per line, m) the localisation's confidence, ``fit_rms_m``."""
     def per_line(f):
         return np.array([f(line) for line in lines], dtype=float)
 
@@ -334,6 +335,8 @@ def write_breaklines(path, lines, crs) -> None:
             "mean_slope_deg": per_line(lambda line: np.nanmean(line.slopes) if np.isfinite(line.slopes).any() else np.nan),
             "max_slope_deg": per_line(lambda line: np.nanmax(line.slopes) if np.isfinite(line.slopes).any() else np.nan),
         }
+        if fit_rms is not None:
+            attributes["fit_rms_m"] = np.asarray(fit_rms, dtype=float)
     write_lines_gpkg(path, [line.coords for line in lines], crs, attributes=attributes)
 
 

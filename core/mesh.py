@@ -101,9 +101,10 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     boundary; all lines are noded at their crossings and touches on a ``snap``/5 precision grid
     (snap rounding), which also merges vertices closer than that and dissolves duplicate or
     overlapping lines. With ``drop_sharp_corners``, break-line segments that meet another
-    segment at less than ``SHARP_CORNER`` degrees are dropped: Triangle does not refine the
-    triangles in such a corner, so they would break the angle bound. ``note`` receives one line
-    for each kind of repair made.
+    segment at less than ``SHARP_CORNER`` degrees are shortened near the meeting point (to end
+    ``2·snap`` m off the other one; dropped only where that leaves too little): Triangle does
+    not refine the triangles in such a corner, so they would break the angle bound. ``note``
+    receives one line for each kind of repair made.
     """
     if not snap > 0 or not np.isfinite(snap):
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
@@ -154,11 +155,13 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
         shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 2
     segments, on_boundary = _prune_dangles(segments, on_boundary)
     if drop_sharp_corners:
-        before = len(segments)
-        segments = _drop_small_angles(vertices, segments, on_boundary, SHARP_CORNER)
-        if len(segments) < before:
-            note(f"{before - len(segments)} break-line segments meeting another at less than "
-                 f"{SHARP_CORNER:g} degrees were left out, so that the angle bound holds there")
+        vertices, segments, shortened, dropped = _shorten_small_angles(
+            vertices, segments, on_boundary, SHARP_CORNER, 2 * snap)
+        if shortened or dropped:
+            note(f"{shortened + dropped} break-line segments meeting another at less than "
+                 f"{SHARP_CORNER:g} degrees were shortened near the meeting point"
+                 f"{f' ({dropped} too short were left out)' if dropped else ''}, so that the "
+                 "angle bound holds there")
     used = np.unique(segments)
     renumber = np.full(len(vertices), -1)
     renumber[used] = np.arange(len(used))
@@ -194,39 +197,63 @@ def _snapped_domain(domain, grid: float):
     return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 
-def _drop_small_angles(vertices, segments, fixed, limit):
-    """Remove non-``fixed`` segments until no two segments meet at less than ``limit`` degrees."""
-    keep = np.ones(len(segments), bool)
+def _shorten_small_angles(vertices, segments, fixed, limit, gap):
+    """Shorten non-``fixed`` segments at vertices where two segments meet at less than
+    ``limit`` degrees: the segment then starts where it lies ``gap`` from the other one (a new
+    vertex on it), or is dropped where that would leave less than a fifth of it. Returns
+    (vertices, segments, how many shortened, how many dropped)."""
+    vertices = [tuple(v) for v in np.asarray(vertices, float)]
+    segments = [list(map(int, ab)) for ab in segments]
+    keep = [True] * len(segments)
     incident = {}
     for k, (a, b) in enumerate(segments):
         incident.setdefault(a, []).append(k)
         incident.setdefault(b, []).append(k)
     cos_limit = np.cos(np.radians(limit))
-    for v, ks in incident.items():
+    shortened = dropped = 0
+
+    def far_end(k, v):
+        return segments[k][1] if segments[k][0] == v else segments[k][0]
+
+    for v in list(incident):
         changed = True
         while changed:
             changed = False
-            live = [k for k in ks if keep[k]]
+            live = [k for k in incident[v] if keep[k]]
+            here = np.asarray(vertices[v])
             directions = {}
             for k in live:
-                other = segments[k, 1] if segments[k, 0] == v else segments[k, 0]
-                d = vertices[other] - vertices[v]
-                directions[k] = d / np.hypot(*d)
+                d = np.asarray(vertices[far_end(k, v)]) - here
+                directions[k] = (d / np.hypot(*d), float(np.hypot(*d)))
             for i, ki in enumerate(live):
                 for kj in live[i + 1:]:
-                    if directions[ki] @ directions[kj] > cos_limit:
-                        # drop the break-line segment whose far end has fewer other segments
-                        candidates = [k for k in (ki, kj) if not fixed[k]]
-                        if not candidates:
-                            continue
-                        drop = min(candidates, key=lambda k: len(
-                            incident[segments[k, 1] if segments[k, 0] == v else segments[k, 0]]))
-                        keep[drop] = False
-                        changed = True
-                        break
+                    cos = float(directions[ki][0] @ directions[kj][0])
+                    if cos <= cos_limit:
+                        continue
+                    # shorten the break-line segment whose far end has fewer other segments
+                    candidates = [k for k in (ki, kj) if not fixed[k]]
+                    if not candidates:
+                        continue
+                    k = min(candidates, key=lambda k: len(incident[far_end(k, v)]))
+                    unit, length = directions[k]
+                    sine = np.sqrt(max(0.0, 1.0 - cos * cos))
+                    cut = gap / sine if sine > 0 else np.inf
+                    incident[v].remove(k)
+                    if cut > 0.8 * length:
+                        keep[k] = False
+                        dropped += 1
+                    else:
+                        vertices.append(tuple(here + cut * unit))
+                        new = len(vertices) - 1
+                        segments[k] = [new, far_end(k, v)]
+                        incident[new] = [k]
+                        shortened += 1
+                    changed = True
+                    break
                 if changed:
                     break
-    return segments[keep]
+    segments = np.asarray(segments, np.int64).reshape(-1, 2)[np.asarray(keep, bool)]
+    return np.asarray(vertices, float), segments, shortened, dropped
 
 
 def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,

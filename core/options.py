@@ -19,6 +19,8 @@ BREAKPOINT_METHODS = (*SLOPE_METHOD_NAMES, "log")
 LOG_KERNELS = ("pratt", "analytic")
 TRACING_MODES = ("auto", "flat", "steep")
 SIMPLIFY_METHODS = ("keep-every", "douglas-peucker", "spline")
+# node elevations: a local least-squares plane of the measured points, or bilinear from the DEM
+NODE_ELEVATIONS = ("plane", "dem")
 # colours of the residual classes <10 cm, 10–25 cm, >25 cm and of points outside the mesh, in
 # the QGIS style (algorithms/styles.py) and the report's pictures (core/report.py)
 RESIDUAL_CLASS_COLOURS = ("#1a9641", "#fdae61", "#d7191c")
@@ -240,6 +242,11 @@ class RunOptions:
     refine: bool = False            # refine until the residual bounds hold (step 9)
     refine_lower: float = 0.10      # m: refine triangles whose points' RMS residual exceeds it
     refine_upper: float = 0.25      # m: insert points whose residual exceeds it
+    localise: bool = True           # break-line vertices onto a two-plane (hinge) fit's kink
+    node_elevation: str = "plane"   # NODE_ELEVATIONS: other nodes' z from a local plane fit
+    node_radius: float | None = None  # m, the plane fit's radius; default from density, noise
+    conforming: bool = False        # conforming Delaunay (Triangle's switch D)
+    far_field_area: float | None = None  # m², larger triangles away from the break lines
 
     def __post_init__(self):
         self.validate()
@@ -273,6 +280,18 @@ class RunOptions:
         check_holdout(self.holdout)
         check_seed(self.seed)
         check_min_points(self.min_points)
+        check_choice(self.node_elevation, NODE_ELEVATIONS, "node elevation")
+        if self.node_radius is not None:
+            _positive(self.node_radius, "node elevation radius", "metres")
+        if self.far_field_area is not None:
+            far = _positive(self.far_field_area, "far-field area", "m²")
+            if far < self.max_area:
+                raise FloodMeshError(f"the far-field area ({far:g} m²) is below the maximum "
+                                     f"area ({self.max_area:g} m²); give a larger one (or "
+                                     "leave it out)")
+            if self.size_field not in (None, "slope"):
+                raise FloodMeshError("give a size-field raster or a far-field area, not both "
+                                     "(the slope size field combines with it)")
         for name in self.formats:
             export_format(name)
 

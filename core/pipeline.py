@@ -3,7 +3,7 @@ with every intermediate written to an output folder and a report of figures and 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -18,6 +18,7 @@ from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
 from .limits import check_memory, check_triangles
+from .localise import fit_node_elevations, fit_window, localise_traced
 from .mesh import build_mesh, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
@@ -26,6 +27,7 @@ from .options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_
 from .outputs import check_output_folder, staged_folder
 from .refine import refine_mesh
 from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
+from .sizing import far_field_size
 from .slope import laplacian_of_gaussian, slope
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
@@ -82,36 +84,74 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     check_output_folder(out, inputs, run_outputs(options.formats))
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
-               "breaklines": 1, "simplify": 0.5, "mesh": 2, "refine": 4, "assess": 1, "write": 2}
-    if not options.refine:
-        del weights["refine"]
+               "breaklines": 1, "simplify": 0.5, "localise": 0.5, "mesh": 2, "refine": 4,
+               "node elevations": 0.5, "assess": 1, "write": 2}
+    del weights["node elevations" if options.refine else "refine"]
+    if not options.localise:
+        del weights["localise"]
     steps = _Steps(weights, progress, cancelled, log)
     front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
                                                      front.breakpoints, front.traced)
     delta = dem.cell_size / 2
     min_distance = delta if options.min_distance is None else options.min_distance
-    lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
-                      min_distance=min_distance)
+    simplified = lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
+                                   min_distance=min_distance)
+    terrain_fit, confidence, window = {"localise": options.localise,
+                                       "node_elevation": options.node_elevation}, None, None
+    if options.localise or options.node_elevation == "plane":
+        area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+        window = fit_window(front.measured, area, dem.cell_size,
+                            node_radius=options.node_radius, seed=options.seed)
+        terrain_fit.update(asdict(window))
+    if options.localise:
+        lines, confidence, counts = steps.run("localise", localise_traced, lines, front.measured,
+                                              window, s_crit=options.s_crit,
+                                              tolerance=dem.cell_size / 10,
+                                              max_gap=20 * dem.cell_size)
+        terrain_fit.update(counts)
     size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
+    max_area = options.max_area
+    if options.far_field_area is not None:  # grows off the lines, where the terrain is plane
+        far = far_field_size(dem, breakpoints, max_area=max_area,
+                             far_field_area=options.far_field_area,
+                             tolerance=max(0.01, window.noise / 2) if window else 0.02)
+        size = far if size is None else far.with_values(np.fmin(far.values, size.values))
+        max_area = options.far_field_area
     mesh_lines = [line.coords for line in lines] + front.own_lines
+    node_counts = {}
+
+    def elevations(mesh):
+        """Node z with the noise taken out, from the points gridded only (never the held-out)."""
+        if options.node_elevation != "plane":
+            return mesh
+        z, counts = fit_node_elevations(mesh.nodes, front.measured, mesh_lines,
+                                        window.node_radius, on_line=delta / 10)
+        node_counts.update(counts)
+        return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
+
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
-                     max_area=options.max_area, domain=front.domain, size_field=size,
-                     max_triangles=options.max_triangles, note=note)
+                     max_area=max_area, conforming=options.conforming, domain=front.domain,
+                     size_field=size, max_triangles=options.max_triangles, note=note)
     rounds = []
     if options.refine:
         # the points gridded drive the refinement; the held-out ones stay independent
         mesh, rounds = steps.run("refine", refine_mesh, dem, mesh_lines, front.measured,
                                  check=holdout.xyz, domain=front.domain, size_field=size,
-                                 min_angle=options.min_angle, max_area=options.max_area,
+                                 min_angle=options.min_angle, max_area=max_area,
+                                 conforming=options.conforming, elevations=elevations,
                                  lower=options.refine_lower, upper=options.refine_upper,
                                  max_nodes=options.max_triangles, cancelled=cancelled)
+    else:
+        mesh = steps.run("node elevations", elevations, mesh)
+    if node_counts:
+        terrain_fit["nodes"] = node_counts
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
-    deviation = max_deviation(traced, lines)
+    deviation = max_deviation(traced, simplified)
     alpha = deviation / delta if method == "keep-every" else amount / delta
-    quality = mesh_quality(mesh, min_angle=options.min_angle, max_area=options.max_area)
+    quality = mesh_quality(mesh, min_angle=options.min_angle, max_area=max_area)
     stats = accuracy_statistics(res, alpha=alpha, delta=delta)
 
     def write_all(out):
@@ -119,7 +159,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         io.write_raster(out / "dem.tif", dem)
         io.write_raster(out / "slope.tif", slope_grid)
         io.write_raster(out / "breakpoints.tif", breakpoints, valid=valid)
-        io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs)
+        io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs, fit_rms=confidence)
         # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
         if "2dm" not in options.formats:
             io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles)
@@ -153,6 +193,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             **quality,
             **stats,
             "refinement": [asdict(r) for r in rounds],
+            "terrain_fit": terrain_fit,
             "notes": notes,
             "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
             "seconds": steps.seconds,

@@ -41,7 +41,7 @@ class RefineRound:
 
 def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                 check: np.ndarray | None = None, domain=None, size_field=None,
-                min_angle: float = 25.0,
+                min_angle: float = 25.0, conforming: bool = True, elevations=None,
                 max_area: float = 100.0, lower: float = 0.10, upper: float = 0.25,
                 target_rmse: float | None = None, target_max: float | None = None,
                 max_nodes: int = 1_000_000, max_rounds: int = 8,
@@ -49,7 +49,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                 cancelled: Callable[[], bool] | None = None) -> tuple[Mesh, list[RefineRound]]:
     """Refine until the target holds on ``points`` (n, 3), within ``max_nodes`` nodes and
     ``max_rounds`` rounds. Bounds and targets in metres; with no target, rounds go on until
-    nothing is left to refine. ``domain`` and ``size_field`` as for ``build_mesh``.
+    nothing is left to refine. ``domain`` and ``size_field`` as for ``build_mesh``;
+    ``elevations(mesh)`` (or None) gives each round's mesh its node z.
     Returns the last mesh within the budget and every round."""
     points = np.asarray(points, float)
     if points.ndim != 2 or points.shape[1] != 3 or not len(points):
@@ -67,7 +68,10 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         if cancelled is not None and cancelled():
             raise Cancelled()
         mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area, points=inserted,
-                          local_areas=local, domain=domain, size_field=size_field)
+                          local_areas=local, domain=domain, size_field=size_field,
+                          conforming=conforming)
+        if elevations is not None:  # node z from a terrain fit, each round
+            mesh = elevations(mesh)
         if len(mesh.nodes) > max_nodes:
             if best is None:
                 raise FloodMeshError(f"the unrefined mesh already has {len(mesh.nodes)} nodes, "

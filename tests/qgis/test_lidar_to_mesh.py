@@ -124,3 +124,23 @@ def test_spline_and_refinement_through_the_one_step_algorithm(processing, demo_p
     assert report["simplification"]["value"] == 0.75
     assert report["breakline_points_kept"] < 0.5 * report["breakline_points_traced"]
     assert len(report["refinement"]) >= 2  # and the refinement switch reaches it too
+
+
+def test_terrain_fit_options_reach_the_chain(processing, demo_points_file, tmp_path):
+    """Localisation, node elevations, conforming Delaunay and the far field are parameters: the
+    report states what ran (and the fit's window and radius); the lines carry their fit RMS."""
+    runs = {}
+    for name, extra in (("fitted", {"FAR_FIELD_AREA": 400.0}),
+                        ("plain", {"LOCALISE": False, "NODE_ELEVATION": 1, "CONFORMING": True})):
+        out = tmp_path / name
+        processing.run("floodmesh:lidartomesh", {"INPUT": str(demo_points_file), "HOLDOUT": 0.01,
+                                                 "OUTPUT_FOLDER": str(out), **extra})
+        runs[name] = json.loads((out / "report.json").read_text()), out
+    fitted, plain = runs["fitted"][0], runs["plain"][0]
+    assert fitted["options"]["localise"] and fitted["options"]["node_elevation"] == "plane"
+    assert fitted["options"]["far_field_area"] == 400.0 and not fitted["options"]["conforming"]
+    assert fitted["terrain_fit"]["node_radius"] > 0 and fitted["terrain_fit"]["vertices_localised"]
+    assert not plain["options"]["localise"] and plain["options"]["node_elevation"] == "dem"
+    assert plain["options"]["conforming"] and "node_radius" not in plain["terrain_fit"]
+    lines = QgsVectorLayer(str(runs["fitted"][1] / "breaklines.gpkg"), "lines", "ogr")
+    assert lines.fields().indexOf("fit_rms_m") >= 0

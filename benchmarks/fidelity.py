@@ -1,0 +1,181 @@
+"""Terrain fidelity per node: FloodMesh's chain against a uniform 25° mesh and pydelatin on
+analytic floodplains whose true surface and true break lines are known.
+
+    nice .venv/bin/python benchmarks/fidelity.py [--quick] [--chains landed,default]
+
+For each terrain (the demo's geometry with a seed it never saw, and an oblique one: a straight
+river at 32° to the grid, a tributary, a levee and a road), noise (5, 15 cm) and density
+(9, 2 ground points/m²), the whole chain (``run_pipeline``, reference-case options) runs once per
+chain of options; its mesh is scored against the TRUE surface (RMSE over 100,000 random points)
+and its break lines against the true ones (recall, precision within 2 m, pieces per true line).
+Peers, in the same run: uniform 25° Triangle meshes without break lines whose nodes carry the
+exact elevation (the node count at FloodMesh's RMSE interpolated in log-log), and pydelatin
+(greedy TIN, no angle bound) on the same DEM. Ratios are uniform nodes / FloodMesh nodes at the
+same true RMSE; pydelatin's "never" means no error bound brings its mesh of the noisy DEM down
+to FloodMesh's true RMSE. Bars (issue 18, reference case): ≥ 15x, < 2 pieces, recall and
+precision ≥ 0.95.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent.parent))
+
+from floodmesh.core import demo, io  # noqa: E402
+from floodmesh.core.accuracy import tin_elevation  # noqa: E402
+from floodmesh.core.mesh import Mesh, build_mesh  # noqa: E402
+from floodmesh.core.options import RunOptions  # noqa: E402
+from floodmesh.core.pipeline import run_pipeline  # noqa: E402
+from floodmesh.core.validation import score_breaklines  # noqa: E402
+
+_river = shapely.LineString([(-20, 28), (320, 238)])
+OBLIQUE = demo.Floodplain({
+    "river": (_river, demo.Profile(-2.0, 5.0, 9.0)),
+    "tributary": (shapely.LineString([(30, 260), (70, 190), (120, 114)]),
+                  demo.Profile(-1.5, 2.5, 5.5)),
+    "levee": (_river.offset_curve(-32.0), demo.Profile(1.2, 1.5, 5.1)),
+    "road": (shapely.LineString([(175, -10), (240, 50), (320, 90)]), demo.Profile(2.0, 3.5, 6.5)),
+}, terrace=None)
+TERRAINS = {"demo geometry, seed 7": (demo.DEMO, 7), "oblique geometry, seed 11": (OBLIQUE, 11)}
+# option sets of the chain: "landed" is the chain before issue 18's steps (no localisation, node
+# z from the DEM, conforming Delaunay), "default" today's
+CHAINS = {
+    "landed": dict(localise=False, node_elevation="dem", conforming=True),
+    "default": dict(),
+    "conforming": dict(conforming=True),     # today's chain with Triangle's switch D
+    "far-field": dict(far_field_area=400.0),  # today's chain, up to 400 m² where plane
+}
+UNIFORM_AREAS = (50, 20, 10, 5, 2.5, 1.2, 0.6, 0.3)
+DELATIN_ERRORS = (0.6, 0.4, 0.25, 0.15, 0.1, 0.07, 0.05)
+
+
+def true_rmse(mesh: Mesh, floodplain, sample: np.ndarray, truth: np.ndarray) -> float:
+    z = tin_elevation(mesh, sample[:, 0], sample[:, 1])
+    return float(np.sqrt(np.nanmean((z - truth) ** 2)))
+
+
+def nodes_at(rmse: float, curve, extrapolate: bool = True) -> float:
+    """Nodes a curve of (nodes, rmse) needs for ``rmse``, interpolated (or extrapolated from
+    the last two) in log-log; NaN below the curve's least RMSE without ``extrapolate``."""
+    nodes, errors = np.log([c[0] for c in curve]), np.log([c[1] for c in curve])
+    order = np.argsort(errors)
+    nodes, errors = nodes[order], errors[order]
+    x = np.log(rmse)
+    if x < errors[0] and not extrapolate:
+        return float("nan")
+    if x < errors[0]:  # finer than the finest mesh: extend its last step
+        slope = (nodes[1] - nodes[0]) / (errors[1] - errors[0])
+        return float(np.exp(nodes[0] + slope * (x - errors[0])))
+    return float(np.exp(np.interp(x, errors, nodes)))
+
+
+def uniform_curve(dem, floodplain, sample, truth):
+    curve = []
+    for area in UNIFORM_AREAS:
+        mesh = build_mesh(dem, [], min_angle=25, max_area=area)
+        local = mesh.nodes[:, :2] - demo.DEMO_ORIGIN
+        exact = Mesh(np.column_stack([mesh.nodes[:, :2], demo.ground_elevation(
+            local[:, 0], local[:, 1], floodplain)]), mesh.triangles, mesh.crs)
+        curve.append((len(mesh.nodes), true_rmse(exact, floodplain, sample, truth)))
+    return curve
+
+
+def delatin_curve(dem, floodplain, sample, truth):
+    try:
+        from pydelatin import Delatin
+    except ImportError:
+        return None
+    z = np.where(np.isfinite(dem.values), dem.values, np.nanmean(dem.values)).astype(np.float32)
+    curve = []
+    for error in DELATIN_ERRORS:
+        tin = Delatin(z, width=dem.shape[1], height=dem.shape[0], max_error=error)
+        vx, vy = dem.cell_centres(dem.shape[0] - 1 - tin.vertices[:, 1], tin.vertices[:, 0])
+        mesh = Mesh(np.column_stack([vx, vy, tin.vertices[:, 2]]),
+                    tin.triangles.astype(np.int64), dem.crs)
+        curve.append((len(mesh.nodes), true_rmse(mesh, floodplain, sample, truth)))
+    return curve
+
+
+def run_case(name, floodplain, seed, noise, density, chains, work: Path):
+    points, classes = demo.synthetic_floodplain(density=density, noise=noise, seed=seed,
+                                                floodplain=floodplain)
+    source = work / "points.laz"
+    io.write_points_las(source, points, classes=classes)
+    rng = np.random.default_rng(seed + 1000)
+    local = np.column_stack([rng.uniform(2, demo.WIDTH - 2, 100_000),
+                             rng.uniform(2, demo.HEIGHT - 2, 100_000)])
+    truth = demo.ground_elevation(local[:, 0], local[:, 1], floodplain)
+    sample = local + demo.DEMO_ORIGIN
+    reference = [shapely.affinity.translate(g, *demo.DEMO_ORIGIN)
+                 for g in demo.true_breaklines(floodplain)]
+    rows, dem = [], None
+    for chain in chains:
+        out = work / chain
+        start = time.perf_counter()
+        report = run_pipeline(source, out, RunOptions(**CHAINS[chain]))
+        seconds = time.perf_counter() - start
+        nodes, triangles = io.read_mesh_2dm(out / "mesh.2dm")
+        mesh = Mesh(nodes, triangles, points.crs)
+        score = score_breaklines(io.read_lines_gpkg(out / "breaklines.gpkg"), reference, 2.0)
+        rows.append((chain, len(nodes), true_rmse(mesh, floodplain, sample, truth), score,
+                     report["min_angle_deg"], seconds))
+        dem = io.read_raster(out / "dem.tif")
+    uniform = uniform_curve(dem, floodplain, sample, truth)
+    delatin = delatin_curve(dem, floodplain, sample, truth)
+    print(f"\n## {name}, {density:g} points/m², {100 * noise:g} cm noise")
+    print(f"{'chain':<10}{'nodes':>8}{'true RMSE cm':>14}{'uniform/ours':>14}"
+          f"{'delatin/ours':>14}{'recall':>8}{'precision':>10}{'pieces':>8}{'min angle':>11}"
+          f"{'s':>6}")
+    results = []
+    for chain, n, rmse, score, angle, seconds in rows:
+        ratio = nodes_at(rmse, uniform) / n
+        peer = nodes_at(rmse, delatin, extrapolate=False) / n if delatin else np.nan
+        peer = f"{peer:>14.1f}" if np.isfinite(peer) else f"{'never':>14}"
+        print(f"{chain:<10}{n:>8,}{100 * rmse:>14.2f}{ratio:>13.1f}x{peer}"
+              f"{score['recall']:>8.3f}{score['precision']:>10.3f}{score['mean_pieces']:>8.2f}"
+              f"{angle:>10.1f}°{seconds:>6.0f}")
+        results.append((chain, ratio, score))
+    print("uniform 25° (exact z): " + ", ".join(f"{n:,} nodes {100 * r:.2f} cm"
+                                                for n, r in uniform[2::2]))
+    if delatin:
+        print("pydelatin (DEM):       " + ", ".join(f"{n:,} nodes {100 * r:.2f} cm"
+                                                    for n, r in delatin[1::2]))
+    return results
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true",
+                        help="only the reference case (demo geometry, 9 points/m², 5 cm)")
+    parser.add_argument("--chains", default="landed,default",
+                        help=f"option sets to run, of {', '.join(CHAINS)}")
+    args = parser.parse_args()
+    chains = args.chains.split(",")
+    cases = [(t, n, d) for t in TERRAINS for n in (0.05, 0.15) for d in (9.0, 2.0)]
+    if args.quick:
+        cases = cases[:1]
+    summary = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for terrain, noise, density in cases:
+            floodplain, seed = TERRAINS[terrain]
+            for chain, ratio, score in run_case(terrain, floodplain, seed, noise, density,
+                                                chains, Path(tmp)):
+                summary.append((terrain, noise, density, chain, ratio, score))
+    print("\n## Summary: nodes a uniform 25° mesh needs for the same true RMSE, per FloodMesh "
+          "node (bars: 15x reference case, goal 30x and 10x at 15 cm)")
+    for terrain, noise, density, chain, ratio, score in summary:
+        print(f"{terrain:<28}{density:>4g}/m² {100 * noise:>3g} cm  {chain:<10}{ratio:>6.1f}x  "
+              f"pieces {score['mean_pieces']:.2f}  recall {score['recall']:.3f}  "
+              f"precision {score['precision']:.3f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,145 @@
+"""Terrain fits on analytic surfaces: a noisy hinge (bank top) whose crest line is known, and a
+noisy plane whose elevation is known."""
+import numpy as np
+import pytest
+
+from floodmesh.core.localise import (estimate_noise, fit_node_elevations, fit_window,
+                                     localise_breaklines)
+
+ANGLE = np.radians(35.0)  # the crest runs at 35° to the grid, the hard case for the tracer
+TANGENT = np.array([np.cos(ANGLE), np.sin(ANGLE)])
+NORMAL = np.array([-np.sin(ANGLE), np.cos(ANGLE)])
+
+
+def hinge(xy):
+    """Flat to the right of the crest line through (50, 50), a 1:2 bank to its left."""
+    u = (xy - 50.0) @ NORMAL
+    return 10.0 + 0.5 * np.maximum(u, 0.0) + 0.002 * (xy @ TANGENT)
+
+
+def noisy_points(surface, *, density=9.0, noise=0.05, seed=0):
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 100, (int(density * 100 * 100), 2))
+    return np.column_stack([xy, surface(xy) + rng.normal(0, noise, len(xy))])
+
+
+@pytest.mark.parametrize("density, noise, bound", [(9.0, 0.05, 0.10), (2.0, 0.15, 0.30)])
+def test_crest_localised_on_a_noisy_hinge(density, noise, bound):
+    points = noisy_points(hinge, density=density, noise=noise)
+    window = fit_window(points, 100 * 100, 1.0)
+    assert window.noise == pytest.approx(noise, rel=0.25)
+    # a traced line: the crest's staircase, 0.3–0.6 m off it to either side
+    s = np.arange(-25, 26, 4.0)
+    offset = np.where(np.arange(len(s)) % 2, 0.6, -0.3)
+    xy = 50.0 + s[:, None] * TANGENT + offset[:, None] * NORMAL
+    line = np.column_stack([xy, hinge(xy)])
+    [moved], [confidence], [kink] = localise_breaklines([line], points, window)
+    off = np.abs((moved[:, :2] - 50.0) @ NORMAL)
+    assert np.isfinite(confidence).mean() > 0.8
+    # the bound: 90 % of the vertices within it, half of them within a third of it
+    assert np.median(off) < bound / 3 and np.percentile(off, 90) < bound
+    assert np.median(np.abs(offset)) > 2 * np.median(off)
+    # z from the fit: the crest's true height, with much less than the noise
+    assert np.median(np.abs(moved[:, 2] - hinge(moved[:, :2]))) < 0.3 * noise
+    assert np.nanmedian(confidence) == pytest.approx(noise, rel=0.3)
+    assert np.nanmin(kink) > 0.3  # the bank's foot as the hinge sees it: a toe (slope rises)
+
+
+def test_no_kink_no_move():
+    """On a plane there is no hinge: the vertices stay where they were."""
+    points = noisy_points(lambda xy: 5.0 + 0.05 * xy[:, 0])
+    xy = 50.0 + np.arange(-20, 21, 4.0)[:, None] * TANGENT
+    line = np.column_stack([xy, np.zeros(len(xy))])
+    window = fit_window(points, 1e4, 1.0)
+    [moved], [confidence], [kink] = localise_breaklines([line], points, window)
+    assert np.isnan(confidence).mean() > 0.8
+    assert np.abs(moved[:, :2] - xy).max(axis=1).mean() < 0.05
+
+
+def test_node_elevations_take_the_noise_out_on_a_plane():
+    def plane(xy):
+        return 3.0 + 0.01 * xy[:, 0] - 0.02 * xy[:, 1]
+
+    noise = 0.05
+    points = noisy_points(plane, noise=noise, seed=1)
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(10, 90, (500, 2))
+    noisy = np.column_stack([xy, plane(xy) + rng.normal(0, noise, len(xy))])
+    line = np.array([[20.0, 20.0, 1.0], [80.0, 20.0, 2.0]])  # a line with its own z
+    noisy[0, :2] = (50.0, 20.0)
+    z, counts = fit_node_elevations(noisy, points, [line], 1.5, on_line=0.05)
+    assert z[0] == pytest.approx(1.5)  # on the line: z along it
+    error = z[1:] - plane(xy[1:])
+    assert counts["plane_fitted"] >= 490
+    assert np.sqrt(np.mean(error ** 2)) < 0.25 * noise
+
+
+def test_noise_estimate():
+    points = noisy_points(hinge, noise=0.10, seed=3)
+    assert estimate_noise(points, 9.0) == pytest.approx(0.10, rel=0.15)
+
+
+def test_chain_fits_the_terrain_on_the_demo_floodplain(demo_points_file, tmp_path):
+    """run_pipeline with the fits (the defaults) against the chain without them, scored on the
+    demo's TRUE surface: a lower true RMSE with no more nodes; report.json states the fits."""
+    from floodmesh.core import demo, io
+    from floodmesh.core.accuracy import tin_elevation
+    from floodmesh.core.mesh import Mesh
+    from floodmesh.core.options import RunOptions
+    from floodmesh.core.pipeline import run_pipeline
+
+    rng = np.random.default_rng(0)
+    local = rng.uniform((2, 2), (demo.WIDTH - 2, demo.HEIGHT - 2), (20_000, 2))
+    truth = demo.ground_elevation(local[:, 0], local[:, 1])
+    result = {}
+    for name, options in (("fitted", RunOptions(holdout=0.01)),
+                          ("plain", RunOptions(holdout=0.01, localise=False,
+                                               node_elevation="dem", conforming=True))):
+        report = run_pipeline(demo_points_file, tmp_path / name, options)
+        nodes, triangles = io.read_mesh_2dm(tmp_path / name / "mesh.2dm")
+        z = tin_elevation(Mesh(nodes, triangles, None), *(local + demo.DEMO_ORIGIN).T)
+        result[name] = len(nodes), float(np.sqrt(np.nanmean((z - truth) ** 2))), report
+    (n_fit, rmse_fit, report), (n_plain, rmse_plain, _) = result["fitted"], result["plain"]
+    assert n_fit <= n_plain and rmse_fit < 0.7 * rmse_plain
+    fit = report["terrain_fit"]
+    assert fit["node_radius"] > 0 and fit["half_width"] > 0 and 0.03 < fit["noise"] < 0.08
+    assert fit["vertices_localised"] > 0.7 * fit["vertices"]
+    assert fit["nodes"]["plane_fitted"] > 0.3 * report["nodes"]
+
+
+def test_a_line_hopping_from_crest_to_toe_is_cut():
+    """A traced line that follows a bank's crest, hops across the 3 m wide bank and goes on along
+    its toe (the staircase of an oblique band) comes out as two pieces, on the crest and toe."""
+    from floodmesh.core.breaklines import BreakLine
+    from floodmesh.core.localise import localise_traced
+
+    def bank(xy):
+        u = (xy - 50.0) @ NORMAL
+        return 10.0 - 0.5 * np.clip(u, 0.0, 3.0)  # crest at u = 0, toe at u = 3
+
+    points = noisy_points(bank)
+    s = np.arange(-24, 25, 4.0)
+    u = np.where(s < 0, 0.3, 2.7)
+    xy = 50.0 + s[:, None] * TANGENT + u[:, None] * NORMAL
+    line = BreakLine(np.column_stack([xy, bank(xy)]), np.full(len(s), 20.0))
+    pieces, confidence, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0))
+    assert counts["hop_segments_cut"] == 1 and len(pieces) == len(confidence) == 2
+    for piece, at in zip(pieces, (0.0, 3.0)):
+        off = (piece.coords[:, :2] - 50.0) @ NORMAL - at
+        assert np.abs(off).max() < 0.15
+
+
+def test_a_loop_without_a_kink_keeps_its_course():
+    """Thinning drops unmoved vertices only over short stretches along the line: a closed loop
+    on a plane (no kink anywhere, its ends 1 m apart) keeps its whole length."""
+    from floodmesh.core.breaklines import BreakLine
+    from floodmesh.core.localise import localise_traced
+
+    points = noisy_points(lambda xy: 5.0 + 0.3 * xy[:, 0])
+    square = [(30, 30), (70, 30), (70, 70), (30, 70), (30, 31)]
+    xy = np.concatenate([np.linspace(a, b, 10, endpoint=False)
+                         for a, b in zip(square[:-1], square[1:])] + [[square[-1]]])
+    line = BreakLine(np.column_stack([xy, 5.0 + 0.3 * xy[:, 0]]), np.full(len(xy), 16.7))
+    [out], _, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0))
+    assert counts["vertices_localised"] == 0
+    assert out.length == pytest.approx(line.length, rel=1e-6)
