@@ -279,31 +279,34 @@ def cmd_grid(args):
 
 
 def cmd_slope(args):
-    from . import io
-    from .slope import laplacian_of_gaussian, slope
+    from .slope import laplacian_of_gaussian_file, slope_file
 
-    dem = io.read_raster(args.dem, crs=args.crs)
+    bar = ProgressBar(args.method)
+    try:  # file to file, block by block
+        if args.method == "log":
+            laplacian_of_gaussian_file(args.dem, args.out, args.sigma, kernel=args.log_kernel,
+                                       crs=args.crs, progress=bar)
+        else:
+            slope_file(args.dem, args.out, args.method, crs=args.crs, progress=bar)
+    finally:
+        bar.close()
     if args.method == "log":
-        io.write_raster(args.out, laplacian_of_gaussian(dem, args.sigma, kernel=args.log_kernel))
         print(f"Laplacian-of-Gaussian response (sigma {args.sigma} m, m) written to {args.out}")
     else:
-        io.write_raster(args.out, slope(dem, args.method))
         print(f"slope ({args.method}, degrees) written to {args.out}")
 
 
 def cmd_breakpoints(args):
-    import numpy as np
+    from .breakpoints import breakpoints_file
 
-    from . import io
-    from .breakpoints import classify_breakpoints, log_breakpoints
-
-    grid = io.read_raster(args.slope, crs=args.crs)
-    if args.sensitivity is not None:
-        bp = log_breakpoints(grid, args.sensitivity, zero_crossings=args.zero_crossings)
-    else:
-        bp = classify_breakpoints(grid, args.s_crit)
-    io.write_raster(args.out, bp, valid=np.isfinite(grid.values))
-    print(f"{int(bp.values.sum())} breakpoints written to {args.out}")
+    bar = ProgressBar("breakpoints")
+    try:  # file to file, block by block
+        count = breakpoints_file(args.slope, args.out, s_crit=args.s_crit,
+                                 sensitivity=args.sensitivity,
+                                 zero_crossings=args.zero_crossings, crs=args.crs, progress=bar)
+    finally:
+        bar.close()
+    print(f"{count} breakpoints written to {args.out}")
 
 
 def cmd_breaklines(args):

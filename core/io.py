@@ -160,6 +160,45 @@ def write_points_las(path, points: PointCloud, *, classes=GROUND_CLASS) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # rasters
+def raster_crs(src, path: Path, crs=None):
+    """The checked CRS of an open rasterio dataset (``crs`` overrides the file's): refuses
+    control-point georeferencing, rotated or non-square grids, and CRSs not in metres."""
+    transform, file_crs = src.transform, src.crs
+    if src.gcps[0] and transform.is_identity:
+        raise FloodMeshError(
+            f"raster {path.name} is georeferenced by control points, not a geotransform: "
+            "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
+    check_transform(transform, f"raster {path.name}")
+    return require_metric_crs(crs if crs is not None else
+                              (file_crs.to_wkt() if file_crs else None),
+                              f"raster {path.name}", kind="raster")
+
+
+def no_valid_cells(path) -> FloodMeshError:
+    return FloodMeshError(f"raster {Path(path).name} has no valid cells (all nodata or NaN): "
+                          "check its nodata value and that it is the right file")
+
+
+def _read_band(src, window=None, dtype=np.float64) -> np.ndarray:
+    """Band 1 (or a window of it) as ``dtype`` with NaN for nodata and ±inf, in one buffer (no
+    masked array) unless the file masks cells by a mask band rather than a nodata value."""
+    from rasterio.enums import MaskFlags
+
+    flags = src.mask_flag_enums[0]
+    if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags:
+        values = src.read(1, window=window, masked=True).astype(dtype).filled(np.nan)
+    else:
+        values = src.read(1, window=window, out_dtype=dtype)
+    bad = ~np.isfinite(values)  # ±inf cells are nodata too
+    if src.nodata is not None and np.isfinite(src.nodata):
+        # compare in the file's own type: a float32 nodata written as text may not round-trip
+        native = np.dtype(src.dtypes[0])
+        nodata = native.type(src.nodata) if native.kind == "f" else src.nodata
+        bad |= values == values.dtype.type(nodata)
+    values[bad] = np.nan
+    return values
+
+
 def read_raster(path, *, crs=None) -> Grid:
     """Read band 1 of a raster as a float64 Grid with NaN for nodata."""
     import rasterio
@@ -167,24 +206,14 @@ def read_raster(path, *, crs=None) -> Grid:
     path = _require_file(path, "raster")
     try:
         with rasterio.open(path) as src:
-            transform, file_crs = src.transform, src.crs
-            if src.gcps[0] and transform.is_identity:
-                raise FloodMeshError(
-                    f"raster {path.name} is georeferenced by control points, not a geotransform: "
-                    "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
-            check_transform(transform, f"raster {path.name}")
-            crs = require_metric_crs(crs if crs is not None else
-                                     (file_crs.to_wkt() if file_crs else None),
-                                     f"raster {path.name}", kind="raster")
+            transform, crs = src.transform, raster_crs(src, path, crs)
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
-            values = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+            values = _read_band(src)
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
-    values[~np.isfinite(values)] = np.nan  # ±inf cells are nodata too
     if not np.isfinite(values).any():
-        raise FloodMeshError(f"raster {path.name} has no valid cells (all nodata or NaN): check "
-                             "its nodata value and that it is the right file")
+        raise no_valid_cells(path)
     return Grid(values, transform, crs)
 
 
