@@ -110,6 +110,139 @@ def bench_slope(size):
                 print(f"{method:<22}{t:>10.2f}{'-':>12}{'-':>12}")
 
 
+def synthetic_dem_file(path, size, *, noise=0.02, strip=500):
+    """A smooth float32 DEM (rolling ground, 2 cm noise) of ``size``² 1 m cells, written in
+    strips in FloodMesh's own GeoTIFF format, as ``floodmesh grid`` writes it."""
+    import rasterio
+
+    from floodmesh.core.blocks import raster_profile
+
+    rng = np.random.default_rng(0)
+    transform = Affine(1.0, 0, 400000, 0, -1.0, 5600000 + size)
+    with rasterio.open(path, "w", **raster_profile((size, size), transform, CRS_M, "float32",
+                                                   -9999.0)) as dst:
+        for r0 in range(0, size, strip):
+            h = min(strip, size - r0)
+            yy, xx = np.mgrid[r0:r0 + h, 0:size].astype(np.float32)
+            z = 20 + 3 * np.sin(xx / 37) * np.cos(yy / 53) + rng.normal(0, noise, (h, size))
+            dst.write(z.astype(np.float32), 1, window=rasterio.windows.Window(0, r0, size, h))
+
+
+def run_process(args):
+    """(wall seconds, CPU seconds, peak RSS MB) of one whole process, start-up included."""
+    import os
+    import subprocess
+
+    start = time.perf_counter()
+    proc = subprocess.Popen([str(a) for a in args], stdout=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
+        raise SystemExit(f"{args[0]} failed with exit code {proc.returncode}")
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
+
+
+def floodmesh_command():
+    exe = Path(sys.executable).with_name("floodmesh")
+    return [exe] if exe.exists() else [sys.executable, "-m", "floodmesh.core.cli"]
+
+
+def bench_slope_file(sizes, repeat=3):
+    """``floodmesh slope`` file to file against ``gdaldem slope`` on the same DEM file, each a
+    whole process (start-up included), alternating, best of ``repeat``, with peak RSS."""
+    import rasterio
+
+    print(f"\n## Slope file to file, whole processes, alternating, best of {repeat} "
+          "(bar: 2x faster than gdaldem, peak RSS at most gdaldem's + 50 %)")
+    print(f"{'DEM':<13}{'command':<44}{'wall s':>8}{'CPU s':>7}{'peak MB':>9}"
+          f"{'speed vs gdaldem':>18}{'RSS vs gdaldem':>16}")
+    pairs = (("sharpnack-akin", "Horn"), ("zevenbergen-thorne", "ZevenbergenThorne"))
+    with tempfile.TemporaryDirectory(dir=Path.cwd()) as tmp:
+        for size in sizes:
+            dem = Path(tmp) / "dem.tif"
+            synthetic_dem_file(dem, size)
+            for method, alg in pairs[:1] if size > 6000 else pairs:
+                ours = floodmesh_command() + ["slope", dem, "--method", method, "--out",
+                                              Path(tmp) / "ours.tif"]
+                peer = ["gdaldem", "slope", "-alg", alg, "-q", dem, Path(tmp) / "gdal.tif"]
+                run_process(ours)  # loads numba's cache and the file into the page cache
+                runs = {"ours": [], "peer": []}
+                for _ in range(repeat):
+                    runs["ours"].append(run_process(ours))
+                    runs["peer"].append(run_process(peer))
+                best = {k: min(v) for k, v in runs.items()}
+                rss = {k: min(r[2] for r in v) for k, v in runs.items()}
+                cpu = {k: min(r[1] for r in v) for k, v in runs.items()}
+                for key, label in (("ours", f"floodmesh slope --method {method}"),
+                                   ("peer", f"gdaldem slope -alg {alg}")):
+                    ratio = (f"{best['peer'][0] / best['ours'][0]:>17.2f}x"
+                             f"{rss['ours'] / rss['peer']:>15.2f}x" if key == "ours" else "")
+                    print(f"{f'{size}²':<13}{label:<44}"
+                          f"{best[key][0]:>8.2f}{cpu[key]:>7.2f}{rss[key]:>9.0f}{ratio}")
+                with rasterio.open(Path(tmp) / "ours.tif") as a, \
+                        rasterio.open(Path(tmp) / "gdal.tif") as b:
+                    window = rasterio.windows.Window(1, 1, size - 2, min(500, size - 2))
+                    diff = np.abs(a.read(1, window=window).astype(float)
+                                  - b.read(1, window=window))
+                print(f"{'':<13}max |difference| from gdaldem in rows 1-500: {diff.max():.1e}°")
+
+
+CODECS = (("none", {}), ("DEFLATE (before)", dict(compress="deflate")),
+          ("LZW + predictor", dict(compress="lzw", predictor="PRED")),
+          ("ZSTD 1", dict(compress="zstd", zstd_level=1)),
+          ("ZSTD 1 + predictor", dict(compress="zstd", zstd_level=1, predictor="PRED")),
+          ("ZSTD 3 + predictor", dict(compress="zstd", zstd_level=3, predictor="PRED")))
+
+
+def bench_codec(size, repeat=3):
+    """GeoTIFF codecs on FloodMesh's rasters (DEM, slope, breakpoints): write and read time
+    (wall and CPU, GDAL's NUM_THREADS on) and size, best of ``repeat``: how the output codec
+    was chosen."""
+    import os
+
+    import rasterio
+
+    from floodmesh.core.blocks import TILE
+    from floodmesh.core.breakpoints import classify_breakpoints
+    from floodmesh.core.slope import slope
+
+    with tempfile.TemporaryDirectory(dir=Path.cwd()) as tmp:
+        synthetic_dem_file(Path(tmp) / "dem.tif", size)
+        with rasterio.open(Path(tmp) / "dem.tif") as src:
+            z = src.read(1)
+        dem = Grid(z, Affine(1.0, 0, 400000, 0, -1.0, 5600000 + size), CRS_M)
+        s = slope(dem, "one-over-distance").values.astype(np.float32)
+        rasters = {"DEM": (z, 3), "slope": (s, 3),
+                   "breakpoints": (classify_breakpoints(dem.with_values(s), 10.0).values, 2)}
+        print(f"\n## GeoTIFF codecs, {size}² tiled {TILE}², NUM_THREADS=ALL_CPUS "
+              f"(best of {repeat})")
+        print(f"{'raster':<13}{'codec':<22}{'write s':>8}{'CPU s':>7}{'read s':>8}{'MB':>8}")
+        for name, (values, predictor) in rasters.items():
+            for label, options in CODECS:
+                options = {k: (predictor if v == "PRED" else v) for k, v in options.items()}
+                if name == "breakpoints" and options.get("predictor") == 3:
+                    continue
+                path = Path(tmp) / "out.tif"
+                profile = dict(driver="GTiff", height=size, width=size, count=1,
+                               dtype=values.dtype, crs=CRS_M.to_wkt(),
+                               transform=dem.transform, tiled=True, blockxsize=TILE,
+                               blockysize=TILE, num_threads="ALL_CPUS", **options)
+                wall = cpu = read = np.inf
+                for _ in range(repeat):
+                    t, c = time.perf_counter(), time.process_time()
+                    with rasterio.open(path, "w", **profile) as dst:
+                        dst.write(values, 1)
+                    wall = min(wall, time.perf_counter() - t)
+                    cpu = min(cpu, time.process_time() - c)
+                    t = time.perf_counter()
+                    with rasterio.Env(GDAL_NUM_THREADS="ALL_CPUS"), rasterio.open(path) as src:
+                        src.read(1)
+                    read = min(read, time.perf_counter() - t)
+                print(f"{name:<13}{label:<22}{wall:>8.2f}{cpu:>7.2f}{read:>8.2f}"
+                      f"{os.path.getsize(path) / 1e6:>8.0f}")
+
+
 def bench_trace(n_breakpoints):
     """Tracing ``n_breakpoints`` (about) on a dense net of ridges, against scipy's connected
     component labelling of the same breakpoints (one pass over the same cells: a floor)."""
@@ -264,13 +397,21 @@ def bench_delatin(dem, coords, holdout):
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", default="grid,slope,trace,lines,mesh")
+    parser.add_argument("--only", default="slopefile,grid,slope,trace,lines,mesh")
+    parser.add_argument("--codec-size", type=int, default=4000,
+                        help="raster side for the codec comparison")
+    parser.add_argument("--file-sizes", default="6000,10000",
+                        help="DEM sides for file-to-file slope against gdaldem")
     parser.add_argument("--points", type=int, default=1_000_000, help="points to grid")
     parser.add_argument("--size", type=int, default=4000, help="raster side for slope")
     parser.add_argument("--breakpoints", type=int, default=1_000_000,
                         help="breakpoints to trace")
     args = parser.parse_args()
     chosen = set(args.only.split(","))
+    if "codec" in chosen:
+        bench_codec(args.codec_size)
+    if "slopefile" in chosen:
+        bench_slope_file([int(n) for n in args.file_sizes.split(",")])
     if "grid" in chosen:
         bench_grid(args.points)
     if "slope" in chosen:

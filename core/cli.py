@@ -200,7 +200,11 @@ def _summary(report: dict, out: Path) -> str:
 
 def cmd_run(args):
     from .pipeline import run_pipeline
+    from .warmup import compile_note
 
+    note = compile_note()
+    if note:  # never a silent two-minute pause
+        print(f"floodmesh: {note}", file=sys.stderr)
     bar = ProgressBar("run")
     try:
         report = run_pipeline(args.input, args.out, _options(args), progress=bar, log=bar.log)

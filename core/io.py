@@ -218,8 +218,11 @@ def read_raster(path, *, crs=None) -> Grid:
 
 
 def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
-    """Write a Grid as a compressed GeoTIFF; float NaN (or cells outside ``valid``) become nodata."""
+    """Write a Grid as a tiled, compressed GeoTIFF (``blocks.raster_profile``); float NaN (or
+    cells outside ``valid``) become nodata."""
     import rasterio
+
+    from .blocks import raster_profile
 
     values = grid.values
     if values.dtype == bool:
@@ -233,13 +236,7 @@ def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
         values = values.astype(np.uint8)
     if valid is not None:
         values = np.where(valid, values, nodata)
-    profile = dict(driver="GTiff", height=values.shape[0], width=values.shape[1], count=1,
-                   dtype=values.dtype, crs=grid.crs.to_wkt(), transform=grid.transform,
-                   nodata=nodata, compress="deflate", tiled=True, blockxsize=256, blockysize=256)
-    if values.shape[0] < 256 or values.shape[1] < 256:
-        profile.update(tiled=False)
-        profile.pop("blockxsize")
-        profile.pop("blockysize")
+    profile = raster_profile(values.shape, grid.transform, grid.crs, values.dtype, nodata)
     with atomic_output(path) as tmp:
         with rasterio.open(tmp, "w", **profile) as dst:
             dst.write(values, 1)
