@@ -243,6 +243,96 @@ def bench_codec(size, repeat=3):
                       f"{os.path.getsize(path) / 1e6:>8.0f}")
 
 
+def synthetic_points(n_points, seed=0):
+    """(n, 3) points at 9 per m² over a square, on the demo floodplain's terrain repeated."""
+    from floodmesh.core.demo import ground_elevation
+
+    side = np.sqrt(n_points / 9.0)
+    rng = np.random.default_rng(seed)
+    x, y = rng.uniform(0, side, n_points), rng.uniform(0, side, n_points)
+    return np.column_stack([x + 400_000, y + 5_600_000, ground_elevation(x % 300, y % 240)
+                            + rng.normal(0, 0.03, n_points)])
+
+
+def bench_grid_file(n_points, repeat=3):
+    """``floodmesh grid`` against ``gdal_grid -a linear`` (GDAL's Delaunay TIN) on the same
+    CSV points and the same 1 m grid, whole processes, alternating, best of ``repeat``."""
+    import rasterio
+
+    from floodmesh.core import io
+
+    xyz = synthetic_points(n_points)
+    with tempfile.TemporaryDirectory(dir=Path.cwd()) as tmp:
+        tmp = Path(tmp)
+        np.savetxt(tmp / "points.csv", xyz, fmt="%.3f", delimiter=",", header="x,y,z",
+                   comments="")
+        (tmp / "points.vrt").write_text(
+            '<OGRVRTDataSource><OGRVRTLayer name="points"><SrcDataSource>'
+            f'{tmp / "points.csv"}</SrcDataSource><GeometryType>wkbPoint</GeometryType>'
+            '<LayerSRS>EPSG:25832</LayerSRS><GeometryField encoding="PointFromColumns" x="x" '
+            'y="y" z="z"/></OGRVRTLayer></OGRVRTDataSource>')
+        ours = floodmesh_command() + ["grid", tmp / "points.csv", "--crs", "EPSG:25832",
+                                      "--cell-size", 1, "--max-gap", 1e6, "--out",
+                                      tmp / "ours.tif"]
+        run_process(ours)
+        with rasterio.open(tmp / "ours.tif") as src:
+            (x0, y0, x1, y1), rows, cols = src.bounds, src.height, src.width
+        peer = ["gdal_grid", "-q", "-a", "linear", "-ot", "Float32", "-txe", x0, x1, "-tye", y1,
+                y0, "-outsize", cols, rows, "-l", "points", tmp / "points.vrt", tmp / "gdal.tif"]
+        runs = {"ours": [], "peer": []}
+        for _ in range(repeat):
+            runs["ours"].append(run_process(ours))
+            runs["peer"].append(run_process(peer))
+        a = io.read_raster(tmp / "ours.tif").values
+        with rasterio.open(tmp / "gdal.tif") as src:
+            b = src.read(1).astype(float)
+            b[b == src.nodata] = np.nan
+    both = np.isfinite(a) & np.isfinite(b)
+    best = {k: min(v) for k, v in runs.items()}
+    print(f"\n## Gridding {n_points:,} CSV points (9 points/m²) to a {cols} x {rows} 1 m grid, "
+          f"whole processes, alternating, best of {repeat}")
+    print(f"{'command':<34}{'wall s':>8}{'CPU s':>7}{'peak MB':>9}")
+    for key, label in (("ours", "floodmesh grid"), ("peer", "gdal_grid -a linear (peer)")):
+        wall, cpu, rss = best[key]
+        print(f"{label:<34}{wall:>8.2f}{cpu:>7.2f}{rss:>9.0f}")
+    diff = np.abs(a[both] - b[both])
+    print(f"speed ratio gdal_grid/ours {best['peer'][0] / best['ours'][0]:.1f}x; |difference| on "
+          f"{both.sum():,} common cells: median {np.median(diff):.1e} m, 99.9 % "
+          f"{np.percentile(diff, 99.9):.1e} m, max {diff.max():.1e} m (float32 output; the TINs "
+          "differ where four points are cocircular)")
+
+
+def bench_run(n_points):
+    """``floodmesh run`` on one LAZ of ``n_points`` (9 per m²: 1 km² for 9 M), whole process with
+    peak RSS, and the report's seconds per step."""
+    import json
+
+    import laspy
+
+    from floodmesh.core import io
+    from floodmesh.core.points import PointCloud
+
+    with tempfile.TemporaryDirectory(dir=Path.cwd()) as tmp:
+        tmp = Path(tmp)
+        start = time.perf_counter()
+        io.write_points_las(tmp / "points.laz", PointCloud(synthetic_points(n_points), CRS_M))
+        written = time.perf_counter() - start
+        assert laspy.read(tmp / "points.laz").header.point_count == n_points
+        wall, cpu, rss = run_process(floodmesh_command() + ["run", tmp / "points.laz", "--out",
+                                                            tmp / "out"])
+        report = json.loads((tmp / "out" / "report.json").read_text())
+    area = n_points / 9.0 / 1e6
+    print(f"\n## floodmesh run, one LAZ of {n_points:,} points ({area:.2f} km², 9 points/m², "
+          f"written in {written:.0f} s), reference case (goal: 10 s end to end)")
+    print(f"{'step':<16}{'seconds':>9}")
+    for step, seconds in report["seconds"].items():
+        print(f"{step:<16}{seconds:>9.2f}")
+    print(f"{'sum of steps':<16}{sum(report['seconds'].values()):>9.2f}")
+    print(f"{'whole process':<16}{wall:>9.2f}   CPU {cpu:.1f} s, peak RSS {rss:,.0f} MB; "
+          f"{report['grid']['cols']} x {report['grid']['rows']} cells, "
+          f"{report['n_breaklines']} break lines, {report['nodes']:,} nodes")
+
+
 def bench_trace(n_breakpoints):
     """Tracing ``n_breakpoints`` (about) on a dense net of ridges, against scipy's connected
     component labelling of the same breakpoints (one pass over the same cells: a floor)."""
@@ -397,7 +487,12 @@ def bench_delatin(dem, coords, holdout):
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", default="slopefile,grid,slope,trace,lines,mesh")
+    parser.add_argument("--only",
+                        default="slopefile,gridfile,run,codec,grid,slope,trace,lines,mesh")
+    parser.add_argument("--grid-points", type=int, default=1_000_000,
+                        help="points for gridding against gdal_grid")
+    parser.add_argument("--run-points", type=int, default=9_000_000,
+                        help="points of the end-to-end run (9 M: 1 km² at 9 points/m²)")
     parser.add_argument("--codec-size", type=int, default=4000,
                         help="raster side for the codec comparison")
     parser.add_argument("--file-sizes", default="6000,10000",
@@ -408,6 +503,10 @@ def main():
                         help="breakpoints to trace")
     args = parser.parse_args()
     chosen = set(args.only.split(","))
+    if "gridfile" in chosen:
+        bench_grid_file(args.grid_points)
+    if "run" in chosen:
+        bench_run(args.run_points)
     if "codec" in chosen:
         bench_codec(args.codec_size)
     if "slopefile" in chosen:
