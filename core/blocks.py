@@ -124,6 +124,13 @@ def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *,
     return out[0] if out else np.empty(values.shape, dtype=dtype or values.dtype)
 
 
+def tile_aligned(windows: Sequence[Window], shape) -> bool:
+    """True when every window covers whole output tiles (edges of the raster count)."""
+    rows, cols = shape
+    return all(r0 % TILE == 0 and c0 % TILE == 0 and (h % TILE == 0 or r0 + h == rows)
+               and (w % TILE == 0 or c0 + w == cols) for r0, c0, h, w in windows)
+
+
 def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
     """A tiled, compressed GeoTIFF profile (rasters under a tile stay striped)."""
     profile = dict(driver="GTiff", height=shape[0], width=shape[1], count=1, dtype=dtype,
@@ -181,9 +188,13 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
                 valid[0] = bool(np.isfinite(block).any())
             return block
 
+        profile = raster_profile(shape, src.transform, crs, dtype, nodata)
+        if not tile_aligned(windows, shape):
+            # a tile written in parts may be read back while GDAL still compresses it in
+            # another thread: compress in this one
+            profile.pop("num_threads")
         with atomic_output(dst_path) as tmp:
-            with rasterio.open(tmp, "w", **raster_profile(shape, src.transform, crs, dtype,
-                                                           nodata)) as dst:
+            with rasterio.open(tmp, "w", **profile) as dst:
                 def write(window, result):
                     from rasterio.windows import Window as RioWindow
 
