@@ -21,7 +21,7 @@ DEFAULT_BLOCK_ROWS = 2048
 STREAM_BLOCK_ROWS = 512
 TILE = 256
 # GDAL's block cache (MB) while streaming: a strip of tiles in and out, not 5 % of the RAM.
-GDAL_CACHE_MB = 256
+GDAL_CACHE_MB = 128
 FLOAT_NODATA = -9999.0
 BYTE_NODATA = 255
 # Chosen by measurement (benchmarks/run.py --only codec, 4000² DEM, slope and breakpoints):
@@ -166,16 +166,12 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
 
     if nodata is None:
         nodata = FLOAT_NODATA if np.dtype(dtype).kind == "f" else BYTE_NODATA
-    from .errors import FloodMeshError
-
     src_path = _require_file(src_path, "raster")
     valid = [False]
     check_valid = np.dtype(input_dtype).kind == "f"
-    try:
-        src = rasterio.open(src_path)
-    except rasterio.errors.RasterioIOError as exc:
-        raise FloodMeshError(f"{src_path.name} is not a readable raster ({exc})") from None
-    with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB, GDAL_NUM_THREADS="ALL_CPUS"), src:
+    # GDAL sizes its block cache when first used: the environment comes before the first open
+    with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB, GDAL_NUM_THREADS="ALL_CPUS"), \
+            _open(src_path) as src:
         crs = raster_crs(src, src_path, crs)
         shape = (src.height, src.width)
         windows = row_windows(shape, block_rows) if windows is None else list(windows)
@@ -209,6 +205,17 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
                            dtype=input_dtype, progress=progress, cancelled=cancelled)
             if check_valid and not valid[0]:
                 raise no_valid_cells(src_path)  # before the move: no output is left
+
+
+def _open(path):
+    import rasterio
+
+    from .errors import FloodMeshError
+
+    try:
+        return rasterio.open(path)
+    except rasterio.errors.RasterioIOError as exc:
+        raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
 
 
 def cell_size(path) -> float:
