@@ -29,9 +29,10 @@ class _Parser(argparse.ArgumentParser):
 class ProgressBar:
     """A one-line progress bar on stderr when it is a terminal; silent otherwise."""
 
-    def __init__(self, label: str, stream=sys.stderr):
-        self.label, self.stream = label, stream
-        self.enabled = stream.isatty()
+    def __init__(self, label: str, stream=None):
+        # sys.stderr when called, not when imported: it may have been replaced since
+        self.label, self.stream = label, stream or sys.stderr
+        self.enabled = self.stream.isatty()
         self.last = -1
 
     def __call__(self, fraction: float):

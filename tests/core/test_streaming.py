@@ -177,3 +177,21 @@ def test_a_fresh_numba_cache_is_announced(tmp_path):
     if not warmup.kernels_cached():
         warmup.compile_kernels(None)
     assert warmup.compile_note() is None
+
+
+@pytest.mark.parametrize("command", ["slope", "breakpoints"])
+def test_streaming_commands_refuse_bad_rasters_in_one_line(tmp_path, capsys, command):
+    """The file-to-file commands check a raster as reading it whole did: a rotated grid and a
+    missing file are one-line errors, and nothing is written."""
+    from floodmesh.core.cli import main
+
+    rotated = tmp_path / "rotated.tif"
+    profile = dict(driver="GTiff", height=30, width=30, count=1, dtype="float32",
+                   crs=CRS_M.to_wkt(), transform=Affine.rotation(20.0) * Affine.scale(1, -1))
+    with rasterio.open(rotated, "w", **profile) as dst:
+        dst.write(np.ones((1, 30, 30), np.float32))
+    for source, words in ((rotated, "is rotated"), (tmp_path / "missing.tif", "does not exist")):
+        assert main([command, str(source), "--out", str(tmp_path / "out.tif")]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and words in lines[0], lines
+        assert not (tmp_path / "out.tif").exists()
