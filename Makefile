@@ -12,7 +12,7 @@ test: setup
 
 bench: setup
 	.venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -e ".[test,bench]"
-	.venv/bin/python benchmarks/run.py
+	.venv/bin/python benchmarks/run.py $(if $(ONLY),--only $(ONLY))
 
 plugin-zip: setup
 	.venv/bin/python scripts/build_plugin_zip.py

@@ -29,9 +29,10 @@ class _Parser(argparse.ArgumentParser):
 class ProgressBar:
     """A one-line progress bar on stderr when it is a terminal; silent otherwise."""
 
-    def __init__(self, label: str, stream=sys.stderr):
-        self.label, self.stream = label, stream
-        self.enabled = stream.isatty()
+    def __init__(self, label: str, stream=None):
+        # sys.stderr when called, not when imported: it may have been replaced since
+        self.label, self.stream = label, stream or sys.stderr
+        self.enabled = self.stream.isatty()
         self.last = -1
 
     def __call__(self, fraction: float):
@@ -228,7 +229,11 @@ def _summary(report: dict, out: Path) -> str:
 
 def cmd_run(args):
     from .pipeline import run_pipeline
+    from .warmup import compile_note
 
+    note = compile_note()
+    if note:  # never a silent two-minute pause
+        print(f"floodmesh: {note}", file=sys.stderr)
     bar = ProgressBar("run")
     try:
         report = run_pipeline(args.input, args.out, _options(args), progress=bar, log=bar.log)
@@ -351,30 +356,40 @@ def _check_files(args) -> None:
 
 def cmd_slope(args):
     from . import io
-    from .slope import laplacian_of_gaussian, slope
+    from .slope import laplacian_of_gaussian, laplacian_of_gaussian_file, slope, slope_file
 
-    dem = io.read_raster(args.dem, crs=args.crs, note=_print_note)
+    if not io.nodata_tagged(args.dem):
+        # untagged nodata sentinels are found on the whole raster: this one goes in memory
+        dem = io.read_raster(args.dem, crs=args.crs, note=_print_note)
+        io.write_raster(args.out, laplacian_of_gaussian(dem, args.sigma, kernel=args.log_kernel)
+                        if args.method == "log" else slope(dem, args.method))
+    else:
+        bar = ProgressBar(args.method)
+        try:  # file to file, block by block
+            if args.method == "log":
+                laplacian_of_gaussian_file(args.dem, args.out, args.sigma, kernel=args.log_kernel,
+                                           crs=args.crs, progress=bar)
+            else:
+                slope_file(args.dem, args.out, args.method, crs=args.crs, progress=bar)
+        finally:
+            bar.close()
     if args.method == "log":
-        io.write_raster(args.out, laplacian_of_gaussian(dem, args.sigma, kernel=args.log_kernel))
         print(f"Laplacian-of-Gaussian response (sigma {args.sigma} m, m) written to {args.out}")
     else:
-        io.write_raster(args.out, slope(dem, args.method))
         print(f"slope ({args.method}, degrees) written to {args.out}")
 
 
 def cmd_breakpoints(args):
-    import numpy as np
+    from .breakpoints import breakpoints_file
 
-    from . import io
-    from .breakpoints import classify_breakpoints, log_breakpoints
-
-    grid = io.read_raster(args.slope, crs=args.crs)
-    if args.sensitivity is not None:
-        bp = log_breakpoints(grid, args.sensitivity, zero_crossings=args.zero_crossings)
-    else:
-        bp = classify_breakpoints(grid, args.s_crit)
-    io.write_raster(args.out, bp, valid=np.isfinite(grid.values))
-    print(f"{int(bp.values.sum())} breakpoints written to {args.out}")
+    bar = ProgressBar("breakpoints")
+    try:  # file to file, block by block
+        count = breakpoints_file(args.slope, args.out, s_crit=args.s_crit,
+                                 sensitivity=args.sensitivity,
+                                 zero_crossings=args.zero_crossings, crs=args.crs, progress=bar)
+    finally:
+        bar.close()
+    print(f"{count} breakpoints written to {args.out}")
 
 
 def cmd_breaklines(args):

@@ -174,6 +174,57 @@ NODATA_SENTINELS = (-9999.0, -99999.0, -32768.0, -32767.0, 32767.0, 65535.0,
 SENTINEL_GAP_M = 100.0  # an untagged sentinel is nodata when this far beyond every other cell
 
 
+def raster_crs(src, path: Path, crs=None):
+    """The checked CRS of an open rasterio dataset (``crs`` overrides the file's): refuses
+    control-point georeferencing, rotated or non-square grids, and CRSs not in metres."""
+    transform, file_crs = src.transform, src.crs
+    if src.gcps[0] and transform.is_identity:
+        raise FloodMeshError(
+            f"raster {path.name} is georeferenced by control points, not a geotransform: "
+            "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
+    check_transform(transform, f"raster {path.name}")
+    return require_metric_crs(crs if crs is not None else
+                              (file_crs.to_wkt() if file_crs else None),
+                              f"raster {path.name}", kind="raster")
+
+
+def no_valid_cells(path) -> FloodMeshError:
+    return FloodMeshError(f"raster {Path(path).name} has no valid cells (all nodata or NaN): "
+                          "check its nodata value and that it is the right file")
+
+
+def _read_band(src, window=None, dtype=np.float64) -> np.ndarray:
+    """Band 1 (or a window of it) as ``dtype`` with NaN for nodata and ±inf, in one buffer (no
+    masked array) unless the file masks cells by a mask band rather than a nodata value."""
+    from rasterio.enums import MaskFlags
+
+    flags = src.mask_flag_enums[0]
+    if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags:
+        values = src.read(1, window=window, masked=True).astype(dtype).filled(np.nan)
+    else:
+        values = src.read(1, window=window, out_dtype=dtype)
+    bad = ~np.isfinite(values)  # ±inf cells are nodata too
+    if src.nodata is not None and np.isfinite(src.nodata):
+        # compare in the file's own type: a float32 nodata written as text may not round-trip
+        native = np.dtype(src.dtypes[0])
+        nodata = native.type(src.nodata) if native.kind == "f" else src.nodata
+        bad |= values == values.dtype.type(nodata)
+    values[bad] = np.nan
+    return values
+
+
+def nodata_tagged(path) -> bool:
+    """Whether a raster file says which value is nodata (a tag or a mask band)."""
+    import rasterio
+    from rasterio.enums import MaskFlags
+
+    try:
+        with rasterio.open(_require_file(path, "raster")) as src:
+            return src.nodata is not None or MaskFlags.all_valid not in src.mask_flag_enums[0]
+    except rasterio.errors.RasterioIOError as exc:
+        raise FloodMeshError(f"{Path(path).name} is not a readable raster ({exc})") from None
+
+
 def read_raster(path, *, crs=None, note=None) -> Grid:
     """Read band 1 of a raster as a float64 Grid with NaN for nodata.
 
@@ -186,22 +237,13 @@ def read_raster(path, *, crs=None, note=None) -> Grid:
     path = _require_file(path, "raster")
     try:
         with rasterio.open(path) as src:
-            transform, file_crs = src.transform, src.crs
-            if src.gcps[0] and transform.is_identity:
-                raise FloodMeshError(
-                    f"raster {path.name} is georeferenced by control points, not a geotransform: "
-                    "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
-            check_transform(transform, f"raster {path.name}")
-            crs = require_metric_crs(crs if crs is not None else
-                                     (file_crs.to_wkt() if file_crs else None),
-                                     f"raster {path.name}", kind="raster")
+            transform, crs = src.transform, raster_crs(src, path, crs)
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
-            values = src.read(1, masked=True).astype(np.float64).filled(np.nan)
+            values = _read_band(src)
             tagged, count, dtype = src.nodata is not None, src.count, src.dtypes[0]
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
-    values[~np.isfinite(values)] = np.nan  # ±inf cells are nodata too
     if not tagged:
         _untagged_nodata(values, path.name, note)
     if note and count > 1:
@@ -212,8 +254,7 @@ def read_raster(path, *, crs=None, note=None) -> Grid:
              "steps are terraces whose edges the slope sees and break lines may follow; use a "
              "DEM with floating-point elevations (float32) where there is one")
     if not np.isfinite(values).any():
-        raise FloodMeshError(f"raster {path.name} has no valid cells (all nodata or NaN): check "
-                             "its nodata value and that it is the right file")
+        raise no_valid_cells(path)
     return Grid(values, transform, crs)
 
 
@@ -236,8 +277,11 @@ def _untagged_nodata(values: np.ndarray, name: str, note=None) -> None:
 
 
 def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
-    """Write a Grid as a compressed GeoTIFF; float NaN (or cells outside ``valid``) become nodata."""
+    """Write a Grid as a tiled, compressed GeoTIFF (``blocks.raster_profile``); float NaN (or
+    cells outside ``valid``) become nodata."""
     import rasterio
+
+    from .blocks import raster_profile
 
     values = grid.values
     if values.dtype == bool:
@@ -251,13 +295,7 @@ def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
         values = values.astype(np.uint8)
     if valid is not None:
         values = np.where(valid, values, nodata)
-    profile = dict(driver="GTiff", height=values.shape[0], width=values.shape[1], count=1,
-                   dtype=values.dtype, crs=grid.crs.to_wkt(), transform=grid.transform,
-                   nodata=nodata, compress="deflate", tiled=True, blockxsize=256, blockysize=256)
-    if values.shape[0] < 256 or values.shape[1] < 256:
-        profile.update(tiled=False)
-        profile.pop("blockxsize")
-        profile.pop("blockysize")
+    profile = raster_profile(values.shape, grid.transform, grid.crs, values.dtype, nodata)
     with atomic_output(path) as tmp:
         with rasterio.open(tmp, "w", **profile) as dst:
             dst.write(values, 1)

@@ -82,6 +82,11 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out = Path(out_dir)
     inputs = run_inputs(input_path, options)
     check_output_folder(out, inputs, run_outputs(options.formats))
+    if log:
+        from .warmup import compile_note
+
+        if compile_note():
+            log(compile_note())
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
                "breaklines": 1, "simplify": 0.5, "localise": 0.5, "mesh": 2, "refine": 4,

@@ -22,7 +22,7 @@ import math
 import numba
 import numpy as np
 
-from .blocks import map_overlap
+from .blocks import cell_size, map_overlap, map_raster
 from .errors import FloodMeshError
 from .options import LOG_KERNELS, SLOPE_METHOD_NAMES, check_choice, check_sigma_fits
 from .raster import Grid
@@ -102,19 +102,21 @@ def _fill_diagonal(zk, zopp, za, zb, z9):
     return za + zb - z9
 
 
-@numba.njit(parallel=True, cache=True)
-def _slope_block(padded, d, method, diagonal):
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _slope_block(padded, out, d, method, diagonal):
+    """Slope (degrees) of the interior of ``padded`` (float32 or float64) into ``out``; the
+    arithmetic is float64 whatever the input, so float32 files give the float64 result."""
     rows, cols = padded.shape[0] - 2, padded.shape[1] - 2
-    out = np.empty((rows, cols))
     for i in numba.prange(rows):
         for j in range(cols):
-            z9 = padded[i + 1, j + 1]
+            z9 = np.float64(padded[i + 1, j + 1])
             if math.isnan(z9):
                 out[i, j] = np.nan
                 continue
-            a1, a2, a3 = padded[i, j], padded[i, j + 1], padded[i, j + 2]
-            a8, a4 = padded[i + 1, j], padded[i + 1, j + 2]
-            a7, a6, a5 = padded[i + 2, j], padded[i + 2, j + 1], padded[i + 2, j + 2]
+            a1, a2 = np.float64(padded[i, j]), np.float64(padded[i, j + 1])
+            a3, a8 = np.float64(padded[i, j + 2]), np.float64(padded[i + 1, j])
+            a4, a7 = np.float64(padded[i + 1, j + 2]), np.float64(padded[i + 2, j])
+            a6, a5 = np.float64(padded[i + 2, j + 1]), np.float64(padded[i + 2, j + 2])
             z2, z6 = _fill(a2, a6, z9), _fill(a6, a2, z9)
             z4, z8 = _fill(a4, a8, z9), _fill(a8, a4, z9)
             z1, z5 = _fill_diagonal(a1, a5, z2, z8, z9), _fill_diagonal(a5, a1, z4, z6, z9)
@@ -146,14 +148,20 @@ def _method_code(method: str) -> int:
 
 
 def slope_block(padded: np.ndarray, d: float, method: str = "one-over-distance", *,
-                diagonal_distance: bool = True) -> np.ndarray:
+                diagonal_distance: bool = True, dtype=np.float64) -> np.ndarray:
     """Slope (degrees) of the interior of a block padded by one cell (NaN beyond the data).
 
-    The unit of work for tiled or distributed runs: ``map_overlap(values, slope_block, halo=1)``.
-    ``diagonal_distance`` applies to "max-slope": diagonal neighbours at √2·d (True) or d.
+    The unit of work for tiled or distributed runs: ``map_overlap(values, slope_block, halo=1)``
+    in memory, ``slope_file`` file to file. ``padded`` may be float32 or float64 (the arithmetic
+    is float64); the result is ``dtype``. ``diagonal_distance`` applies to "max-slope":
+    diagonal neighbours at √2·d (True) or d.
     """
     diagonal = SQRT2 * d if diagonal_distance else d
-    return _slope_block(np.asarray(padded, np.float64), float(d), _method_code(method), diagonal)
+    padded = np.asarray(padded)
+    if padded.dtype not in (np.float32, np.float64):
+        padded = padded.astype(np.float64)
+    out = np.empty((padded.shape[0] - 2, padded.shape[1] - 2), dtype)
+    return _slope_block(padded, out, float(d), _method_code(method), diagonal)
 
 
 def slope(dem: Grid, method: str = "one-over-distance", *, diagonal_distance: bool = True,
@@ -162,10 +170,23 @@ def slope(dem: Grid, method: str = "one-over-distance", *, diagonal_distance: bo
     _method_code(method)
     d = dem.cell_size
     values = map_overlap(
-        dem.values.astype(np.float64),
+        dem.values,
         lambda padded: slope_block(padded, d, method, diagonal_distance=diagonal_distance),
         halo=1, cancelled=cancelled)
     return dem.with_values(values)
+
+
+def slope_file(dem_path, out_path, method: str = "one-over-distance", *,
+               diagonal_distance: bool = True, crs=None, windows=None, progress=None,
+               cancelled=None) -> None:
+    """Slope (degrees, float32) of a DEM file into a GeoTIFF, streamed block by block in float32
+    (``blocks.map_raster``; ``windows`` as there); the same values as ``slope`` on the DEM."""
+    _method_code(method)
+    d = cell_size(dem_path)
+    map_raster(dem_path, out_path,
+               lambda padded: slope_block(padded, d, method, diagonal_distance=diagonal_distance,
+                                          dtype=np.float32),
+               halo=1, crs=crs, windows=windows, progress=progress, cancelled=cancelled)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -186,9 +207,30 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
     Reference: Pratt, Digital Image Processing (2007), ch. 15; Marr & Hildreth (1980)
     doi:10.1098/rspb.1980.0020.
     """
+    block, halo = _log_block(sigma, dem.cell_size, kernel, dem.shape)
+    return dem.with_values(map_overlap(dem.values, block, halo=halo, cancelled=cancelled))
+
+
+def laplacian_of_gaussian_file(dem_path, out_path, sigma: float, *, kernel: str = "pratt",
+                               crs=None, windows=None, progress=None, cancelled=None) -> None:
+    """``laplacian_of_gaussian`` of a DEM file into a float32 GeoTIFF, streamed block by block
+    (``blocks.map_raster``); the same values as in memory."""
+    import rasterio
+
+    from .io import _require_file
+
+    with rasterio.open(_require_file(dem_path, "raster")) as src:
+        d, shape = float(src.transform.a), (src.height, src.width)
+    block, halo = _log_block(sigma, d, kernel, shape)
+    map_raster(dem_path, out_path, block, halo=halo, crs=crs, windows=windows,
+               progress=progress, cancelled=cancelled)
+
+
+def _log_block(sigma: float, d: float, kernel: str, shape):
+    """(block kernel, halo) of the LoG response for ``map_overlap`` / ``map_raster``; the block
+    is computed in float64."""
     check_choice(kernel, LOG_KERNELS, "LoG kernel")
-    d = dem.cell_size
-    sigma = check_sigma_fits(sigma, *dem.shape, d)
+    sigma = check_sigma_fits(sigma, *shape, d)
     if kernel == "analytic" and sigma < d:
         raise FloodMeshError(f"the analytic LoG kernel needs sigma of at least one cell ({d} m), "
                              f"got {sigma}; use the pratt kernel for less smoothing")
@@ -199,6 +241,7 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
         def block(padded):
             from scipy import ndimage
 
+            padded = padded.astype(np.float64, copy=False)
             smooth = _gaussian_nan(padded, sigma / d) if sigma > 0 else padded
             c = smooth[1:-1, 1:-1]
             total = (smooth[:-2, :-2] + smooth[:-2, 1:-1] + smooth[:-2, 2:] + smooth[1:-1, :-2]
@@ -214,6 +257,7 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
         def block(padded):
             from scipy import ndimage
 
+            padded = padded.astype(np.float64, copy=False)
             valid = np.isfinite(padded)
             out = ndimage.correlate(np.where(valid, padded, 0.0), weights, mode="constant")
             touched = ndimage.maximum_filter(~valid, size=2 * halo + 1, mode="constant",
@@ -221,8 +265,7 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
             out = np.where(touched, np.nan, -3.0 * d * d / 8.0 * out)
             return out[halo:-halo, halo:-halo] if halo else out
 
-    values = map_overlap(dem.values.astype(np.float64), block, halo=halo, cancelled=cancelled)
-    return dem.with_values(np.where(np.isfinite(dem.values), values, np.nan))
+    return block, halo
 
 
 def _gaussian_nan(values, sigma_cells):

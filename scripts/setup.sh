@@ -42,6 +42,9 @@ fi
 mkdir -p .venv/share
 [ -e .venv/share/proj ] || ln -s /usr/share/proj .venv/share/proj
 
+# Compile the numba kernels now (about 2 minutes, once; seconds when cached), not in the first run.
+.venv/bin/python -m floodmesh.core.warmup
+
 # QGIS finds plugins by folder name: build/plugins/floodmesh is this repository.
 mkdir -p build/plugins
 ln -sfn "$(pwd)" build/plugins/floodmesh

@@ -223,6 +223,18 @@ def test_a_run_on_an_untagged_dem_meshes_no_pit(tmp_path, capsys):
     assert nodes[:, 2].min() >= 10.0
 
 
+def test_the_slope_command_keeps_untagged_sentinels_out_of_the_slope(tmp_path, capsys):
+    # the command streams tagged rasters block by block; an untagged one must still be cleaned
+    values = slope_dem()
+    values[10:20, 10:20] = -9999.0
+    out = tmp_path / "slope.tif"
+    assert main(["slope", str(_raster(tmp_path / "untagged.tif", values)), "--out", str(out)]) == 0
+    assert "taken as nodata" in capsys.readouterr().err
+    slope_deg = io.read_raster(out).values
+    assert np.isnan(slope_deg[10:20, 10:20]).all()
+    assert np.nanmax(slope_deg) < 80.0  # the DEM's own steepest is 61°; a -9999 m pit: 89.99°
+
+
 def test_integer_and_multi_band_dems_get_a_note(tmp_path):
     notes = []
     io.read_input(_raster(tmp_path / "int.tif", np.round(slope_dem()), dtype="int16",

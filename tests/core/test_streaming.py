@@ -1,0 +1,197 @@
+"""The streaming block engine (``core.blocks``): every raster step file to file, block by block,
+gives exactly what the step gives on the whole grid in memory, across block edges, for any
+window list; outputs are tiled, compressed and atomic."""
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+from numpy.testing import assert_array_equal
+from pyproj import CRS
+
+from floodmesh.core import blocks, io
+from floodmesh.core.breakpoints import (_threshold_block, breakpoints_file,
+                                        classify_breakpoints, log_breakpoints, thin_breakpoints)
+from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.raster import Grid
+from floodmesh.core.slope import (SLOPE_METHODS, laplacian_of_gaussian,
+                                  laplacian_of_gaussian_file, slope, slope_file)
+
+CRS_M = CRS.from_epsg(25832)
+
+
+def rough_dem(rows=300, cols=280, seed=5):
+    """Rolling ground with embankments and holes: many breakpoints and nodata at block edges."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:rows, 0:cols].astype(float)
+    z = 3 * np.sin(xx / 9) * np.cos(yy / 7) + np.clip((xx % 60) - 40, 0, 4)
+    z += rng.normal(0, 0.05, z.shape)
+    z[rng.random(z.shape) < 0.01] = np.nan
+    z[127:131, :] = np.nan  # a gap across a block edge
+    return Grid(z.astype(np.float32).astype(np.float64),
+                Affine(0.5, 0, 400000, 0, -0.5, 5600000), CRS_M)
+
+
+@pytest.fixture
+def dem_file(tmp_path):
+    path = tmp_path / "dem.tif"
+    io.write_raster(path, rough_dem())
+    return path
+
+
+def tiles(shape, size):
+    rows, cols = shape
+    return [(r, c, min(size, rows - r), min(size, cols - c))
+            for r in range(0, rows, size) for c in range(0, cols, size)]
+
+
+@pytest.mark.parametrize("windows", [None, "rows7", "tiles33"])
+@pytest.mark.parametrize("method", SLOPE_METHODS)
+def test_slope_file_equals_slope_in_memory(dem_file, tmp_path, method, windows):
+    dem = io.read_raster(dem_file)
+    windows = {None: None, "rows7": blocks.row_windows(dem.shape, 7),
+               "tiles33": tiles(dem.shape, 33)}[windows]
+    slope_file(dem_file, tmp_path / "s.tif", method, windows=windows)
+    ours = io.read_raster(tmp_path / "s.tif").values
+    assert_array_equal(ours, slope(dem, method).values.astype(np.float32))
+
+
+def test_breakpoints_blocked_equal_whole():
+    """Thinning across block edges: strips of 1..13 rows and square tiles give the whole grid's
+    breakpoints, cell for cell (thinning needs the neighbours' breakpoints, hence the halo)."""
+    s = slope(rough_dem(), "one-over-distance")
+    with np.errstate(invalid="ignore"):
+        whole = thin_breakpoints(s.values >= 10.0)
+    assert 1000 < whole.sum() < 0.5 * np.isfinite(s.values).sum()
+    assert_array_equal(classify_breakpoints(s, 10.0).values, whole)
+    block, halo = _threshold_block(10.0, True)
+    for rows in (1, 2, 5, 13):
+        assert_array_equal(blocks.map_overlap(s.values, block, halo=halo, block_rows=rows), whole)
+    assert_array_equal(blocks.map_overlap(s.values, block, halo=halo,
+                                          windows=tiles(s.shape, 17)), whole)
+
+
+def test_breakpoints_file_equals_memory_and_marks_nodata(dem_file, tmp_path):
+    slope_file(dem_file, tmp_path / "s.tif", "one-over-distance")
+    s = io.read_raster(tmp_path / "s.tif")
+    count = breakpoints_file(tmp_path / "s.tif", tmp_path / "bp.tif", s_crit=10.3,
+                             windows=blocks.row_windows(s.shape, 9))
+    with rasterio.open(tmp_path / "bp.tif") as src:
+        bp = src.read(1)
+        assert src.nodata == 255 and src.dtypes[0] == "uint8"
+    expected = classify_breakpoints(s, 10.3).values
+    assert count == expected.sum() > 1000
+    assert_array_equal(bp == 255, np.isnan(s.values))
+    assert_array_equal(np.where(bp == 255, 0, bp), expected)
+
+
+def test_float32_threshold_is_the_float64_comparison():
+    """S_crit not representable in float32: a float32 slope just below it is no breakpoint."""
+    s_crit = 10.1
+    below = np.nextafter(np.float32(s_crit), np.float32(0))
+    above = np.nextafter(below, np.float32(np.inf))
+    values = np.array([[below, above]], np.float32)
+    grid = Grid(values, Affine(1, 0, 0, 0, -1, 2), CRS_M)
+    expected = (values.astype(np.float64) >= s_crit).astype(np.uint8)
+    assert_array_equal(classify_breakpoints(grid, s_crit, thin=False).values, expected)
+
+
+@pytest.mark.parametrize("zero_crossings", [False, True])
+@pytest.mark.parametrize("kernel, sigma", [("pratt", 1.0), ("analytic", 1.0)])
+def test_log_and_its_breakpoints_file_equal_memory(dem_file, tmp_path, kernel, sigma,
+                                                   zero_crossings):
+    dem = io.read_raster(dem_file)
+    laplacian_of_gaussian_file(dem_file, tmp_path / "log.tif", sigma, kernel=kernel,
+                               windows=blocks.row_windows(dem.shape, 11))
+    response = io.read_raster(tmp_path / "log.tif")
+    assert_array_equal(response.values,
+                       laplacian_of_gaussian(dem, sigma, kernel=kernel).values.astype(np.float32))
+    breakpoints_file(tmp_path / "log.tif", tmp_path / "bp.tif", sensitivity=0.02,
+                     zero_crossings=zero_crossings, windows=tiles(dem.shape, 23))
+    with rasterio.open(tmp_path / "bp.tif") as src:
+        bp = src.read(1)
+    expected = log_breakpoints(response, 0.02, zero_crossings=zero_crossings).values
+    assert expected.sum() > 20
+    assert_array_equal(np.where(bp == 255, 0, bp), expected)
+
+
+def test_output_is_tiled_compressed_and_georeferenced(dem_file, tmp_path):
+    slope_file(dem_file, tmp_path / "s.tif", crs="EPSG:25833")
+    with rasterio.open(tmp_path / "s.tif") as src, rasterio.open(dem_file) as dem:
+        assert src.profile["tiled"] and src.block_shapes[0] == (256, 256)
+        assert src.compression.name.lower() == blocks.CREATION_OPTIONS["compress"]
+        assert src.transform == dem.transform and src.nodata == blocks.FLOAT_NODATA
+        assert src.crs.to_epsg() == 25833  # --crs overrides the file's
+
+
+def test_failure_leaves_no_output_and_keeps_the_old_one(dem_file, tmp_path):
+    out = tmp_path / "s.tif"
+    out.write_bytes(b"old")
+    calls = []
+
+    def failing(padded):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("disk full")
+        return padded[1:-1, 1:-1]
+
+    with pytest.raises(RuntimeError):
+        blocks.map_raster(dem_file, out, failing, halo=1, block_rows=64)
+    assert out.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dem.tif", "s.tif"]
+
+
+def test_all_nodata_is_refused_without_output(tmp_path):
+    grid = Grid(np.full((20, 20), np.nan), Affine(1, 0, 0, 0, -1, 20), CRS_M)
+    profile = dict(driver="GTiff", height=20, width=20, count=1, dtype="float32",
+                   crs=CRS_M.to_wkt(), transform=grid.transform, nodata=-9999.0)
+    with rasterio.open(tmp_path / "empty.tif", "w", **profile) as dst:
+        dst.write(np.full((1, 20, 20), -9999.0, np.float32))
+    with pytest.raises(FloodMeshError, match="no valid cells"):
+        slope_file(tmp_path / "empty.tif", tmp_path / "s.tif")
+    assert not (tmp_path / "s.tif").exists()
+
+
+def test_unlisted_windows_are_nodata(dem_file, tmp_path):
+    dem = io.read_raster(dem_file)
+    slope_file(dem_file, tmp_path / "s.tif", windows=[(0, 0, 40, 50)])
+    ours = io.read_raster(tmp_path / "s.tif").values
+    assert_array_equal(ours[:40, :50],
+                       slope(dem, "one-over-distance").values[:40, :50].astype(np.float32))
+    assert np.isnan(ours[40:]).all() and np.isnan(ours[:, 50:]).all()
+
+
+def test_a_fresh_numba_cache_is_announced(tmp_path):
+    """Another user or profile (an empty NUMBA_CACHE_DIR) is told of the compile ahead; this
+    checkout, warmed by setup, is not."""
+    import os
+    import subprocess
+    import sys
+
+    code = "from floodmesh.core.warmup import compile_note; print(compile_note())"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    fresh = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                           text=True, check=True).stdout
+    assert "first run only" in fresh and str(tmp_path) in fresh
+    from floodmesh.core import warmup
+
+    if not warmup.kernels_cached():
+        warmup.compile_kernels(None)
+    assert warmup.compile_note() is None
+
+
+@pytest.mark.parametrize("command", ["slope", "breakpoints"])
+def test_streaming_commands_refuse_bad_rasters_in_one_line(tmp_path, capsys, command):
+    """The file-to-file commands check a raster as reading it whole did: a rotated grid and a
+    missing file are one-line errors, and nothing is written."""
+    from floodmesh.core.cli import main
+
+    rotated = tmp_path / "rotated.tif"
+    profile = dict(driver="GTiff", height=30, width=30, count=1, dtype="float32",
+                   crs=CRS_M.to_wkt(), transform=Affine.rotation(20.0) * Affine.scale(1, -1))
+    with rasterio.open(rotated, "w", **profile) as dst:
+        dst.write(np.ones((1, 30, 30), np.float32))
+    for source, words in ((rotated, "is rotated"), (tmp_path / "missing.tif", "does not exist")):
+        assert main([command, str(source), "--out", str(tmp_path / "out.tif")]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and words in lines[0], lines
+        assert not (tmp_path / "out.tif").exists()
