@@ -11,6 +11,7 @@ import numpy as np
 import shapely
 from pyproj import CRS
 
+from .arrays import unique_rows
 from .errors import FloodMeshError
 from .limits import check_triangles
 from .options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles,
@@ -132,8 +133,8 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     parts = [g for g in getattr(noded, "geoms", [noded]) if g.geom_type == "LineString"]
     coords = [np.asarray(p.coords)[:, :2] for p in parts]
     allpts = np.concatenate(coords)
-    vertices, inverse = np.unique(np.round(allpts / (snap / 5)).astype(np.int64), axis=0,
-                                  return_inverse=True)
+    vertices, inverse = unique_rows(np.round(allpts / (snap / 5)).astype(np.int64),
+                                    return_inverse=True)
     inverse = inverse.ravel()
     segments = []
     offset = 0
@@ -143,7 +144,7 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
         offset += len(c)
     segments = np.concatenate(segments)
     segments = segments[segments[:, 0] != segments[:, 1]]
-    segments = np.unique(np.sort(segments, axis=1), axis=0)
+    segments = unique_rows(np.sort(segments, axis=1))
     vertices = vertices * (snap / 5)
     degree = np.bincount(segments.ravel(), minlength=len(vertices))
     if kept and (degree >= 3).any():
@@ -341,7 +342,7 @@ def _check_pslg(pslg: PSLG) -> None:
         problem = "a segment ends at a vertex that does not exist"
     elif (segments[:, 0] == segments[:, 1]).any():
         problem = "a segment has zero length"
-    elif len(np.unique(vertices, axis=0)) < len(vertices):
+    elif len(unique_rows(vertices)) < len(vertices):
         problem = "two vertices coincide"
     elif _segments_cross(vertices, segments):
         problem = "segments cross or overlap"
@@ -566,8 +567,8 @@ def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
         "n_above_max_area": int((areas > max_area * (1 + 1e-9)).sum()),
         "all_counter_clockwise": bool((areas > 0).all()),
         "n_missing_segments": missing_segments(mesh.nodes, mesh.triangles, mesh.segments),
-        "n_duplicate_nodes": int(len(mesh.nodes) - len(np.unique(
-            np.round(mesh.nodes[:, :2] / 1e-6).astype(np.int64), axis=0))),
+        "n_duplicate_nodes": int(len(mesh.nodes) - len(unique_rows(
+            np.round(mesh.nodes[:, :2] / 1e-6).astype(np.int64)))),
     }
 
 
