@@ -15,10 +15,10 @@ test: setup
 test-debian13:
 	bash scripts/test_debian13.sh
 
-# Wide exploration of the mesher: many more random PSLGs and rasters than `make test` draws
+# Wide exploration of the mesher: ten times the random PSLGs and rasters `make test` draws
 # (FUZZ_PSLG=... etc. to change the counts); turn what it finds into fixed regression cases.
 fuzz: setup
-	FUZZ_PSLG=$${FUZZ_PSLG:-30000} FUZZ_RASTER=$${FUZZ_RASTER:-6000} FUZZ_RAW=$${FUZZ_RAW:-9000} \
+	FUZZ_PSLG=$${FUZZ_PSLG:-15000} FUZZ_RASTER=$${FUZZ_RASTER:-6000} FUZZ_RAW=$${FUZZ_RAW:-9000} \
 	    bash scripts/test.sh tests/core/test_mesh_fuzz.py -q -p no:cacheprovider
 
 bench: setup
