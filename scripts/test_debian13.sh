@@ -44,8 +44,9 @@ build_root() {  # debootstrap into a temporary folder, renamed when complete: ne
     cp /etc/resolv.conf "$tmp/etc/resolv.conf"
     rm -rf --one-file-system "$ROOT"
     mv "$tmp" "$ROOT"
-    in_root apt-get update -qq
-    in_root apt-get install -y -qq --no-install-recommends "${BASE_PACKAGES[@]}" >/dev/null
+    in_root apt-get -o Acquire::Retries=3 update -qq
+    in_root apt-get -o Acquire::Retries=3 install -y -qq --no-install-recommends \
+        "${BASE_PACKAGES[@]}" >/dev/null
     touch "$ROOT/.floodmesh-ready"
 }
 
@@ -75,6 +76,10 @@ echo "test_debian13: $(chroot "$ROOT" cat /etc/debian_version) root at $ROOT, re
 # The repository appears at its own path inside the root, so the plugin link and editable install
 # name the same folder on both sides. Its .venv is Debian 12's: inside, a venv of the root's own
 # (one per clone path, kept in the root) is mounted over it.
+# Each run starts from an empty /tmp, home folder (QGIS profile, caches) included, so that
+# nothing a previous run left changes this one's answer; pip's download cache is kept.
+rm -rf --one-file-system "$ROOT/tmp"
+mkdir -m 1777 "$ROOT/tmp"
 venv="$ROOT/var/lib/floodmesh/venvs/$(printf %s "$REPO" | sha1sum | cut -c1-12)"
 mkdir -p "$venv" "$REPO/.venv" "$ROOT$REPO"
 shared=""
@@ -91,6 +96,7 @@ unshare --mount --propagation private bash -euc '
         mkdir -p "$root$shared"; mount --bind "$shared" "$root$shared"
         [ "$shared" = "$(dirname "$repo")/shared" ] || ln -sfn "$shared" "$root$(dirname "$repo")/shared"
     fi
-    chroot "$root" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/root LANG=C.UTF-8 \
-        DEBIAN_FRONTEND=noninteractive $passed bash -c "cd \"\$0\" && make setup && exec bash scripts/test.sh \"\$@\"" "$repo" "$@"
+    chroot "$root" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/tmp/home LANG=C.UTF-8 \
+        PIP_CACHE_DIR=/var/cache/pip XDG_RUNTIME_DIR=/tmp/runtime \
+        DEBIAN_FRONTEND=noninteractive $passed bash -c "mkdir -p -m 700 /tmp/home /tmp/runtime && cd \"\$0\" && make setup && exec bash scripts/test.sh \"\$@\"" "$repo" "$@"
 ' _ "$ROOT" "$REPO" "$venv" "$shared" "${passed[*]:-}" "$@"
