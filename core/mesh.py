@@ -315,8 +315,11 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     for _ in range(REPAIR_PASSES):
         if not _angle_defects(result, pslg, min_angle):
             break
+        before = len(result["vertices"])
         result = triangle.triangulate({key: result[key] for key in
                                        ("vertices", "triangles", "segments")}, "r" + switches)
+        if len(result["vertices"]) == before:  # Triangle added nothing: it will not again
+            break
     left = _angle_defects(result, pslg, min_angle)
     if left:
         raise FloodMeshError(

@@ -1,6 +1,7 @@
 """Fixed cases that the mesh fuzz tests (tests/core/test_mesh_fuzz.py, `make fuzz`) or a random
 search once found failing, kept exactly as found so that every run checks them."""
 import numpy as np
+import pytest
 import shapely
 
 from floodmesh.core.mesh import below_angle_bound, build_pslg, triangulate_pslg
@@ -26,3 +27,40 @@ def test_valid_domain_whose_shrunk_copy_rounds_invalid_meshes():
                                            area=GEOS_DOMAIN.area)
     defects, _ = below_angle_bound(vertices, triangles, pslg.segments, 30)
     assert len(triangles) > 100 and not defects.any()
+
+
+# PSLGs on which Triangle's own pass leaves a triangle below the bound away from any sharp input
+# corner (corners of 63-89° here), found by a random search at the fuzz test's snap (0.02 of a
+# 10 m domain) and bounds; triangulate_pslg's repair passes must mend them.
+TRIANGLE_LEAVES_ONE = [
+    ("POLYGON ((4.678741208359347 9.186703647514419, 4.61927306283563 9.05368127295135, "
+     "0.9514052079269097 7.1158456937869445, 2.2775811131886288 2.3617582070150513, "
+     "4.851948906296576 3.138582809785044, 6.103774042834833 2.787508318461422, "
+     "4.678741208359347 9.186703647514419))",
+     [[[1.3953842705069563, 6.1601998231805455], [8.509234692671622, 9.779344806796663]],
+      [[2.20595245909133, 8.092054232289298], [6.816176720538767, 8.76695936366173],
+       [4.040404107260628, 5.948917339828253]]], 23.87, 0.003334774115006845),
+    ("POLYGON ((7.651289663205377 5.2044579512682, 5.640068545393968 7.323689303319007, "
+     "5.313123683237522 9.01978384873691, 2.147426797017755 7.354354985220706, "
+     "2.407765497650964 3.6212262537535604, 6.5669359065480135 4.442832834049257, "
+     "7.651289663205377 5.2044579512682))",
+     [[[9.838439439878107, 1.218651922908579], [5.124130877877562, 6.417534486140138],
+       [8.232701725116234, 4.507731013680138]]], 28.983157076867865, 0.04806354154169687),
+]
+
+
+@pytest.mark.parametrize("wkt, lines, min_angle, max_area", TRIANGLE_LEAVES_ONE)
+def test_repair_passes_mend_what_triangle_leaves_below_the_bound(wkt, lines, min_angle,
+                                                                 max_area):
+    import triangle
+
+    domain = shapely.from_wkt(wkt)
+    pslg = build_pslg([np.array(line) for line in lines], domain, snap=0.2)
+    origin = pslg.vertices.min(axis=0)
+    raw = triangle.triangulate({"vertices": pslg.vertices - origin, "segments": pslg.segments},
+                               f"pq{min_angle!r}Da{max_area!r}")
+    assert below_angle_bound(raw["vertices"], raw["triangles"], pslg.segments,
+                             min_angle)[0].sum() == 1  # the case still shows what it guards
+    vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area)
+    defects, _ = below_angle_bound(vertices, triangles, pslg.segments, min_angle)
+    assert not defects.any()
