@@ -20,10 +20,13 @@ if [ "$(id -u)" -ne 0 ]; then
     echo "test_debian13: needs root (debootstrap, chroot and mounts); run it with sudo" >&2
     exit 2
 fi
-for tool in debootstrap unshare flock; do
-    command -v "$tool" >/dev/null || {
-        echo "test_debian13: $tool is missing: apt-get install debootstrap util-linux" >&2; exit 2; }
-done
+if ! command -v debootstrap >/dev/null; then
+    echo "test_debian13: installing debootstrap"
+    # apt is shared with anything else installing on this machine: wait for it
+    flock /tmp/apt.lock apt-get install -y -qq --no-install-recommends debootstrap >/dev/null \
+        || { apt-get update -qq && flock /tmp/apt.lock apt-get install -y -qq \
+                 --no-install-recommends debootstrap >/dev/null; }
+fi
 
 in_root() {  # run a command in the root, with /proc, /dev and /sys (only for the build steps)
     unshare --mount --propagation private bash -euc '
