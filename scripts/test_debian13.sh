@@ -24,7 +24,7 @@ if ! command -v debootstrap >/dev/null; then
     echo "test_debian13: installing debootstrap"
     # apt is shared with anything else installing on this machine: wait for it
     flock /tmp/apt.lock apt-get install -y -qq --no-install-recommends debootstrap >/dev/null \
-        || { apt-get update -qq && flock /tmp/apt.lock apt-get install -y -qq \
+        || { flock /tmp/apt.lock apt-get update -qq && flock /tmp/apt.lock apt-get install -y -qq \
                  --no-install-recommends debootstrap >/dev/null; }
 fi
 
