@@ -23,8 +23,10 @@ if [ ${#missing[@]} -gt 0 ]; then
     SUDO=""
     [ "$(id -u)" -eq 0 ] || SUDO="sudo"
     export DEBIAN_FRONTEND=noninteractive
-    $SUDO apt-get update -qq
-    $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+    # wait for another apt (another setup, unattended upgrades) instead of failing at once
+    APT=(apt-get -o DPkg::Lock::Timeout=600 -o Acquire::Retries=3)
+    $SUDO "${APT[@]}" update -qq
+    $SUDO "${APT[@]}" install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
 if [ ! -x .venv/bin/python ]; then
