@@ -157,6 +157,8 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     on_boundary = shapely.distance(
         shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 2
     segments, on_boundary = _prune_dangles(segments, on_boundary)
+    if not on_boundary.any():  # a sliver whose sides noding on the grid merged into one line
+        raise _vanishes(domain, snap / 5)
     if drop_sharp_corners:
         before = len(segments)
         segments = _drop_small_angles(vertices, segments, on_boundary, SHARP_CORNER)
@@ -192,14 +194,18 @@ def _snapped_domain(domain, grid: float):
     polygons = [g for g in getattr(snapped, "geoms", [snapped])
                 if g.geom_type == "Polygon" and g.area > 0]
     if not polygons:
-        raise FloodMeshError(
-            f"the area to mesh ({domain.area:.3g} m²) vanishes on a {grid:.3g} m grid: it is "
-            "thinner than the snapping distance; use a smaller cell size or a larger area")
+        raise _vanishes(domain, grid)
     snapped = shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
     # the same coordinates, without the grid's precision model: GEOS would round what is made
     # from it (the buffer that clips the lines) to the grid, which can make it invalid and the
     # clipping raise a TopologyException ("side location conflict")
     return shapely.set_precision(snapped, 0)
+
+
+def _vanishes(domain, grid: float) -> FloodMeshError:
+    return FloodMeshError(
+        f"the area to mesh ({domain.area:.3g} m²) vanishes on a {grid:.3g} m grid: it is "
+        "thinner than the snapping distance; use a smaller cell size or a larger area")
 
 
 def _drop_small_angles(vertices, segments, fixed, limit):

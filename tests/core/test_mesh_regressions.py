@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import shapely
 
+from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.mesh import below_angle_bound, build_pslg, triangulate_pslg
 
 # A valid star-shaped domain: on its 0.04 m snapping grid, the domain shrunk by the 0.2 m snap
@@ -64,3 +65,14 @@ def test_repair_passes_mend_what_triangle_leaves_below_the_bound(wkt, lines, min
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area)
     defects, _ = below_angle_bound(vertices, triangles, pslg.segments, min_angle)
     assert not defects.any()
+
+
+def test_sliver_domain_that_noding_collapses_is_refused_clearly():
+    """A valid 0.04 m² sliver at UTM coordinates: on the 0.04 m grid its two long sides merge
+    into one line, and build_pslg handed triangulate_pslg an empty PSLG ("the PSLG cannot be
+    meshed"); found by a fuzz-strategy search at snap 0.02 of a 10 m domain."""
+    unit = shapely.from_wkt("POLYGON ((0.825 0.5, 0.836 0.5, 0.523 0.577, 0.825 0.5))")
+    domain = shapely.transform(unit, lambda c: c * 10 + np.array([321987.654, 4456789.123]))
+    assert domain.is_valid
+    with pytest.raises(FloodMeshError, match="vanishes on a 0.04 m grid"):
+        build_pslg([], domain, snap=0.2)
