@@ -50,14 +50,13 @@ stamp=.venv/.floodmesh-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] \
         || ! cmp -s .venv/constraints.txt.new .venv/constraints.txt; then
     echo "setup: installing Python dependencies into .venv ($(grep '^numpy' .venv/constraints.txt.new))"
-    mv .venv/constraints.txt.new .venv/constraints.txt
     # the build backend is Debian's setuptools (python3-setuptools), not one that pip would fetch
     # into an isolated build environment
     .venv/bin/pip install -q --disable-pip-version-check --no-build-isolation \
-        -c .venv/constraints.txt -e ".[test]"
+        -c .venv/constraints.txt.new -e ".[test]"
     touch "$stamp"
 fi
-rm -f .venv/constraints.txt.new
+mv .venv/constraints.txt.new .venv/constraints.txt  # only once pip has kept to it
 
 # pyproj looks for PROJ's data under sys.prefix, which in a venv is the venv: point it at Debian's.
 mkdir -p .venv/share
