@@ -87,14 +87,20 @@ venv="$ROOT/var/lib/floodmesh/venvs/$(printf %s "$REPO" | sha1sum | cut -c1-12)"
 mkdir -p "$venv" "$REPO/.venv" "$ROOT$REPO"
 shared=""
 [ -e "$REPO/../shared" ] && shared=$(cd "$REPO/../shared" && pwd -P)
+# a git worktree keeps its repository elsewhere: mount that too (read-only), for git ls-files
+gitdir=$(git -C "$REPO" rev-parse --path-format=absolute --git-common-dir 2>/dev/null || true)
+case "$gitdir" in "$REPO"/*|"") gitdir="" ;; *) mkdir -p "$ROOT$gitdir" ;; esac
 
 unshare --mount --propagation private bash -euc '
-    root=$1 repo=$2 venv=$3 shared=$4 passed=$5; shift 5
+    root=$1 repo=$2 venv=$3 shared=$4 passed=$5 gitdir=$6; shift 6
     cleanup() { umount -R "$root/proc" "$root/dev" "$root/sys" "$root$repo" 2>/dev/null || true; }
     trap cleanup EXIT
     mount -t proc proc "$root/proc"; mount --rbind /dev "$root/dev"; mount --rbind /sys "$root/sys"
     mount --bind "$repo" "$root$repo"
     mount --bind "$venv" "$root$repo/.venv"
+    if [ -n "$gitdir" ]; then
+        mount --bind "$gitdir" "$root$gitdir"; mount -o remount,bind,ro "$root$gitdir"
+    fi
     if [ -n "$shared" ]; then
         mkdir -p "$root$shared"; mount --bind "$shared" "$root$shared"
         [ "$shared" = "$(dirname "$repo")/shared" ] || ln -sfn "$shared" "$root$(dirname "$repo")/shared"
@@ -102,4 +108,4 @@ unshare --mount --propagation private bash -euc '
     chroot "$root" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/tmp/home LANG=C.UTF-8 \
         PIP_CACHE_DIR=/var/cache/pip XDG_RUNTIME_DIR=/tmp/runtime \
         DEBIAN_FRONTEND=noninteractive $passed bash -c "mkdir -p -m 700 /tmp/home /tmp/runtime && cd \"\$0\" && make setup && exec bash scripts/test.sh \"\$@\"" "$repo" "$@"
-' _ "$ROOT" "$REPO" "$venv" "$shared" "${passed[*]:-}" "$@"
+' _ "$ROOT" "$REPO" "$venv" "$shared" "${passed[*]:-}" "$gitdir" "$@"
