@@ -1,9 +1,10 @@
 """Assess accuracy: residuals of check points against a mesh's TIN."""
 import json
 
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterFile,
+from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterFile,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterVectorDestination)
+from .compat import VECTOR_POINT
 
 from .base import FloodMeshAlgorithm, layer_file, run_core
 from .styles import style_residuals, style_when_loaded
@@ -23,9 +24,9 @@ class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterFile(self.MESH, self.tr("Mesh (SMS 2DM)"),
                                                      fileFilter="SMS 2DM (*.2dm)"))
         self.addParameter(QgsProcessingParameterFeatureSource(
-            self.POINTS, self.tr("Check points (3-D)"), [QgsProcessing.TypeVectorPoint]))
+            self.POINTS, self.tr("Check points (3-D)"), [VECTOR_POINT]))
         self.addParameter(QgsProcessingParameterVectorDestination(
-            self.OUTPUT, self.tr("Residuals"), QgsProcessing.TypeVectorPoint))
+            self.OUTPUT, self.tr("Residuals"), VECTOR_POINT))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.REPORT, self.tr("Statistics (JSON)"), fileFilter="JSON (*.json)",
             optional=True, createByDefault=False))

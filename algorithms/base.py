@@ -4,6 +4,7 @@ from pathlib import Path
 
 from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
 from qgis.PyQt.QtCore import QCoreApplication
+from .compat import VECTOR_LINE, VECTOR_POLYGON
 
 from ..core.dependencies import install_hint, missing_dependencies
 from ..core.errors import Cancelled, FloodMeshError
@@ -140,14 +141,14 @@ BOUNDARY, USER_LINES = "BOUNDARY", "USER_LINES"
 
 def add_domain_parameters(algorithm):
     """The optional model-domain polygon and the modeller's own lines, as in Build mesh."""
-    from qgis.core import QgsProcessing, QgsProcessingParameterFeatureSource
+    from qgis.core import QgsProcessingParameterFeatureSource
 
     algorithm.addParameter(QgsProcessingParameterFeatureSource(
         BOUNDARY, algorithm.tr("Model domain polygon (holes left out; default: the data's "
-                               "extent)"), [QgsProcessing.TypeVectorPolygon], optional=True))
+                               "extent)"), [VECTOR_POLYGON], optional=True))
     algorithm.addParameter(QgsProcessingParameterFeatureSource(
         USER_LINES, algorithm.tr("Own break or structure lines (2-D lines take z from the DEM)"),
-        [QgsProcessing.TypeVectorLine], optional=True))
+        [VECTOR_LINE], optional=True))
 
 
 def domain_files(algorithm, parameters, context) -> tuple:

@@ -1,6 +1,7 @@
 """Classify breakpoints: slope ≥ S_crit (or a LoG response), thinned."""
 from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
+from .compat import DOUBLE
 
 from ..core.options import check_s_crit, check_sensitivity
 from .base import FloodMeshAlgorithm, layer_file, run_core
@@ -22,10 +23,10 @@ class ClassifyBreakpointsAlgorithm(FloodMeshAlgorithm):
             self.INPUT, self.tr("Slope (degrees) or LoG response (m)")))
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
-            QgsProcessingParameterNumber.Double, 10.0, minValue=0.0, maxValue=90.0))
+            DOUBLE, 10.0, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.LOG_SENSITIVITY, self.tr("LoG sensitivity (m; only for a LoG response)"),
-            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
+            DOUBLE, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterBoolean(
             self.ZERO_CROSSINGS, self.tr("LoG: breakpoints at zero crossings"), False))
         self.addParameter(QgsProcessingParameterRasterDestination(

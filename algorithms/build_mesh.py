@@ -1,8 +1,9 @@
 """Build mesh: break lines and the DEM's extent as a PSLG, refined by Triangle."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterDefinition,
+from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterDefinition,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer,
                        QgsProcessingParameterVectorDestination)
+from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POLYGON
 
 from ..core.options import (DEFAULT_MAX_TRIANGLES, MAX_MIN_ANGLE, check_max_area,
                             check_max_triangles, check_min_angle)
@@ -30,22 +31,22 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterRasterLayer(self.DEM, self.tr("DEM")))
         self.addParameter(QgsProcessingParameterFeatureSource(
-            self.BREAKLINES, self.tr("Break lines"), [QgsProcessing.TypeVectorLine],
+            self.BREAKLINES, self.tr("Break lines"), [VECTOR_LINE],
             optional=True))
         add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum angle (degrees)"),
-            QgsProcessingParameterNumber.Double, 25.0, minValue=0.0, maxValue=MAX_MIN_ANGLE))
+            DOUBLE, 25.0, minValue=0.0, maxValue=MAX_MIN_ANGLE))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_AREA, self.tr("Maximum triangle area (m²)"),
-            QgsProcessingParameterNumber.Double, 100.0, minValue=0.0))
+            DOUBLE, 100.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterRasterLayer(
             self.SIZE_FIELD, self.tr("Size field: local maximum area (m²)"), optional=True))
         self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, self.tr("Mesh (SMS 2DM)"), fileFilter="SMS 2DM (*.2dm)"))
         self.addParameter(QgsProcessingParameterVectorDestination(
-            self.TRIANGLES, self.tr("Triangles"), QgsProcessing.TypeVectorPolygon, optional=True,
+            self.TRIANGLES, self.tr("Triangles"), VECTOR_POLYGON, optional=True,
             createByDefault=False))
         self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Nodes")))
         self.addOutput(QgsProcessingOutputNumber(self.TRIANGLE_COUNT, self.tr("Triangles")))
@@ -91,6 +92,6 @@ def max_triangles_parameter(name, tr):
     """The advanced parameter that caps the mesh size, shared with LiDAR to mesh."""
     parameter = QgsProcessingParameterNumber(
         name, tr("Maximum number of triangles (refused before meshing above it)"),
-        QgsProcessingParameterNumber.Integer, DEFAULT_MAX_TRIANGLES, minValue=1)
+        INTEGER, DEFAULT_MAX_TRIANGLES, minValue=1)
     parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
     return parameter

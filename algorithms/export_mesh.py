@@ -1,11 +1,12 @@
 """Export mesh: a FloodMesh mesh (SMS 2DM) written for a solver."""
 from pathlib import Path
 
-from qgis.core import (QgsProcessing, QgsProcessingOutputFile,
+from qgis.core import (QgsProcessingOutputFile,
                        QgsProcessingParameterBoolean, QgsProcessingParameterCrs,
                        QgsProcessingParameterEnum, QgsProcessingParameterFeatureSource,
                        QgsProcessingParameterField, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterMeshLayer, QgsProcessingParameterNumber)
+from .compat import DOUBLE, VECTOR_LINE, VECTOR_POLYGON
 
 from ..core.options import EXPORT_EXTENSIONS as EXTENSIONS
 from ..core.options import EXPORT_FORMAT_LABELS, EXPORT_FORMATS
@@ -40,25 +41,25 @@ class ExportMeshAlgorithm(FloodMeshAlgorithm):
             self.CRS, self.tr("CRS of the mesh (when the layer has none)"), optional=True))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.OPEN_BOUNDARIES, self.tr("Open boundary lines (inflow, outflow sections)"),
-            [QgsProcessing.TypeVectorLine], optional=True))
+            [VECTOR_LINE], optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.SNAP, self.tr("Snapping distance to open boundary lines (m)"),
-            QgsProcessingParameterNumber.Double, 1.0, minValue=0.001))
+            DOUBLE, 1.0, minValue=0.001))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.REGIONS, self.tr("Region polygons (material ids)"),
-            [QgsProcessing.TypeVectorPolygon], optional=True))
+            [VECTOR_POLYGON], optional=True))
         self.addParameter(QgsProcessingParameterField(
             self.MATERIAL_FIELD, self.tr("Material id field"), parentLayerParameterName=self.REGIONS,
             type=QgsProcessingParameterField.Numeric, optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.DATUM_OFFSET, self.tr("Vertical datum offset added to elevations (m)"),
-            QgsProcessingParameterNumber.Double, 0.0))
+            DOUBLE, 0.0))
         self.addParameter(QgsProcessingParameterBoolean(
             self.ELEMENT_ELEVATIONS, self.tr("2DM: element-centre elevations (BASEMENT 3)"),
             defaultValue=False))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.BREAKLINES, self.tr("Break lines (GeoPackage layer)"),
-            [QgsProcessing.TypeVectorLine], optional=True))
+            [VECTOR_LINE], optional=True))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, self.tr("Exported mesh"), fileFilter=FILE_FILTER))
         self.addOutput(QgsProcessingOutputFile(self.CLI, self.tr("TELEMAC boundary conditions")))

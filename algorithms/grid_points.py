@@ -3,6 +3,7 @@ from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
                        QgsProcessingParameterFile, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterString,
                        QgsProcessingParameterVectorDestination)
+from .compat import DOUBLE, INTEGER
 
 from ..core.options import check_cell_size, check_holdout, check_max_gap
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
@@ -31,16 +32,16 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
             self.CLASSES, self.tr("LAS classes to grid, e.g. 2,9 (empty: 2 when classified)"),
             optional=True))
         self.addParameter(QgsProcessingParameterNumber(
-            self.CELL_SIZE, self.tr("Cell size d (m)"), QgsProcessingParameterNumber.Double, 1.0,
+            self.CELL_SIZE, self.tr("Cell size d (m)"), DOUBLE, 1.0,
             minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_GAP, self.tr("Maximum gap bridged (m; empty: 10 cells)"),
-            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
+            DOUBLE, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.HOLDOUT, self.tr("Fraction of points held out"),
-            QgsProcessingParameterNumber.Double, 0.0, minValue=0.0, maxValue=1.0))
+            DOUBLE, 0.0, minValue=0.0, maxValue=1.0))
         self.addParameter(QgsProcessingParameterNumber(
-            self.SEED, self.tr("Random seed"), QgsProcessingParameterNumber.Integer, 0))
+            self.SEED, self.tr("Random seed"), INTEGER, 0))
         self.addParameter(QgsProcessingParameterRasterDestination(self.OUTPUT, self.tr("DEM")))
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.HOLDOUT_OUTPUT, self.tr("Held-out points"), optional=True,

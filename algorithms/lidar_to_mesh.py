@@ -1,12 +1,13 @@
 """LiDAR to mesh: the whole FloodMesh chain in one Processing algorithm."""
 from pathlib import Path
 
-from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputFile,
+from qgis.core import (QgsMeshLayer, QgsProcessingOutputFile,
                        QgsProcessingParameterBoolean,
                        QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
                        QgsProcessingParameterCrs, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
                        QgsProcessingParameterNumber, QgsVectorLayer)
+from .compat import DOUBLE, INTEGER, VECTOR_LINE
 
 from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
                             MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions)
@@ -67,36 +68,36 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, self.tr("CRS of the input (when the file has none)"), optional=True))
         self.addParameter(QgsProcessingParameterNumber(
-            self.CELL_SIZE, self.tr("Grid cell size d (m)"), QgsProcessingParameterNumber.Double,
+            self.CELL_SIZE, self.tr("Grid cell size d (m)"), DOUBLE,
             defaults.cell_size, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
             self.SLOPE_METHOD, self.tr("Slope method"), options=METHODS,
             defaultValue=METHODS.index(defaults.slope_method)))
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
-            QgsProcessingParameterNumber.Double, defaults.s_crit, minValue=0.0, maxValue=90.0))
+            DOUBLE, defaults.s_crit, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.KEEP_EVERY, self.tr("Keep every n-th break-line point"),
-            QgsProcessingParameterNumber.Integer, 4, minValue=1))
+            INTEGER, 4, minValue=1))
         self.addParameter(QgsProcessingParameterEnum(
             self.SIMPLIFY, self.tr("Break-line simplification"), options=list(SIMPLIFY_LABELS),
             defaultValue=0))
         self.addParameter(QgsProcessingParameterNumber(
             self.TOLERANCE, self.tr("Tolerance for Douglas–Peucker or spline (m)"),
-            QgsProcessingParameterNumber.Double, 0.9, minValue=0.001))
+            DOUBLE, 0.9, minValue=0.001))
         add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),
-            QgsProcessingParameterNumber.Double, defaults.min_angle, minValue=0.0,
+            DOUBLE, defaults.min_angle, minValue=0.0,
             maxValue=MAX_MIN_ANGLE))
         self.addParameter(QgsProcessingParameterNumber(
             self.MAX_AREA, self.tr("Maximum triangle area (m²)"),
-            QgsProcessingParameterNumber.Double, defaults.max_area, minValue=0.0))
+            DOUBLE, defaults.max_area, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.HOLDOUT, self.tr("Fraction of points held out for assessment"),
-            QgsProcessingParameterNumber.Double, defaults.holdout, minValue=0.0, maxValue=1.0))
+            DOUBLE, defaults.holdout, minValue=0.0, maxValue=1.0))
         self.addParameter(QgsProcessingParameterNumber(
-            self.SEED, self.tr("Random seed"), QgsProcessingParameterNumber.Integer,
+            self.SEED, self.tr("Random seed"), INTEGER,
             defaults.seed))
         self.addParameter(QgsProcessingParameterEnum(
             self.FORMATS, self.tr("Also write the mesh for solvers"),
@@ -123,7 +124,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
         self.addOutput(QgsProcessingOutputVectorLayer(
-            self.BREAKLINES, self.tr("Break lines"), QgsProcessing.TypeVectorLine))
+            self.BREAKLINES, self.tr("Break lines"), VECTOR_LINE))
         self.addOutput(QgsProcessingOutputFile(self.MESH, self.tr("Mesh (SMS 2DM)")))
         self.addOutput(QgsProcessingOutputFile(self.REPORT, self.tr("Report (JSON)")))
         self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Mesh nodes")))

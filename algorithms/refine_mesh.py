@@ -1,9 +1,10 @@
 """Refine mesh: local refinement and point insertion until the residuals meet a target."""
 from dataclasses import asdict
 
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
+from qgis.core import (QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
+from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POINT
 
 from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, read_mesh_inputs,
                    run_core)
@@ -30,19 +31,19 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterRasterLayer(self.DEM, self.tr("DEM")))
         self.addParameter(QgsProcessingParameterFeatureSource(
-            self.BREAKLINES, self.tr("Break lines"), [QgsProcessing.TypeVectorLine],
+            self.BREAKLINES, self.tr("Break lines"), [VECTOR_LINE],
             optional=True))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.POINTS, self.tr("Measured points (3-D) driving the refinement"),
-            [QgsProcessing.TypeVectorPoint]))
+            [VECTOR_POINT]))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.CHECK, self.tr("Check points (3-D), never used for refinement"),
-            [QgsProcessing.TypeVectorPoint], optional=True))
+            [VECTOR_POINT], optional=True))
         add_domain_parameters(self)
 
         def number(name, label, default, minimum, optional=False, kind=None):
             self.addParameter(QgsProcessingParameterNumber(
-                name, self.tr(label), kind or QgsProcessingParameterNumber.Double, default,
+                name, self.tr(label), kind or DOUBLE, default,
                 optional=optional, minValue=minimum))
 
         number(self.MIN_ANGLE, "Minimum angle (degrees)", 25.0, 0.01)
@@ -52,8 +53,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         number(self.TARGET_RMSE, "Target RMSE (m)", None, 0.0, optional=True)
         number(self.TARGET_MAX, "Target maximum residual (m)", None, 0.0, optional=True)
         number(self.MAX_NODES, "Node budget", 1_000_000, 3,
-               kind=QgsProcessingParameterNumber.Integer)
-        number(self.MAX_ROUNDS, "Rounds at most", 8, 1, kind=QgsProcessingParameterNumber.Integer)
+               kind=INTEGER)
+        number(self.MAX_ROUNDS, "Rounds at most", 8, 1, kind=INTEGER)
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, self.tr("Refined mesh (SMS 2DM)"), fileFilter="SMS 2DM (*.2dm)"))
         self.addParameter(QgsProcessingParameterFileDestination(

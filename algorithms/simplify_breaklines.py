@@ -1,7 +1,8 @@
 """Simplify break lines: every n-th point, Douglas–Peucker or a cubic smoothing spline."""
-from qgis.core import (QgsProcessing, QgsProcessingParameterEnum,
+from qgis.core import (QgsProcessingParameterEnum,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber,
                        QgsProcessingParameterVectorDestination)
+from .compat import DOUBLE, INTEGER, VECTOR_LINE
 
 from ..core.options import SIMPLIFY_METHODS
 from .base import FloodMeshAlgorithm, layer_file, run_core
@@ -26,20 +27,20 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFeatureSource(
-            self.INPUT, self.tr("Break lines"), [QgsProcessing.TypeVectorLine]))
+            self.INPUT, self.tr("Break lines"), [VECTOR_LINE]))
         self.addParameter(QgsProcessingParameterEnum(self.METHOD, self.tr("Method"),
                                                      options=list(METHODS), defaultValue=0))
         self.addParameter(QgsProcessingParameterNumber(
             self.KEEP_EVERY, self.tr("Keep every n-th point"),
-            QgsProcessingParameterNumber.Integer, 4, minValue=1))
+            INTEGER, 4, minValue=1))
         self.addParameter(QgsProcessingParameterNumber(
             self.TOLERANCE, self.tr("Tolerance for Douglas–Peucker or spline (m)"),
-            QgsProcessingParameterNumber.Double, 0.9, minValue=0.0))
+            DOUBLE, 0.9, minValue=0.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_DISTANCE, self.tr("Minimum distance between lines (m)"),
-            QgsProcessingParameterNumber.Double, 0.5, minValue=0.0))
+            DOUBLE, 0.5, minValue=0.0))
         self.addParameter(QgsProcessingParameterVectorDestination(
-            self.OUTPUT, self.tr("Simplified break lines"), QgsProcessing.TypeVectorLine))
+            self.OUTPUT, self.tr("Simplified break lines"), VECTOR_LINE))
 
     def process(self, parameters, context, feedback):
         from ..core import io

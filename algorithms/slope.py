@@ -1,6 +1,7 @@
 """Slope: one of the six first-order kernels, or the Laplacian of Gaussian."""
 from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
+from .compat import DOUBLE
 
 from ..core.options import BREAKPOINT_METHODS, LOG_KERNELS
 from .base import FloodMeshAlgorithm, layer_file, run_core
@@ -24,7 +25,7 @@ class SlopeAlgorithm(FloodMeshAlgorithm):
             self.METHOD, self.tr("Method"), options=list(BREAKPOINT_METHODS),
             defaultValue=BREAKPOINT_METHODS.index("one-over-distance")))
         self.addParameter(QgsProcessingParameterNumber(
-            self.SIGMA, self.tr("LoG: Gaussian sigma (m)"), QgsProcessingParameterNumber.Double,
+            self.SIGMA, self.tr("LoG: Gaussian sigma (m)"), DOUBLE,
             1.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
             self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"), options=list(LOG_KERNELS),

@@ -1,7 +1,8 @@
 """Trace break lines through thinned breakpoints."""
-from qgis.core import (QgsProcessing, QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
+from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefinition,
                        QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterLayer, QgsProcessingParameterVectorDestination)
+from .compat import DOUBLE, INTEGER, VECTOR_LINE
 
 from ..core.options import TRACING_MODES as MODES
 from ..core.options import check_min_points, check_s_crit
@@ -34,23 +35,23 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterRasterLayer(self.DEM, self.tr("DEM")))
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
-            QgsProcessingParameterNumber.Double, 10.0, minValue=0.0, maxValue=90.0))
+            DOUBLE, 10.0, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterEnum(self.MODE, self.tr("Terrain"),
                                                      options=list(MODES), defaultValue=0))
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_POINTS, self.tr("Minimum points per line"),
-            QgsProcessingParameterNumber.Integer, 3, minValue=2))
+            INTEGER, 3, minValue=2))
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_LENGTH, self.tr("Minimum line length (m)"),
-            QgsProcessingParameterNumber.Double, 0.0, minValue=0.0))
+            DOUBLE, 0.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterBoolean(
             self.JOIN, self.tr("Join pieces cut at staircase corners"), defaultValue=True))
         seed = QgsProcessingParameterNumber(self.SEED, self.tr("Random seed for ties"),
-                                            QgsProcessingParameterNumber.Integer, 0, minValue=0)
+                                            INTEGER, 0, minValue=0)
         seed.setFlags(seed.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
         self.addParameter(seed)
         self.addParameter(QgsProcessingParameterVectorDestination(
-            self.OUTPUT, self.tr("Break lines"), QgsProcessing.TypeVectorLine))
+            self.OUTPUT, self.tr("Break lines"), VECTOR_LINE))
 
     def check_values(self, parameters, context):
         check_s_crit(self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context))

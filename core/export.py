@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from . import io
+from .arrays import unique_rows
 from .errors import FloodMeshError
 from .mesh import boundary_loops
 from .raster import require_metric_crs
@@ -462,8 +463,8 @@ def write_ugrid(path, mesh: SolverMesh, *, title: str = "FloodMesh mesh") -> Non
 
     crs = mesh.crs
     tri = mesh.triangles
-    edges = np.unique(np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]),
-                              axis=1), axis=0)
+    edges = unique_rows(np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]),
+                                axis=1))
     n, m = len(mesh.nodes), len(tri)
     gm = "projected_coordinate_system"
 

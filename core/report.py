@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from . import io
+from .arrays import unique_rows
 from .accuracy import CLASS_LIMITS_M, accuracy_statistics, residual_class
 from .options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS
 
@@ -86,7 +87,7 @@ def write_residual_histogram(path, res: np.ndarray) -> Path:
 def mesh_edges(triangles: np.ndarray) -> np.ndarray:
     """The unique edges of ``triangles`` (m, 3) as (k, 2) node index pairs, smaller first."""
     pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    return np.unique(np.sort(pairs, axis=1), axis=0)
+    return unique_rows(np.sort(pairs, axis=1))
 
 
 def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray,

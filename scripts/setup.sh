@@ -1,13 +1,18 @@
 #!/usr/bin/env bash
-# Sets up everything FloodMesh needs on Debian 12: QGIS and the scientific stack from Debian's
-# packages, then a virtual environment that sees them (--system-site-packages) and adds what
-# Debian lacks (triangle, laspy+lazrs, numba, shapely 2) from PyPI, pinned to Debian's numpy.
+# Sets up everything FloodMesh needs on Debian 12 or 13: QGIS and the scientific stack from
+# Debian's packages, then a virtual environment that sees them (--system-site-packages) and adds
+# what Debian lacks (triangle, laspy+lazrs, numba, shapely 2) from PyPI, pinned to the versions of
+# Debian's Python packages installed here (.venv/constraints.txt, written below).
 # Safe to run again: it installs only what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 DEB_PACKAGES=(qgis python3-qgis qgis-providers python3-venv python3-numpy python3-scipy
-              python3-rasterio python3-fiona python3-pyproj python3-matplotlib gdal-bin)
+              python3-rasterio python3-fiona python3-pyproj python3-matplotlib gdal-bin
+              python3-setuptools python3-wheel)
+# Debian's Python packages that pip must never replace (QGIS, GDAL and each other are built
+# against them): the environment is pinned to the versions installed.
+SYSTEM_PINS=(numpy scipy rasterio fiona pyproj matplotlib)
 
 missing=()
 for p in "${DEB_PACKAGES[@]}"; do
@@ -18,20 +23,40 @@ if [ ${#missing[@]} -gt 0 ]; then
     SUDO=""
     [ "$(id -u)" -eq 0 ] || SUDO="sudo"
     export DEBIAN_FRONTEND=noninteractive
-    $SUDO apt-get update -qq
-    $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+    # wait for another apt (another setup, unattended upgrades) instead of failing at once
+    APT=(apt-get -o DPkg::Lock::Timeout=600 -o Acquire::Retries=3)
+    $SUDO "${APT[@]}" update -qq
+    $SUDO "${APT[@]}" install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
 if [ ! -x .venv/bin/python ]; then
     echo "setup: creating .venv (Debian python with system site-packages)"
     /usr/bin/python3 -m venv --system-site-packages .venv
 fi
+# constraints.txt (the project's own pins) plus the system's versions, e.g. numpy 1.24.2 on
+# Debian 12 and 2.2.4 on Debian 13
+{ cat constraints.txt
+  /usr/bin/python3 -I - "${SYSTEM_PINS[@]}" <<'EOF'
+import sys
+from importlib.metadata import PackageNotFoundError, version
+for name in sys.argv[1:]:
+    try:
+        print(f"{name}=={version(name)}")
+    except PackageNotFoundError:
+        pass
+EOF
+} >.venv/constraints.txt.new
 stamp=.venv/.floodmesh-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ]; then
-    echo "setup: installing Python dependencies into .venv"
-    .venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -e ".[test]"
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] \
+        || ! cmp -s .venv/constraints.txt.new .venv/constraints.txt; then
+    echo "setup: installing Python dependencies into .venv ($(grep '^numpy' .venv/constraints.txt.new))"
+    # the build backend is Debian's setuptools (python3-setuptools), not one that pip would fetch
+    # into an isolated build environment
+    .venv/bin/pip install -q --disable-pip-version-check --no-build-isolation \
+        -c .venv/constraints.txt.new -e ".[test]"
     touch "$stamp"
 fi
+mv .venv/constraints.txt.new .venv/constraints.txt  # only once pip has kept to it
 # the fort.14/hgrid.gr3 readers ADCIRC and SCHISM users script with, for the export tests: their
 # parsers only, without the dependencies (which would pull in a second numpy)
 if ! .venv/bin/python -c "import importlib.util as u, sys; sys.exit(not (u.find_spec('pyschism') and u.find_spec('adcircpy')))"; then

@@ -2,10 +2,13 @@
 rasters, each meshed in a child process with a time bound, so that a crash in Triangle's C code
 or a refinement that never ends is caught and reported instead of taking the test run down.
 
-Each case must either give a valid mesh (every triangle counter-clockwise, no angle below the
-bound except at sharp input corners, no triangle above the area bound, every input segment a
+Each case must either give a valid mesh (every triangle counter-clockwise, the angle rule of
+``core.mesh.below_angle_bound`` kept, no triangle above the area bound, every input segment a
 chain of mesh edges) or raise FloodMeshError. The number of cases run is printed at the end of
 the session (tests/conftest.py).
+
+With CI set the cases are the same on every run (derandomised); otherwise every run draws new
+ones. ``make fuzz`` draws ten times as many; what it finds goes into test_mesh_regressions.py.
 """
 from __future__ import annotations
 
@@ -23,8 +26,8 @@ from hypothesis import strategies as st
 from pyproj import CRS
 
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import (SHARP_CORNER, build_mesh, build_pslg, domain_from_dem,
-                                 input_corner_angles, triangle_angles, triangulate_pslg)
+from floodmesh.core.mesh import (below_angle_bound, build_mesh, build_pslg, domain_from_dem,
+                                 triangle_angles, triangulate_pslg)
 from floodmesh.core.raster import Grid
 
 from .. import fuzz_stats
@@ -133,28 +136,12 @@ def _check(vertices, triangles, pslg, min_angle, max_area) -> str:
         return f"{int((signed <= 0).sum())} triangles not counter-clockwise"
     if signed.max() > max_area * (1 + 1e-6):
         return f"largest triangle {signed.max()} above {max_area}"
-    # Triangle keeps the angle bound except near input corners sharper than 60 degrees
-    # (Miller, Pav & Walkington 2003): there, skinny triangles may fill the corner's wedge as
-    # far as its longest segment reaches, or have the corner as a vertex. Anywhere else a small
-    # angle is a failure.
-    smallest = triangle_angles(xy, triangles).min(axis=1)
-    bad = np.nonzero(smallest < min_angle - 1e-6)[0]
-    if len(bad):
-        corner = input_corner_angles(xy, pslg.segments)
-        sharp = np.nonzero(corner < SHARP_CORNER)[0]
-        seg_len = np.hypot(*(xy[pslg.segments[:, 0]] - xy[pslg.segments[:, 1]]).T)
-        reach = np.zeros(len(xy))
-        np.maximum.at(reach, pslg.segments[:, 0], seg_len)
-        np.maximum.at(reach, pslg.segments[:, 1], seg_len)
-        centroids = xy[triangles[bad]].mean(axis=1)
-        dist = np.hypot(centroids[:, None, 0] - xy[None, sharp, 0],
-                        centroids[:, None, 1] - xy[None, sharp, 1])
-        excused = (dist <= reach[sharp][None, :]).any(axis=1) if len(sharp) else \
-            np.zeros(len(bad), bool)
-        excused |= np.isin(triangles[bad], sharp).any(axis=1)  # a corner of the triangle
-        if not excused.all():
-            return (f"{int((~excused).sum())} triangles below {min_angle} degrees away from "
-                    f"sharp input corners (smallest {smallest[bad][~excused].min():.2f})")
+    # the one angle rule of core.mesh: below the bound only at input corners sharper than 60°
+    defects, _ = below_angle_bound(xy, triangles, pslg.segments, min_angle)
+    if defects.any():
+        smallest = triangle_angles(xy, triangles[defects]).min()
+        return (f"{int(defects.sum())} triangles below {min_angle} degrees away from "
+                f"sharp input corners (smallest {smallest:.2f})")
     # every input segment is a chain of mesh edges: the vertices on it, in order, are joined
     edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
                                     triangles[:, [2, 0]]]), axis=1)

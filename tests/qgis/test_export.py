@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from pyproj import CRS
 from qgis.core import (QgsMesh, QgsMeshDatasetGroupMetadata, QgsMeshDatasetIndex, QgsMeshLayer,
-                       QgsProcessingException, QgsVectorLayer, QgsWkbTypes)
+                       QgsProcessingException, QgsVectorLayer)
+from floodmesh.algorithms.compat import LINESTRING_Z, POINT_Z, POLYGON_Z
 
 from floodmesh.core import io
 from floodmesh.core.mesh import triangle_areas
@@ -109,10 +110,10 @@ def test_geopackage_through_ogr(processing, inputs):
     t, nodes, tris, materials = inputs
     result = export(processing, inputs, "gpkg", "layers.gpkg",
                     BREAKLINES=str(t / "open.gpkg"))
-    expected = {"triangles": (QgsWkbTypes.PolygonZ, len(tris)),
-                "nodes": (QgsWkbTypes.PointZ, len(nodes)),
-                "boundary": (QgsWkbTypes.LineStringZ, 3),
-                "breaklines": (QgsWkbTypes.LineStringZ, 1)}
+    expected = {"triangles": (POLYGON_Z, len(tris)),
+                "nodes": (POINT_Z, len(nodes)),
+                "boundary": (LINESTRING_Z, 3),
+                "breaklines": (LINESTRING_Z, 1)}
     for name, (wkb, count) in expected.items():
         layer = QgsVectorLayer(f"{result['OUTPUT']}|layername={name}", name, "ogr")
         assert layer.isValid() and layer.wkbType() == wkb and layer.featureCount() == count

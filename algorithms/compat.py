@@ -1,0 +1,35 @@
+"""The one place where FloodMesh's QGIS code differs between the QGIS releases it supports:
+3.22 (Debian 12) and 3.40 LTR (Debian 13), Qt5 builds and Qt6 ones.
+
+QGIS 3.30 and 3.36 moved the enums used here into ``Qgis`` (``Qgis.WkbType``,
+``Qgis.ProcessingSourceType``, ``Qgis.ProcessingNumberParameterType``) and deprecated the old
+names; the scoped ones are what Qt6 builds (QGIS 4) keep. Each name below is the new enum
+where this QGIS has it, else the old one. Qt classes come from ``qgis.PyQt``, QGIS's own shim
+over PyQt5 and PyQt6.
+"""
+from qgis.core import Qgis, QgsProcessing, QgsProcessingParameterNumber
+
+if hasattr(Qgis, "ProcessingSourceType"):  # QGIS >= 3.36
+    VECTOR_POINT = Qgis.ProcessingSourceType.VectorPoint
+    VECTOR_LINE = Qgis.ProcessingSourceType.VectorLine
+    VECTOR_POLYGON = Qgis.ProcessingSourceType.VectorPolygon
+else:
+    VECTOR_POINT = QgsProcessing.TypeVectorPoint
+    VECTOR_LINE = QgsProcessing.TypeVectorLine
+    VECTOR_POLYGON = QgsProcessing.TypeVectorPolygon
+
+if hasattr(Qgis, "ProcessingNumberParameterType"):  # QGIS >= 3.36
+    DOUBLE = Qgis.ProcessingNumberParameterType.Double
+    INTEGER = Qgis.ProcessingNumberParameterType.Integer
+else:
+    DOUBLE = QgsProcessingParameterNumber.Double
+    INTEGER = QgsProcessingParameterNumber.Integer
+
+if hasattr(Qgis, "WkbType"):  # QGIS >= 3.30
+    POINT_Z, LINESTRING_Z, POLYGON_Z = (Qgis.WkbType.PointZ, Qgis.WkbType.LineStringZ,
+                                        Qgis.WkbType.PolygonZ)
+else:
+    from qgis.core import QgsWkbTypes
+
+    POINT_Z, LINESTRING_Z, POLYGON_Z = (QgsWkbTypes.PointZ, QgsWkbTypes.LineStringZ,
+                                        QgsWkbTypes.PolygonZ)
