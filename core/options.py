@@ -216,6 +216,9 @@ class RunOptions:
     refine: bool = False            # refine until the residual bounds hold (step 9)
     refine_lower: float = 0.10      # m: refine triangles whose points' RMS residual exceeds it
     refine_upper: float = 0.25      # m: insert points whose residual exceeds it
+    workers: int | None = None      # point tiles: local Dask workers (default one per core)
+    scheduler: str | None = None    # point tiles: a running dask.distributed scheduler's address
+    processes: bool = True          # point tiles: local workers are processes (False: threads)
 
     def __post_init__(self):
         self.validate()
@@ -247,6 +250,8 @@ class RunOptions:
                 raise FloodMeshError(f"the refinement lower bound ({lower:g} m) is above the "
                                      f"upper bound ({upper:g} m); 0.10 and 0.25 are usual")
         check_holdout(self.holdout)
+        if self.workers is not None:
+            check_positive_int(self.workers, "number of Dask workers")
         check_min_points(self.min_points)
         for name in self.formats:
             export_format(name)

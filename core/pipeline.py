@@ -26,6 +26,8 @@ from .options import RunOptions
 from .refine import refine_mesh
 from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .slope import laplacian_of_gaussian, slope
+from .tiles import (TiledDem, expand_tiles, grid_point_tiles, is_tile_set, read_dem_tiles,
+                    tile_kind)
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
                 "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG, "report.json")
@@ -132,7 +134,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
 
     exported = steps.run("write", write_all)
     report = {
-        "input": str(input_path),
+        "input": (str(input_path) if isinstance(input_path, (str, Path))
+                  else [str(p) for p in input_path]),
         "crs": dem.crs.to_string(),
         "options": {k: v for k, v in asdict(options).items()},
         "n_points": front.n_points,
@@ -181,9 +184,17 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
     repaired on the user's behalf. Grids and meshes too large for the triangle limit or the
     memory are refused before the work."""
     steps = steps or _Steps({}, None, cancelled, None)
-    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes,
-                     note=note)
-    if isinstance(data, PointCloud):
+    if is_tile_set(input_path):
+        data = steps.run("read", read_tile_set, input_path, options, cancelled=cancelled,
+                         note=note, progress=None)
+    else:
+        data = steps.run("read", io.read_input, input_path, crs=options.crs,
+                         classes=options.classes, note=note)
+    if isinstance(data, TiledDem):
+        dem, holdout, measured = data.dem, PointCloud(data.holdout, data.dem.crs), None
+        holdout_source = "LiDAR points withheld from gridding, tile by tile"
+        n_points = data.n_points
+    elif isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
         measured = gridding.xyz
         # refuse, before the work, a grid or mesh too large for the limit or the memory
@@ -224,6 +235,30 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
                  domain, own_lines, measured)
+
+
+def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None, note=None):
+    """Point tiles gridded on Dask (``tiles.TiledDem``), or DEM tiles as one ``Grid``."""
+    paths = expand_tiles(inputs)
+    if tile_kind(paths[0]) == "dem":
+        return read_dem_tiles(paths, crs=options.crs)
+    if options.refine:
+        raise FloodMeshError("--refine ('Refine' in QGIS) needs all points in memory and is not "
+                             "available with point tiles: run without it, then refine a part "
+                             "with floodmesh refine DEM --points TILE")
+
+    def check(plan):
+        check_triangles(plan["area"], options.max_area, options.max_triangles)
+
+    tiled = grid_point_tiles(paths, options.cell_size, max_gap=options.max_gap, crs=options.crs,
+                             classes=options.classes, holdout=options.holdout, seed=options.seed,
+                             workers=options.workers, scheduler=options.scheduler,
+                             processes=options.processes, progress=progress,
+                             cancelled=cancelled, check=check)
+    for message in tiled.notes:
+        if note:
+            note(message)
+    return tiled
 
 
 def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: float,

@@ -279,6 +279,7 @@ class TiledDem:
     n_tiles: int
     area: float              # m² the points cover
     notes: list
+    crs: CRS
 
 
 def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
@@ -390,7 +391,7 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
     held = np.concatenate([m["holdout"] for m in meta]) if meta else np.empty((0, 3))
     notes = [n for m in meta for n in m["notes"]]
     return TiledDem(Grid(values, transform, tile_crs) if keep else None, held, n_points,
-                    len(tiles), area, notes)
+                    len(tiles), area, notes, tile_crs)
 
 
 @contextlib.contextmanager
