@@ -10,7 +10,7 @@ import rasterio
 from pyproj import CRS
 
 from floodmesh.core import io
-from floodmesh.core.demo import DEMO_ORIGIN, synthetic_floodplain
+from floodmesh.core.demo import DEMO_ORIGIN
 from floodmesh.core.errors import Cancelled, FloodMeshError
 from floodmesh.core.grid import grid_points_linear
 from floodmesh.core.options import RunOptions
@@ -20,6 +20,8 @@ from floodmesh.core.raster import Grid
 from floodmesh.core.tiles import (_tile_points, grid_point_tiles, holdout_mask,
                                   read_dem_tiles)
 
+from ..conftest import survey_tiles
+
 FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
 X0, Y0 = DEMO_ORIGIN
 EDGE_X, EDGE_Y = X0 + 150, Y0 + 120  # the inner tile edges
@@ -27,22 +29,7 @@ EDGE_X, EDGE_Y = X0 + 150, Y0 + 120  # the inner tile edges
 
 @pytest.fixture(scope="module")
 def survey(tmp_path_factory):
-    """The demo floodplain (ground points, 4 per m²) as 4 LAZ tiles of 150 x 120 m and as one
-    LAZ file of the same points."""
-    points, classes = synthetic_floodplain(density=4.0, seed=2)
-    ground = points.xyz[classes == 2]
-    root = tmp_path_factory.mktemp("survey")
-    (root / "tiles").mkdir()
-    for xs in (0, 150):
-        for ys in (0, 120):
-            inside = ((ground[:, 0] >= X0 + xs) & (ground[:, 0] < X0 + xs + 150)
-                      & (ground[:, 1] >= Y0 + ys) & (ground[:, 1] < Y0 + ys + 120))
-            io.write_points_las(root / "tiles" / f"tile_{xs}_{ys}.laz",
-                                PointCloud(ground[inside], points.crs))
-    tiles = sorted((root / "tiles").glob("*.laz"))
-    merged = np.concatenate([io.read_points(p).xyz for p in tiles])
-    io.write_points_las(root / "single.laz", PointCloud(merged, points.crs))
-    return root
+    return survey_tiles(tmp_path_factory.mktemp("survey"))
 
 
 @pytest.fixture(scope="module")
