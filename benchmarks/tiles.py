@@ -34,7 +34,7 @@ def ground(x, y):
     centre = 500.0 + 120.0 * np.sin(2 * np.pi * x / 1700.0)
     r = np.abs((y % TILE) - centre)  # across-channel distance (vertical, close enough)
     z += np.where(r < 60, -2.5 * np.clip((12.0 - r) / 5.0, 0, 1), 0.0)        # channel 1:2
-    z += 1.8 * np.clip(1 - np.abs(r - 45.0 - 2.0) / 5.4, 0, 1).clip(0, 1 / 1.0)  # levees 1:3
+    z += 1.8 * np.clip(1 - np.abs(r - 47.0) / 5.4, 0, 1)                      # levees 1:3
     road = np.abs((x % 2000.0) - 1000.0 - 0.1 * (y % 2000.0))
     z += 1.5 * np.clip((7.0 - road) / 3.0, 0, 1)                                # roads 1:2
     return z

@@ -185,8 +185,9 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
     memory are refused before the work."""
     steps = steps or _Steps({}, None, cancelled, None)
     if is_tile_set(input_path):
-        data = steps.run("read", read_tile_set, input_path, options, cancelled=cancelled,
-                         note=note, progress=None)
+        paths = expand_tiles(input_path)  # point tiles are read and gridded in one step
+        data = steps.run("grid" if tile_kind(paths[0]) == "points" else "read", read_tile_set,
+                         paths, options, cancelled=cancelled, note=note, progress=None)
     else:
         data = steps.run("read", io.read_input, input_path, crs=options.crs,
                          classes=options.classes, note=note)

@@ -151,3 +151,16 @@ def test_dem_tiles_are_read_as_one_grid(tmp_path):
     io.write_raster(tmp_path / "e.tif", shifted)
     with pytest.raises(FloodMeshError, match="tile e.tif has cells of 1 m .* not on the grid"):
         read_dem_tiles([tmp_path / "w.tif", tmp_path / "e.tif"])
+
+
+def test_xyz_tiles_with_a_given_crs(survey, scheduler, tmp_path):
+    tiles = sorted((survey / "tiles").glob("*.laz"))[:2]  # the western column
+    for p in tiles:
+        np.savetxt(tmp_path / f"{p.stem}.xyz", io.read_points(p).xyz, fmt="%.3f")
+    from_laz = grid_point_tiles(tiles, 1.0, scheduler=scheduler)
+    with pytest.raises(FloodMeshError, match=r"tile tile_0_0.xyz has no coordinate reference"):
+        grid_point_tiles(str(tmp_path / "*.xyz"), 1.0, scheduler=scheduler)
+    from_xyz = grid_point_tiles(str(tmp_path / "*.xyz"), 1.0, crs="EPSG:25832",
+                                scheduler=scheduler)
+    assert from_xyz.dem.transform == from_laz.dem.transform
+    np.testing.assert_allclose(from_xyz.dem.values, from_laz.dem.values, atol=1e-6)
