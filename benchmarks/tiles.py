@@ -8,7 +8,8 @@ DEMs). Prints a table.
 The synthetic floodplain (9 ground points/m², 5 cm noise: a sinuous river with levees in every
 1 km band, a road embankment every 2 km, undulating ground) is generated once into ``--data``
 (not the repository) and removed at the end unless ``--keep-data``. Peak memory is the largest
-sum of the resident memory of the command and its Dask worker processes, sampled every 0.1 s.
+sum of the resident memory of the command and its Dask worker processes, sampled every 0.1 s;
+CPU seconds are theirs too (user + system), the measure of work when the machine is shared.
 """
 from __future__ import annotations
 
@@ -79,10 +80,18 @@ def tiles_for(data: Path, area_km2: int, density: float) -> list[Path]:
     return paths
 
 
-def measured(command: list[str]) -> tuple[float, float, str]:
-    """(wall seconds, peak MB of the process tree's summed RSS, stdout) of a command."""
+def measured(command: list[str]) -> tuple[float, float, float, str]:
+    """(wall seconds, CPU seconds of the command and its workers, peak MB of the process tree's
+    summed RSS, stdout) of a command."""
+    import resource
+
     import psutil
 
+    def cpu():
+        usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return usage.ru_utime + usage.ru_stime
+
+    cpu0 = cpu()
     start = time.perf_counter()
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     top = psutil.Process(proc.pid)
@@ -97,7 +106,7 @@ def measured(command: list[str]) -> tuple[float, float, str]:
     out, err = proc.communicate()
     if proc.returncode:
         raise SystemExit(f"{' '.join(command)} failed:\n{err}")
-    return time.perf_counter() - start, peak / 1e6, out
+    return time.perf_counter() - start, cpu() - cpu0, peak / 1e6, out
 
 
 def main():
@@ -120,17 +129,17 @@ def main():
         for area in areas:
             tiles = tiles_for(data, area, args.density)
             points = int(args.density * 1e6 * area)
-            seconds, peak, _ = measured([FLOODMESH, "grid", *map(str, tiles), "--cell-size",
-                                         "1", "--workers", str(args.workers),
-                                         "--out", str(out / f"dem_{area}.tif")])
-            rows.append(("grid tiles", area, points, seconds, peak))
+            seconds, cpu, peak, _ = measured([FLOODMESH, "grid", *map(str, tiles), "--cell-size",
+                                              "1", "--workers", str(args.workers),
+                                              "--out", str(out / f"dem_{area}.tif")])
+            rows.append(("grid tiles", area, points, seconds, cpu, peak))
             print(f"  grid {area} km²: {seconds:.0f} s, {peak:.0f} MB", file=sys.stderr,
                   flush=True)
             if area in chain:
-                seconds, peak, _ = measured([FLOODMESH, "run", *map(str, tiles), "--workers",
-                                             str(args.workers), "--out",
-                                             str(out / f"run_{area}")])
-                rows.append(("run tiles", area, points, seconds, peak))
+                seconds, cpu, peak, _ = measured([FLOODMESH, "run", *map(str, tiles),
+                                                  "--workers", str(args.workers), "--out",
+                                                  str(out / f"run_{area}")])
+                rows.append(("run tiles", area, points, seconds, cpu, peak))
                 print(f"  run {area} km²: {seconds:.0f} s, {peak:.0f} MB", file=sys.stderr,
                       flush=True)
         # one file against tiles: the same 4 km², the same DEM
@@ -148,9 +157,10 @@ def main():
                         with laspy.open(path) as reader:
                             for chunk in reader.chunk_iterator(2_000_000):
                                 writer.write_points(chunk)
-            seconds, peak, _ = measured([FLOODMESH, "grid", str(single), "--cell-size", "1",
-                                         "--out", str(out / "dem_single_4.tif")])
-            rows.append(("grid one file (peer)", 4, int(args.density * 4e6), seconds, peak))
+            seconds, cpu, peak, _ = measured([FLOODMESH, "grid", str(single), "--cell-size",
+                                              "1", "--out", str(out / "dem_single_4.tif")])
+            rows.append(("grid one file (peer)", 4, int(args.density * 4e6), seconds, cpu,
+                         peak))
             from floodmesh.core import io
 
             a = io.read_raster(out / "dem_single_4.tif")
@@ -165,10 +175,10 @@ def main():
             shutil.rmtree(data, ignore_errors=True)
     print(f"\n## A floodplain as 1 km² LAZ tiles, {args.density:g} points/m², 1 m DEM, "
           f"{args.workers} local Dask workers")
-    print(f"{'what':<22}{'km²':>5}{'points':>14}{'seconds':>9}{'s per km²':>11}"
+    print(f"{'what':<22}{'km²':>5}{'points':>14}{'wall s':>9}{'CPU s':>9}{'CPU s/km²':>11}"
           f"{'peak RSS MB':>13}")
-    for what, area, points, seconds, peak in rows:
-        print(f"{what:<22}{area:>5}{points:>14,}{seconds:>9.1f}{seconds / area:>11.1f}"
+    for what, area, points, seconds, cpu, peak in rows:
+        print(f"{what:<22}{area:>5}{points:>14,}{seconds:>9.1f}{cpu:>9.1f}{cpu / area:>11.1f}"
               f"{peak:>13.0f}")
     if compare:
         same_transform, same_nan, diff, shape = compare

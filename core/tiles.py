@@ -310,7 +310,7 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
     band = 2 * halo
     largest = max(t.count for t in tiles)
     with dask_client(workers, scheduler, processes=processes) as client:
-        parallel = 1 if scheduler else len(client.scheduler_info()["workers"]) or 1
+        parallel = 1 if scheduler else sum(client.nthreads().values()) or 1
         # A worker reads one tile (all classes) and grids a block of about its size.
         check_memory(points=largest * parallel, advice=f"the largest tile holds {largest:,} "
                      "points: give fewer --workers or cut the survey into smaller tiles")
