@@ -80,6 +80,17 @@ def tiles_for(data: Path, area_km2: int, density: float) -> list[Path]:
     return paths
 
 
+def tile_folder(data: Path, area_km2: int, tiles: list[Path]) -> Path:
+    """A folder of links to the tiles of one area: the tile route even for a single tile."""
+    folder = data / f"area_{area_km2}"
+    folder.mkdir(exist_ok=True)
+    for path in tiles:
+        link = folder / path.name
+        if not link.exists():
+            link.symlink_to(path)
+    return folder
+
+
 def measured(command: list[str]) -> tuple[float, float, float, str]:
     """(wall seconds, CPU seconds of the command and its workers, peak MB of the process tree's
     summed RSS, stdout) of a command."""
@@ -129,14 +140,15 @@ def main():
         for area in areas:
             tiles = tiles_for(data, area, args.density)
             points = int(args.density * 1e6 * area)
-            seconds, cpu, peak, _ = measured([FLOODMESH, "grid", *map(str, tiles), "--cell-size",
+            folder = str(tile_folder(data, area, tiles))
+            seconds, cpu, peak, _ = measured([FLOODMESH, "grid", folder, "--cell-size",
                                               "1", "--workers", str(args.workers),
                                               "--out", str(out / f"dem_{area}.tif")])
             rows.append(("grid tiles", area, points, seconds, cpu, peak))
             print(f"  grid {area} km²: {seconds:.0f} s, {peak:.0f} MB", file=sys.stderr,
                   flush=True)
             if area in chain:
-                seconds, cpu, peak, _ = measured([FLOODMESH, "run", *map(str, tiles),
+                seconds, cpu, peak, _ = measured([FLOODMESH, "run", folder,
                                                   "--workers", str(args.workers), "--out",
                                                   str(out / f"run_{area}")])
                 rows.append(("run tiles", area, points, seconds, cpu, peak))
