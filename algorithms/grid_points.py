@@ -6,7 +6,9 @@ from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
 from .compat import DOUBLE, INTEGER
 
 from ..core.options import check_cell_size, check_holdout, check_max_gap
+from ..core.tiles import is_tile_set
 from .base import FloodMeshAlgorithm, crs_or_none, run_core
+from .tiles import add_tile_parameters, dask_settings, input_or_tiles
 
 POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
 
@@ -25,7 +27,8 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterFile(self.INPUT, self.tr("LiDAR points"),
-                                                     fileFilter=POINT_FILTER))
+                                                     fileFilter=POINT_FILTER, optional=True))
+        add_tile_parameters(self, "LAS/LAZ/XYZ point tiles")
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, self.tr("CRS of the points (when the file has none)"), optional=True))
         self.addParameter(QgsProcessingParameterString(
@@ -67,7 +70,10 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
         except ValueError:
             raise QgsProcessingException(f"LAS classes must be whole numbers separated by "
                                          f"commas, e.g. 2,9; got {text!r}") from None
-        points = run_core(io.read_points, self.parameterAsFile(parameters, self.INPUT, context),
+        source = input_or_tiles(self, parameters, context, self.INPUT)
+        if is_tile_set(source):
+            return self.grid_tiles(source, classes, parameters, context, feedback)
+        points = run_core(io.read_points, source,
                           crs=crs_or_none(self, parameters, self.CRS, context), classes=classes,
                           note=feedback.pushWarning)
         gridding, holdout = run_core(split_holdout, points,
@@ -83,5 +89,27 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
         holdout_out = self.parameterAsOutputLayer(parameters, self.HOLDOUT_OUTPUT, context)
         if holdout_out and len(holdout):
             run_core(io.write_points_gpkg, holdout_out, holdout.xyz, points.crs, layer="holdout")
+            results[self.HOLDOUT_OUTPUT] = holdout_out
+        return results
+
+    def grid_tiles(self, tiles, classes, parameters, context, feedback):
+        from ..core import io
+        from ..core.tiles import grid_point_tiles
+
+        out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
+        tiled = run_core(grid_point_tiles, tiles,
+                         self.parameterAsDouble(parameters, self.CELL_SIZE, context),
+                         max_gap=self.max_gap(parameters, context),
+                         crs=crs_or_none(self, parameters, self.CRS, context), classes=classes,
+                         holdout=self.parameterAsDouble(parameters, self.HOLDOUT, context),
+                         seed=self.parameterAsInt(parameters, self.SEED, context),
+                         out_path=out, keep=False, progress=lambda f: feedback.setProgress(100 * f),
+                         cancelled=feedback.isCanceled, **dask_settings(self, parameters, context))
+        for message in tiled.notes:
+            feedback.pushWarning(message)
+        results = {self.OUTPUT: out}
+        holdout_out = self.parameterAsOutputLayer(parameters, self.HOLDOUT_OUTPUT, context)
+        if holdout_out and len(tiled.holdout):
+            run_core(io.write_points_gpkg, holdout_out, tiled.holdout, tiled.crs, layer="holdout")
             results[self.HOLDOUT_OUTPUT] = holdout_out
         return results

@@ -14,6 +14,7 @@ from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FOR
 from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, run_core
 from .build_mesh import max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
+from .tiles import add_tile_parameters, dask_settings, input_or_tiles
 from .styles import load_on_completion, style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
@@ -64,7 +65,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         defaults = RunOptions()
         self.addParameter(QgsProcessingParameterFile(
-            self.INPUT, self.tr("LiDAR points or DEM"), fileFilter=INPUT_FILTER))
+            self.INPUT, self.tr("LiDAR points or DEM"), fileFilter=INPUT_FILTER, optional=True))
+        add_tile_parameters(self, "LAS/LAZ/XYZ point tiles, or GeoTIFF DEM tiles")
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, self.tr("CRS of the input (when the file has none)"), optional=True))
         self.addParameter(QgsProcessingParameterNumber(
@@ -157,7 +159,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
                                                                 context)],
             conforming=self.parameterAsBool(parameters, self.CONFORMING, context),
             far_field_area=(self.parameterAsDouble(parameters, self.FAR_FIELD_AREA, context)
-                            if parameters.get(self.FAR_FIELD_AREA) not in (None, "") else None))
+                            if parameters.get(self.FAR_FIELD_AREA) not in (None, "") else None),
+            **dask_settings(self, parameters, context))
 
     def check_values(self, parameters, context):
         self.options(parameters, context)
@@ -166,7 +169,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         from ..core.pipeline import run_pipeline
 
         options = run_core(self.options, parameters, context)
-        source = self.parameterAsFile(parameters, self.INPUT, context)
+        source = input_or_tiles(self, parameters, context, self.INPUT)
         out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
         report = run_core(run_pipeline, source, out, options,
                           progress=lambda f: feedback.setProgress(100 * f),

@@ -213,7 +213,23 @@ def _options(args) -> RunOptions:
                       node_elevation=getattr(args, "node_elevation", DEFAULTS.node_elevation),
                       node_radius=getattr(args, "node_radius", None),
                       far_field_area=getattr(args, "far_field_area", None),
-                      conforming=getattr(args, "conforming", DEFAULTS.conforming))
+                      conforming=getattr(args, "conforming", DEFAULTS.conforming),
+                      workers=getattr(args, "workers", None),
+                      scheduler=getattr(args, "scheduler", None))
+
+
+def _input(args):
+    """One input file, or the list of tile inputs (folders, globs, files)."""
+    items = args.input if isinstance(args.input, list) else [args.input]
+    return items[0] if len(items) == 1 else items
+
+
+def _add_dask_options(p: argparse.ArgumentParser):
+    p.add_argument("--workers", type=int,
+                   help="point tiles: local Dask worker processes (default one per core)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="point tiles: send the per-tile work to this running dask.distributed "
+                        "scheduler (tcp://HOST:8786) instead of a local cluster")
 
 
 def _summary(report: dict, out: Path) -> str:
@@ -236,7 +252,8 @@ def cmd_run(args):
         print(f"floodmesh: {note}", file=sys.stderr)
     bar = ProgressBar("run")
     try:
-        report = run_pipeline(args.input, args.out, _options(args), progress=bar, log=bar.log)
+        report = run_pipeline(_input(args), args.out, _options(args), progress=bar,
+                              log=bar.log)
     finally:
         bar.close()
     _print_notes(report["notes"])
@@ -253,7 +270,7 @@ def cmd_series(args):
     args.keep_every = None  # the series' simplifications are in settings
     bar = ProgressBar("series")
     try:
-        result = run_series(args.input, args.out, _options(args), settings, log=bar.log)
+        result = run_series(_input(args), args.out, _options(args), settings, log=bar.log)
     finally:
         bar.close()
     print(f"{'setting':<14}{'nodes':>8}{'RMSE cm':>9}{'max cm':>8}{'>25 cm':>8}")
@@ -298,13 +315,17 @@ def cmd_grid(args):
     from .grid import grid_points_linear
     from .options import check_cell_size, check_holdout, check_max_gap, check_seed
     from .points import split_holdout
+    from .tiles import is_tile_set
 
     check_cell_size(args.cell_size)
     check_max_gap(args.max_gap)
     check_holdout(args.holdout)
     check_seed(args.seed)
+    if is_tile_set(_input(args)):
+        return _grid_tiles(args)
     notes = []
-    points = io.read_points(args.input, crs=args.crs, classes=args.classes, note=notes.append)
+    points = io.read_points(_input(args), crs=args.crs, classes=args.classes,
+                            note=notes.append)
     _print_notes(notes)
     gridding, holdout = split_holdout(points, args.holdout, args.seed)
     dem = grid_points_linear(gridding, args.cell_size, max_gap=args.max_gap)
@@ -341,9 +362,14 @@ def _check_files(args) -> None:
     writable, and the rasters written are GeoTIFFs (run and series check their folder in
     core)."""
     from .outputs import check_outputs, require_suffix
+    from .tiles import expand_tiles, is_tile_set
 
     reads, writes = _FILES.get(args.command, ((), ()))
     inputs = [getattr(args, name) for name in reads if getattr(args, name) != "slope"]
+    if args.command == "grid" and is_tile_set(_input(args)):
+        inputs = expand_tiles(_input(args))
+    elif args.command == "grid":
+        inputs = [_input(args)]
     outputs = [getattr(args, name) for name in writes]
     if args.command == "grid" and args.holdout:
         outputs.append(_holdout_target(args))
@@ -352,6 +378,27 @@ def _check_files(args) -> None:
     check_outputs(inputs, outputs)
     if args.command in ("grid", "slope", "breakpoints"):
         require_suffix(args.out, RASTER_OUTPUTS, "a GeoTIFF")
+
+
+def _grid_tiles(args):
+    from . import io
+    from .tiles import grid_point_tiles
+
+    bar = ProgressBar("grid tiles")
+    try:
+        tiled = grid_point_tiles(_input(args), args.cell_size, max_gap=args.max_gap,
+                                 crs=args.crs, classes=args.classes, holdout=args.holdout,
+                                 seed=args.seed, out_path=args.out, keep=False,
+                                 workers=args.workers, scheduler=args.scheduler, progress=bar)
+    finally:
+        bar.close()
+    _print_notes(tiled.notes)
+    if len(tiled.holdout):
+        target = args.holdout_out or str(Path(args.out).with_name("holdout.gpkg"))
+        io.write_points_gpkg(target, tiled.holdout, tiled.crs,
+                             layer="holdout")
+        print(f"{len(tiled.holdout)} held-out points written to {target}")
+    print(f"DEM of {tiled.n_tiles} tiles ({tiled.n_points:,} points) written to {args.out}")
 
 
 def cmd_slope(args):
@@ -547,16 +594,20 @@ def build_parser() -> argparse.ArgumentParser:
                                 parser_class=_Parser)
 
     p = sub.add_parser("run", help="the whole chain: points or DEM to mesh and report")
-    p.add_argument("input", help="LAS/LAZ/XYZ point file or GeoTIFF DEM")
+    p.add_argument("input", nargs="+", help="LAS/LAZ/XYZ point file or GeoTIFF DEM, or tiles: "
+                                            "a folder, a quoted glob or several files")
     p.add_argument("--out", required=True, help="output folder")
     _add_chain_options(p)
+    _add_dask_options(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("series", help="one mesh per maximum area and simplification, and a "
                                       "table and plot of nodes against holdout error")
-    p.add_argument("input", help="LAS/LAZ/XYZ point file or GeoTIFF DEM")
+    p.add_argument("input", nargs="+", help="LAS/LAZ/XYZ point file or GeoTIFF DEM, or tiles: "
+                                            "a folder, a quoted glob or several files")
     p.add_argument("--out", required=True, help="output folder")
     _add_chain_options(p, series=True)
+    _add_dask_options(p)
     p.set_defaults(func=cmd_series)
 
     p = sub.add_parser("demo", help="run the whole chain on a built-in synthetic floodplain")
@@ -565,7 +616,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("grid", help="grid points to a DEM by linear (TIN) interpolation")
-    p.add_argument("input")
+    p.add_argument("input", nargs="+", help="LAS/LAZ/XYZ point file, or tiles: a folder, a "
+                                            "quoted glob or several files")
     p.add_argument("--cell-size", type=float, required=True)
     p.add_argument("--out", required=True, help="DEM GeoTIFF")
     p.add_argument("--crs")
@@ -574,6 +626,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--holdout", type=float, default=0.0)
     p.add_argument("--holdout-out", help="held-out points (default holdout.gpkg beside --out)")
     p.add_argument("--seed", type=int, default=0)
+    _add_dask_options(p)
     p.set_defaults(func=cmd_grid)
 
     p = sub.add_parser("slope", help="slope in degrees (or the LoG response) from a DEM")

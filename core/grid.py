@@ -40,10 +40,33 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
     cell_size = check_cell_size(cell_size)
     plan = check_grid(points, cell_size, max_gap)
     max_gap, rows, cols, x0, y1 = (plan[k] for k in ("max_gap", "rows", "cols", "x0", "y1"))
-    xyz = points.xyz
+    values = grid_window(points.xyz, cell_size, max_gap, x0, y1, rows, cols, progress=progress,
+                         cancelled=cancelled, workers=workers)
+    if not np.isfinite(values).any():
+        raise FloodMeshError(
+            f"no grid cell is covered by the points at a gap limit of {max_gap} m; the points are "
+            "too sparse for this cell size: raise the cell size or the max gap")
+    if progress:
+        progress(1.0)
+    transform = Affine(cell_size, 0.0, x0, 0.0, -cell_size, y1)
+    return Grid(values, transform, points.crs)
+
+
+def halo_width(cell_size: float, max_gap: float) -> float:
+    """Metres of neighbouring points a window of cells needs so that every TIN triangle that
+    can cover one of its cells is formed as in one global TIN."""
+    return max(max_gap, 4 * cell_size)
+
+
+def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1: float,
+                rows: int, cols: int, *, progress=None, cancelled=None,
+                workers: int | None = None) -> np.ndarray:
+    """Cell values (rows, cols; NaN where no triangle covers) of the window whose upper-left
+    corner is (x0, y1), by linear interpolation on the TIN of ``xyz``. Points up to
+    ``halo_width`` beyond the window are used; points farther out are ignored."""
     values = np.full((rows, cols), np.nan)
     tiles = [(r, c) for r in range(0, rows, TILE) for c in range(0, cols, TILE)]
-    halo = max(max_gap, 4 * cell_size)
+    halo = halo_width(cell_size, max_gap)
     # Points sorted once into buckets about a halo wide, row-major: a tile and its halo are
     # then a few contiguous slices, one per bucket row.
     per_tile = max(1, min(8, int(TILE * cell_size // halo)))
@@ -79,14 +102,7 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
         for done, _ in enumerate(pool.map(grid_tile, tiles), start=1):
             if progress:
                 progress(done / len(tiles))
-    if not np.isfinite(values).any():
-        raise FloodMeshError(
-            f"no grid cell is covered by the points at a gap limit of {max_gap} m; the points are "
-            "too sparse for this cell size: raise the cell size or the max gap")
-    if progress:
-        progress(1.0)
-    transform = Affine(cell_size, 0.0, x0, 0.0, -cell_size, y1)
-    return Grid(values, transform, points.crs)
+    return values
 
 
 def check_grid(points: PointCloud, cell_size: float, max_gap: float | None = None, *,
@@ -96,19 +112,30 @@ def check_grid(points: PointCloud, cell_size: float, max_gap: float | None = Non
     memory for the points and the cells. Returns the grid's layout
     (``rows``, ``cols``, ``x0``, ``y1``, ``max_gap``) and the points' ``area`` (m²) and
     ``spacing`` (m)."""
+    xyz = points.xyz
+    bounds = (xyz[:, 0].min(), xyz[:, 1].min(), xyz[:, 0].max(), xyz[:, 1].max())
+    area, _ = footprint(xyz[:, :2])
+    return check_layout(bounds, len(xyz), area, cell_size, max_gap, memory=memory)
+
+
+def check_layout(bounds, n_points: int, area: float, cell_size: float,
+                 max_gap: float | None = None, *, memory: int | None = None,
+                 memory_points: int | None = None, memory_cells: int | None = None,
+                 advice: str | None = None) -> dict:
+    """``check_grid`` for points known by their ``bounds`` (xmin, ymin, xmax, ymax), count and
+    covered ``area`` (m²), as tiles are; the memory is checked for ``memory_points`` and
+    ``memory_cells`` (default: all the points and cells)."""
     cell_size = check_cell_size(cell_size)
     max_gap = check_max_gap(max_gap)
     default_gap = max_gap is None
     if default_gap:
         max_gap = 10.0 * cell_size
-    xyz = points.xyz
-    xmin, ymin = xyz[:, 0].min(), xyz[:, 1].min()
-    xmax, ymax = xyz[:, 0].max(), xyz[:, 1].max()
+    xmin, ymin, xmax, ymax = bounds
     x0 = math.floor(xmin / cell_size) * cell_size
     y1 = math.ceil(ymax / cell_size) * cell_size
     cols = max(1, math.ceil((xmax - x0) / cell_size))
     rows = max(1, math.ceil((y1 - ymin) / cell_size))
-    area, spacing = footprint(xyz[:, :2])
+    spacing = math.sqrt(area / n_points)
     if rows < 3 or cols < 3:
         raise FloodMeshError(
             f"the data covers only {xmax - xmin:.2f} x {ymax - ymin:.2f} m, fewer than 3 cells of "
@@ -121,13 +148,14 @@ def check_grid(points: PointCloud, cell_size: float, max_gap: float | None = Non
                f"give a max gap of at least {MIN_GAP_IN_SPACINGS * spacing:.2g} m, or leave it "
                "out (10 cells)")
         raise FloodMeshError(
-            f"the points are about {spacing:.2g} m apart ({len(xyz):,} points over "
+            f"the points are about {spacing:.2g} m apart ({n_points:,} points over "
             f"{area:,.0f} m²), so gaps of at most {max_gap:.2g} m "
             f"({'10 cells of ' + format(cell_size, 'g') + ' m' if default_gap else 'max gap'}) "
             f"would leave most grid cells empty: {fix}")
-    check_memory(points=len(xyz), cells=rows * cols, memory=memory,
-                 advice=f"give a cell size larger than {cell_size:g} m, or split the data "
-                        "into tiles")
+    check_memory(points=n_points if memory_points is None else memory_points,
+                 cells=rows * cols if memory_cells is None else memory_cells, memory=memory,
+                 advice=advice or f"give a cell size larger than {cell_size:g} m, or split the "
+                                  "data into tiles")
     return {"rows": rows, "cols": cols, "x0": float(x0), "y1": float(y1), "max_gap": max_gap,
             "area": area, "spacing": spacing}
 

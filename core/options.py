@@ -247,6 +247,9 @@ class RunOptions:
     node_radius: float | None = None  # m, the plane fit's radius; default from density, noise
     conforming: bool = False        # conforming Delaunay (Triangle's switch D)
     far_field_area: float | None = None  # m², larger triangles away from the break lines
+    workers: int | None = None      # point tiles: local Dask workers (default one per core)
+    scheduler: str | None = None    # point tiles: a running dask.distributed scheduler's address
+    processes: bool = True          # point tiles: local workers are processes (False: threads)
 
     def __post_init__(self):
         self.validate()
@@ -279,6 +282,8 @@ class RunOptions:
                                      f"upper bound ({upper:g} m); 0.10 and 0.25 are usual")
         check_holdout(self.holdout)
         check_seed(self.seed)
+        if self.workers is not None:
+            check_positive_int(self.workers, "number of Dask workers")
         check_min_points(self.min_points)
         check_choice(self.node_elevation, NODE_ELEVATIONS, "node elevation")
         if self.node_radius is not None:

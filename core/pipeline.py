@@ -29,6 +29,8 @@ from .refine import refine_mesh
 from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .sizing import far_field_size
 from .slope import laplacian_of_gaussian, slope
+from .tiles import (TiledDem, expand_tiles, grid_point_tiles, is_tile_set, read_dem_tiles,
+                    tile_kind)
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
                 "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG, "report.json")
@@ -181,7 +183,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage:
         exported = steps.run("write", write_all, stage)
         report = {
-            "input": str(input_path),
+            "input": (str(input_path) if isinstance(input_path, (str, Path))
+                      else [str(p) for p in input_path]),
             "crs": dem.crs.to_string(),
             "options": {k: v for k, v in asdict(options).items()},
             "n_points": front.n_points,
@@ -210,7 +213,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
 def run_inputs(input_path, options: RunOptions) -> list:
     """The files a run reads: never to be replaced by its outputs."""
     size = options.size_field if options.size_field != "slope" else None
-    return [input_path, options.boundary, options.user_lines, size]
+    sources = expand_tiles(input_path) if is_tile_set(input_path) else [input_path]
+    return [*sources, options.boundary, options.user_lines, size]
 
 
 def run_outputs(formats) -> list:
@@ -243,9 +247,18 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
     repaired on the user's behalf. Grids and meshes too large for the triangle limit or the
     memory are refused before the work."""
     steps = steps or _Steps({}, None, cancelled, None)
-    data = steps.run("read", io.read_input, input_path, crs=options.crs, classes=options.classes,
-                     note=note)
-    if isinstance(data, PointCloud):
+    if is_tile_set(input_path):
+        paths = expand_tiles(input_path)  # point tiles are read and gridded in one step
+        data = steps.run("grid" if tile_kind(paths[0]) == "points" else "read", read_tile_set,
+                         paths, options, cancelled=cancelled, note=note, progress=None)
+    else:
+        data = steps.run("read", io.read_input, input_path, crs=options.crs,
+                         classes=options.classes, note=note)
+    if isinstance(data, TiledDem):
+        dem, holdout, measured = data.dem, PointCloud(data.holdout, data.dem.crs), None
+        holdout_source = "LiDAR points withheld from gridding, tile by tile"
+        n_points = data.n_points
+    elif isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
         measured = gridding.xyz
         # refuse, before the work, a grid or mesh too large for the limit or the memory
@@ -288,6 +301,30 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
                  domain, own_lines, measured)
+
+
+def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None, note=None):
+    """Point tiles gridded on Dask (``tiles.TiledDem``), or DEM tiles as one ``Grid``."""
+    paths = expand_tiles(inputs)
+    if tile_kind(paths[0]) == "dem":
+        return read_dem_tiles(paths, crs=options.crs)
+    if options.refine:
+        raise FloodMeshError("--refine ('Refine' in QGIS) needs all points in memory and is not "
+                             "available with point tiles: run without it, then refine a part "
+                             "with floodmesh refine DEM --points TILE")
+
+    def check(plan):
+        check_triangles(plan["area"], options.max_area, options.max_triangles)
+
+    tiled = grid_point_tiles(paths, options.cell_size, max_gap=options.max_gap, crs=options.crs,
+                             classes=options.classes, holdout=options.holdout, seed=options.seed,
+                             workers=options.workers, scheduler=options.scheduler,
+                             processes=options.processes, progress=progress,
+                             cancelled=cancelled, check=check)
+    for message in tiled.notes:
+        if note:
+            note(message)
+    return tiled
 
 
 def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: float,

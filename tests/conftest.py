@@ -20,6 +20,28 @@ def demo_points_file(tmp_path_factory):
     return path
 
 
+def survey_tiles(root, density=4.0):
+    """The demo floodplain (ground points, ``density`` per m²) as 4 LAZ tiles of 150 x 120 m in
+    ``root``/tiles and as one LAZ file of the same points, ``root``/single.laz; returns root."""
+    from floodmesh.core.demo import DEMO_ORIGIN
+    from floodmesh.core.points import PointCloud
+
+    points, classes = synthetic_floodplain(density=density, seed=2)
+    ground = points.xyz[classes == 2]
+    (root / "tiles").mkdir()
+    x0, y0 = DEMO_ORIGIN
+    for xs in (0, 150):
+        for ys in (0, 120):
+            inside = ((ground[:, 0] >= x0 + xs) & (ground[:, 0] < x0 + xs + 150)
+                      & (ground[:, 1] >= y0 + ys) & (ground[:, 1] < y0 + ys + 120))
+            io.write_points_las(root / "tiles" / f"tile_{xs}_{ys}.laz",
+                                PointCloud(ground[inside], points.crs))
+    tiles = sorted((root / "tiles").glob("*.laz"))
+    merged = np.concatenate([io.read_points(p).xyz for p in tiles])
+    io.write_points_las(root / "single.laz", PointCloud(merged, points.crs))
+    return root
+
+
 @pytest.fixture
 def real_data():
     if not REAL_DATA.is_dir():

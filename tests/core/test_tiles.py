@@ -1,0 +1,166 @@
+"""A survey as tiles: gridded tile by tile on a real dask.distributed cluster, the same DEM,
+break lines and mesh as one file of the same points, and tiles in another CRS refused by name."""
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rasterio
+from pyproj import CRS
+
+from floodmesh.core import io
+from floodmesh.core.demo import DEMO_ORIGIN
+from floodmesh.core.errors import Cancelled, FloodMeshError
+from floodmesh.core.grid import grid_points_linear
+from floodmesh.core.options import RunOptions
+from floodmesh.core.pipeline import run_pipeline
+from floodmesh.core.points import PointCloud
+from floodmesh.core.raster import Grid
+from floodmesh.core.tiles import (_tile_points, grid_point_tiles, holdout_mask,
+                                  read_dem_tiles)
+
+from ..conftest import survey_tiles
+
+FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
+X0, Y0 = DEMO_ORIGIN
+EDGE_X, EDGE_Y = X0 + 150, Y0 + 120  # the inner tile edges
+
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory):
+    return survey_tiles(tmp_path_factory.mktemp("survey"))
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """A real local dask.distributed cluster of two worker processes, by its address."""
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
+        yield cluster.scheduler_address
+
+
+def test_tiles_grid_to_the_dem_of_the_whole_cloud(survey, scheduler, tmp_path):
+    tiles = sorted((survey / "tiles").glob("*.laz"))
+    crs = CRS.from_epsg(25832).to_wkt()
+    # 0.5 m cells: blocks of one tile (300 x 240 cells) meet at the tile edges
+    tiled = grid_point_tiles(survey / "tiles", 0.5, holdout=0.01, seed=5, scheduler=scheduler,
+                             out_path=tmp_path / "dem.tif")
+    kept = np.concatenate([_tile_points(str(p), crs, None, 0.01, 5)[0] for p in tiles])
+    whole = grid_points_linear(PointCloud(kept, tiled.crs), 0.5)
+    assert tiled.dem.transform == whole.transform and tiled.dem.shape == whole.shape
+    assert np.array_equal(np.isnan(tiled.dem.values), np.isnan(whole.values))
+    np.testing.assert_allclose(tiled.dem.values, whole.values, rtol=0, atol=1e-9)
+    # the tiled GeoTIFF on disk holds the same DEM
+    with rasterio.open(tmp_path / "dem.tif") as src:
+        assert src.profile["tiled"] and src.block_shapes[0] == (256, 256)
+    on_disk = io.read_raster(tmp_path / "dem.tif")
+    np.testing.assert_array_equal(on_disk.values, whole.values.astype(np.float32))
+    # the holdout: 1 % of each tile, the same again with the same seed
+    n = sum(len(io.read_points(p)) for p in tiles)
+    assert len(kept) + len(tiled.holdout) == n == tiled.n_points
+    assert abs(len(tiled.holdout) - 0.01 * n) <= len(tiles)
+    again = holdout_mask(1000, 0.01, 5, tiles[0].name)
+    assert np.array_equal(again, holdout_mask(1000, 0.01, 5, tiles[0].name))
+    assert not np.array_equal(again, holdout_mask(1000, 0.01, 5, tiles[1].name))
+
+
+def _lines(path):
+    return sorted(tuple(map(tuple, np.round(c, 6))) for c in io.read_lines_gpkg(path))
+
+
+def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path):
+    options = RunOptions(holdout=0.0, scheduler=scheduler)
+    tiled = run_pipeline(survey / "tiles", tmp_path / "tiled", options)
+    single = run_pipeline(survey / "single.laz", tmp_path / "single", options)
+    assert io.read_raster(tmp_path / "tiled" / "dem.tif").values.tobytes() == \
+        io.read_raster(tmp_path / "single" / "dem.tif").values.tobytes()
+    for key in ("nodes", "triangles", "n_breakpoints", "n_breaklines", "min_angle_deg"):
+        assert tiled[key] == single[key], key
+    lines = _lines(tmp_path / "tiled" / "breaklines.gpkg")
+    assert lines == _lines(tmp_path / "single" / "breaklines.gpkg")
+    # break lines run on across the tile edges: the river and the levee cross x = EDGE_X
+    crossing_x = [c for c in lines if min(p[0] for p in c) < EDGE_X - 5 < EDGE_X + 5
+                  < max(p[0] for p in c)]
+    crossing_y = [c for c in lines if min(p[1] for p in c) < EDGE_Y - 5 < EDGE_Y + 5
+                  < max(p[1] for p in c)]
+    assert len(crossing_x) >= 4 and len(crossing_y) >= 1
+
+
+def test_a_tile_in_another_crs_or_none_is_refused_by_name(survey, tmp_path):
+    import laspy
+
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    tiles = sorted((survey / "tiles").glob("*.laz"))
+    for p in tiles[:2]:
+        (folder / p.name).write_bytes(p.read_bytes())
+    pts = io.read_points(tiles[2])
+    io.write_points_las(folder / "other.laz", PointCloud(pts.xyz, CRS.from_epsg(25833)))
+    result = subprocess.run([FLOODMESH, "grid", str(folder), "--cell-size", "1", "--out",
+                             str(tmp_path / "dem.tif")], capture_output=True, text=True)
+    assert result.returncode == 2
+    assert "tile other.laz is in ETRS89 / UTM zone 33N" in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "dem.tif").exists()
+    (folder / "other.laz").unlink()
+    header = laspy.LasHeader(point_format=3, version="1.4")  # no CRS
+    header.offsets, header.scales = pts.xyz.min(axis=0), [0.001] * 3
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts.xyz.T
+    las.classification = np.full(len(pts), 2, np.uint8)
+    las.write(str(folder / "nocrs.laz"))
+    with pytest.raises(FloodMeshError, match="tile nocrs.laz has no coordinate reference"):
+        grid_point_tiles(folder, 1.0)
+    (folder / "broken.laz").write_bytes(b"not a LAS file")
+    with pytest.raises(FloodMeshError, match="tile broken.laz is not a readable LAS/LAZ"):
+        grid_point_tiles(folder, 1.0, crs="EPSG:25832")
+
+
+def test_grid_command_on_its_own_local_cluster_with_progress_and_cancel(survey, tmp_path):
+    out = tmp_path / "dem.tif"
+    result = subprocess.run([FLOODMESH, "grid", str(survey / "tiles" / "*.laz"), "--cell-size",
+                             "1", "--holdout", "0.01", "--workers", "2", "--out", str(out)],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert "DEM of 4 tiles" in result.stdout and (tmp_path / "holdout.gpkg").exists()
+    assert np.isfinite(io.read_raster(out).values).mean() > 0.99
+    seen = []
+    with pytest.raises(Cancelled):
+        grid_point_tiles(survey / "tiles", 1.0, workers=1, processes=False,
+                         out_path=tmp_path / "cancelled.tif", progress=seen.append,
+                         cancelled=lambda: len(seen) >= 1)
+    assert seen and not (tmp_path / "cancelled.tif").exists()
+
+
+def test_dem_tiles_are_read_as_one_grid(tmp_path):
+    from affine import Affine
+
+    rng = np.random.default_rng(0)
+    whole = Grid(rng.uniform(10, 20, (40, 60)), Affine(1.0, 0, X0, 0, -1.0, Y0),
+                 CRS.from_epsg(25832))
+    west = Grid(whole.values[:, :25], whole.transform, whole.crs)
+    east = Grid(whole.values[:, 25:], whole.transform * Affine.translation(25, 0), whole.crs)
+    io.write_raster(tmp_path / "w.tif", west)
+    io.write_raster(tmp_path / "e.tif", east)
+    mosaic = read_dem_tiles(tmp_path)
+    assert mosaic.transform == whole.transform
+    np.testing.assert_allclose(mosaic.values, whole.values.astype(np.float32))
+    shifted = Grid(east.values, east.transform * Affine.translation(0.5, 0), whole.crs)
+    io.write_raster(tmp_path / "e.tif", shifted)
+    with pytest.raises(FloodMeshError, match="tile e.tif has cells of 1 m .* not on the grid"):
+        read_dem_tiles([tmp_path / "w.tif", tmp_path / "e.tif"])
+
+
+def test_xyz_tiles_with_a_given_crs(survey, scheduler, tmp_path):
+    tiles = sorted((survey / "tiles").glob("*.laz"))[:2]  # the western column
+    for p in tiles:
+        np.savetxt(tmp_path / f"{p.stem}.xyz", io.read_points(p).xyz, fmt="%.3f")
+    from_laz = grid_point_tiles(tiles, 1.0, scheduler=scheduler)
+    with pytest.raises(FloodMeshError, match=r"tile tile_0_0.xyz has no coordinate reference"):
+        grid_point_tiles(str(tmp_path / "*.xyz"), 1.0, scheduler=scheduler)
+    from_xyz = grid_point_tiles(str(tmp_path / "*.xyz"), 1.0, crs="EPSG:25832",
+                                scheduler=scheduler)
+    assert from_xyz.dem.transform == from_laz.dem.transform
+    np.testing.assert_allclose(from_xyz.dem.values, from_laz.dem.values, atol=1e-6)
