@@ -1,18 +1,21 @@
-"""What every FloodMesh algorithm shares: names, groups, help, and turning core errors into
-messages QGIS shows."""
+"""What every FloodMesh algorithm shares: names, groups, help, parameter checks, and running
+the core step in the worker process (``child.run_step``).
+
+Only ``core.options`` and ``core.errors`` (plain Python) are imported into QGIS; the numerical
+core runs in the worker."""
 from pathlib import Path
 
 from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
 from qgis.PyQt.QtCore import QCoreApplication
 
-from ..core.dependencies import install_hint, missing_dependencies
-from ..core.errors import Cancelled, FloodMeshError
+from ..core.errors import FloodMeshError
+from .child import run_step
 
 
 class FloodMeshAlgorithm(QgsProcessingAlgorithm):
     """Subclasses set NAME, DISPLAY_NAME, GROUP, GROUP_ID and HELP, and implement
-    ``initAlgorithm`` and ``process`` (importing the numerical core there, so that the plugin
-    loads even where a dependency is missing); they keep no state on ``self``."""
+    ``initAlgorithm`` and ``process``, which hands plain arguments to ``self.run_step`` (the
+    core step in the worker process); they keep no state on ``self``."""
 
     NAME = DISPLAY_NAME = GROUP = GROUP_ID = HELP = ""
 
@@ -32,9 +35,6 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         return self.tr(self.HELP)
 
     def checkParameterValues(self, parameters, context):  # noqa: N802
-        missing = missing_dependencies()
-        if missing:
-            return False, install_hint(missing)
         try:
             self.check_values(parameters, context)
         except FloodMeshError as exc:  # core's own message, before QGIS's generic range check
@@ -46,10 +46,18 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         subclasses override it. Core checks them again when it runs, with the same message."""
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        missing = missing_dependencies()
-        if missing:
-            raise QgsProcessingException(install_hint(missing))
         return self.process(parameters, context, feedback)
+
+    def run_step(self, step, args, feedback, *outputs):
+        """Core's ``step`` on ``args`` in the worker process (see ``child.run_step``); the
+        ``outputs`` (files or folders) are where a killed worker's temporaries are removed."""
+        return run_step(step, args, feedback, outputs=outputs, what=self.displayName())
+
+    def optional_number(self, parameters, name, context):
+        """A number parameter's value, or None when left empty."""
+        if parameters.get(name) in (None, ""):
+            return None
+        return self.parameterAsDouble(parameters, name, context)
 
     def process(self, parameters, context, feedback):
         raise NotImplementedError
@@ -59,22 +67,6 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
 
     def tr(self, text):
         return QCoreApplication.translate("FloodMesh", text)
-
-
-def run_core(func, *args, **kwargs):
-    """Call a core function; bad input becomes a QgsProcessingException with the same message."""
-    try:
-        return func(*args, **kwargs)
-    except FloodMeshError as exc:
-        raise QgsProcessingException(str(exc)) from None
-    except Cancelled:
-        raise QgsProcessingException("Cancelled; no partial output was written") from None
-
-
-def feedback_callables(feedback):
-    """Progress and cancellation as the plain callables core takes."""
-    return {"progress": lambda f: feedback.setProgress(100 * f),
-            "cancelled": feedback.isCanceled}
 
 
 def layer_file(layer, what: str) -> str:
@@ -121,17 +113,11 @@ def domain_files(algorithm, parameters, context) -> tuple:
     return path(BOUNDARY, "Model domain polygon"), path(USER_LINES, "Own lines")
 
 
-def read_mesh_inputs(algorithm, parameters, context) -> tuple:
-    """(DEM, break lines plus own lines, domain) from the DEM, BREAKLINES, BOUNDARY and
-    USER_LINES parameters of a meshing algorithm."""
-    from ..core import io
-    from ..core.pipeline import mesh_constraints
-
-    dem = run_core(io.read_raster, layer_file(
-        algorithm.parameterAsRasterLayer(parameters, "DEM", context), "DEM"))
-    lines_layer = algorithm.parameterAsVectorLayer(parameters, "BREAKLINES", context)
-    lines = (run_core(io.read_lines_gpkg, layer_file(lines_layer, "Break lines"))
-             if lines_layer is not None else [])
-    domain, own_lines = run_core(mesh_constraints, dem,
-                                 *domain_files(algorithm, parameters, context))
-    return dem, lines + own_lines, domain
+def mesh_input_args(algorithm, parameters, context) -> dict:
+    """The worker's arguments for the DEM, BREAKLINES, BOUNDARY and USER_LINES parameters of a
+    meshing algorithm."""
+    lines = algorithm.parameterAsVectorLayer(parameters, "BREAKLINES", context)
+    boundary, user_lines = domain_files(algorithm, parameters, context)
+    return {"dem": layer_file(algorithm.parameterAsRasterLayer(parameters, "DEM", context), "DEM"),
+            "breaklines": layer_file(lines, "Break lines") if lines is not None else None,
+            "boundary": boundary, "user_lines": user_lines}

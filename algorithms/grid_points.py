@@ -5,7 +5,7 @@ from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
                        QgsProcessingParameterVectorDestination)
 
 from ..core.options import check_cell_size, check_holdout, check_max_gap
-from .base import FloodMeshAlgorithm, crs_or_none, run_core
+from .base import FloodMeshAlgorithm, crs_or_none
 
 POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
 
@@ -56,31 +56,20 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
         check_holdout(self.parameterAsDouble(parameters, self.HOLDOUT, context))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.grid import grid_points_linear
-        from ..core.points import split_holdout
-
         text = self.parameterAsString(parameters, self.CLASSES, context).strip()
         try:
-            classes = tuple(int(c) for c in text.split(",")) if text else None
+            classes = [int(c) for c in text.split(",")] if text else None
         except ValueError:
             raise QgsProcessingException(f"LAS classes must be whole numbers separated by "
                                          f"commas, e.g. 2,9; got {text!r}") from None
-        points = run_core(io.read_points, self.parameterAsFile(parameters, self.INPUT, context),
-                          crs=crs_or_none(self, parameters, self.CRS, context), classes=classes,
-                          note=feedback.pushWarning)
-        gridding, holdout = run_core(split_holdout, points,
-                                     self.parameterAsDouble(parameters, self.HOLDOUT, context),
-                                     self.parameterAsInt(parameters, self.SEED, context))
-        max_gap = self.max_gap(parameters, context)
-        dem = run_core(grid_points_linear, gridding,
-                       self.parameterAsDouble(parameters, self.CELL_SIZE, context),
-                       max_gap=max_gap, progress=lambda f: feedback.setProgress(100 * f))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_raster, out, dem)
-        results = {self.OUTPUT: out}
         holdout_out = self.parameterAsOutputLayer(parameters, self.HOLDOUT_OUTPUT, context)
-        if holdout_out and len(holdout):
-            run_core(io.write_points_gpkg, holdout_out, holdout.xyz, points.crs, layer="holdout")
-            results[self.HOLDOUT_OUTPUT] = holdout_out
-        return results
+        result = self.run_step("grid", {
+            "input": self.parameterAsFile(parameters, self.INPUT, context),
+            "crs": crs_or_none(self, parameters, self.CRS, context), "classes": classes,
+            "cell_size": self.parameterAsDouble(parameters, self.CELL_SIZE, context),
+            "max_gap": self.max_gap(parameters, context),
+            "holdout": self.parameterAsDouble(parameters, self.HOLDOUT, context),
+            "seed": self.parameterAsInt(parameters, self.SEED, context),
+            "output": out, "holdout_output": holdout_out or None}, feedback, out, holdout_out)
+        return {k: v for k, v in result.items() if k in (self.OUTPUT, self.HOLDOUT_OUTPUT)}

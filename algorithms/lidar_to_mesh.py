@@ -1,19 +1,20 @@
 """LiDAR to mesh: the whole FloodMesh chain in one Processing algorithm."""
 from pathlib import Path
 
-from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingOutputFile,
+from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingException, QgsProcessingOutputFile,
                        QgsProcessingParameterBoolean,
                        QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
                        QgsProcessingParameterCrs, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
                        QgsProcessingParameterNumber, QgsVectorLayer)
 
+from ..core.errors import FloodMeshError
 from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
                             MAX_MIN_ANGLE, RunOptions)
-from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, run_core
+from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files
 from .build_mesh import max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
-from .styles import load_on_completion, style_breaklines, style_mesh, style_residuals
+from .styles import load_results, style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
@@ -140,25 +141,23 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.options(parameters, context)
 
     def process(self, parameters, context, feedback):
-        from ..core.pipeline import run_pipeline
+        from dataclasses import asdict
 
-        options = run_core(self.options, parameters, context)
+        try:
+            options = self.options(parameters, context)
+        except FloodMeshError as exc:
+            raise QgsProcessingException(str(exc)) from None
         source = self.parameterAsFile(parameters, self.INPUT, context)
         out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
-        report = run_core(run_pipeline, source, out, options,
-                          progress=lambda f: feedback.setProgress(100 * f),
-                          cancelled=feedback.isCanceled, log=feedback.pushInfo)
-        breaklines = str(out / "breaklines.gpkg")
-        mesh = str(out / "mesh.2dm")
-        for layer, style, output in (
-                (QgsVectorLayer(breaklines, "Break lines", "ogr"), style_breaklines,
-                 self.BREAKLINES),
-                (QgsMeshLayer(mesh, "Mesh", "mdal"), style_mesh, self.MESH),
-                (QgsVectorLayer(str(out / "residuals.gpkg"), "Residuals", "ogr"),
-                 style_residuals, self.REPORT)):
-            load_on_completion(context, layer, output)
-            style(layer)
+        report = self.run_step("run", {"input": source, "output_folder": str(out),
+                                       "options": asdict(options)}, feedback, out)
+        breaklines, mesh = str(out / "breaklines.gpkg"), str(out / "mesh.2dm")
+        load_results(context, report["crs"], (
+            (QgsMeshLayer(mesh, "Mesh", "mdal"), style_mesh, self.MESH),
+            (QgsVectorLayer(str(out / "residuals.gpkg"), "Residuals", "ogr"), style_residuals,
+             self.REPORT),
+            (QgsVectorLayer(breaklines, "Break lines", "ogr"), style_breaklines,
+             self.BREAKLINES)))
         return {self.OUTPUT_FOLDER: str(out), self.BREAKLINES: breaklines, self.MESH: mesh,
                 self.REPORT: str(out / "report.json"), self.NODES: report["nodes"],
                 self.TRIANGLES: report["triangles"], self.RMSE: report["rmse_m"]}
-

@@ -1,12 +1,9 @@
 """Refine mesh: local refinement and point insertion until the residuals meet a target."""
-from dataclasses import asdict
-
 from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
 
-from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, read_mesh_inputs,
-                   run_core)
+from .base import FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args
 from .styles import load_mesh
 
 
@@ -63,42 +60,25 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("RMSE of the points (m)")))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.refine import refine_mesh
-
-        dem, lines, domain = read_mesh_inputs(self, parameters, context)
-
         def points(name, what):
             layer = self.parameterAsVectorLayer(parameters, name, context)
-            return run_core(io.read_points_vector, layer_file(layer, what)) if layer else None
+            return layer_file(layer, what) if layer else None
 
-        def optional(name):
-            value = parameters.get(name)
-            return None if value in (None, "") else self.parameterAsDouble(parameters, name,
-                                                                           context)
-
-        mesh, rounds = run_core(
-            refine_mesh, dem, lines, points(self.POINTS, "Measured points"),
-            check=points(self.CHECK, "Check points"), domain=domain,
-            min_angle=self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
-            max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
-            lower=self.parameterAsDouble(parameters, self.LOWER, context),
-            upper=self.parameterAsDouble(parameters, self.UPPER, context),
-            target_rmse=optional(self.TARGET_RMSE), target_max=optional(self.TARGET_MAX),
-            max_nodes=self.parameterAsInt(parameters, self.MAX_NODES, context),
-            max_rounds=self.parameterAsInt(parameters, self.MAX_ROUNDS, context),
-            progress=lambda f: feedback.setProgress(100 * f), cancelled=feedback.isCanceled)
-        for k, r in enumerate(rounds, 1):
-            feedback.pushInfo(f"round {k}: {r.nodes} nodes, RMSE {100 * r.rmse_m:.1f} cm, max "
-                              f"{100 * r.max_abs_m:.1f} cm, check RMSE "
-                              f"{100 * r.check_rmse_m:.1f} cm; {r.inserted} points inserted, "
-                              f"{r.refined} triangles refined")
         out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
-        run_core(io.write_mesh_2dm, out, mesh.nodes, mesh.triangles)
-        load_mesh(context, out, "Refined mesh", self.OUTPUT)
-        results = {self.OUTPUT: out, self.NODES: len(mesh.nodes), self.RMSE: rounds[-1].rmse_m}
         report = self.parameterAsFileOutput(parameters, self.REPORT, context)
-        if report:
-            run_core(io.write_json, report, {"rounds": [asdict(r) for r in rounds]})
-            results[self.REPORT] = report
-        return results
+        result = self.run_step("refine_mesh", {
+            **mesh_input_args(self, parameters, context),
+            "points": points(self.POINTS, "Measured points"),
+            "check": points(self.CHECK, "Check points"),
+            "min_angle": self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
+            "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
+            "lower": self.parameterAsDouble(parameters, self.LOWER, context),
+            "upper": self.parameterAsDouble(parameters, self.UPPER, context),
+            "target_rmse": self.optional_number(parameters, self.TARGET_RMSE, context),
+            "target_max": self.optional_number(parameters, self.TARGET_MAX, context),
+            "max_nodes": self.parameterAsInt(parameters, self.MAX_NODES, context),
+            "max_rounds": self.parameterAsInt(parameters, self.MAX_ROUNDS, context),
+            "output": out, "report": report or None}, feedback, out, report)
+        load_mesh(context, out, "Refined mesh", self.OUTPUT, result["crs"])
+        return {k: v for k, v in result.items()
+                if k in (self.OUTPUT, self.NODES, self.RMSE, self.REPORT)}

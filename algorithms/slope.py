@@ -3,7 +3,7 @@ from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
 
 from ..core.options import BREAKPOINT_METHODS, LOG_KERNELS
-from .base import FloodMeshAlgorithm, layer_file, run_core
+from .base import FloodMeshAlgorithm, layer_file
 
 
 class SlopeAlgorithm(FloodMeshAlgorithm):
@@ -33,20 +33,11 @@ class SlopeAlgorithm(FloodMeshAlgorithm):
             self.OUTPUT, self.tr("Slope (degrees) or LoG response (m)")))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.slope import laplacian_of_gaussian, slope
-
-        dem = run_core(io.read_raster, layer_file(
-            self.parameterAsRasterLayer(parameters, self.INPUT, context), "DEM"))
-        method = BREAKPOINT_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
-        if method == "log":
-            result = run_core(laplacian_of_gaussian, dem,
-                              self.parameterAsDouble(parameters, self.SIGMA, context),
-                              kernel=LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL,
-                                                                      context)],
-                              cancelled=feedback.isCanceled)
-        else:
-            result = run_core(slope, dem, method, cancelled=feedback.isCanceled)
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_raster, out, result)
-        return {self.OUTPUT: out}
+        return {self.OUTPUT: self.run_step("slope", {
+            "input": layer_file(self.parameterAsRasterLayer(parameters, self.INPUT, context),
+                                "DEM"),
+            "method": BREAKPOINT_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)],
+            "sigma": self.parameterAsDouble(parameters, self.SIGMA, context),
+            "log_kernel": LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL, context)],
+            "output": out}, feedback, out)["OUTPUT"]}

@@ -5,7 +5,7 @@ from qgis.core import (QgsProcessing, QgsProcessingParameterBoolean, QgsProcessi
 
 from ..core.options import TRACING_MODES as MODES
 from ..core.options import check_min_points, check_s_crit
-from .base import FloodMeshAlgorithm, layer_file, run_core
+from .base import FloodMeshAlgorithm, layer_file
 from .styles import style_breaklines, style_when_loaded
 
 
@@ -57,25 +57,19 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         check_min_points(self.parameterAsDouble(parameters, self.MIN_POINTS, context))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.breaklines import trace_breaklines
-
         def raster(name, what):
-            return run_core(io.read_raster, layer_file(
-                self.parameterAsRasterLayer(parameters, name, context), what))
+            return layer_file(self.parameterAsRasterLayer(parameters, name, context), what)
 
-        breakpoints = raster(self.BREAKPOINTS, "Breakpoints")
-        breakpoints = breakpoints.with_values((breakpoints.values == 1).astype("uint8"))
-        dem = raster(self.DEM, "DEM")
-        lines = run_core(trace_breaklines, breakpoints, raster(self.SLOPE, "Slope"), dem,
-                         self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
-                         mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)],
-                         min_points=self.parameterAsInt(parameters, self.MIN_POINTS, context),
-                         min_length=self.parameterAsDouble(parameters, self.MIN_LENGTH, context),
-                         join=self.parameterAsBool(parameters, self.JOIN, context),
-                         seed=self.parameterAsInt(parameters, self.SEED, context))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_breaklines, out, lines, dem.crs)
+        self.run_step("trace", {
+            "breakpoints": raster(self.BREAKPOINTS, "Breakpoints"),
+            "slope": raster(self.SLOPE, "Slope"), "dem": raster(self.DEM, "DEM"),
+            "s_crit": self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
+            "mode": MODES[self.parameterAsEnum(parameters, self.MODE, context)],
+            "min_points": self.parameterAsInt(parameters, self.MIN_POINTS, context),
+            "min_length": self.parameterAsDouble(parameters, self.MIN_LENGTH, context),
+            "join": self.parameterAsBool(parameters, self.JOIN, context),
+            "seed": self.parameterAsInt(parameters, self.SEED, context), "output": out},
+            feedback, out)
         style_when_loaded(context, out, style_breaklines)
-        feedback.pushInfo(f"{len(lines)} break lines")
         return {self.OUTPUT: out}
