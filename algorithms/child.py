@@ -13,11 +13,13 @@ Which Python runs the worker (the first that exists):
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import queue
 import signal
 import subprocess
+import tempfile
 import threading
 from pathlib import Path
 
@@ -32,6 +34,11 @@ MANAGED_PACKAGES = ("triangle", "laspy[lazrs]", "numba", "shapely>=2", "scipy", 
                     "fiona", "pyproj", "matplotlib")
 PARTIAL_GLOB = ".*.partial*"  # core.worker.PARTIAL_GLOB (not imported: core stays out of QGIS)
 LOG_TAG = "FloodMesh"
+FIRST_RUN_MESSAGE = (
+    "FloodMesh's first run sets up its Python packages (Triangle, laspy, numba, shapely) in "
+    "a virtual environment of its own beside your QGIS profile: a minute or two, with the "
+    "internet; then numba compiles FloodMesh's kernels once (about 2 minutes). Or set "
+    "FLOODMESH_PYTHON to a Python that has them. QGIS itself never loads them.")
 
 
 def managed_venv() -> Path:
@@ -63,9 +70,7 @@ def ensure_python(feedback) -> str:
     if python:
         return python
     venv = managed_venv()
-    feedback.pushInfo(f"FloodMesh: first run, setting up its Python packages in {venv} (once; "
-                      f"a minute or two, needs the internet; or set {ENV_VARIABLE} to a Python "
-                      f"that has them)")
+    feedback.pushInfo(f"{FIRST_RUN_MESSAGE} Setting up {venv} …")
     numpy = subprocess.run([SYSTEM_PYTHON, "-c", "import numpy; print(numpy.__version__)"],
                            capture_output=True, text=True)
     pin = [f"numpy=={numpy.stdout.strip()}"] if numpy.returncode == 0 else []
@@ -88,13 +93,27 @@ def ensure_python(feedback) -> str:
     return str(venv / "bin" / "python")
 
 
+def _import_root() -> Path:
+    """A folder from which ``import floodmesh`` finds this very plugin: its parent when the
+    folder is named so (a ZIP install), else a link under the temporary folder (a checkout)."""
+    if PLUGIN_DIR.name == PACKAGE:
+        return PLUGIN_DIR.parent
+    digest = hashlib.sha1(str(PLUGIN_DIR).encode()).hexdigest()[:10]
+    root = Path(tempfile.gettempdir()) / f"floodmesh-plugin-{os.getuid()}-{digest}"
+    link = root / PACKAGE
+    if not link.exists():
+        root.mkdir(exist_ok=True)
+        try:
+            link.symlink_to(PLUGIN_DIR, target_is_directory=True)
+        except FileExistsError:
+            pass
+    return root
+
+
 def _child_env() -> dict:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONHOME", "PYTHONSTARTUP")}
-    env["PYTHONUNBUFFERED"] = "1"
-    env.pop("PYTHONPATH", None)
-    if PLUGIN_DIR.name == PACKAGE:  # a plugin folder (ZIP install, link): import it from there
-        env["PYTHONPATH"] = str(PLUGIN_DIR.parent)
-    return env  # else a checkout under another name: its .venv has it installed (make setup)
+    env.update(PYTHONUNBUFFERED="1", PYTHONPATH=str(_import_root()))
+    return env
 
 
 def _remove_partials(outputs) -> None:
@@ -168,7 +187,7 @@ def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> 
         elif "info" in message:
             feedback.pushInfo(message["info"])
         elif "note" in message:
-            feedback.pushWarning(f"note: {message['note']}")
+            feedback.pushWarning(message["note"])
             QgsMessageLog.logMessage(f"{what}: {message['note']}", LOG_TAG)
         elif "result" in message:
             result = message["result"]

@@ -40,12 +40,12 @@ def test_zip_installs_into_a_fresh_profile_and_runs(tmp_path, real_data):
         f"{int(p):02d}" for p in general["qgisMinimumVersion"].split("."))) * 100
 
     import shutil
-    import sysconfig
     exe = shutil.which("qgis_process.bin") or shutil.which("qgis_process")
     env = {k: v for k, v in os.environ.items() if k != "QGIS_PLUGINPATH"}
     env.update(QT_QPA_PLATFORM="offscreen", HOME=str(tmp_path / "home"),
                XDG_DATA_HOME=str(tmp_path / "home" / "data"),
-               PYTHONPATH=sysconfig.get_paths()["purelib"])
+               FLOODMESH_PYTHON=str(REPO / ".venv" / "bin" / "python"))  # as a user sets it
+    env.pop("PYTHONPATH", None)  # QGIS itself needs none of FloodMesh's packages
     enable = subprocess.run([exe, "plugins", "enable", "floodmesh"], env=env,
                             capture_output=True, text=True, timeout=120)
     assert enable.returncode == 0, enable.stdout + enable.stderr
