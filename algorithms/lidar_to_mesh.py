@@ -6,11 +6,12 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingException, QgsP
                        QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
                        QgsProcessingParameterCrs, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
-                       QgsProcessingParameterNumber, QgsVectorLayer)
+                       QgsProcessingParameterDefinition, QgsProcessingParameterNumber,
+                       QgsProcessingParameterString, QgsVectorLayer)
 
 from ..core.errors import FloodMeshError
 from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
-                            MAX_MIN_ANGLE, RunOptions)
+                            LOG_KERNELS, MAX_MIN_ANGLE, RunOptions)
 from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files
 from .build_mesh import max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
@@ -19,6 +20,7 @@ from .styles import load_results, style_breaklines, style_mesh, style_residuals
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
 METHODS = list(BREAKPOINT_METHODS)
+LOG_KERNEL_LABELS = ("Pratt's 3x3 mask", "analytic LoG kernel")  # LOG_KERNELS
 
 
 SIMPLIFY_OPTION = ("keep_every", "tolerance", "spline")  # RunOptions field per method
@@ -45,6 +47,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     CRITICAL_SLOPE = "CRITICAL_SLOPE"
     KEEP_EVERY = "KEEP_EVERY"
     SIMPLIFY, TOLERANCE, REFINE = "SIMPLIFY", "TOLERANCE", "REFINE"
+    CLASSES, MAX_GAP, SIGMA, SENSITIVITY = "CLASSES", "MAX_GAP", "SIGMA", "SENSITIVITY"
+    LOG_KERNEL, ZERO_CROSSINGS = "LOG_KERNEL", "ZERO_CROSSINGS"
     MIN_ANGLE = "MIN_ANGLE"
     MAX_AREA = "MAX_AREA"
     MAX_TRIANGLES = "MAX_TRIANGLES"
@@ -65,12 +69,33 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.INPUT, self.tr("LiDAR points or DEM"), fileFilter=INPUT_FILTER))
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, self.tr("CRS of the input (when the file has none)"), optional=True))
+        self.addParameter(QgsProcessingParameterString(
+            self.CLASSES, self.tr("LAS classes to grid, e.g. 2,9 for ground and water (empty: 2 "
+                                  "when classified)"), optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.CELL_SIZE, self.tr("Grid cell size d (m)"), QgsProcessingParameterNumber.Double,
             defaults.cell_size, minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_GAP, self.tr("Maximum gap bridged (m; empty: 10 cells)"),
+            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
             self.SLOPE_METHOD, self.tr("Slope method"), options=METHODS,
             defaultValue=METHODS.index(defaults.slope_method)))
+        for name, label, value in (
+                (self.SIGMA, "LoG: Gaussian sigma (m)", defaults.sigma),
+                (self.SENSITIVITY, "LoG: sensitivity, |response| (m)", defaults.sensitivity)):
+            parameter = QgsProcessingParameterNumber(
+                name, self.tr(label), QgsProcessingParameterNumber.Double, value, minValue=0.0)
+            parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+            self.addParameter(parameter)
+        kernel = QgsProcessingParameterEnum(self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"),
+                                            options=list(LOG_KERNEL_LABELS), defaultValue=0)
+        crossings = QgsProcessingParameterBoolean(
+            self.ZERO_CROSSINGS, self.tr("LoG: breakpoints at zero crossings (mid-slope)"),
+            defaultValue=defaults.zero_crossings)
+        for parameter in (kernel, crossings):
+            parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+            self.addParameter(parameter)
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
             QgsProcessingParameterNumber.Double, defaults.s_crit, minValue=0.0, maxValue=90.0))
@@ -119,7 +144,18 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         """The chain's options from the parameters; RunOptions checks their ranges."""
         boundary, user_lines = domain_files(self, parameters, context)
         simplify = self.parameterAsEnum(parameters, self.SIMPLIFY, context)
+        text = self.parameterAsString(parameters, self.CLASSES, context).strip()
+        try:
+            classes = tuple(int(c) for c in text.split(",")) if text else None
+        except ValueError:
+            raise FloodMeshError(f"LAS classes must be whole numbers separated by commas, e.g. "
+                                 f"2,9; got {text!r}") from None
         return RunOptions(
+            classes=classes, max_gap=self.optional_number(parameters, self.MAX_GAP, context),
+            sigma=self.parameterAsDouble(parameters, self.SIGMA, context),
+            sensitivity=self.parameterAsDouble(parameters, self.SENSITIVITY, context),
+            log_kernel=LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL, context)],
+            zero_crossings=self.parameterAsBool(parameters, self.ZERO_CROSSINGS, context),
             cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],
             s_crit=self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),

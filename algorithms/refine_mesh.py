@@ -1,9 +1,12 @@
 """Refine mesh: local refinement and point insertion until the residuals meet a target."""
 from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
+                       QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
 
+from ..core.errors import FloodMeshError
 from .base import FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args
+from .grid_points import POINT_FILTER
 from .styles import load_mesh
 
 
@@ -18,7 +21,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
             "maximum. Stops when the target RMSE and/or maximum residual (m) holds, at the "
             "node budget, or after the last round. Check points, if given, are assessed each "
             "round and never used for refinement.")
-    DEM, BREAKLINES, POINTS, CHECK = "DEM", "BREAKLINES", "POINTS", "CHECK"
+    DEM, BREAKLINES, POINTS, POINTS_FILE, CHECK = ("DEM", "BREAKLINES", "POINTS", "POINTS_FILE",
+                                                   "CHECK")
     MIN_ANGLE, MAX_AREA, LOWER, UPPER = "MIN_ANGLE", "MAX_AREA", "LOWER", "UPPER"
     TARGET_RMSE, TARGET_MAX, MAX_NODES, MAX_ROUNDS = ("TARGET_RMSE", "TARGET_MAX", "MAX_NODES",
                                                       "MAX_ROUNDS")
@@ -30,8 +34,11 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
             self.BREAKLINES, self.tr("Break lines"), [QgsProcessing.TypeVectorLine],
             optional=True))
         self.addParameter(QgsProcessingParameterFeatureSource(
-            self.POINTS, self.tr("Measured points (3-D) driving the refinement"),
-            [QgsProcessing.TypeVectorPoint]))
+            self.POINTS, self.tr("Measured points (3-D layer) driving the refinement"),
+            [QgsProcessing.TypeVectorPoint], optional=True))
+        self.addParameter(QgsProcessingParameterFile(
+            self.POINTS_FILE, self.tr("… or measured points from a LiDAR file (LAS/LAZ ground, "
+                                      "XYZ)"), fileFilter=POINT_FILTER, optional=True))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.CHECK, self.tr("Check points (3-D), never used for refinement"),
             [QgsProcessing.TypeVectorPoint], optional=True))
@@ -59,6 +66,19 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Nodes")))
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("RMSE of the points (m)")))
 
+    def measured_points(self, parameters, context):
+        layer = self.parameterAsVectorLayer(parameters, self.POINTS, context)
+        if layer is not None:
+            return layer_file(layer, "Measured points")
+        path = self.parameterAsFile(parameters, self.POINTS_FILE, context)
+        if not path:
+            raise FloodMeshError("Refine mesh needs measured points: a 3-D point layer (e.g. "
+                                 "Grid LiDAR points' held-out points) or a LiDAR file")
+        return path
+
+    def check_values(self, parameters, context):
+        self.measured_points(parameters, context)
+
     def process(self, parameters, context, feedback):
         def points(name, what):
             layer = self.parameterAsVectorLayer(parameters, name, context)
@@ -68,7 +88,7 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         report = self.parameterAsFileOutput(parameters, self.REPORT, context)
         result = self.run_step("refine_mesh", {
             **mesh_input_args(self, parameters, context),
-            "points": points(self.POINTS, "Measured points"),
+            "points": self.measured_points(parameters, context),
             "check": points(self.CHECK, "Check points"),
             "min_angle": self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
             "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
