@@ -10,7 +10,7 @@ from .styles import style_residuals, style_when_loaded
 class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
     NAME = "assessaccuracy"
     DISPLAY_NAME = "Assess accuracy"
-    GROUP, GROUP_ID = "Mesh", "mesh"
+    GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Residual = check point z − mesh TIN z (linear in the triangle holding the point), "
             "for held-out LiDAR points. Reports RMSE, mean, standard deviation, skew, 1.96·RMSE, "
             "the maximum, the FEMA/NSSDA sample test and the shares of residuals under 10 cm, "

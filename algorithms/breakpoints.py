@@ -9,7 +9,7 @@ from .base import FloodMeshAlgorithm, layer_file
 class ClassifyBreakpointsAlgorithm(FloodMeshAlgorithm):
     NAME = "classifybreakpoints"
     DISPLAY_NAME = "Classify breakpoints"
-    GROUP, GROUP_ID = "Terrain analysis", "terrain"
+    GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Breakpoints (1) where slope ≥ the critical slope S_crit (degrees, default 10), "
             "thinned: breakpoints whose eight neighbours are all breakpoints are dropped. With a "
             "LoG sensitivity (m) the input is read as a Laplacian-of-Gaussian response instead: "

@@ -13,7 +13,7 @@ from .styles import load_mesh
 class BuildMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "buildmesh"
     DISPLAY_NAME = "Build mesh"
-    GROUP, GROUP_ID = "Mesh", "mesh"
+    GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Meshes the DEM's valid area with Triangle (conforming Delaunay refinement), "
             "honouring the break lines: no angle below the minimum (degrees, default 25, at most "
             "34) and no triangle above the maximum area (m², default 100). Break-line vertices "

@@ -17,7 +17,7 @@ FILE_FILTER = ";;".join(f"{label} (*{EXTENSIONS[f]})"
 class ExportMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "exportmesh"
     DISPLAY_NAME = "Export mesh"
-    GROUP, GROUP_ID = "Mesh", "mesh"
+    GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Writes a FloodMesh mesh (SMS 2DM) in a solver's format: SMS 2DM with material ids "
             "and node strings (BASEMENT, TUFLOW FV, SRH-2D), TELEMAC Selafin with its boundary "
             "conditions file (.cli), ADCIRC fort.14 and SCHISM hgrid.gr3 (depth positive down), "

@@ -13,7 +13,7 @@ POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
 class GridPointsAlgorithm(FloodMeshAlgorithm):
     NAME = "gridpoints"
     DISPLAY_NAME = "Grid LiDAR points"
-    GROUP, GROUP_ID = "Terrain analysis", "terrain"
+    GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Grids LiDAR ground points (LAS/LAZ class 2 when classified, or XYZ/CSV) to a DEM of "
             "cell size d (m) by linear interpolation on their Delaunay TIN; cells are aligned to "
             "whole multiples of d. Triangles with an edge longer than the maximum gap (m, default "

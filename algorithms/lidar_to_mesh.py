@@ -12,7 +12,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingException, QgsP
 from ..core.errors import FloodMeshError
 from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
                             LOG_KERNELS, MAX_MIN_ANGLE, RunOptions)
-from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files
+from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, labels
 from .build_mesh import max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
 from .styles import load_results, style_breaklines, style_mesh, style_residuals
@@ -20,7 +20,6 @@ from .styles import load_results, style_breaklines, style_mesh, style_residuals
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
 METHODS = list(BREAKPOINT_METHODS)
-LOG_KERNEL_LABELS = ("Pratt's 3x3 mask", "analytic LoG kernel")  # LOG_KERNELS
 
 
 SIMPLIFY_OPTION = ("keep_every", "tolerance", "spline")  # RunOptions field per method
@@ -29,7 +28,7 @@ SIMPLIFY_OPTION = ("keep_every", "tolerance", "spline")  # RunOptions field per 
 class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "lidartomesh"
     DISPLAY_NAME = "LiDAR to mesh"
-    GROUP, GROUP_ID = "Workflows", "workflows"
+    GROUP, GROUP_ID = "1 · Workflows", "workflows"
     HELP = ("Runs the whole FloodMesh chain on a LiDAR point file (LAS/LAZ ground class, XYZ/CSV) "
             "or a DEM: grid (cell size d, m), slope (degrees), breakpoints (slope ≥ S_crit), "
             "break lines, simplification (every n-th point), a Triangle mesh with a minimum "
@@ -79,7 +78,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.MAX_GAP, self.tr("Maximum gap bridged (m; empty: 10 cells)"),
             QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
-            self.SLOPE_METHOD, self.tr("Slope method"), options=METHODS,
+            self.SLOPE_METHOD, self.tr("Slope method"), options=labels(METHODS),
             defaultValue=METHODS.index(defaults.slope_method)))
         for name, label, value in (
                 (self.SIGMA, "LoG: Gaussian sigma (m)", defaults.sigma),
@@ -89,7 +88,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
             self.addParameter(parameter)
         kernel = QgsProcessingParameterEnum(self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"),
-                                            options=list(LOG_KERNEL_LABELS), defaultValue=0)
+                                            options=labels(LOG_KERNELS), defaultValue=0)
         crossings = QgsProcessingParameterBoolean(
             self.ZERO_CROSSINGS, self.tr("LoG: breakpoints at zero crossings (mid-slope)"),
             defaultValue=defaults.zero_crossings)

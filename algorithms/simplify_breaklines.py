@@ -13,7 +13,7 @@ METHODS = ("keep every n-th point", "Douglas-Peucker", "cubic smoothing spline")
 class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
     NAME = "simplifybreaklines"
     DISPLAY_NAME = "Simplify break lines"
-    GROUP, GROUP_ID = "Break lines", "breaklines"
+    GROUP, GROUP_ID = "3 · Break lines", "breaklines"
     HELP = ("Thins break-line vertices within a tolerance α·Δ (Δ = d/2): keep every n-th point "
             "(default 4, both ends always kept); Douglas–Peucker, which keeps every dropped "
             "vertex within the tolerance (m) of the simplified line, horizontally and "

@@ -3,13 +3,14 @@ from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
 
 from ..core.options import BREAKPOINT_METHODS, LOG_KERNELS
-from .base import FloodMeshAlgorithm, layer_file
+from .base import FloodMeshAlgorithm, labels, layer_file
 
 
 class SlopeAlgorithm(FloodMeshAlgorithm):
     NAME = "slope"
-    DISPLAY_NAME = "Slope"
-    GROUP, GROUP_ID = "Terrain analysis", "terrain"
+    DISPLAY_NAME = "Slope for break lines"
+    TAGS = ("slope", "gradient", "horn", "laplacian", "log", "curvature")
+    GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Slope of a DEM in degrees from its 3x3 neighbourhood: maximum slope (Shanholtz), "
             "one-over-distance (NOAA, default), Sharpnack & Akin (= Horn), constrained quadratic "
             "(Wood), quadratic surface (Zevenbergen & Thorne) or diagonal (Ritter). Edges and "
@@ -21,13 +22,13 @@ class SlopeAlgorithm(FloodMeshAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterRasterLayer(self.INPUT, self.tr("DEM")))
         self.addParameter(QgsProcessingParameterEnum(
-            self.METHOD, self.tr("Method"), options=list(BREAKPOINT_METHODS),
+            self.METHOD, self.tr("Method"), options=labels(BREAKPOINT_METHODS),
             defaultValue=BREAKPOINT_METHODS.index("one-over-distance")))
         self.addParameter(QgsProcessingParameterNumber(
             self.SIGMA, self.tr("LoG: Gaussian sigma (m)"), QgsProcessingParameterNumber.Double,
             1.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
-            self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"), options=list(LOG_KERNELS),
+            self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"), options=labels(LOG_KERNELS),
             defaultValue=0))
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.OUTPUT, self.tr("Slope (degrees) or LoG response (m)")))

@@ -5,14 +5,14 @@ from qgis.core import (QgsProcessing, QgsProcessingParameterBoolean, QgsProcessi
 
 from ..core.options import TRACING_MODES as MODES
 from ..core.options import check_min_points, check_s_crit
-from .base import FloodMeshAlgorithm, layer_file
+from .base import FloodMeshAlgorithm, labels, layer_file
 from .styles import style_breaklines, style_when_loaded
 
 
 class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
     NAME = "tracebreaklines"
     DISPLAY_NAME = "Trace break lines"
-    GROUP, GROUP_ID = "Break lines", "breaklines"
+    GROUP, GROUP_ID = "3 · Break lines", "breaklines"
     HELP = ("Joins breakpoints into break lines: only breakpoints, only grid neighbours; slope "
             "changes by less than S_crit (degrees) between consecutive points; no turn over 90° "
             "from the line's trend; no line crosses another. In flat terrain the next point is "
@@ -36,7 +36,7 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
             QgsProcessingParameterNumber.Double, 10.0, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterEnum(self.MODE, self.tr("Terrain"),
-                                                     options=list(MODES), defaultValue=0))
+                                                     options=labels(MODES), defaultValue=0))
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_POINTS, self.tr("Minimum points per line"),
             QgsProcessingParameterNumber.Integer, 3, minValue=2))

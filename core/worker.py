@@ -288,6 +288,14 @@ STEPS = {"grid": step_grid, "slope": step_slope, "breakpoints": step_breakpoints
          "run": step_run}
 
 
+NUMBA_STEPS = {step_grid, step_trace, step_run, step_slope}
+
+
+def _kernels_cached() -> bool:
+    """Whether numba's cache (``cache=True``) beside the core modules holds compiled kernels."""
+    return any((Path(__file__).parent / "__pycache__").glob("*.nbi"))
+
+
 def run_job(job: dict, ch: Channel) -> int:
     """Run one job, answering on ``ch``; the exit code (0 done, 2 bad input, 130 cancelled)."""
     from .dependencies import install_hint, missing_dependencies
@@ -297,6 +305,9 @@ def run_job(job: dict, ch: Channel) -> int:
         ch.send(error=install_hint(missing))
         return 2
     step = STEPS.get(job.get("step"))
+    if step is not None and step in NUMBA_STEPS and not _kernels_cached():
+        ch.info("First run in this Python environment: numba compiles FloodMesh's kernels "
+                "(about 2 minutes, once; later runs start at once)")
     if step is None:
         ch.send(error=f"unknown FloodMesh worker step {job.get('step')!r}; one of "
                       f"{', '.join(STEPS)}")

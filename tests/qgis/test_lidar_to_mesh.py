@@ -123,3 +123,21 @@ def test_spline_and_refinement_through_the_one_step_algorithm(processing, demo_p
     assert report["simplification"]["value"] == 0.75
     assert report["breakline_points_kept"] < 0.5 * report["breakline_points_traced"]
     assert len(report["refinement"]) >= 2  # and the refinement switch reaches it too
+
+
+def test_results_load_lines_above_the_mesh_in_the_runs_crs(processing, demo_points_file,
+                                                          tmp_path):
+    """As from the toolbox: the break lines stack above the residuals above the mesh (which
+    would hide them), and the mesh comes in the run's CRS, not none."""
+    from qgis.core import QgsProject
+
+    project = QgsProject.instance()
+    project.clear()
+    processing.runAndLoadResults("floodmesh:lidartomesh", {
+        "INPUT": str(demo_points_file), "MAX_AREA": 200, "HOLDOUT": 0.01,
+        "OUTPUT_FOLDER": str(tmp_path / "loaded")})
+    order = [node.layer().name() for node in project.layerTreeRoot().findLayers()]
+    assert order == ["Break lines", "Residuals", "Mesh"], order
+    mesh = project.mapLayersByName("Mesh")[0]
+    assert mesh.crs().isValid() and mesh.crs().authid() == "EPSG:25832"
+    project.clear()
