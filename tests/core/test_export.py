@@ -495,7 +495,8 @@ def test_same_input_gives_identical_files(mesh, tmp_path):
         export.export_formats(tmp_path / run / "mesh", nodes, tris, "2dm,slf,14,gr3,nc",
                               crs="EPSG:25832", open_lines=[WEST_LINE], element_elevations=True)
     names = sorted(p.name for p in (tmp_path / "a").iterdir())
-    assert names == ["mesh.14", "mesh.2dm", "mesh.cli", "mesh.gr3", "mesh.nc", "mesh.slf"]
+    assert names == ["mesh.14", "mesh.2dm", "mesh.cli", "mesh.gr3", "mesh.nc", "mesh.prj",
+                     "mesh.slf"]
     for name in names:
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
 
