@@ -1,5 +1,5 @@
 """Assess accuracy: residuals of check points against a mesh's TIN."""
-from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterFile,
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingParameterMeshLayer,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
                        QgsProcessingParameterVectorDestination)
 
@@ -18,8 +18,7 @@ class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
     MESH, POINTS, OUTPUT, REPORT, RMSE = "MESH", "POINTS", "OUTPUT", "REPORT", "RMSE"
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile(self.MESH, self.tr("Mesh (SMS 2DM)"),
-                                                     fileFilter="SMS 2DM (*.2dm)"))
+        self.addParameter(QgsProcessingParameterMeshLayer(self.MESH, self.tr("Mesh (SMS 2DM)")))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.POINTS, self.tr("Check points (3-D)"), [QgsProcessing.TypeVectorPoint]))
         self.addParameter(QgsProcessingParameterVectorDestination(
@@ -34,7 +33,7 @@ class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
         report = self.parameterAsFileOutput(parameters, self.REPORT, context)
         result = self.run_step("assess", {
-            "mesh": self.parameterAsFile(parameters, self.MESH, context),
+            "mesh": layer_file(self.parameterAsMeshLayer(parameters, self.MESH, context), "Mesh"),
             "points": layer_file(layer, "Check points"), "crs": layer.crs().toWkt() or None,
             "output": out, "report": report or None}, feedback, out, report)
         style_when_loaded(context, out, style_residuals)

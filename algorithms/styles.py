@@ -5,7 +5,7 @@ from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSyste
                        QgsCoordinateTransform, QgsMapLayerType, QgsProcessingContext,
                        QgsProcessingException, QgsProcessingLayerPostProcessorInterface,
                        QgsRendererCategory, QgsSimpleLineSymbolLayer, QgsSingleSymbolRenderer,
-                       QgsSymbol)
+                       QgsSymbol, QgsWkbTypes)
 from qgis.PyQt.QtGui import QColor
 
 from ..core.options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS as COLOURS
@@ -61,7 +61,7 @@ def _rank(layer) -> int:
         return 3
     if layer.type() == QgsMapLayerType.RasterLayer:
         return 2
-    return 0 if layer.geometryType() == 1 else 1  # QgsWkbTypes.LineGeometry is 1
+    return 0 if layer.geometryType() == QgsWkbTypes.LineGeometry else 1
 
 
 class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):

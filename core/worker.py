@@ -200,9 +200,11 @@ def step_refine_mesh(ch, *, dem, points, output, min_angle, max_area, lower, upp
                                max_nodes=max_nodes, max_rounds=max_rounds, progress=ch.progress,
                                cancelled=ch.cancelled)
     for k, r in enumerate(rounds, 1):
+        checked = (f", check RMSE {100 * r.check_rmse_m:.1f} cm" if check_xyz is not None
+                   else "")
         ch.info(f"round {k}: {r.nodes} nodes, RMSE {100 * r.rmse_m:.1f} cm, max "
-                f"{100 * r.max_abs_m:.1f} cm, check RMSE {100 * r.check_rmse_m:.1f} cm; "
-                f"{r.inserted} points inserted, {r.refined} triangles refined")
+                f"{100 * r.max_abs_m:.1f} cm{checked}; {r.inserted} points inserted, "
+                f"{r.refined} triangles refined")
     io.write_mesh_2dm(output, mesh.nodes, mesh.triangles, crs=grid.crs)
     result = {"OUTPUT": output, "NODES": len(mesh.nodes), "RMSE": rounds[-1].rmse_m,
               "crs": grid.crs.to_wkt()}
