@@ -8,6 +8,7 @@ cd "$(dirname "$0")/.."
 
 DEB_PACKAGES=(qgis python3-qgis qgis-providers python3-venv python3-numpy python3-scipy
               python3-rasterio python3-fiona python3-pyproj python3-matplotlib gdal-bin)
+DEB_PACKAGES+=(xvfb)  # a virtual display for the desktop QGIS test (tests/qgis/test_desktop.py)
 
 missing=()
 for p in "${DEB_PACKAGES[@]}"; do
