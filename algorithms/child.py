@@ -34,6 +34,7 @@ MANAGED_PACKAGES = ("triangle", "laspy[lazrs]", "numba", "shapely>=2", "scipy", 
                     "fiona", "pyproj", "matplotlib")
 PARTIAL_GLOB = ".*.partial*"  # core.worker.PARTIAL_GLOB (not imported: core stays out of QGIS)
 LOG_TAG = "FloodMesh"
+READY = ".floodmesh-ready"  # written into the managed environment once pip has succeeded
 FIRST_RUN_MESSAGE = (
     "FloodMesh's first run sets up its Python packages (Triangle, laspy, numba, shapely) in "
     "a virtual environment of its own beside your QGIS profile: a minute or two, with the "
@@ -57,9 +58,11 @@ def find_python() -> str | None:
     setting = QgsSettings().value(SETTING, "")
     if setting:
         return str(setting)
-    for candidate in (PLUGIN_DIR / ".venv" / "bin" / "python", managed_venv() / "bin" / "python"):
-        if candidate.exists():
-            return str(candidate)
+    checkout = PLUGIN_DIR / ".venv" / "bin" / "python"
+    if checkout.exists():
+        return str(checkout)
+    if (managed_venv() / READY).exists():  # only once pip has filled it
+        return str(managed_venv() / "bin" / "python")
     return None
 
 
@@ -90,6 +93,7 @@ def ensure_python(feedback) -> str:
     if not proj.exists() and Path("/usr/share/proj").is_dir():
         proj.parent.mkdir(parents=True, exist_ok=True)
         proj.symlink_to("/usr/share/proj")
+    (venv / READY).write_text(" ".join(MANAGED_PACKAGES + tuple(pin)) + "\n")
     return str(venv / "bin" / "python")
 
 

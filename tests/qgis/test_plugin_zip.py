@@ -24,7 +24,7 @@ def test_zip_on_a_stock_qgis_sets_up_its_python_on_the_first_run(tmp_path, real_
     assert "sets up its Python packages" in run.stdout + run.stderr
     venv = (tmp_path / "home" / "data" / "QGIS" / "QGIS3" / "profiles" / "default" / "floodmesh"
             / "venv")
-    assert (venv / "bin" / "python").exists()
+    assert (venv / "bin" / "python").exists() and (venv / ".floodmesh-ready").exists()
     check = subprocess.run([str(venv / "bin" / "python"), "-c",
                             "import numpy, triangle, numba, laspy, lazrs, shapely; "
                             "print(numpy.__version__)"], capture_output=True, text=True)
