@@ -1,24 +1,111 @@
-"""What every FloodMesh algorithm shares: names, groups, help, and turning core errors into
-messages QGIS shows."""
+"""What every FloodMesh algorithm shares: names, groups, help, parameter checks, and running
+the core step in the worker process (``child.run_step``).
+
+Only ``core.options`` and ``core.errors`` (plain Python) are imported into QGIS; the numerical
+core runs in the worker."""
+import html
 from pathlib import Path
 
 from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
-from qgis.PyQt.QtCore import QCoreApplication
-from .compat import VECTOR_LINE, VECTOR_POLYGON
+from qgis.PyQt.QtCore import QCoreApplication, QUrl
 
-from ..core.dependencies import install_hint, missing_dependencies
-from ..core.errors import Cancelled, FloodMeshError
+from ..core.errors import FloodMeshError
+from .compat import VECTOR_LINE, VECTOR_POLYGON
+from .child import run_step
+
+
+README = Path(__file__).resolve().parent.parent / "README.md"
+# what toolbox searches find every FloodMesh algorithm by
+TAGS = ("floodmesh", "lidar", "las", "laz", "dem", "tin", "triangle", "mesh", "2dm", "telemac",
+        "selafin", "adcirc", "schism", "hec-ras", "basement", "tuflow", "d-flow", "ugrid",
+        "hydraulic", "flood", "breakline")
+GLOSSARY = ("<p><i>d</i>: the grid cell size (m); <i>Δ = d/2</i>: the scale of detail; "
+            "<i>S_crit</i>: the critical slope (degrees) from which a cell is a breakpoint; "
+            "<i>α</i>: the break-line simplification tolerance in units of Δ; a "
+            "<i>system</i>: break lines joined to each other.</p>")
+# what the enum parameters show, by core's ids (core/options.py)
+LABELS = {"max-slope": "Maximum slope (Shanholtz)", "one-over-distance":
+          "One over distance (NOAA)", "sharpnack-akin": "Sharpnack & Akin (= Horn)",
+          "wood": "Constrained quadratic (Wood)", "zevenbergen-thorne":
+          "Quadratic surface (Zevenbergen & Thorne)", "ritter": "Diagonal (Ritter)",
+          "log": "Laplacian of Gaussian (LoG)", "pratt": "Pratt's 3x3 mask",
+          "analytic": "Analytic LoG kernel", "auto": "Automatic (steep where the median slope "
+          "reaches S_crit)", "flat": "Flat: least slope", "steep": "Steep: least change of slope"}
+
+
+# per-parameter help (the tooltip), by parameter name: one text for the same parameter everywhere
+PARAMETER_HELP = {
+    "CELL_SIZE": "Grid cell size d in metres; the scale of detail Δ is d/2. About the point "
+                 "spacing: 1 m for 9 points/m².",
+    "CLASSES": "LAS classification codes gridded as terrain, e.g. 2 (ground) or 2,9 (ground "
+               "and water, so that lakes are meshed instead of left as holes).",
+    "MAX_GAP": "Triangles of the points' TIN with an edge longer than this (m) are not "
+               "interpolated: wider gaps (water, voids) stay nodata and become mesh holes.",
+    "CRITICAL_SLOPE": "S_crit, degrees: cells at least this steep are breakpoints; break lines "
+                      "change slope by less than S_crit from point to point. 10° is the "
+                      "reference case.",
+    "SLOPE_METHOD": "The 3x3 slope kernel, or the Laplacian of Gaussian (crests and toes).",
+    "METHOD": "The method of this step (see the help).",
+    "SIGMA": "Standard deviation of the Gaussian smoothing of the LoG, in metres.",
+    "SENSITIVITY": "LoG breakpoints where the |response| reaches this (m).",
+    "LOG_SENSITIVITY": "LoG breakpoints where the |response| reaches this (m); empty: the input "
+                       "is a slope in degrees.",
+    "KEEP_EVERY": "Keep every n-th traced break-line point (both ends always): 4 in the "
+                  "reference case.",
+    "TOLERANCE": "Douglas–Peucker or spline tolerance in metres (α·Δ), horizontal and "
+                 "vertical.",
+    "MIN_ANGLE": "No triangle angle below this (degrees); at most 34. 25° is usual for solvers.",
+    "MAX_AREA": "No triangle larger than this (m²).",
+    "MAX_TRIANGLES": "Refuse, before meshing, a mesh estimated above this many triangles.",
+    "HOLDOUT": "Share of the points kept out of the grid to measure the mesh's error (at "
+               "least 20 points for the FEMA/NSSDA test; 0: no assessment).",
+    "SEED": "Random seed of the holdout and of tie breaks: the same seed, the same result.",
+    "BOUNDARY": "Polygon layer of the model domain; its holes (buildings, islands) stay "
+                "unmeshed. Must be in the DEM's CRS.",
+    "USER_LINES": "Your own break or structure lines (dykes, walls), kept as mesh edges.",
+    "CRS": "The CRS when the file carries none: a projected CRS in metres.",
+    "FORMATS": "Solver formats written beside mesh.2dm as mesh.<ext>.",
+    "REFINE": "Step 9: insert measured points and refine triangles until the residual bounds "
+              "(10 cm RMS, 25 cm) hold.",
+    "MAX_NODES": "Stop refining when the mesh reaches this many nodes.",
+    "MAX_ROUNDS": "Stop after this many rounds of refinement.",
+    "LOWER": "Triangles whose points misfit by more than this RMS (m) get a quarter of their "
+             "area as a local maximum.",
+    "UPPER": "Measured points misfitting by more than this (m) become mesh nodes.",
+    "POINTS": "3-D points (z) that drive the refinement, e.g. Grid LiDAR points' held-out "
+              "points.",
+    "POINTS_FILE": "A LAS/LAZ (ground class) or XYZ file of measured points, instead of a layer.",
+    "CHECK": "3-D points only measured each round, never inserted: an independent check.",
+    "SNAP": "Boundary nodes within this distance (m) of an open boundary line become open.",
+    "REGIONS": "Polygons whose triangles (by centroid) get a material id.",
+    "DATUM_OFFSET": "Added to every elevation before writing (m).",
+    "OUTPUT_FOLDER": "Folder for dem.tif, slope.tif, breakpoints.tif, breaklines.gpkg, "
+                     "mesh.2dm (+ mesh.prj), mesh.gpkg, residuals.gpkg and report.json.",
+}
+
+
+def labels(ids) -> list:
+    """The labels an enum parameter shows for core's option ids (in their order)."""
+    return [LABELS.get(i, i) for i in ids]
 
 
 class FloodMeshAlgorithm(QgsProcessingAlgorithm):
     """Subclasses set NAME, DISPLAY_NAME, GROUP, GROUP_ID and HELP, and implement
-    ``initAlgorithm`` and ``process`` (importing the numerical core there, so that the plugin
-    loads even where a dependency is missing); they keep no state on ``self``."""
+    ``initAlgorithm`` and ``process``, which hands plain arguments to ``self.run_step`` (the
+    core step in the worker process); they keep no state on ``self``."""
 
     NAME = DISPLAY_NAME = GROUP = GROUP_ID = HELP = ""
+    TAGS = ()  # the algorithm's own search words, beside TAGS
 
     def name(self):
         return self.NAME
+
+    def addParameter(self, parameter, createOutput=True):  # noqa: N802
+        """QGIS's addParameter, with the shared tooltip of PARAMETER_HELP."""
+        text = PARAMETER_HELP.get(parameter.name())
+        if text and not parameter.help():
+            parameter.setHelp(self.tr(text))
+        return super().addParameter(parameter, createOutput)
 
     def displayName(self):  # noqa: N802
         return self.tr(self.DISPLAY_NAME)
@@ -30,12 +117,18 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         return self.GROUP_ID
 
     def shortHelpString(self):  # noqa: N802
-        return self.tr(self.HELP)
+        return f"<p>{html.escape(self.tr(self.HELP), quote=False)}</p>{GLOSSARY}"
+
+    def shortDescription(self):  # noqa: N802
+        return self.tr(self.HELP.split(". ")[0].split(": ")[0].rstrip(".") + ".")
+
+    def tags(self):
+        return [*TAGS, *self.TAGS]
+
+    def helpUrl(self):  # noqa: N802
+        return QUrl.fromLocalFile(str(README)).toString() + "#in-qgis"
 
     def checkParameterValues(self, parameters, context):  # noqa: N802
-        missing = missing_dependencies()
-        if missing:
-            return False, install_hint(missing)
         try:
             self.check_values(parameters, context)
         except FloodMeshError as exc:  # core's own message, before QGIS's generic range check
@@ -47,12 +140,12 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         subclasses override it. Core checks them again when it runs, with the same message."""
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        missing = missing_dependencies()
-        if missing:
-            raise QgsProcessingException(install_hint(missing))
-        from ..core.outputs import check_outputs
+        from ..core.outputs import check_outputs  # plain Python, like core.options
 
-        run_core(check_outputs, *self.files(parameters, context))
+        try:
+            check_outputs(*self.files(parameters, context))
+        except FloodMeshError as exc:
+            raise QgsProcessingException(str(exc)) from None
         return self.process(parameters, context, feedback)
 
     def files(self, parameters, context) -> tuple[list, list]:
@@ -62,6 +155,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
                                QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
                                QgsProcessingParameterFolderDestination,
                                QgsProcessingParameterMeshLayer,
+                               QgsProcessingParameterMultipleLayers,
                                QgsProcessingParameterRasterLayer,
                                QgsProcessingParameterVectorLayer)
 
@@ -78,6 +172,8 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
                     outputs.append(value)
             elif isinstance(p, QgsProcessingParameterFile):
                 inputs.append(self.parameterAsFile(parameters, name, context))
+            elif isinstance(p, QgsProcessingParameterMultipleLayers):
+                inputs += self.parameterAsFileList(parameters, name, context)
             elif isinstance(p, QgsProcessingParameterRasterLayer):
                 layer = self.parameterAsRasterLayer(parameters, name, context)
                 inputs.append(layer.source() if layer else None)
@@ -90,6 +186,17 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
                 inputs.append(layer.source().split("|")[0] if layer else None)
         return inputs, [o for o in outputs if o and not o.startswith(("memory:", "ogr:"))]
 
+    def run_step(self, step, args, feedback, *outputs):
+        """Core's ``step`` on ``args`` in the worker process (see ``child.run_step``); the
+        ``outputs`` (files or folders) are where a killed worker's temporaries are removed."""
+        return run_step(step, args, feedback, outputs=outputs, what=self.displayName())
+
+    def optional_number(self, parameters, name, context):
+        """A number parameter's value, or None when left empty."""
+        if parameters.get(name) in (None, ""):
+            return None
+        return self.parameterAsDouble(parameters, name, context)
+
     def process(self, parameters, context, feedback):
         raise NotImplementedError
 
@@ -98,22 +205,6 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
 
     def tr(self, text):
         return QCoreApplication.translate("FloodMesh", text)
-
-
-def run_core(func, *args, **kwargs):
-    """Call a core function; bad input becomes a QgsProcessingException with the same message."""
-    try:
-        return func(*args, **kwargs)
-    except FloodMeshError as exc:
-        raise QgsProcessingException(str(exc)) from None
-    except Cancelled:
-        raise QgsProcessingException("Cancelled; no partial output was written") from None
-
-
-def feedback_callables(feedback):
-    """Progress and cancellation as the plain callables core takes."""
-    return {"progress": lambda f: feedback.setProgress(100 * f),
-            "cancelled": feedback.isCanceled}
 
 
 def layer_file(layer, what: str) -> str:
@@ -141,7 +232,7 @@ BOUNDARY, USER_LINES = "BOUNDARY", "USER_LINES"
 
 def add_domain_parameters(algorithm):
     """The optional model-domain polygon and the modeller's own lines, as in Build mesh."""
-    from qgis.core import QgsProcessingParameterFeatureSource
+    from qgis.core import QgsProcessing, QgsProcessingParameterFeatureSource
 
     algorithm.addParameter(QgsProcessingParameterFeatureSource(
         BOUNDARY, algorithm.tr("Model domain polygon (holes left out; default: the data's "
@@ -160,17 +251,11 @@ def domain_files(algorithm, parameters, context) -> tuple:
     return path(BOUNDARY, "Model domain polygon"), path(USER_LINES, "Own lines")
 
 
-def read_mesh_inputs(algorithm, parameters, context) -> tuple:
-    """(DEM, break lines plus own lines, domain) from the DEM, BREAKLINES, BOUNDARY and
-    USER_LINES parameters of a meshing algorithm."""
-    from ..core import io
-    from ..core.pipeline import mesh_constraints
-
-    dem = run_core(io.read_raster, layer_file(
-        algorithm.parameterAsRasterLayer(parameters, "DEM", context), "DEM"))
-    lines_layer = algorithm.parameterAsVectorLayer(parameters, "BREAKLINES", context)
-    lines = (run_core(io.read_lines_gpkg, layer_file(lines_layer, "Break lines"))
-             if lines_layer is not None else [])
-    domain, own_lines = run_core(mesh_constraints, dem,
-                                 *domain_files(algorithm, parameters, context))
-    return dem, lines + own_lines, domain
+def mesh_input_args(algorithm, parameters, context) -> dict:
+    """The worker's arguments for the DEM, BREAKLINES, BOUNDARY and USER_LINES parameters of a
+    meshing algorithm."""
+    lines = algorithm.parameterAsVectorLayer(parameters, "BREAKLINES", context)
+    boundary, user_lines = domain_files(algorithm, parameters, context)
+    return {"dem": layer_file(algorithm.parameterAsRasterLayer(parameters, "DEM", context), "DEM"),
+            "breaklines": layer_file(lines, "Break lines") if lines is not None else None,
+            "boundary": boundary, "user_lines": user_lines}

@@ -4,13 +4,13 @@ from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterNumb
 from .compat import DOUBLE
 
 from ..core.options import check_s_crit, check_sensitivity
-from .base import FloodMeshAlgorithm, layer_file, run_core
+from .base import FloodMeshAlgorithm, layer_file
 
 
 class ClassifyBreakpointsAlgorithm(FloodMeshAlgorithm):
     NAME = "classifybreakpoints"
     DISPLAY_NAME = "Classify breakpoints"
-    GROUP, GROUP_ID = "Terrain analysis", "terrain"
+    GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Breakpoints (1) where slope ≥ the critical slope S_crit (degrees, default 10), "
             "thinned: breakpoints whose eight neighbours are all breakpoints are dropped. With a "
             "LoG sensitivity (m) the input is read as a Laplacian-of-Gaussian response instead: "
@@ -39,20 +39,11 @@ class ClassifyBreakpointsAlgorithm(FloodMeshAlgorithm):
             check_s_crit(self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context))
 
     def process(self, parameters, context, feedback):
-        import numpy as np
-        from ..core import io
-        from ..core.breakpoints import classify_breakpoints, log_breakpoints
-
-        grid = run_core(io.read_raster, layer_file(
-            self.parameterAsRasterLayer(parameters, self.INPUT, context), "Slope"))
-        if parameters.get(self.LOG_SENSITIVITY) not in (None, ""):
-            breakpoints = run_core(
-                log_breakpoints, grid,
-                self.parameterAsDouble(parameters, self.LOG_SENSITIVITY, context),
-                zero_crossings=self.parameterAsBool(parameters, self.ZERO_CROSSINGS, context))
-        else:
-            breakpoints = run_core(classify_breakpoints, grid, self.parameterAsDouble(
-                parameters, self.CRITICAL_SLOPE, context))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_raster, out, breakpoints, valid=np.isfinite(grid.values))
-        return {self.OUTPUT: out}
+        return {self.OUTPUT: self.run_step("breakpoints", {
+            "input": layer_file(self.parameterAsRasterLayer(parameters, self.INPUT, context),
+                                "Slope"),
+            "s_crit": self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
+            "sensitivity": self.optional_number(parameters, self.LOG_SENSITIVITY, context),
+            "zero_crossings": self.parameterAsBool(parameters, self.ZERO_CROSSINGS, context),
+            "output": out}, feedback, out)["OUTPUT"]}

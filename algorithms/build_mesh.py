@@ -7,15 +7,14 @@ from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POLYGON
 
 from ..core.options import (DEFAULT_MAX_TRIANGLES, MAX_MIN_ANGLE, check_max_area,
                             check_max_triangles, check_min_angle)
-from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, read_mesh_inputs,
-                   run_core)
+from .base import FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args
 from .styles import load_mesh
 
 
 class BuildMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "buildmesh"
     DISPLAY_NAME = "Build mesh"
-    GROUP, GROUP_ID = "Mesh", "mesh"
+    GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Meshes the DEM's valid area with Triangle (conforming Delaunay refinement), "
             "honouring the break lines: no angle below the minimum (degrees, default 25, at most "
             "34) and no triangle above the maximum area (m², default 100). Break-line vertices "
@@ -57,35 +56,19 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         check_max_triangles(self.parameterAsInt(parameters, self.MAX_TRIANGLES, context))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.mesh import build_mesh, mesh_quality
-        from ..core.pipeline import size_field
-
-        dem, lines, domain = read_mesh_inputs(self, parameters, context)
-        min_angle = self.parameterAsDouble(parameters, self.MIN_ANGLE, context)
-        max_area = self.parameterAsDouble(parameters, self.MAX_AREA, context)
         size_layer = self.parameterAsRasterLayer(parameters, self.SIZE_FIELD, context)
-        size = (run_core(size_field, layer_file(size_layer, "Size field"), dem,
-                         max_area=max_area) if size_layer is not None else None)
-        mesh = run_core(build_mesh, dem, lines, min_angle=min_angle, max_area=max_area,
-                        domain=domain, size_field=size,
-                        max_triangles=self.parameterAsInt(parameters, self.MAX_TRIANGLES,
-                                                          context),
-                        note=feedback.pushWarning)
-        quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)
-        feedback.pushInfo(f"{quality['nodes']} nodes, {quality['triangles']} triangles, smallest "
-                          f"angle {quality['min_angle_deg']:.2f}°, largest area "
-                          f"{quality['max_area_m2']:.1f} m²")
         out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
-        run_core(io.write_mesh_2dm, out, mesh.nodes, mesh.triangles)
-        load_mesh(context, out, "Mesh", self.OUTPUT)
-        results = {self.OUTPUT: out, self.NODES: quality["nodes"],
-                   self.TRIANGLE_COUNT: quality["triangles"]}
         triangles_out = self.parameterAsOutputLayer(parameters, self.TRIANGLES, context)
-        if triangles_out:
-            run_core(io.write_mesh_gpkg, triangles_out, mesh.nodes, mesh.triangles, dem.crs)
-            results[self.TRIANGLES] = triangles_out
-        return results
+        result = self.run_step("build_mesh", {
+            **mesh_input_args(self, parameters, context),
+            "min_angle": self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
+            "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
+            "size_field": layer_file(size_layer, "Size field") if size_layer else None,
+            "max_triangles": self.parameterAsInt(parameters, self.MAX_TRIANGLES, context),
+            "output": out, "triangles": triangles_out or None}, feedback, out, triangles_out)
+        load_mesh(context, out, "Mesh", self.OUTPUT, result["crs"])
+        return {k: v for k, v in result.items()
+                if k in (self.OUTPUT, self.NODES, self.TRIANGLE_COUNT, self.TRIANGLES)}
 
 
 def max_triangles_parameter(name, tr):

@@ -10,7 +10,7 @@ from .compat import DOUBLE, VECTOR_LINE, VECTOR_POLYGON
 
 from ..core.options import EXPORT_EXTENSIONS as EXTENSIONS
 from ..core.options import EXPORT_FORMAT_LABELS, EXPORT_FORMATS
-from .base import FloodMeshAlgorithm, crs_or_none, layer_file, run_core
+from .base import FloodMeshAlgorithm, crs_or_none, layer_file
 FILE_FILTER = ";;".join(f"{label} (*{EXTENSIONS[f]})"
                         for f, label in zip(EXPORT_FORMATS, EXPORT_FORMAT_LABELS))
 
@@ -18,7 +18,7 @@ FILE_FILTER = ";;".join(f"{label} (*{EXTENSIONS[f]})"
 class ExportMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "exportmesh"
     DISPLAY_NAME = "Export mesh"
-    GROUP, GROUP_ID = "Mesh", "mesh"
+    GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Writes a FloodMesh mesh (SMS 2DM) in a solver's format: SMS 2DM with material ids "
             "and node strings (BASEMENT, TUFLOW FV, SRH-2D), TELEMAC Selafin with its boundary "
             "conditions file (.cli), ADCIRC fort.14 and SCHISM hgrid.gr3 (depth positive down), "
@@ -65,43 +65,27 @@ class ExportMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputFile(self.CLI, self.tr("TELEMAC boundary conditions")))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.export import export_mesh, layers_crs
-
         fmt = EXPORT_FORMATS[self.parameterAsEnum(parameters, self.FORMAT, context)]
         mesh_layer = self.parameterAsMeshLayer(parameters, self.INPUT, context)
-        mesh_path = layer_file(mesh_layer, "Mesh")
         crs = crs_or_none(self, parameters, self.CRS, context)
-        if crs is None and mesh_layer.crs().isValid():
+        if crs is None and mesh_layer is not None and mesh_layer.crs().isValid():
             crs = mesh_layer.crs().toWkt()
         files = {}
         for name, what in ((self.OPEN_BOUNDARIES, "Open boundary lines"),
                            (self.REGIONS, "Region polygons"), (self.BREAKLINES, "Break lines")):
             layer = self.parameterAsVectorLayer(parameters, name, context)
             files[name] = layer_file(layer, what) if layer is not None else None
-        crs = run_core(layers_crs, crs, {"open boundary": files[self.OPEN_BOUNDARIES],
-                                         "region": files[self.REGIONS],
-                                         "break line": files[self.BREAKLINES]})
-        field = self.parameterAsString(parameters, self.MATERIAL_FIELD, context) or None
-        mesh = run_core(io.read_2dm, mesh_path)
         out = Path(self.parameterAsFileOutput(parameters, self.OUTPUT, context))
         if out.suffix.lower() != EXTENSIONS[fmt]:  # the format chosen decides the extension
             out = out.with_suffix(EXTENSIONS[fmt])
-        written = run_core(
-            export_mesh, out, mesh.nodes, mesh.triangles, fmt=fmt, crs=crs,
-            open_lines=(run_core(io.read_lines_gpkg, files[self.OPEN_BOUNDARIES])
-                        if files[self.OPEN_BOUNDARIES] else ()),
-            snap=self.parameterAsDouble(parameters, self.SNAP, context),
-            regions=(run_core(io.read_regions, files[self.REGIONS], field=field)
-                     if files[self.REGIONS] else ()),
-            materials=mesh.materials,
-            datum_offset=self.parameterAsDouble(parameters, self.DATUM_OFFSET, context),
-            element_elevations=self.parameterAsBool(parameters, self.ELEMENT_ELEVATIONS, context),
-            breaklines=(run_core(io.read_lines_gpkg, files[self.BREAKLINES])
-                        if files[self.BREAKLINES] else ()))
-        feedback.pushInfo(f"{len(mesh.nodes)} nodes, {len(mesh.triangles)} triangles written to "
-                          f"{', '.join(str(p) for p in written)}")
-        results = {self.OUTPUT: str(out)}
-        if fmt == "slf":
-            results[self.CLI] = str(written[1])
-        return results
+        result = self.run_step("export", {
+            "mesh": layer_file(mesh_layer, "Mesh"), "output": str(out), "fmt": fmt, "crs": crs,
+            "open_boundaries": files[self.OPEN_BOUNDARIES], "regions": files[self.REGIONS],
+            "material_field": self.parameterAsString(parameters, self.MATERIAL_FIELD,
+                                                     context) or None,
+            "breaklines": files[self.BREAKLINES],
+            "snap": self.parameterAsDouble(parameters, self.SNAP, context),
+            "datum_offset": self.parameterAsDouble(parameters, self.DATUM_OFFSET, context),
+            "element_elevations": self.parameterAsBool(parameters, self.ELEMENT_ELEVATIONS,
+                                                       context)}, feedback, out)
+        return {k: v for k, v in result.items() if k in (self.OUTPUT, self.CLI)}

@@ -3,11 +3,10 @@ from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
                        QgsProcessingParameterFile, QgsProcessingParameterNumber,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterString,
                        QgsProcessingParameterVectorDestination)
-from .compat import DOUBLE, INTEGER
 
 from ..core.options import check_cell_size, check_holdout, check_max_gap
-from ..core.tiles import is_tile_set
-from .base import FloodMeshAlgorithm, crs_or_none, run_core
+from .compat import DOUBLE, INTEGER
+from .base import FloodMeshAlgorithm, crs_or_none
 from .tiles import add_tile_parameters, dask_settings, input_or_tiles
 
 POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
@@ -16,7 +15,7 @@ POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
 class GridPointsAlgorithm(FloodMeshAlgorithm):
     NAME = "gridpoints"
     DISPLAY_NAME = "Grid LiDAR points"
-    GROUP, GROUP_ID = "Terrain analysis", "terrain"
+    GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Grids LiDAR ground points (LAS/LAZ class 2 when classified, or XYZ/CSV) to a DEM of "
             "cell size d (m) by linear interpolation on their Delaunay TIN; cells are aligned to "
             "whole multiples of d. Triangles with an edge longer than the maximum gap (m, default "
@@ -60,56 +59,21 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
         check_holdout(self.parameterAsDouble(parameters, self.HOLDOUT, context))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.grid import grid_points_linear
-        from ..core.points import split_holdout
-
         text = self.parameterAsString(parameters, self.CLASSES, context).strip()
         try:
-            classes = tuple(int(c) for c in text.split(",")) if text else None
+            classes = [int(c) for c in text.split(",")] if text else None
         except ValueError:
             raise QgsProcessingException(f"LAS classes must be whole numbers separated by "
                                          f"commas, e.g. 2,9; got {text!r}") from None
-        source = input_or_tiles(self, parameters, context, self.INPUT)
-        if is_tile_set(source):
-            return self.grid_tiles(source, classes, parameters, context, feedback)
-        points = run_core(io.read_points, source,
-                          crs=crs_or_none(self, parameters, self.CRS, context), classes=classes,
-                          note=feedback.pushWarning)
-        gridding, holdout = run_core(split_holdout, points,
-                                     self.parameterAsDouble(parameters, self.HOLDOUT, context),
-                                     self.parameterAsInt(parameters, self.SEED, context))
-        max_gap = self.max_gap(parameters, context)
-        dem = run_core(grid_points_linear, gridding,
-                       self.parameterAsDouble(parameters, self.CELL_SIZE, context),
-                       max_gap=max_gap, progress=lambda f: feedback.setProgress(100 * f))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_raster, out, dem)
-        results = {self.OUTPUT: out}
         holdout_out = self.parameterAsOutputLayer(parameters, self.HOLDOUT_OUTPUT, context)
-        if holdout_out and len(holdout):
-            run_core(io.write_points_gpkg, holdout_out, holdout.xyz, points.crs, layer="holdout")
-            results[self.HOLDOUT_OUTPUT] = holdout_out
-        return results
-
-    def grid_tiles(self, tiles, classes, parameters, context, feedback):
-        from ..core import io
-        from ..core.tiles import grid_point_tiles
-
-        out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        tiled = run_core(grid_point_tiles, tiles,
-                         self.parameterAsDouble(parameters, self.CELL_SIZE, context),
-                         max_gap=self.max_gap(parameters, context),
-                         crs=crs_or_none(self, parameters, self.CRS, context), classes=classes,
-                         holdout=self.parameterAsDouble(parameters, self.HOLDOUT, context),
-                         seed=self.parameterAsInt(parameters, self.SEED, context),
-                         out_path=out, keep=False, progress=lambda f: feedback.setProgress(100 * f),
-                         cancelled=feedback.isCanceled, **dask_settings(self, parameters, context))
-        for message in tiled.notes:
-            feedback.pushWarning(message)
-        results = {self.OUTPUT: out}
-        holdout_out = self.parameterAsOutputLayer(parameters, self.HOLDOUT_OUTPUT, context)
-        if holdout_out and len(tiled.holdout):
-            run_core(io.write_points_gpkg, holdout_out, tiled.holdout, tiled.crs, layer="holdout")
-            results[self.HOLDOUT_OUTPUT] = holdout_out
-        return results
+        result = self.run_step("grid", {
+            "input": input_or_tiles(self, parameters, context, self.INPUT),
+            **dask_settings(self, parameters, context),
+            "crs": crs_or_none(self, parameters, self.CRS, context), "classes": classes,
+            "cell_size": self.parameterAsDouble(parameters, self.CELL_SIZE, context),
+            "max_gap": self.max_gap(parameters, context),
+            "holdout": self.parameterAsDouble(parameters, self.HOLDOUT, context),
+            "seed": self.parameterAsInt(parameters, self.SEED, context),
+            "output": out, "holdout_output": holdout_out or None}, feedback, out, holdout_out)
+        return {k: v for k, v in result.items() if k in (self.OUTPUT, self.HOLDOUT_OUTPUT)}

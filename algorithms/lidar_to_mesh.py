@@ -1,21 +1,23 @@
 """LiDAR to mesh: the whole FloodMesh chain in one Processing algorithm."""
 from pathlib import Path
 
-from qgis.core import (QgsMeshLayer, QgsProcessingOutputFile,
+from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingException, QgsProcessingOutputFile,
                        QgsProcessingParameterBoolean,
                        QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
                        QgsProcessingParameterCrs, QgsProcessingParameterEnum,
                        QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
-                       QgsProcessingParameterNumber, QgsVectorLayer)
-from .compat import DOUBLE, INTEGER, VECTOR_LINE
+                       QgsProcessingParameterDefinition, QgsProcessingParameterNumber,
+                       QgsProcessingParameterString, QgsVectorLayer)
 
+from ..core.errors import FloodMeshError
 from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
-                            MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions)
-from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, run_core
+                            LOG_KERNELS, MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions)
+from .compat import DOUBLE, INTEGER, VECTOR_LINE
+from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, labels
 from .build_mesh import max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
 from .tiles import add_tile_parameters, dask_settings, input_or_tiles
-from .styles import load_on_completion, style_breaklines, style_mesh, style_residuals
+from .styles import load_results, style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
@@ -28,7 +30,7 @@ SIMPLIFY_OPTION = ("keep_every", "tolerance", "spline")  # RunOptions field per 
 class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "lidartomesh"
     DISPLAY_NAME = "LiDAR to mesh"
-    GROUP, GROUP_ID = "Workflows", "workflows"
+    GROUP, GROUP_ID = "1 · Workflows", "workflows"
     HELP = ("Runs the whole FloodMesh chain on a LiDAR point file (LAS/LAZ ground class, XYZ/CSV) "
             "or a DEM: grid (cell size d, m), slope (degrees), breakpoints (slope ≥ S_crit), "
             "break lines, simplification (every n-th point), a Triangle mesh with a minimum "
@@ -46,6 +48,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     CRITICAL_SLOPE = "CRITICAL_SLOPE"
     KEEP_EVERY = "KEEP_EVERY"
     SIMPLIFY, TOLERANCE, REFINE = "SIMPLIFY", "TOLERANCE", "REFINE"
+    CLASSES, MAX_GAP, SIGMA, SENSITIVITY = "CLASSES", "MAX_GAP", "SIGMA", "SENSITIVITY"
+    LOG_KERNEL, ZERO_CROSSINGS = "LOG_KERNEL", "ZERO_CROSSINGS"
     LOCALISE, NODE_ELEVATION = "LOCALISE", "NODE_ELEVATION"
     CONFORMING, FAR_FIELD_AREA = "CONFORMING", "FAR_FIELD_AREA"
     MIN_ANGLE = "MIN_ANGLE"
@@ -69,12 +73,33 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         add_tile_parameters(self, "LAS/LAZ/XYZ point tiles, or GeoTIFF DEM tiles")
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, self.tr("CRS of the input (when the file has none)"), optional=True))
+        self.addParameter(QgsProcessingParameterString(
+            self.CLASSES, self.tr("LAS classes to grid, e.g. 2,9 for ground and water (empty: 2 "
+                                  "when classified)"), optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.CELL_SIZE, self.tr("Grid cell size d (m)"), DOUBLE,
             defaults.cell_size, minValue=0.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_GAP, self.tr("Maximum gap bridged (m; empty: 10 cells)"),
+            DOUBLE, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
-            self.SLOPE_METHOD, self.tr("Slope method"), options=METHODS,
+            self.SLOPE_METHOD, self.tr("Slope method"), options=labels(METHODS),
             defaultValue=METHODS.index(defaults.slope_method)))
+        for name, label, value in (
+                (self.SIGMA, "LoG: Gaussian sigma (m)", defaults.sigma),
+                (self.SENSITIVITY, "LoG: sensitivity, |response| (m)", defaults.sensitivity)):
+            parameter = QgsProcessingParameterNumber(
+                name, self.tr(label), DOUBLE, value, minValue=0.0)
+            parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+            self.addParameter(parameter)
+        kernel = QgsProcessingParameterEnum(self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"),
+                                            options=labels(LOG_KERNELS), defaultValue=0)
+        crossings = QgsProcessingParameterBoolean(
+            self.ZERO_CROSSINGS, self.tr("LoG: breakpoints at zero crossings (mid-slope)"),
+            defaultValue=defaults.zero_crossings)
+        for parameter in (kernel, crossings):
+            parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+            self.addParameter(parameter)
         self.addParameter(QgsProcessingParameterNumber(
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
             DOUBLE, defaults.s_crit, minValue=0.0, maxValue=90.0))
@@ -120,8 +145,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             defaultValue=defaults.conforming))
         self.addParameter(QgsProcessingParameterNumber(
             self.FAR_FIELD_AREA, self.tr("Far-field triangle area where the terrain is plane "
-                                         "(m²)"), QgsProcessingParameterNumber.Double,
-            optional=True, minValue=0.0))
+                                         "(m²)"), DOUBLE, optional=True, minValue=0.0))
         self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
@@ -137,7 +161,18 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         """The chain's options from the parameters; RunOptions checks their ranges."""
         boundary, user_lines = domain_files(self, parameters, context)
         simplify = self.parameterAsEnum(parameters, self.SIMPLIFY, context)
+        text = self.parameterAsString(parameters, self.CLASSES, context).strip()
+        try:
+            classes = tuple(int(c) for c in text.split(",")) if text else None
+        except ValueError:
+            raise FloodMeshError(f"LAS classes must be whole numbers separated by commas, e.g. "
+                                 f"2,9; got {text!r}") from None
         return RunOptions(
+            classes=classes, max_gap=self.optional_number(parameters, self.MAX_GAP, context),
+            sigma=self.parameterAsDouble(parameters, self.SIGMA, context),
+            sensitivity=self.parameterAsDouble(parameters, self.SENSITIVITY, context),
+            log_kernel=LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL, context)],
+            zero_crossings=self.parameterAsBool(parameters, self.ZERO_CROSSINGS, context),
             cell_size=self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             slope_method=METHODS[self.parameterAsEnum(parameters, self.SLOPE_METHOD, context)],
             s_crit=self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
@@ -158,33 +193,30 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             node_elevation=NODE_ELEVATIONS[self.parameterAsEnum(parameters, self.NODE_ELEVATION,
                                                                 context)],
             conforming=self.parameterAsBool(parameters, self.CONFORMING, context),
-            far_field_area=(self.parameterAsDouble(parameters, self.FAR_FIELD_AREA, context)
-                            if parameters.get(self.FAR_FIELD_AREA) not in (None, "") else None),
+            far_field_area=self.optional_number(parameters, self.FAR_FIELD_AREA, context),
             **dask_settings(self, parameters, context))
 
     def check_values(self, parameters, context):
         self.options(parameters, context)
 
     def process(self, parameters, context, feedback):
-        from ..core.pipeline import run_pipeline
+        from dataclasses import asdict
 
-        options = run_core(self.options, parameters, context)
+        try:
+            options = self.options(parameters, context)
+        except FloodMeshError as exc:
+            raise QgsProcessingException(str(exc)) from None
         source = input_or_tiles(self, parameters, context, self.INPUT)
         out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
-        report = run_core(run_pipeline, source, out, options,
-                          progress=lambda f: feedback.setProgress(100 * f),
-                          cancelled=feedback.isCanceled, log=feedback.pushInfo)
-        breaklines = str(out / "breaklines.gpkg")
-        mesh = str(out / "mesh.2dm")
-        for layer, style, output in (
-                (QgsVectorLayer(breaklines, "Break lines", "ogr"), style_breaklines,
-                 self.BREAKLINES),
-                (QgsMeshLayer(mesh, "Mesh", "mdal"), style_mesh, self.MESH),
-                (QgsVectorLayer(str(out / "residuals.gpkg"), "Residuals", "ogr"),
-                 style_residuals, self.REPORT)):
-            load_on_completion(context, layer, output)
-            style(layer)
+        report = self.run_step("run", {"input": source, "output_folder": str(out),
+                                       "options": asdict(options)}, feedback, out)
+        breaklines, mesh = str(out / "breaklines.gpkg"), str(out / "mesh.2dm")
+        load_results(context, report["crs"], (
+            (QgsMeshLayer(mesh, "Mesh", "mdal"), style_mesh, self.MESH),
+            (QgsVectorLayer(str(out / "residuals.gpkg"), "Residuals", "ogr"), style_residuals,
+             self.REPORT),
+            (QgsVectorLayer(breaklines, "Break lines", "ogr"), style_breaklines,
+             self.BREAKLINES)))
         return {self.OUTPUT_FOLDER: str(out), self.BREAKLINES: breaklines, self.MESH: mesh,
                 self.REPORT: str(out / "report.json"), self.NODES: report["nodes"],
                 self.TRIANGLES: report["triangles"], self.RMSE: report["rmse_m"]}
-

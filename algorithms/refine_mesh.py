@@ -1,20 +1,20 @@
 """Refine mesh: local refinement and point insertion until the residuals meet a target."""
-from dataclasses import asdict
-
-from qgis.core import (QgsProcessingOutputNumber,
-                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFileDestination,
+from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
+                       QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
+                       QgsProcessingParameterFileDestination,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
-from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POINT
 
-from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, read_mesh_inputs,
-                   run_core)
+from ..core.errors import FloodMeshError
+from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POINT
+from .base import FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args
+from .grid_points import POINT_FILTER
 from .styles import load_mesh
 
 
 class RefineMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "refinemesh"
     DISPLAY_NAME = "Refine mesh"
-    GROUP, GROUP_ID = "Mesh", "mesh"
+    GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Meshes the DEM with its break lines as Build mesh does, then refines in rounds: "
             "measured points whose residual exceeds the upper bound (m, default 0.25) go into "
             "the mesh as nodes with their measured z; triangles whose points' RMS residual "
@@ -22,7 +22,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
             "maximum. Stops when the target RMSE and/or maximum residual (m) holds, at the "
             "node budget, or after the last round. Check points, if given, are assessed each "
             "round and never used for refinement.")
-    DEM, BREAKLINES, POINTS, CHECK = "DEM", "BREAKLINES", "POINTS", "CHECK"
+    DEM, BREAKLINES, POINTS, POINTS_FILE, CHECK = ("DEM", "BREAKLINES", "POINTS", "POINTS_FILE",
+                                                   "CHECK")
     MIN_ANGLE, MAX_AREA, LOWER, UPPER = "MIN_ANGLE", "MAX_AREA", "LOWER", "UPPER"
     TARGET_RMSE, TARGET_MAX, MAX_NODES, MAX_ROUNDS = ("TARGET_RMSE", "TARGET_MAX", "MAX_NODES",
                                                       "MAX_ROUNDS")
@@ -34,8 +35,11 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
             self.BREAKLINES, self.tr("Break lines"), [VECTOR_LINE],
             optional=True))
         self.addParameter(QgsProcessingParameterFeatureSource(
-            self.POINTS, self.tr("Measured points (3-D) driving the refinement"),
-            [VECTOR_POINT]))
+            self.POINTS, self.tr("Measured points (3-D layer) driving the refinement"),
+            [VECTOR_POINT], optional=True))
+        self.addParameter(QgsProcessingParameterFile(
+            self.POINTS_FILE, self.tr("… or measured points from a LiDAR file (LAS/LAZ ground, "
+                                      "XYZ)"), fileFilter=POINT_FILTER, optional=True))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.CHECK, self.tr("Check points (3-D), never used for refinement"),
             [VECTOR_POINT], optional=True))
@@ -63,43 +67,39 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Nodes")))
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("RMSE of the points (m)")))
 
+    def measured_points(self, parameters, context):
+        layer = self.parameterAsVectorLayer(parameters, self.POINTS, context)
+        if layer is not None:
+            return layer_file(layer, "Measured points")
+        path = self.parameterAsFile(parameters, self.POINTS_FILE, context)
+        if not path:
+            raise FloodMeshError("Refine mesh needs measured points: a 3-D point layer (e.g. "
+                                 "Grid LiDAR points' held-out points) or a LiDAR file")
+        return path
+
+    def check_values(self, parameters, context):
+        self.measured_points(parameters, context)
+
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.refine import refine_mesh
-
-        dem, lines, domain = read_mesh_inputs(self, parameters, context)
-
         def points(name, what):
             layer = self.parameterAsVectorLayer(parameters, name, context)
-            return run_core(io.read_points_vector, layer_file(layer, what)) if layer else None
+            return layer_file(layer, what) if layer else None
 
-        def optional(name):
-            value = parameters.get(name)
-            return None if value in (None, "") else self.parameterAsDouble(parameters, name,
-                                                                           context)
-
-        mesh, rounds = run_core(
-            refine_mesh, dem, lines, points(self.POINTS, "Measured points"),
-            check=points(self.CHECK, "Check points"), domain=domain,
-            min_angle=self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
-            max_area=self.parameterAsDouble(parameters, self.MAX_AREA, context),
-            lower=self.parameterAsDouble(parameters, self.LOWER, context),
-            upper=self.parameterAsDouble(parameters, self.UPPER, context),
-            target_rmse=optional(self.TARGET_RMSE), target_max=optional(self.TARGET_MAX),
-            max_nodes=self.parameterAsInt(parameters, self.MAX_NODES, context),
-            max_rounds=self.parameterAsInt(parameters, self.MAX_ROUNDS, context),
-            progress=lambda f: feedback.setProgress(100 * f), cancelled=feedback.isCanceled)
-        for k, r in enumerate(rounds, 1):
-            feedback.pushInfo(f"round {k}: {r.nodes} nodes, RMSE {100 * r.rmse_m:.1f} cm, max "
-                              f"{100 * r.max_abs_m:.1f} cm, check RMSE "
-                              f"{100 * r.check_rmse_m:.1f} cm; {r.inserted} points inserted, "
-                              f"{r.refined} triangles refined")
         out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
-        run_core(io.write_mesh_2dm, out, mesh.nodes, mesh.triangles)
-        load_mesh(context, out, "Refined mesh", self.OUTPUT)
-        results = {self.OUTPUT: out, self.NODES: len(mesh.nodes), self.RMSE: rounds[-1].rmse_m}
         report = self.parameterAsFileOutput(parameters, self.REPORT, context)
-        if report:
-            run_core(io.write_json, report, {"rounds": [asdict(r) for r in rounds]})
-            results[self.REPORT] = report
-        return results
+        result = self.run_step("refine_mesh", {
+            **mesh_input_args(self, parameters, context),
+            "points": self.measured_points(parameters, context),
+            "check": points(self.CHECK, "Check points"),
+            "min_angle": self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
+            "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
+            "lower": self.parameterAsDouble(parameters, self.LOWER, context),
+            "upper": self.parameterAsDouble(parameters, self.UPPER, context),
+            "target_rmse": self.optional_number(parameters, self.TARGET_RMSE, context),
+            "target_max": self.optional_number(parameters, self.TARGET_MAX, context),
+            "max_nodes": self.parameterAsInt(parameters, self.MAX_NODES, context),
+            "max_rounds": self.parameterAsInt(parameters, self.MAX_ROUNDS, context),
+            "output": out, "report": report or None}, feedback, out, report)
+        load_mesh(context, out, "Refined mesh", self.OUTPUT, result["crs"])
+        return {k: v for k, v in result.items()
+                if k in (self.OUTPUT, self.NODES, self.RMSE, self.REPORT)}

@@ -5,7 +5,7 @@ from qgis.core import (QgsProcessingParameterEnum,
 from .compat import DOUBLE, INTEGER, VECTOR_LINE
 
 from ..core.options import SIMPLIFY_METHODS
-from .base import FloodMeshAlgorithm, layer_file, run_core
+from .base import FloodMeshAlgorithm, layer_file
 from .styles import style_breaklines, style_when_loaded
 
 METHODS = ("keep every n-th point", "Douglas-Peucker", "cubic smoothing spline")
@@ -14,7 +14,7 @@ METHODS = ("keep every n-th point", "Douglas-Peucker", "cubic smoothing spline")
 class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
     NAME = "simplifybreaklines"
     DISPLAY_NAME = "Simplify break lines"
-    GROUP, GROUP_ID = "Break lines", "breaklines"
+    GROUP, GROUP_ID = "3 · Break lines", "breaklines"
     HELP = ("Thins break-line vertices within a tolerance α·Δ (Δ = d/2): keep every n-th point "
             "(default 4, both ends always kept); Douglas–Peucker, which keeps every dropped "
             "vertex within the tolerance (m) of the simplified line, horizontally and "
@@ -43,21 +43,16 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
             self.OUTPUT, self.tr("Simplified break lines"), VECTOR_LINE))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.raster import require_metric_crs
-        from ..core.simplify import simplify_breaklines
-
         layer = self.parameterAsVectorLayer(parameters, self.INPUT, context)
-        path = layer_file(layer, "Break lines")
-        crs = run_core(require_metric_crs, layer.crs().toWkt() or None, layer.name())
-        lines = run_core(io.read_breaklines, path)
         method = SIMPLIFY_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
         amount = (self.parameterAsInt(parameters, self.KEEP_EVERY, context)
                   if method == "keep-every"
                   else self.parameterAsDouble(parameters, self.TOLERANCE, context))
-        lines = run_core(simplify_breaklines, lines, method, amount,
-                         min_distance=self.parameterAsDouble(parameters, self.MIN_DISTANCE, context))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_breaklines, out, lines, crs)
+        self.run_step("simplify", {
+            "input": layer_file(layer, "Break lines"), "crs": layer.crs().toWkt() or None,
+            "method": method, "amount": amount,
+            "min_distance": self.parameterAsDouble(parameters, self.MIN_DISTANCE, context),
+            "output": out}, feedback, out)
         style_when_loaded(context, out, style_breaklines)
         return {self.OUTPUT: out}

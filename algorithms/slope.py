@@ -4,13 +4,14 @@ from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
 from .compat import DOUBLE
 
 from ..core.options import BREAKPOINT_METHODS, LOG_KERNELS
-from .base import FloodMeshAlgorithm, layer_file, run_core
+from .base import FloodMeshAlgorithm, labels, layer_file
 
 
 class SlopeAlgorithm(FloodMeshAlgorithm):
     NAME = "slope"
-    DISPLAY_NAME = "Slope"
-    GROUP, GROUP_ID = "Terrain analysis", "terrain"
+    DISPLAY_NAME = "Slope for break lines"
+    TAGS = ("slope", "gradient", "horn", "laplacian", "log", "curvature")
+    GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Slope of a DEM in degrees from its 3x3 neighbourhood: maximum slope (Shanholtz), "
             "one-over-distance (NOAA, default), Sharpnack & Akin (= Horn), constrained quadratic "
             "(Wood), quadratic surface (Zevenbergen & Thorne) or diagonal (Ritter). Edges and "
@@ -22,32 +23,23 @@ class SlopeAlgorithm(FloodMeshAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterRasterLayer(self.INPUT, self.tr("DEM")))
         self.addParameter(QgsProcessingParameterEnum(
-            self.METHOD, self.tr("Method"), options=list(BREAKPOINT_METHODS),
+            self.METHOD, self.tr("Method"), options=labels(BREAKPOINT_METHODS),
             defaultValue=BREAKPOINT_METHODS.index("one-over-distance")))
         self.addParameter(QgsProcessingParameterNumber(
             self.SIGMA, self.tr("LoG: Gaussian sigma (m)"), DOUBLE,
             1.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterEnum(
-            self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"), options=list(LOG_KERNELS),
+            self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"), options=labels(LOG_KERNELS),
             defaultValue=0))
         self.addParameter(QgsProcessingParameterRasterDestination(
             self.OUTPUT, self.tr("Slope (degrees) or LoG response (m)")))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.slope import laplacian_of_gaussian, slope
-
-        dem = run_core(io.read_raster, layer_file(
-            self.parameterAsRasterLayer(parameters, self.INPUT, context), "DEM"))
-        method = BREAKPOINT_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
-        if method == "log":
-            result = run_core(laplacian_of_gaussian, dem,
-                              self.parameterAsDouble(parameters, self.SIGMA, context),
-                              kernel=LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL,
-                                                                      context)],
-                              cancelled=feedback.isCanceled)
-        else:
-            result = run_core(slope, dem, method, cancelled=feedback.isCanceled)
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_raster, out, result)
-        return {self.OUTPUT: out}
+        return {self.OUTPUT: self.run_step("slope", {
+            "input": layer_file(self.parameterAsRasterLayer(parameters, self.INPUT, context),
+                                "DEM"),
+            "method": BREAKPOINT_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)],
+            "sigma": self.parameterAsDouble(parameters, self.SIGMA, context),
+            "log_kernel": LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL, context)],
+            "output": out}, feedback, out)["OUTPUT"]}

@@ -1,8 +1,11 @@
-"""How FloodMesh's results look when they load: break lines by component, residuals by class,
-the mesh shaded by elevation."""
-from qgis.core import (QgsCategorizedSymbolRenderer, QgsProcessingContext,
+"""How FloodMesh's results look when they load: break lines in one readable style above the
+mesh, residuals by class, the mesh shaded by elevation with its edges drawn, in the run's CRS,
+the view zoomed to it."""
+from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSystem,
+                       QgsCoordinateTransform, QgsMapLayerType, QgsProcessingContext,
                        QgsProcessingException, QgsProcessingLayerPostProcessorInterface,
-                       QgsRendererCategory, QgsSymbol)
+                       QgsRendererCategory, QgsSimpleLineSymbolLayer, QgsSingleSymbolRenderer,
+                       QgsSymbol, QgsWkbTypes)
 from qgis.PyQt.QtGui import QColor
 
 from ..core.options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS as COLOURS
@@ -11,24 +14,28 @@ RESIDUAL_CLASSES = ((0, "< 10 cm", COLOURS[0]), (1, "10–25 cm", COLOURS[1]),
                     (2, "> 25 cm", COLOURS[2]), (-1, "outside the mesh", OUTSIDE_MESH_COLOUR))
 
 
-def _categorised(layer, field, categories, width=None):
+def _categorised(layer, field, categories):
     renderer = QgsCategorizedSymbolRenderer(field)
     for value, label, colour in categories:
         symbol = QgsSymbol.defaultSymbol(layer.geometryType())
         symbol.setColor(QColor(colour))
-        if width is not None:
-            symbol.setWidth(width)
         renderer.addCategory(QgsRendererCategory(value, symbol, label))
     layer.setRenderer(renderer)
 
 
+BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR = "#b0006e", "#ffffff", "#404040"
+
+
 def style_breaklines(layer):
-    """A distinct colour per connected break-line system (``component_id``)."""
-    index = layer.fields().indexOf("component_id")
-    values = sorted(layer.uniqueValues(index)) if index >= 0 else []
-    colours = [QColor.fromHsv(int(137.508 * k) % 360, 200, 210).name() for k in range(len(values))]
-    _categorised(layer, "component_id", [(v, f"system {v}", c) for v, c in zip(values, colours)],
-                 width=0.6)
+    """One style for every break line, readable on the mesh's colour ramp: a magenta line on a
+    white halo (the attributes, e.g. ``mean_slope_deg`` or ``component_id``, stay there to
+    colour by)."""
+    symbol = QgsSymbol.defaultSymbol(layer.geometryType())
+    halo = QgsSimpleLineSymbolLayer(QColor(HALO_COLOUR), 1.0)
+    line = QgsSimpleLineSymbolLayer(QColor(BREAKLINE_COLOUR), 0.5)
+    symbol.changeSymbolLayer(0, halo)
+    symbol.appendSymbolLayer(line)
+    layer.setRenderer(QgsSingleSymbolRenderer(symbol))
 
 
 def style_residuals(layer):
@@ -36,20 +43,77 @@ def style_residuals(layer):
 
 
 def style_mesh(layer):
-    """Shade the faces by the nodes' elevation (the mesh's first dataset group)."""
+    """Shade the faces by the nodes' elevation (the mesh's first dataset group) and draw the
+    edges, thin and grey, so that it reads as a mesh."""
     settings = layer.rendererSettings()
     settings.setActiveScalarDatasetGroup(0)
+    edges = settings.nativeMeshSettings()
+    edges.setEnabled(True)
+    edges.setColor(QColor(MESH_EDGE_COLOUR))
+    edges.setLineWidth(0.1)
+    settings.setNativeMeshSettings(edges)
     layer.setRendererSettings(settings)
 
 
+# the order results stack in, top first: lines above points above rasters above the mesh
+def _rank(layer) -> int:
+    if layer.type() == QgsMapLayerType.MeshLayer:
+        return 3
+    if layer.type() == QgsMapLayerType.RasterLayer:
+        return 2
+    return 0 if layer.geometryType() == QgsWkbTypes.LineGeometry else 1
+
+
 class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):
-    def __init__(self, style):
+    """Styles a result as QGIS adds it; with ``run`` (the ids of one run's results) it also
+    stacks that run's layers in the readable order and zooms the map to them."""
+
+    def __init__(self, style, run=None):
         super().__init__()
-        self.style = style
+        self.style, self.run = style, run
 
     def postProcessLayer(self, layer, context, feedback):  # noqa: N802
-        self.style(layer)
+        if self.style:
+            self.style(layer)
+        if self.run is not None:
+            self.run.append(layer.id())
+            _stack(context.project(), self.run)
+            _zoom_to(layer, context.project())
         layer.triggerRepaint()
+
+
+def _stack(project, layer_ids) -> None:
+    """Move the tree nodes of ``layer_ids`` (one parent group) into rank order, where the
+    topmost of them is."""
+    root = project.layerTreeRoot()
+    nodes = [n for n in (root.findLayer(i) for i in layer_ids) if n is not None]
+    if len(nodes) < 2 or len({id(n.parent()) for n in nodes}) != 1:
+        return
+    parent = nodes[0].parent()
+    start = min(parent.children().index(n) for n in nodes)
+    ordered = sorted(nodes, key=lambda n: _rank(n.layer()))
+    clones = [n.clone() for n in ordered]
+    for node in nodes:
+        parent.removeChildNode(node)
+    for offset, clone in enumerate(clones):
+        parent.insertChildNode(start + offset, clone)
+
+
+def _zoom_to(layer, project) -> None:
+    """In the desktop QGIS, show ``layer`` whole (qgis_process has no map)."""
+    try:
+        from qgis.utils import iface
+    except ImportError:
+        return
+    if iface is None or iface.mapCanvas() is None or not layer.crs().isValid():
+        return
+    canvas = iface.mapCanvas()
+    transform = QgsCoordinateTransform(layer.crs(), canvas.mapSettings().destinationCrs(),
+                                       project)
+    extent = transform.transformBoundingBox(layer.extent())
+    if not extent.isEmpty():
+        canvas.setExtent(extent.buffered(extent.width() * 0.02))
+        canvas.refresh()
 
 
 _PENDING = []  # QGIS holds post-processors by pointer only: keep them alive here
@@ -65,19 +129,32 @@ def style_when_loaded(context, output_path: str, style) -> None:
         context.layerToLoadOnCompletionDetails(output_path).setPostProcessor(styler)
 
 
-def load_on_completion(context, layer, output_name):
-    """Hand a finished layer to QGIS to add to the project when the algorithm ends."""
-    if not layer.isValid():
-        raise QgsProcessingException(f"the output {layer.source()} could not be opened by QGIS")
-    context.temporaryLayerStore().addMapLayer(layer)
-    context.addLayerToLoadOnCompletion(
-        layer.id(), QgsProcessingContext.LayerDetails(layer.name(), context.project(), output_name))
+def load_results(context, crs_wkt, layers) -> None:
+    """Hand one run's finished layers (``(layer, style, output name)``) to QGIS to add to the
+    project when the algorithm ends: each in the run's CRS (an SMS 2DM carries none) and
+    styled, stacked lines above points above the mesh, the map zoomed to them."""
+    crs = QgsCoordinateReferenceSystem.fromWkt(crs_wkt) if crs_wkt else None
+    run = []
+    for layer, style, output_name in layers:
+        if not layer.isValid():
+            raise QgsProcessingException(f"the output {layer.source()} could not be opened by "
+                                         f"QGIS")
+        if crs is not None and crs.isValid() and not layer.crs().isValid():
+            layer.setCrs(crs)
+        style(layer)
+        context.temporaryLayerStore().addMapLayer(layer)
+        details = QgsProcessingContext.LayerDetails(layer.name(), context.project(), output_name)
+        styler = _StyleOnLoad(None, run)
+        _PENDING.append(styler)
+        del _PENDING[:-16]
+        details.setPostProcessor(styler)
+        context.addLayerToLoadOnCompletion(layer.id(), details)
 
 
-def load_mesh(context, path: str, name: str, output_name: str) -> None:
-    """Load a 2DM mesh as a QGIS mesh layer, shaded by elevation, when the algorithm ends."""
+def load_mesh(context, path: str, name: str, output_name: str, crs_wkt=None) -> None:
+    """Load a 2DM mesh as a QGIS mesh layer in ``crs_wkt``, shaded by elevation with its edges
+    drawn, when the algorithm ends."""
     from qgis.core import QgsMeshLayer
 
-    layer = QgsMeshLayer(path, name, "mdal")
-    load_on_completion(context, layer, output_name)
-    style_mesh(layer)
+    load_results(context, crs_wkt, [(QgsMeshLayer(path, name, "mdal"), style_mesh,
+                                     output_name)])

@@ -4,6 +4,8 @@ from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingParam
                        QgsProcessingParameterMultipleLayers, QgsProcessingParameterNumber,
                        QgsProcessingParameterString)
 
+from .compat import INTEGER
+
 TILES, WORKERS, SCHEDULER = "TILES", "WORKERS", "SCHEDULER"
 
 
@@ -16,7 +18,7 @@ def add_tile_parameters(algorithm, what: str):
     for parameter in (
             QgsProcessingParameterNumber(
                 WORKERS, tr("Tiles: parallel Dask workers (empty: one per core)"),
-                QgsProcessingParameterNumber.Integer, None, optional=True, minValue=1),
+                INTEGER, None, optional=True, minValue=1),
             QgsProcessingParameterString(
                 SCHEDULER, tr("Tiles: address of a running Dask scheduler (tcp://HOST:8786; "
                               "empty: workers on this machine)"), optional=True)):
@@ -37,9 +39,9 @@ def input_or_tiles(algorithm, parameters, context, input_name: str):
 
 
 def dask_settings(algorithm, parameters, context) -> dict:
-    """workers, scheduler and processes for core: QGIS cannot start Python worker processes
-    from its own binaries, so local workers are threads."""
+    """workers and scheduler for core (which runs in FloodMesh's worker process, so local Dask
+    workers can be processes there)."""
     workers = (algorithm.parameterAsInt(parameters, WORKERS, context)
                if parameters.get(WORKERS) not in (None, "") else None)
     scheduler = algorithm.parameterAsString(parameters, SCHEDULER, context).strip() or None
-    return {"workers": workers, "scheduler": scheduler, "processes": False}
+    return {"workers": workers, "scheduler": scheduler}

@@ -6,14 +6,14 @@ from .compat import DOUBLE, INTEGER, VECTOR_LINE
 
 from ..core.options import TRACING_MODES as MODES
 from ..core.options import check_min_points, check_s_crit
-from .base import FloodMeshAlgorithm, layer_file, run_core
+from .base import FloodMeshAlgorithm, labels, layer_file
 from .styles import style_breaklines, style_when_loaded
 
 
 class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
     NAME = "tracebreaklines"
     DISPLAY_NAME = "Trace break lines"
-    GROUP, GROUP_ID = "Break lines", "breaklines"
+    GROUP, GROUP_ID = "3 · Break lines", "breaklines"
     HELP = ("Joins breakpoints into break lines: only breakpoints, only grid neighbours; slope "
             "changes by less than S_crit (degrees) between consecutive points; no turn over 90° "
             "from the line's trend; no line crosses another. In flat terrain the next point is "
@@ -37,7 +37,7 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
             self.CRITICAL_SLOPE, self.tr("Critical slope S_crit (degrees)"),
             DOUBLE, 10.0, minValue=0.0, maxValue=90.0))
         self.addParameter(QgsProcessingParameterEnum(self.MODE, self.tr("Terrain"),
-                                                     options=list(MODES), defaultValue=0))
+                                                     options=labels(MODES), defaultValue=0))
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_POINTS, self.tr("Minimum points per line"),
             INTEGER, 3, minValue=2))
@@ -58,25 +58,19 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         check_min_points(self.parameterAsDouble(parameters, self.MIN_POINTS, context))
 
     def process(self, parameters, context, feedback):
-        from ..core import io
-        from ..core.breaklines import trace_breaklines
-
         def raster(name, what):
-            return run_core(io.read_raster, layer_file(
-                self.parameterAsRasterLayer(parameters, name, context), what))
+            return layer_file(self.parameterAsRasterLayer(parameters, name, context), what)
 
-        breakpoints = raster(self.BREAKPOINTS, "Breakpoints")
-        breakpoints = breakpoints.with_values((breakpoints.values == 1).astype("uint8"))
-        dem = raster(self.DEM, "DEM")
-        lines = run_core(trace_breaklines, breakpoints, raster(self.SLOPE, "Slope"), dem,
-                         self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
-                         mode=MODES[self.parameterAsEnum(parameters, self.MODE, context)],
-                         min_points=self.parameterAsInt(parameters, self.MIN_POINTS, context),
-                         min_length=self.parameterAsDouble(parameters, self.MIN_LENGTH, context),
-                         join=self.parameterAsBool(parameters, self.JOIN, context),
-                         seed=self.parameterAsInt(parameters, self.SEED, context))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
-        run_core(io.write_breaklines, out, lines, dem.crs)
+        self.run_step("trace", {
+            "breakpoints": raster(self.BREAKPOINTS, "Breakpoints"),
+            "slope": raster(self.SLOPE, "Slope"), "dem": raster(self.DEM, "DEM"),
+            "s_crit": self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context),
+            "mode": MODES[self.parameterAsEnum(parameters, self.MODE, context)],
+            "min_points": self.parameterAsInt(parameters, self.MIN_POINTS, context),
+            "min_length": self.parameterAsDouble(parameters, self.MIN_LENGTH, context),
+            "join": self.parameterAsBool(parameters, self.JOIN, context),
+            "seed": self.parameterAsInt(parameters, self.SEED, context), "output": out},
+            feedback, out)
         style_when_loaded(context, out, style_breaklines)
-        feedback.pushInfo(f"{len(lines)} break lines")
         return {self.OUTPUT: out}

@@ -487,7 +487,7 @@ def cmd_mesh(args):
                       conforming=args.conforming, domain=domain, size_field=size,
                       max_triangles=args.max_triangles, note=notes.append)
     _print_notes(notes)
-    io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles)
+    io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles, crs=dem.crs)
     if args.gpkg:
         io.write_mesh_gpkg(args.gpkg, mesh.nodes, mesh.triangles, dem.crs)
     q = mesh_quality(mesh, min_angle=args.min_angle, max_area=args.max_area)
@@ -524,7 +524,7 @@ def cmd_export(args):
 
     fmt = format_of(args.output, args.format)
     mesh = io.read_2dm(args.mesh)
-    crs = layers_crs(args.crs, {"open boundary": args.open_boundaries, "region": args.regions,
+    crs = layers_crs(args.crs or mesh.crs, {"open boundary": args.open_boundaries, "region": args.regions,
                                 "break line": args.breaklines})
     written = export_mesh(
         args.output, mesh.nodes, mesh.triangles, fmt=fmt, crs=crs,
@@ -574,7 +574,7 @@ def cmd_refine(args):
                                    progress=bar)
     finally:
         bar.close()
-    io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles)
+    io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles, crs=dem.crs)
     if args.report:
         io.write_json(args.report, {"rounds": [asdict(r) for r in rounds],
                                     **mesh_quality(mesh, min_angle=args.min_angle,

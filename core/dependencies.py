@@ -1,7 +1,7 @@
 """Which of the Python packages FloodMesh needs are missing, and how to install them.
 
-QGIS ships numpy and often GDAL's Python bindings, but not Triangle, laspy or numba; the QGIS
-plugin loads without them and its algorithms say what to install.
+QGIS ships numpy and often GDAL's Python bindings, but not Triangle, laspy or numba. The QGIS
+plugin never imports them: its worker (``core.worker``) checks them and says what to install.
 """
 from __future__ import annotations
 
@@ -30,10 +30,21 @@ def missing_dependencies() -> list[str]:
 
 
 def install_hint(missing: list[str]) -> str:
-    """One message naming the missing packages and the command that installs them."""
+    """One message naming the missing packages and the command that installs them into this
+    Python (the worker's: QGIS itself never imports them), numpy kept at its version."""
+    import sys
+
     quoted = " ".join(f'"{r}"' if "[" in r or ">" in r else r for r in missing)
-    return (f"FloodMesh needs Python packages that this QGIS does not have: {', '.join(missing)}. "
-            f"Install them into the Python that QGIS runs (keeping its numpy), e.g. "
-            f"`python3 -m pip install --user {quoted}` (on Debian/Ubuntu add "
-            f"--break-system-packages, or use the project's `make setup` and put "
-            f".venv/lib/python3.*/site-packages on PYTHONPATH), then restart QGIS.")
+    try:
+        import numpy
+        pin = f" numpy=={numpy.__version__}"
+    except ImportError:
+        pin = ""
+    return (f"FloodMesh's Python ({sys.executable}) lacks {', '.join(missing)}: install them "
+            f"there with `{sys.executable} -m pip install {quoted}{pin}`"
+            + ("" if sys.prefix != sys.base_prefix else
+               " (in a virtual environment: Debian's own Python refuses pip; with "
+               "FLOODMESH_PYTHON unset the plugin sets one up itself)")
+            + f", or set "
+            f"FLOODMESH_PYTHON to a Python that has them (a checkout's .venv after `make "
+            f"setup`; see the README's 'In QGIS'), then run again.")

@@ -351,7 +351,7 @@ def write_2dm(path, mesh: SolverMesh, *, element_elevations: bool = False) -> No
                 for s in mesh.boundary.of_kind("open")]
     element_z = (mesh.nodes[mesh.triangles, 2].mean(axis=1) if element_elevations else None)
     io.write_mesh_2dm(path, mesh.nodes, mesh.triangles, materials=mesh.materials,
-                      element_z=element_z, node_strings=loops + sections)
+                      element_z=element_z, node_strings=loops + sections, crs=mesh.crs)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -509,7 +509,7 @@ def vector_crs(path):
 # ---------------------------------------------------------------------------------------------
 # meshes
 def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: int = 1,
-                   materials=None, element_z=None, node_strings=()) -> None:
+                   materials=None, element_z=None, node_strings=(), crs=None) -> None:
     """Write a triangular mesh as SMS 2DM: 1-based ids, ``E3T id n1 n2 n3 matid`` lines, then
     ``ND id x y z`` (m), then node strings.
 
@@ -517,6 +517,7 @@ def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: 
     (m, one per triangle) adds BASEMENT 3's element elevation as the second material column;
     either writes the ``NUM_MATERIALS_PER_ELEM`` card. ``node_strings`` are sequences of node
     indices, each written as ``NS`` lines of up to 10 ids, the last negative, then its number.
+    ``crs`` (a 2DM has no place for it) goes into the sidecar ``<stem>.prj`` (``write_prj``).
     """
     n_tri = len(triangles)
     ids = np.arange(1, n_tri + 1)
@@ -543,6 +544,23 @@ def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: 
                     if last:
                         chunk[-1] = -chunk[-1]
                     fh.write("NS " + " ".join(map(str, chunk)) + (f" {number}\n" if last else "\n"))
+    if crs is not None:
+        write_prj(path, crs)
+
+
+def write_prj(path, crs) -> None:
+    """The CRS of a file that cannot hold one (SMS 2DM) as WKT in ``<stem>.prj`` beside it, as
+    shapefiles and ASCII grids carry theirs; ``read_prj`` and the QGIS plugin read it back."""
+    from pyproj import CRS
+
+    with atomic_output(Path(path).with_suffix(".prj")) as tmp:
+        Path(tmp).write_text(CRS.from_user_input(crs).to_wkt() + "\n")
+
+
+def read_prj(path) -> str | None:
+    """The WKT of ``<stem>.prj`` beside ``path``, or None when there is none."""
+    prj = Path(path).with_suffix(".prj")
+    return prj.read_text().strip() or None if prj.is_file() else None
 
 
 @dataclass(frozen=True)
@@ -556,6 +574,7 @@ class Mesh2DM:
     materials: np.ndarray
     element_z: np.ndarray | None
     node_strings: list
+    crs: str | None = None  # WKT of the sidecar .prj (write_prj), if there is one
 
 
 def read_2dm(path) -> Mesh2DM:
@@ -612,7 +631,8 @@ def read_2dm(path) -> Mesh2DM:
     # BASEMENT 3 (and MDAL): the column after the material id is the element's elevation
     has_z = width >= 2 and (n_materials is None or n_materials >= 2)
     element_z = values[:, 1].copy() if has_z else None
-    return Mesh2DM(node_arr, tri_arr.reshape(-1, 3), materials, element_z, string_arr)
+    return Mesh2DM(node_arr, tri_arr.reshape(-1, 3), materials, element_z, string_arr,
+                   read_prj(path))
 
 
 def read_mesh_2dm(path) -> tuple[np.ndarray, np.ndarray]:

@@ -33,7 +33,7 @@ from .tiles import (TiledDem, expand_tiles, grid_point_tiles, is_tile_set, read_
                     tile_kind)
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
-                "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG, "report.json")
+                "mesh.prj", "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG, "report.json")
 
 
 class _Steps:
@@ -169,7 +169,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs, fit_rms=confidence)
         # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
         if "2dm" not in options.formats:
-            io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles)
+            io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles, crs=dem.crs)
         if "gpkg" not in options.formats:
             io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
         io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)

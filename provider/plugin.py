@@ -16,11 +16,10 @@ class FloodMeshPlugin:
 
     def initGui(self):  # noqa: N802
         self.initProcessing()
-        from ..core.dependencies import install_hint, missing_dependencies
+        from ..algorithms.child import FIRST_RUN_MESSAGE, find_python
 
-        missing = missing_dependencies()
-        if missing and self.iface is not None:
-            self.iface.messageBar().pushWarning("FloodMesh", install_hint(missing))
+        if find_python() is None and self.iface is not None:
+            self.iface.messageBar().pushInfo("FloodMesh", FIRST_RUN_MESSAGE)
 
     def unload(self):
         if self.provider:

@@ -495,7 +495,8 @@ def test_same_input_gives_identical_files(mesh, tmp_path):
         export.export_formats(tmp_path / run / "mesh", nodes, tris, "2dm,slf,14,gr3,nc",
                               crs="EPSG:25832", open_lines=[WEST_LINE], element_elevations=True)
     names = sorted(p.name for p in (tmp_path / "a").iterdir())
-    assert names == ["mesh.14", "mesh.2dm", "mesh.cli", "mesh.gr3", "mesh.nc", "mesh.slf"]
+    assert names == ["mesh.14", "mesh.2dm", "mesh.cli", "mesh.gr3", "mesh.nc", "mesh.prj",
+                     "mesh.slf"]
     for name in names:
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
 
@@ -552,6 +553,21 @@ def test_export_command(mesh, mesh_files):
     assert run.returncode == 0, run.stderr
     grid = read_fort14(t / "hgrid")
     np.testing.assert_allclose(grid["xyd"][:, 2], -(nodes[:, 2] + 2), atol=0.5e-4)
+
+
+def test_export_takes_the_crs_from_the_meshs_prj_sidecar(mesh, mesh_files, tmp_path):
+    """A 2DM has no CRS: write_mesh_2dm puts it into mesh.prj, read_2dm returns it, and the
+    export of a CRS-carrying format needs no --crs then."""
+    t = mesh_files
+    nodes, tris = mesh
+    io.write_mesh_2dm(tmp_path / "own.2dm", nodes, tris, crs=UTM32)
+    assert CRS.from_wkt(io.read_2dm(tmp_path / "own.2dm").crs).to_epsg() == 25832
+    assert (tmp_path / "own.prj").is_file()
+    run = floodmesh("export", tmp_path / "own.2dm", t / "out.nc")
+    assert run.returncode == 0, run.stderr
+    with netcdf_file(t / "out.nc", "r", mmap=False) as nc:
+        assert nc.variables["projected_coordinate_system"].epsg == 25832
+    assert io.read_2dm(t / "mesh.2dm").crs is None  # no sidecar: as before
 
 
 @pytest.mark.parametrize("args, words", [

@@ -3,7 +3,6 @@ import os
 import shutil
 import subprocess
 import sys
-import sysconfig
 import tempfile
 from pathlib import Path
 
@@ -40,10 +39,11 @@ REPO = Path(__file__).resolve().parent.parent.parent
 
 
 def _qgis_process_env(home):
-    env = dict(os.environ)
+    """qgis_process as a user runs it: no PYTHONPATH (QGIS itself needs none of FloodMesh's
+    packages; the plugin's worker runs the checkout's .venv)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env.update(QT_QPA_PLATFORM="offscreen", HOME=str(home), XDG_DATA_HOME=str(home / "data"),
-               QGIS_PLUGINPATH=str(REPO / "build" / "plugins"),
-               PYTHONPATH=sysconfig.get_paths()["purelib"])
+               QGIS_PLUGINPATH=str(REPO / "build" / "plugins"))
     return env
 
 

@@ -36,17 +36,16 @@ def test_processing_run_writes_and_loads_the_mesh(processing, demo_points_file, 
     assert names == {"Break lines", "Mesh", "Residuals"}
     layers = {details.name: context.temporaryLayerStore().mapLayer(layer_id)
               for layer_id, details in to_load.items()}
-    # break lines: one colour per connected system; residuals: the three classes (+ outside)
+    # break lines: one legend entry (a line on a halo); residuals: the three classes (+ outside)
     renderer = layers["Break lines"].renderer()
-    components = {f["component_id"] for f in layers["Break lines"].getFeatures()}
-    assert renderer.type() == "categorizedSymbol" and renderer.classAttribute() == "component_id"
-    assert {c.value() for c in renderer.categories()} == components and len(components) > 1
-    colours = {c.symbol().color().name() for c in renderer.categories()}
-    assert len(colours) == len(components)
+    assert renderer.type() == "singleSymbol" and renderer.symbol().symbolLayerCount() == 2
     classes = layers["Residuals"].renderer()
     assert classes.classAttribute() == "class"
     assert {c.value() for c in classes.categories()} == {0, 1, 2, -1}
-    assert layers["Mesh"].rendererSettings().activeScalarDatasetGroup() == 0
+    # the mesh: shaded by elevation, its edges drawn, in the run's CRS (a 2DM has none)
+    settings = layers["Mesh"].rendererSettings()
+    assert settings.activeScalarDatasetGroup() == 0 and settings.nativeMeshSettings().isEnabled()
+    assert layers["Mesh"].crs().authid() == "EPSG:" + report["crs"].split(":")[-1]
 
 
 def test_bad_input_is_a_processing_exception(processing, tmp_path):
@@ -144,3 +143,21 @@ def test_terrain_fit_options_reach_the_chain(processing, demo_points_file, tmp_p
     assert plain["options"]["conforming"] and "node_radius" not in plain["terrain_fit"]
     lines = QgsVectorLayer(str(runs["fitted"][1] / "breaklines.gpkg"), "lines", "ogr")
     assert lines.fields().indexOf("fit_rms_m") >= 0
+
+
+def test_results_load_lines_above_the_mesh_in_the_runs_crs(processing, demo_points_file,
+                                                          tmp_path):
+    """As from the toolbox: the break lines stack above the residuals above the mesh (which
+    would hide them), and the mesh comes in the run's CRS, not none."""
+    from qgis.core import QgsProject
+
+    project = QgsProject.instance()
+    project.clear()
+    processing.runAndLoadResults("floodmesh:lidartomesh", {
+        "INPUT": str(demo_points_file), "MAX_AREA": 200, "HOLDOUT": 0.01,
+        "OUTPUT_FOLDER": str(tmp_path / "loaded")})
+    order = [node.layer().name() for node in project.layerTreeRoot().findLayers()]
+    assert order == ["Break lines", "Residuals", "Mesh"], order
+    mesh = project.mapLayersByName("Mesh")[0]
+    assert mesh.crs().isValid() and mesh.crs().authid() == "EPSG:25832"
+    project.clear()

@@ -1,0 +1,224 @@
+"""Every FloodMesh algorithm's core work runs in a child process (``core/worker.py``), as QGIS's
+GRASS, SAGA and point-cloud algorithms run theirs: the QGIS process never imports shapely,
+Triangle, numba or laspy, so a second GEOS, a segfault or an out-of-memory kill cannot take QGIS
+down; Cancel ends the child at once and its memory goes back to the system.
+
+Which Python runs the worker (the first that exists):
+1. the environment variable ``FLOODMESH_PYTHON``;
+2. the QGIS setting ``floodmesh/python`` (Settings › Options › Advanced);
+3. ``.venv/bin/python`` of the plugin's own folder (a checkout set up with ``make setup``);
+4. the managed environment ``<QGIS profile>/floodmesh/venv``, which ``ensure_python`` creates
+   on the first run from the system's Python (``--system-site-packages``, so that it keeps
+   the system's numpy, GDAL and rasterio) and fills from PyPI (``MANAGED_PACKAGES``).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import queue
+import signal
+import subprocess
+import tempfile
+import threading
+from pathlib import Path
+
+from qgis.core import QgsMessageLog, QgsProcessingException
+
+PLUGIN_DIR = Path(__file__).resolve().parent.parent
+PACKAGE = __name__.split(".")[0]  # "floodmesh" as QGIS and pip install it
+ENV_VARIABLE, SETTING = "FLOODMESH_PYTHON", "floodmesh/python"
+SYSTEM_PYTHON = "/usr/bin/python3"
+# what Debian/Ubuntu's QGIS lacks; numpy stays the system's (pinned), so its GDAL still loads
+MANAGED_PACKAGES = ("triangle", "laspy[lazrs]", "numba", "shapely>=2", "scipy", "rasterio",
+                    "fiona", "pyproj", "matplotlib")
+PARTIAL_GLOB = ".*.partial*"  # core.worker.PARTIAL_GLOB (not imported: core stays out of QGIS)
+LOG_TAG = "FloodMesh"
+READY = ".floodmesh-ready"  # written into the managed environment once pip has succeeded
+FIRST_RUN_MESSAGE = (
+    "FloodMesh's first run sets up its Python packages (Triangle, laspy, numba, shapely) in "
+    "a virtual environment of its own beside your QGIS profile: a minute or two, with the "
+    "internet; then numba compiles FloodMesh's kernels once (about 2 minutes). Or set "
+    "FLOODMESH_PYTHON to a Python that has them. QGIS itself never loads them.")
+
+
+def managed_venv() -> Path:
+    from qgis.core import QgsApplication
+
+    return Path(QgsApplication.qgisSettingsDirPath()) / "floodmesh" / "venv"
+
+
+def find_python() -> str | None:
+    """The Python that runs the worker, or None when there is none yet."""
+    given = os.environ.get(ENV_VARIABLE)
+    if given:
+        return given
+    from qgis.core import QgsSettings
+
+    setting = QgsSettings().value(SETTING, "")
+    if setting:
+        return str(setting)
+    checkout = PLUGIN_DIR / ".venv" / "bin" / "python"
+    if checkout.exists():
+        return str(checkout)
+    if (managed_venv() / READY).exists():  # only once pip has filled it
+        return str(managed_venv() / "bin" / "python")
+    return None
+
+
+def ensure_python(feedback) -> str:
+    """The worker's Python; on the first run of a plugin installed from its ZIP, the managed
+    environment is created first (once; a minute or two, from PyPI)."""
+    python = find_python()
+    if python:
+        return python
+    venv = managed_venv()
+    feedback.pushInfo(f"{FIRST_RUN_MESSAGE} Setting up {venv} …")
+    numpy = subprocess.run([SYSTEM_PYTHON, "-c", "import numpy; print(numpy.__version__)"],
+                           capture_output=True, text=True)
+    pin = [f"numpy=={numpy.stdout.strip()}"] if numpy.returncode == 0 else []
+    commands = [[SYSTEM_PYTHON, "-m", "venv", "--system-site-packages", str(venv)],
+                [str(venv / "bin" / "python"), "-m", "pip", "install", "--disable-pip-version-check",
+                 "-q", *MANAGED_PACKAGES, *pin]]
+    for command in commands:
+        done = subprocess.run(command, capture_output=True, text=True)
+        if done.returncode != 0:
+            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or [""]
+            raise QgsProcessingException(
+                f"FloodMesh could not set up its Python packages ({' '.join(command[:4])}…: "
+                f"{tail[0]}); on Debian/Ubuntu install python3-venv (apt install python3-venv) "
+                f"and check the internet connection, or set {ENV_VARIABLE} to a Python with "
+                f"triangle, laspy[lazrs], numba and shapely 2 (see the README's 'In QGIS')")
+    proj = venv / "share" / "proj"
+    if not proj.exists() and Path("/usr/share/proj").is_dir():
+        proj.parent.mkdir(parents=True, exist_ok=True)
+        proj.symlink_to("/usr/share/proj")
+    (venv / READY).write_text(" ".join(MANAGED_PACKAGES + tuple(pin)) + "\n")
+    return str(venv / "bin" / "python")
+
+
+def _import_root() -> Path:
+    """A folder from which ``import floodmesh`` finds this very plugin: its parent when the
+    folder is named so (a ZIP install), else a link under the temporary folder (a checkout)."""
+    if PLUGIN_DIR.name == PACKAGE:
+        return PLUGIN_DIR.parent
+    digest = hashlib.sha1(str(PLUGIN_DIR).encode()).hexdigest()[:10]
+    root = Path(tempfile.gettempdir()) / f"floodmesh-plugin-{os.getuid()}-{digest}"
+    link = root / PACKAGE
+    if not link.exists():
+        root.mkdir(exist_ok=True)
+        try:
+            link.symlink_to(PLUGIN_DIR, target_is_directory=True)
+        except FileExistsError:
+            pass
+    return root
+
+
+def _child_env() -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONHOME", "PYTHONSTARTUP")}
+    env.update(PYTHONUNBUFFERED="1", PYTHONPATH=str(_import_root()))
+    return env
+
+
+def _remove_partials(outputs) -> None:
+    """The hidden temporaries a killed worker leaves beside its outputs (none when it ended)."""
+    for output in outputs:
+        if not output:
+            continue
+        path = Path(output)
+        folder = path if path.is_dir() else path.parent
+        for leftover in folder.glob(PARTIAL_GLOB):
+            try:
+                leftover.unlink()
+            except OSError:
+                pass
+
+
+def _signal_name(code: int) -> str:
+    try:
+        return signal.Signals(-code).name
+    except ValueError:
+        return f"signal {-code}"
+
+
+def _reader(stream, sink):
+    for line in iter(stream.readline, ""):
+        sink.put(line)
+    sink.put(None)
+
+
+def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> dict:
+    """Run core's ``step`` with ``args`` in the worker and return its result; progress, info
+    and notes go to ``feedback`` (notes also to the QGIS log), Cancel ends the child at once,
+    core's error is raised once as a QgsProcessingException, and a crash or kill of the
+    child becomes one too, with no partial output left among ``outputs`` (files or folders)."""
+    python = ensure_python(feedback)
+    what = what or step
+    try:
+        child = subprocess.Popen([python, "-m", f"{PACKAGE}.core.worker"], stdin=subprocess.PIPE,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                 encoding="utf-8", errors="replace", env=_child_env())
+    except OSError as exc:
+        raise QgsProcessingException(
+            f"FloodMesh could not start its worker {python} ({exc.strerror}): set "
+            f"{ENV_VARIABLE} to a Python with FloodMesh's packages") from None
+    lines, stderr = queue.Queue(), []
+    threading.Thread(target=_reader, args=(child.stdout, lines), daemon=True).start()
+    errors = threading.Thread(target=lambda: stderr.extend(iter(child.stderr.readline, "")),
+                              daemon=True)
+    errors.start()
+    child.stdin.write(json.dumps({"step": step, "args": args}))
+    child.stdin.close()
+    result = error = None
+    cancelled = False
+    while True:
+        if feedback is not None and feedback.isCanceled() and not cancelled:
+            cancelled = True
+            child.kill()
+        try:
+            line = lines.get(timeout=0.1)
+        except queue.Empty:
+            continue
+        if line is None:
+            break
+        try:
+            message = json.loads(line)
+        except ValueError:
+            stderr.append(line)
+            continue
+        if "progress" in message:
+            feedback.setProgress(100 * message["progress"])
+        elif "info" in message:
+            feedback.pushInfo(message["info"])
+        elif "note" in message:
+            feedback.pushWarning(message["note"])
+            QgsMessageLog.logMessage(f"{what}: {message['note']}", LOG_TAG)
+        elif "result" in message:
+            result = message["result"]
+        elif "error" in message:
+            error = message["error"]
+    code = child.wait()
+    errors.join(timeout=2)
+    child.stdout.close()
+    child.stderr.close()
+    if cancelled:
+        _remove_partials(outputs)
+        raise QgsProcessingException("Cancelled; no partial output was written")
+    if error is not None:
+        raise QgsProcessingException(error)
+    if code != 0 or result is None:
+        _remove_partials(outputs)
+        trace = "".join(stderr[-40:]).strip()
+        if trace:
+            QgsMessageLog.logMessage(f"{what}: the worker's last output:\n{trace}", LOG_TAG)
+        if code in (-9, -15):
+            how = (f"was killed ({_signal_name(code)}; by the system when memory runs out: then "
+                   f"try a larger cell size or maximum area)")
+        elif code < 0:
+            how = f"crashed ({_signal_name(code)}; the log has its trace)"
+        else:
+            last = next((s.strip() for s in reversed(stderr) if s.strip()), "")
+            how = f"stopped with exit code {code} ({last or 'no message'})"
+        raise QgsProcessingException(f"{what}: FloodMesh's worker process {how}; QGIS is "
+                                     f"unaffected and no partial output was written")
+    return result
