@@ -609,6 +609,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="2DM: also write each element's centre elevation (BASEMENT 3)")
     p.add_argument("--breaklines", help="line layer written as the breaklines layer (gpkg)")
     p.set_defaults(func=cmd_export)
+
+    from .flood_cli import add_flood_commands
+    add_flood_commands(sub)
     return parser
 
 
