@@ -17,6 +17,7 @@ from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
+from .hydraulics import hydraulic_checks
 from .limits import check_memory, check_triangles
 from .mesh import build_mesh, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
@@ -149,6 +150,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         **quality,
         **stats,
         "refinement": [asdict(r) for r in rounds],
+        "hydraulics": hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
+                                       detected_lines=[line.coords for line in lines]),
         "notes": notes,
         "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
         "seconds": steps.seconds,
