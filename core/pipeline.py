@@ -17,9 +17,10 @@ from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
+from .hydraulic_lines import lines_for_hydraulics
 from .hydraulics import hydraulic_checks
 from .limits import check_memory, check_triangles
-from .mesh import build_mesh, mesh_quality, size_from_slope, user_domain
+from .mesh import build_mesh, domain_from_dem, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
@@ -94,7 +95,13 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                       min_distance=min_distance)
     size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
-    mesh_lines = [line.coords for line in lines] + front.own_lines
+    detected, line_stats = [line.coords for line in lines], None
+    spacing = dem.cell_size if options.min_spacing is None else options.min_spacing
+    if spacing > 0:  # lines a flood model can afford: see hydraulic_lines
+        detected, line_stats = lines_for_hydraulics(
+            detected, front.domain if front.domain is not None else domain_from_dem(dem),
+            spacing=spacing, own_lines=front.own_lines)
+    mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
                      max_area=options.max_area, domain=front.domain, size_field=size,
                      max_triangles=options.max_triangles, note=note)
@@ -150,8 +157,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         **quality,
         **stats,
         "refinement": [asdict(r) for r in rounds],
+        "hydraulic_lines": line_stats,
         "hydraulics": hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
-                                       detected_lines=[line.coords for line in lines]),
+                                       detected_lines=detected),
         "notes": notes,
         "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
         "seconds": steps.seconds,
