@@ -15,10 +15,12 @@ import csv
 import glob
 import json
 import os
+import queue
 import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -240,8 +242,9 @@ def flood_python() -> str | None:
     ``.venv-flood`` or this Python, whichever imports anuga; None if none does."""
     named = os.environ.get("FLOODMESH_FLOOD_PYTHON")
     candidates = [named] if named else [
-        str(Path(__file__).resolve().parents[1] / ".venv-flood" / "bin" / "python"),
-        sys.executable]
+        str(Path(__file__).resolve().parents[1] / ".venv-flood" / "bin" / "python")]
+    if not named and Path(sys.executable).name.startswith("python"):  # not qgis.bin
+        candidates.append(sys.executable)
     for python in candidates:
         if Path(python).exists():
             probe = subprocess.run([python, "-c", "import anuga"], capture_output=True,
@@ -457,21 +460,27 @@ def run_anuga(prepared: dict, *, work_dir=None, python: str | None = None,
         (work / "job.json").write_text(json.dumps(prepared["job"]))
         duration = prepared["job"]["duration_s"]
         start = time.perf_counter()
-        child = subprocess.Popen([python, "-u", str(WORKER), str(work)], env=_worker_env(),
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            for line in child.stdout:
-                if line.startswith("progress ") and progress:
-                    progress(min(float(line.split()[1]) / duration, 1.0))
-                if cancelled and cancelled():
-                    raise Cancelled()
-            child.wait()
-        except BaseException:
-            child.kill()
-            child.wait()
-            raise
+        with open(work / "stderr.txt", "w") as errors, subprocess.Popen(
+                [python, "-u", str(WORKER), str(work)], env=_worker_env(),
+                stdout=subprocess.PIPE, stderr=errors, text=True) as child:
+            lines = queue.Queue()
+            threading.Thread(target=lambda: [lines.put(line) for line in child.stdout],
+                             daemon=True).start()
+            try:
+                while child.poll() is None or not lines.empty():
+                    if cancelled and cancelled():
+                        raise Cancelled()
+                    try:
+                        line = lines.get(timeout=0.2)
+                    except queue.Empty:
+                        continue
+                    if line.startswith("progress ") and progress:
+                        progress(min(float(line.split()[1]) / duration, 1.0))
+            except BaseException:
+                child.kill()
+                raise
         if child.returncode != 0:
-            tail = child.stderr.read().strip().splitlines()[-3:]
+            tail = (work / "stderr.txt").read_text().strip().splitlines()[-3:]
             raise FloodMeshError("ANUGA stopped with an error: " + " | ".join(tail))
         with np.load(work / "result.npz") as result:
             out = {k: result[k] for k in result.files}
@@ -566,6 +575,12 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
         log(f"ANUGA on {len(arrays['triangles'])} triangles; estimated time step "
             f"{checks['cfl_time_step_s']:.3g} s at 1 m depth")
     result = run_anuga(prepared, python=python, progress=progress, cancelled=cancelled, log=log)
+    volume = np.asarray(result["volume_m3"])
+    if not np.isfinite(volume).all():
+        at = float(np.asarray(result["times_s"])[~np.isfinite(volume)][0])
+        raise FloodMeshError(f"ANUGA's solution broke down (NaN) by t = {at:g} s; nothing was "
+                             "written. Check report figures of the mesh (`hydraulics`) and the "
+                             "scenario's inflow for a region of one or two triangles")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cell = scenario.cell_size_m or default_cell_size(arrays["nodes"], arrays["triangles"])

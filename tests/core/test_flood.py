@@ -7,13 +7,14 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 import rasterio
 
 from floodmesh.core import io
-from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.errors import Cancelled, FloodMeshError
 from floodmesh.core.flood import (RESULT_RASTERS, flood_python, load_scenario, prepare,
                                   run_flood, scenario_from_dict)
 from floodmesh.core.mesh import PSLG, triangulate_pslg
@@ -121,6 +122,22 @@ def test_hydrograph_into_a_region_fills_a_closed_basin_by_its_volume(tmp_path):
     assert balance["outflow_volume_m3"] == pytest.approx(0, abs=1e-9)  # all walls
     assert report["observations"][0]["peak_stage_m"] > 3.0  # the roof: its bed, never wet
     assert any("raised 3.0 m" in n for n in report["notes"])
+
+
+@needs_anuga
+def test_cancel_ends_the_child_and_writes_nothing(tmp_path):
+    mesh = tmp_path / "channel.2dm"
+    rectangle_mesh(mesh, 100, 20, lambda x, y: 0.02 * (100 - x))
+    scenario = scenario_from_dict({
+        "duration_s": 3600, "output_interval_s": 1,
+        "inflows": [{"line": local([[1, 0.5], [1, 19.5]]), "discharge_m3s": 2.0}]})
+    seen = []
+    start = time.perf_counter()
+    with pytest.raises(Cancelled):
+        run_flood(mesh, scenario, tmp_path / "out", crs=CRS, progress=seen.append,
+                  cancelled=lambda: bool(seen))
+    assert time.perf_counter() - start < 60 and seen[0] < 0.01
+    assert not (tmp_path / "out").exists()
 
 
 def test_buildings_as_holes_leave_the_mesh_with_walls_around_them(tmp_path):
