@@ -49,10 +49,10 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
     by ``run_flood``) on a grid of ``cell_size`` m over their common extent; with ``out_dir``
     write ``comparison.json``, ``depth_difference.tif`` and ``extent_difference.tif`` there.
     Returns the figures."""
-    from affine import Affine
     from pyproj import CRS
 
     from . import io
+    from .flood import cell_centres
     from .raster import Grid
 
     rep_a, arr_a = _load(mesh_run)
@@ -63,11 +63,7 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
     if np.any(hi <= lo):
         raise FloodMeshError("the two meshes do not overlap: check that both runs are of the "
                              "same place and CRS")
-    x0, y1 = np.floor(lo[0] / cell_size) * cell_size, np.ceil(hi[1] / cell_size) * cell_size
-    cols, rows = int(np.ceil((hi[0] - x0) / cell_size)), int(np.ceil((y1 - lo[1]) / cell_size))
-    gx, gy = np.meshgrid(x0 + (np.arange(cols) + 0.5) * cell_size,
-                         y1 - (np.arange(rows) + 0.5) * cell_size)
-    xy = np.column_stack([gx.ravel(), gy.ravel()])
+    transform, (rows, cols), xy = cell_centres(lo, hi, cell_size)
     a, b = _sample(arr_a, xy), _sample(arr_b, xy)
     both = a["inside"] & b["inside"]
     wet_a, wet_b = both & (a["max_depth"] > wet), both & (b["max_depth"] > wet)
@@ -102,7 +98,6 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         grid_crs = CRS.from_user_input(crs or rep_a["crs"])
-        transform = Affine(cell_size, 0, x0, 0, -cell_size, y1)
         depth = np.where(both & union, diff, np.where(both, 0.0, np.nan)).reshape(rows, cols)
         code = (wet_a.astype(np.uint8) + 2 * wet_b.astype(np.uint8)).reshape(rows, cols)
         io.write_raster(out / "depth_difference.tif", Grid(depth.astype(np.float32), transform,

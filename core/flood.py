@@ -515,21 +515,12 @@ def outflow_hydrograph(result: dict) -> np.ndarray:
 def result_grids(nodes, triangles, result: dict, crs, cell_size: float) -> dict:
     """The per-triangle maxima as Grids (cell centres take the value of their triangle; NaN
     outside the mesh; dry cells 0 depth and speed, NaN level and arrival)."""
-    from affine import Affine
-
     from .mesh import containing_triangle
     from .raster import Grid
 
-    lo, hi = nodes[:, :2].min(axis=0), nodes[:, :2].max(axis=0)
-    x0, y1 = np.floor(lo[0] / cell_size) * cell_size, np.ceil(hi[1] / cell_size) * cell_size
-    cols = int(np.ceil((hi[0] - x0) / cell_size))
-    rows = int(np.ceil((y1 - lo[1]) / cell_size))
-    transform = Affine(cell_size, 0, x0, 0, -cell_size, y1)
-    xs = x0 + (np.arange(cols) + 0.5) * cell_size
-    ys = y1 - (np.arange(rows) + 0.5) * cell_size
-    gx, gy = np.meshgrid(xs, ys)
-    tri = containing_triangle(nodes[:, :2], triangles,
-                              np.column_stack([gx.ravel(), gy.ravel()])).reshape(rows, cols)
+    transform, (rows, cols), xy = cell_centres(nodes[:, :2].min(axis=0),
+                                               nodes[:, :2].max(axis=0), cell_size)
+    tri = containing_triangle(nodes[:, :2], triangles, xy).reshape(rows, cols)
     inside = tri >= 0
     wet = np.asarray(result["max_depth"]) > 0
     grids = {}
@@ -541,6 +532,20 @@ def result_grids(nodes, triangles, result: dict, crs, cell_size: float) -> dict:
         grid[inside] = values[tri[inside]]
         grids[name] = Grid(grid.astype(np.float32), transform, crs)
     return grids
+
+
+def cell_centres(lo, hi, cell_size: float):
+    """(transform, (rows, cols), centres (rows·cols, 2)) of a north-up grid of ``cell_size``
+    aligned to its multiples and covering the box ``lo``–``hi`` (m)."""
+    from affine import Affine
+
+    x0, y1 = np.floor(lo[0] / cell_size) * cell_size, np.ceil(hi[1] / cell_size) * cell_size
+    cols = max(int(np.ceil((hi[0] - x0) / cell_size)), 1)
+    rows = max(int(np.ceil((y1 - lo[1]) / cell_size)), 1)
+    gx, gy = np.meshgrid(x0 + (np.arange(cols) + 0.5) * cell_size,
+                         y1 - (np.arange(rows) + 0.5) * cell_size)
+    return (Affine(cell_size, 0, x0, 0, -cell_size, y1), (rows, cols),
+            np.column_stack([gx.ravel(), gy.ravel()]))
 
 
 def default_cell_size(nodes, triangles) -> float:

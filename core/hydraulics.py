@@ -17,13 +17,11 @@ EDGE_BAND_M = 2.0          # "at the domain edge": within this distance of the b
 
 def inradii(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Inradius of each triangle (m): 2·area / perimeter."""
+    from .mesh import triangle_areas
+
     p = nodes[triangles][:, :, :2]
-    a = np.hypot(*(p[:, 1] - p[:, 2]).T)
-    b = np.hypot(*(p[:, 2] - p[:, 0]).T)
-    c = np.hypot(*(p[:, 0] - p[:, 1]).T)
-    d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
-    return 2 * area / np.maximum(a + b + c, 1e-300)
+    perimeter = np.hypot(*(p - np.roll(p, 1, axis=1)).transpose(2, 0, 1)).sum(axis=1)
+    return 2 * np.abs(triangle_areas(nodes, triangles)) / np.maximum(perimeter, 1e-300)
 
 
 def cfl_time_step(inradius: np.ndarray, depth: float = CHECK_DEPTH_M, speed: float = 0.0,
@@ -90,11 +88,6 @@ def _edge_lengths(nodes, pairs):
     return np.hypot(*(nodes[pairs[:, 0], :2] - nodes[pairs[:, 1], :2]).T)
 
 
-def _all_edges(triangles):
-    pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    return np.unique(np.sort(pairs, axis=1), axis=0)
-
-
 def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
                      detected_lines=(), depth: float = CHECK_DEPTH_M,
                      small_inradius: float = SMALL_INRADIUS_M,
@@ -108,10 +101,13 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
     (k, 2+) coordinate arrays)."""
     from scipy.spatial import cKDTree
 
+    from .mesh import triangle_areas
+    from .report import mesh_edges
+
     nodes = np.asarray(nodes, float)
     triangles = np.asarray(triangles)
     r = inradii(nodes, triangles)
-    edges = _all_edges(triangles)
+    edges = mesh_edges(triangles)
     lengths = _edge_lengths(nodes, edges)
     bnodes = edge_nodes(triangles, boundary_edges(triangles))
     on_edge = np.unique(bnodes)
@@ -123,7 +119,7 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
         near_edge = int((dist <= edge_band).sum())
     touches_edge = np.isin(edges, on_edge).any(axis=1)
     # a uniform mesh of equilateral triangles with the same node count over the same area
-    uniform_area = _total_area(nodes, triangles) / max(len(triangles), 1)
+    uniform_area = np.abs(triangle_areas(nodes, triangles)).sum() / max(len(triangles), 1)
     uniform_r = np.sqrt(uniform_area / (3 * np.sqrt(3)))  # equilateral: A = 3√3 r²
     smallest = int(np.argmin(r))
     report = {
@@ -164,12 +160,6 @@ def _inner_node_distance(nodes, bnodes) -> float | None:
         return None
     edges = shapely.multilinestrings(nodes[bnodes][:, :, :2])
     return float(shapely.distance(shapely.points(nodes[inner, :2]), edges).min())
-
-
-def _total_area(nodes, triangles) -> float:
-    p = nodes[triangles][:, :, :2]
-    d1, d2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    return float(0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]).sum())
 
 
 def _crossings(own_lines, detected_lines) -> np.ndarray:

@@ -140,6 +140,38 @@ def test_cancel_ends_the_child_and_writes_nothing(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@needs_anuga
+def test_flood_with_a_reference_compares_the_two_meshes(tmp_path, capsys):
+    """The CLI runs the scenario on a coarse and a fine mesh of the same channel and compares:
+    the extents nearly agree, max depths within centimetres; the maps are written."""
+    from floodmesh.core.cli import main
+
+    rectangle_mesh(tmp_path / "coarse.2dm", 100, 20, lambda x, y: 0.02 * (100 - x), max_area=4)
+    rectangle_mesh(tmp_path / "fine.2dm", 100, 20, lambda x, y: 0.02 * (100 - x), max_area=1)
+    _write(tmp_path / "s.json", {
+        "duration_s": 60, "output_interval_s": 5, "manning": 0.03,
+        "inflows": [{"line": local([[1, 0.5], [1, 19.5]]), "discharge_m3s": 2.0}],
+        "boundaries": [{"kind": "outflow", "sides": ["east"]}],
+        "observation_points": [{"name": "mid", "x": X0 + 30, "y": Y0 + 10}]})
+    assert main(["flood", str(tmp_path / "coarse.2dm"), "--scenario", str(tmp_path / "s.json"),
+                 "--out", str(tmp_path / "cmp"), "--crs", CRS,
+                 "--reference", str(tmp_path / "fine.2dm")]) == 0
+    assert "extent IoU" in capsys.readouterr().out
+    c = json.loads((tmp_path / "cmp" / "comparison.json").read_text())
+    assert c["mesh_nodes"] < c["reference_nodes"]
+    assert 0.8 < c["extent_iou"] < 1.0
+    assert c["max_depth_rmse_m"] < 0.05 and abs(c["max_depth_bias_m"]) < 0.03
+    assert abs(c["observations"][0]["difference_m"]) < 0.03
+    assert c["arrival_mean_abs_difference_s"] < 10
+    with rasterio.open(tmp_path / "cmp" / "extent_difference.tif") as src:
+        codes = src.read(1, masked=True)
+    assert (codes == 3).sum() > 10 * ((codes == 1).sum() + (codes == 2).sum())
+    same = main(["compare", str(tmp_path / "cmp" / "mesh"), str(tmp_path / "cmp" / "mesh"),
+                 "--out", str(tmp_path / "same")])
+    assert same == 0
+    assert json.loads((tmp_path / "same" / "comparison.json").read_text())["extent_iou"] == 1
+
+
 def test_buildings_as_holes_leave_the_mesh_with_walls_around_them(tmp_path):
     nodes, tri = rectangle_mesh(tmp_path / "m.2dm", 40, 20, lambda x, y: 0 * x)
     house = local([[10, 5], [16, 5], [16, 12], [10, 12]])
