@@ -106,6 +106,8 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
                    help="smallest node spacing a flood model affords, m: detected lines kept "
                         "2x this from the domain edge and this from other lines, vertices "
                         "this far apart (default d; 0: off)")
+    p.add_argument("--flow-zone", help="polygon file (wet_zone.gpkg of floodmesh flood "
+                   "--size-field-area): detected lines kept only inside it")
     _add_domain_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle,
                    help="minimum triangle angle in degrees (default %(default)s)")
@@ -180,6 +182,7 @@ def _options(args) -> RunOptions:
                       keep_every=args.keep_every, tolerance=args.tolerance, spline=args.spline,
                       min_distance=args.min_distance, min_length=args.min_length,
                       min_spacing=getattr(args, "min_spacing", None),
+                      flow_zone=getattr(args, "flow_zone", None),
                       boundary=args.boundary, user_lines=args.user_lines,
                       size_field=getattr(args, "size_field", None),
                       min_area=getattr(args, "min_area", None),

@@ -23,9 +23,38 @@ def cmd_flood(args):
             bar.close()
         _print_notes(reports[-1]["notes"])
         print(_summary(reports[-1], out))
+        if args.size_field_area:
+            print(_write_flow_fields(out, args.size_field_area, reports[-1]))
     if args.reference:
         print(_comparison(compare_floods(runs[0][1], runs[1][1], args.out,
                                          cell_size=args.cell_size)))
+
+
+def _write_flow_fields(out: Path, wet_area: float, report: dict) -> str:
+    """size_field.tif and wet_zone.gpkg from the run's max depth, for a second mesh."""
+    from . import io
+    from .hydraulic_lines import flood_size_field, wet_zone
+
+    depth = io.read_raster(out / "max_depth.tif")
+    wet = report["scenario"]["wet_depth_m"]
+    io.write_raster(out / "size_field.tif", flood_size_field(depth, wet_area=wet_area,
+                                                             wet_depth=wet))
+    write_zone(out / "wet_zone.gpkg", wet_zone(depth, wet_depth=wet), depth.crs)
+    return (f"size_field.tif ({wet_area} m² where it flooded) and wet_zone.gpkg written: "
+            f"floodmesh run DEM --size-field {out}/size_field.tif --flow-zone "
+            f"{out}/wet_zone.gpkg meshes for this flood")
+
+
+def write_zone(path, zone, crs) -> None:
+    """A (Multi)Polygon as a GeoPackage of polygons (layer wet_zone)."""
+    import shapely.geometry
+
+    from . import io
+
+    parts = list(getattr(zone, "geoms", [zone]))
+    io._write_gpkg(path, "wet_zone", "Polygon", {"id": "int"},
+                   ({"geometry": shapely.geometry.mapping(g), "properties": {"id": k + 1}}
+                    for k, g in enumerate(parts)), crs)
 
 
 def _summary(report: dict, out) -> str:
@@ -71,6 +100,9 @@ def add_flood_commands(sub) -> None:
                    "and compare (results in OUT/mesh, OUT/reference, comparison in OUT)")
     p.add_argument("--cell-size", type=float, default=1.0,
                    help="grid of the comparison, m (default %(default)s)")
+    p.add_argument("--size-field-area", type=float, metavar="M2",
+                   help="also write size_field.tif (M2 where it flooded, 5 m around) and "
+                        "wet_zone.gpkg, for a second mesh (run --size-field, --flow-zone)")
     p.set_defaults(func=cmd_flood)
 
     p = sub.add_parser("compare", help="compare two flood runs: extent IoU, max-depth RMSE and "

@@ -36,13 +36,16 @@ def thin_vertices(coords: np.ndarray, spacing: float) -> np.ndarray:
 
 
 def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | None = None,
-                         own_lines=()) -> tuple[list[np.ndarray], dict]:
+                         own_lines=(), within=None) -> tuple[list[np.ndarray], dict]:
     """Detected ``lines`` ((k, 3) arrays) made affordable for a flood model inside ``domain``
-    (a shapely (Multi)Polygon), as the module says; returns (lines, counts of what was done)."""
+    (a shapely (Multi)Polygon), as the module says, and only ``within`` a polygon if given
+    (e.g. ``wet_zone`` of a first flood); returns (lines, counts of what was done)."""
     import shapely
 
     clearance = 2 * spacing if clearance is None else clearance
     inner = domain.buffer(-clearance) if domain is not None else None
+    if within is not None:
+        inner = within if inner is None else shapely.intersection(inner, within)
     taken = [shapely.LineString(np.asarray(c)[:, :2]) for c in own_lines if len(c) >= 2]
     order = sorted(range(len(lines)), key=lambda k: -_length(lines[k]))
     out, stats = [], {"lines_in": len(lines), "vertices_in": int(sum(len(c) for c in lines)),
@@ -58,11 +61,16 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
             cut = shapely.difference(line, near)
             stats["cut_near_other_lines"] += cut.length < line.length - 1e-9
             line = cut
+        own_pieces = []  # a cut leaves pieces that may end a hair apart: keep them s apart too
         for part in _parts(line):
-            coords = thin_vertices(shapely.get_coordinates(part, include_z=True), spacing)
-            if _length(coords) >= 2 * spacing and len(coords) >= 2:
-                out.append(coords)
-                taken.append(shapely.LineString(coords[:, :2]))
+            if own_pieces:
+                part = shapely.difference(part, shapely.union_all(own_pieces).buffer(spacing))
+            for piece in _parts(part):
+                coords = thin_vertices(shapely.get_coordinates(piece, include_z=True), spacing)
+                if _length(coords) >= 2 * spacing and len(coords) >= 2:
+                    out.append(coords)
+                    own_pieces.append(shapely.LineString(coords[:, :2]))
+        taken.extend(own_pieces)
     stats.update(lines_out=len(out), vertices_out=int(sum(len(c) for c in out)),
                  spacing_m=spacing, clearance_m=clearance)
     return out, stats
@@ -79,3 +87,37 @@ def _parts(geometry):
     if geometry.geom_type == "LineString":
         return [geometry]
     return [g for g in getattr(geometry, "geoms", []) if g.geom_type == "LineString"]
+
+
+
+def _wet_mask(max_depth, wet_depth: float, margin: float) -> np.ndarray:
+    from scipy.ndimage import binary_dilation
+
+    wet = np.nan_to_num(np.asarray(max_depth.values, float), nan=0.0) > wet_depth
+    steps = int(np.ceil(margin / max_depth.cell_size))
+    if steps:
+        disk = np.hypot(*np.mgrid[-steps:steps + 1, -steps:steps + 1]) <= steps
+        wet = binary_dilation(wet, structure=disk)
+    return wet
+
+
+def flood_size_field(max_depth, *, wet_area: float, wet_depth: float = 0.05,
+                     margin: float = 5.0):
+    """A size field (a Grid of local maximum triangle areas, m²; NaN: no limit) from a first
+    flood's maximum depth (a Grid, m): ``wet_area`` where the water was deeper than
+    ``wet_depth`` and within ``margin`` m of there, so that a second mesh puts its resolution
+    where the water flows."""
+    wet = _wet_mask(max_depth, wet_depth, margin)
+    return max_depth.with_values(np.where(wet, float(wet_area), np.nan).astype(np.float32))
+
+
+def wet_zone(max_depth, *, wet_depth: float = 0.05, margin: float = 10.0):
+    """The (Multi)Polygon where a first flood was deeper than ``wet_depth``, grown by
+    ``margin`` m: detected lines outside it shape no flow (``lines_for_hydraulics(within=)``)."""
+    import shapely
+    from rasterio.features import shapes
+
+    wet = _wet_mask(max_depth, wet_depth, margin).astype(np.uint8)
+    return shapely.union_all([shapely.geometry.shape(g) for g, v in
+                              shapes(wet, mask=wet.astype(bool), transform=max_depth.transform)
+                              if v == 1])

@@ -198,6 +198,7 @@ class RunOptions:
     spline: float | None = None     # ... or a cubic smoothing spline within this many metres
     min_distance: float | None = None  # m between lines and vertices; default Δ = d/2
     min_spacing: float | None = None   # m: smallest spacing a flood model affords; default d, 0 off
+    flow_zone: str | None = None       # polygon file: detected lines kept only there (wet_zone.gpkg)
     min_angle: float = 25.0         # degrees
     max_area: float = 100.0         # m²
     holdout: float = 0.001          # fraction of points held out for assessment

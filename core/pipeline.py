@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import shapely
 from pyproj import CRS
 
 from . import io
@@ -100,7 +101,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     if spacing > 0:  # lines a flood model can afford: see hydraulic_lines
         detected, line_stats = lines_for_hydraulics(
             detected, front.domain if front.domain is not None else domain_from_dem(dem),
-            spacing=spacing, own_lines=front.own_lines)
+            spacing=spacing, own_lines=front.own_lines,
+            within=shapely.union_all(io.read_boundary(options.flow_zone))
+            if options.flow_zone else None)
     mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
                      max_area=options.max_area, domain=front.domain, size_field=size,

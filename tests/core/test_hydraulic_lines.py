@@ -49,3 +49,37 @@ def test_default_mesh_of_the_demo_affords_a_longer_time_step(demo_points_file, t
     assert default["n_missing_segments"] == 0 and default["n_below_min_angle"] == 0
     # the terrain error stays where it was (within a centimetre)
     assert default["rmse_m"] < plain["rmse_m"] + 0.01
+
+
+def test_the_pieces_of_a_cut_line_stay_a_spacing_apart():
+    """A line grazing another's buffer is cut into two pieces a hair apart; they may not keep
+    two nodes 0.2 m apart (found on Merewether)."""
+    longer = np.array([[0, 0, 0], [40, 0, 0]])
+    grazing = np.array([[0, 5, 0], [20, 0.99, 0], [40, 5, 0]])  # dips 1 cm into the buffer
+    out, _ = lines_for_hydraulics([longer, grazing], None, spacing=1.0)
+    ends = [c[[0, -1], :2] for c in out[1:]]
+    gaps = [np.hypot(*(a - b)) for i, e in enumerate(ends) for f in ends[i + 1:]
+            for a in e for b in f]
+    assert len(out) == 3 and min(gaps) >= 1.0 - 1e-9
+
+
+def test_a_first_flood_sets_the_size_field_and_the_flow_zone():
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.hydraulic_lines import flood_size_field, wet_zone
+    from floodmesh.core.raster import Grid
+
+    depth = np.zeros((40, 60))
+    depth[10:20, 10:30] = 0.3   # wet: 20 × 10 m at 1 m cells
+    grid = Grid(depth.astype(np.float32), Affine(1, 0, 0, 0, -1, 40), CRS.from_epsg(32756))
+    size = flood_size_field(grid, wet_area=8.0, margin=2.0)
+    wet = np.isfinite(size.values)
+    assert (size.values[wet] == 8.0).all() and wet[10:20, 10:30].all()
+    assert wet.sum() == pytest.approx((20 + 4) * (10 + 4) - 4 * 4 + 4 * 3, rel=0.15)
+    zone = wet_zone(grid, margin=0.0)
+    assert zone.area == pytest.approx(200.0)
+    line = np.array([[0, 25, 0], [60, 25, 0]])   # through the wet block (y 20–30)
+    out, _ = lines_for_hydraulics([line], None, spacing=1.0, within=zone)
+    assert len(out) == 1 and out[0][0, 0] == pytest.approx(10) and out[0][-1, 0] == \
+        pytest.approx(30)
