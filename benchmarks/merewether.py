@@ -104,6 +104,8 @@ def main(argv=None):
     p.add_argument("--houses", action="store_true", help="houses raised 3 m")
     p.add_argument("--wet-area", type=float, default=8.0,
                    help="floodmesh-flow: max triangle area where the first flood went, m²")
+    p.add_argument("--flow-spacing", type=float,
+                   help="floodmesh-flow: --min-spacing, m (default: the cell size)")
     p.add_argument("--reuse", action="store_true",
                    help="keep flood runs already in OUT (e.g. the reference)")
     p.add_argument("--max-area", type=float, default=100.0,
@@ -151,7 +153,8 @@ def main(argv=None):
     write_zone(out / "wet_zone.gpkg", wet_zone(depth), depth.crs)
     report = run_pipeline(DEM, out / "floodmesh-flow", RunOptions(
         crs=CRS, boundary=str(out / "domain.gpkg"), max_area=args.max_area,
-        size_field=str(out / "size_field.tif"), flow_zone=str(out / "wet_zone.gpkg")))
+        size_field=str(out / "size_field.tif"), flow_zone=str(out / "wet_zone.gpkg"),
+        min_spacing=args.flow_spacing))
     meshes["floodmesh-flow"] = (out / "floodmesh-flow" / "mesh.2dm", report["nodes"])
     uniform_mesh(dem, domain, report["nodes"], out / "uniform-flow.2dm")
     meshes["uniform-flow"] = (out / "uniform-flow.2dm", None)
