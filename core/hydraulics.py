@@ -89,7 +89,7 @@ def _edge_lengths(nodes, pairs):
 
 
 def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
-                     detected_lines=(), depth: float = CHECK_DEPTH_M,
+                     detected_lines=(), dem=None, depth: float = CHECK_DEPTH_M,
                      small_inradius: float = SMALL_INRADIUS_M,
                      edge_band: float = EDGE_BAND_M) -> dict:
     """The report's ``hydraulics`` section: the smallest inradius, the CFL time step it allows
@@ -98,7 +98,8 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
     ``edge_band`` of the domain edge, the shortest edge at the domain edge and the closest node
     to it, and the shortest
     edge at the points where the modeller's ``own_lines`` cross ``detected_lines`` (lists of
-    (k, 2+) coordinate arrays)."""
+    (k, 2+) coordinate arrays); with the ``dem`` (a Grid), how far the mesh's surface along
+    the own lines (crests the modeller chose) falls below the DEM's."""
     from scipy.spatial import cKDTree
 
     from .mesh import triangle_areas
@@ -146,6 +147,8 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
         _, nearest = cKDTree(nodes[:, :2]).query(crossings)
         at = np.isin(edges, nearest).any(axis=1)
         report["min_edge_at_crossings_m"] = float(lengths[at].min()) if at.any() else None
+    report.update(crest_lowering(nodes, triangles, own_lines, dem) if dem is not None
+                  else {})
     report["cfl_slowdown_vs_uniform"] = (report["uniform_mesh_cfl_time_step_s"]
                                          / max(report["cfl_time_step_s"], 1e-300))
     return report
@@ -160,6 +163,27 @@ def _inner_node_distance(nodes, bnodes) -> float | None:
         return None
     edges = shapely.multilinestrings(nodes[bnodes][:, :, :2])
     return float(shapely.distance(shapely.points(nodes[inner, :2]), edges).min())
+
+
+def crest_lowering(nodes, triangles, lines, dem, step: float = 0.5) -> dict:
+    """The mesh's surface (linear on each triangle) against the DEM (bilinear) every ``step``
+    m along ``lines``: the largest and the mean lowering (DEM − mesh, m); None without lines."""
+    import shapely
+    from matplotlib.tri import LinearTriInterpolator, Triangulation
+
+    from .raster import bilinear
+
+    points = [np.asarray(shapely.segmentize(shapely.LineString(np.asarray(c)[:, :2]),
+                                            step).coords) for c in lines if len(c) >= 2]
+    if not points:
+        return {"crest_max_lowering_m": None, "crest_mean_lowering_m": None}
+    xy = np.vstack(points)
+    surface = LinearTriInterpolator(Triangulation(nodes[:, 0], nodes[:, 1], triangles),
+                                    nodes[:, 2])(xy[:, 0], xy[:, 1])
+    lowering = bilinear(dem, xy[:, 0], xy[:, 1]) - np.ma.filled(surface, np.nan)
+    lowering = lowering[np.isfinite(lowering)]
+    return {"crest_max_lowering_m": float(lowering.max()) if lowering.size else None,
+            "crest_mean_lowering_m": float(lowering.mean()) if lowering.size else None}
 
 
 def _crossings(own_lines, detected_lines) -> np.ndarray:

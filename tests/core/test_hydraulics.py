@@ -51,3 +51,31 @@ def test_boundary_fans_are_merged_without_changing_the_boundary():
     assert triangle_areas(nodes, merged).sum() == pytest.approx(
         triangle_areas(nodes, triangles).sum())
     assert len(boundary_edges(merged)) == len(boundary_edges(triangles)) - 1
+
+
+def test_crest_lowering_along_own_lines_against_the_dem():
+    """A ridge z = 2 − |x − 5.5| on a 1 m DEM: a mesh with a node on the crest keeps it, one
+    whose nodes straddle it cuts it by up to 0.5 m (bilinear DEM: exact on cell centres)."""
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.hydraulics import crest_lowering
+    from floodmesh.core.raster import Grid
+
+    x = np.arange(10) + 0.5
+    dem = Grid(np.tile(2 - np.abs(x - 5.5), (10, 1)), Affine(1, 0, 0, 0, -1, 10),
+               CRS.from_epsg(32756))
+    crest = [np.array([[5.5, 2.0], [5.5, 8.0]])]
+
+    def mesh(columns):
+        xs, ys = np.meshgrid(columns, [0.5, 9.5])
+        nodes = np.column_stack([xs.ravel(), ys.ravel(), 2 - np.abs(xs.ravel() - 5.5)])
+        k = len(columns)
+        triangles = [[i, i + 1, k + i + 1] for i in range(k - 1)] + \
+                    [[i, k + i + 1, k + i] for i in range(k - 1)]
+        return nodes, np.array(triangles)
+
+    kept = crest_lowering(*mesh([0.5, 3.5, 5.5, 7.5, 9.5]), crest, dem)
+    cut = crest_lowering(*mesh([0.5, 5.0, 6.0, 9.5]), crest, dem)
+    assert abs(kept["crest_max_lowering_m"]) < 1e-9
+    assert cut["crest_max_lowering_m"] == pytest.approx(0.5, abs=0.01)
