@@ -3,7 +3,7 @@ levee crest (a level boundary across the river and its north floodplain at the w
 walls elsewhere), flooded by ANUGA on FloodMesh's mesh and on a uniform mesh of the same node
 count: how much water gets behind the levee.
 
-    .venv/bin/python benchmarks/demo_levee.py [--out DIR] [--freeboard 0.15] [--duration 300]
+    .venv/bin/python benchmarks/demo_levee.py [--out DIR] [--freeboard 0.15] [--duration 300] [--reuse]
 """
 from __future__ import annotations
 
@@ -29,14 +29,16 @@ def main(argv=None):
     p.add_argument("--freeboard", type=float, default=0.15,
                    help="the river's level below the lowest true crest, m (default 0.15)")
     p.add_argument("--duration", type=float, default=300.0)
+    p.add_argument("--reuse", action="store_true", help="keep the demo mesh already in OUT")
     args = p.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    points, classes = demo.synthetic_floodplain(seed=0)
-    source = out / "demo_points.laz"
-    io.write_points_las(source, points, classes=classes)
-    run_pipeline(source, out / "floodmesh", RunOptions())
     mesh_path = out / "floodmesh" / "mesh.2dm"
+    if not (args.reuse and mesh_path.is_file()):
+        points, classes = demo.synthetic_floodplain(seed=0)
+        source = out / "demo_points.laz"
+        io.write_points_las(source, points, classes=classes)
+        run_pipeline(source, out / "floodmesh", RunOptions())
     nodes, _ = io.read_mesh_2dm(mesh_path)
     dem = io.read_raster(out / "floodmesh" / "dem.tif")
     area = 40.0

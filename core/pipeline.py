@@ -83,7 +83,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out.mkdir(parents=True, exist_ok=True)
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
-               "breaklines": 1, "simplify": 0.5, "mesh": 2, "refine": 4, "assess": 1, "write": 2}
+               "breaklines": 1, "simplify": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
+               "assess": 1, "write": 2}
     if not options.refine:
         del weights["refine"]
     steps = _Steps(weights, progress, cancelled, log)
@@ -99,11 +100,11 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     detected, line_stats = [line.coords for line in lines], None
     spacing = dem.cell_size if options.min_spacing is None else options.min_spacing
     if spacing > 0:  # lines a flood model can afford: see hydraulic_lines
-        detected, line_stats = lines_for_hydraulics(
-            detected, front.domain if front.domain is not None else domain_from_dem(dem),
-            spacing=spacing, own_lines=front.own_lines,
-            within=shapely.union_all(io.read_boundary(options.flow_zone))
-            if options.flow_zone else None)
+        domain = front.domain if front.domain is not None else domain_from_dem(dem)
+        detected, line_stats = steps.run(
+            "hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
+            own_lines=front.own_lines, within=shapely.union_all(
+                io.read_boundary(options.flow_zone)) if options.flow_zone else None)
     mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
                      max_area=options.max_area, domain=front.domain, size_field=size,
