@@ -1,9 +1,9 @@
-"""Does the demo's levee hold? The built-in floodplain's river held at a level just below the
-levee crest (a level boundary across the river and its north floodplain at the west edge,
-walls elsewhere), flooded by ANUGA on FloodMesh's mesh and on a uniform mesh of the same node
+"""Does the demo's levee hold? The built-in floodplain's river rising to a level just below
+the levee crest (a level boundary across the river and its north floodplain at the west edge,
+rising 1.2 m over --rise s, then held; walls elsewhere), flooded by ANUGA on FloodMesh's mesh and on a uniform mesh of the same node
 count: how much water gets behind the levee.
 
-    .venv/bin/python benchmarks/demo_levee.py [--out DIR] [--freeboard 0.15] [--duration 300] [--reuse]
+    .venv/bin/python benchmarks/demo_levee.py [--out DIR] [--freeboard 0.15] [--duration 600] [--rise 400] [--reuse]
 """
 from __future__ import annotations
 
@@ -28,7 +28,9 @@ def main(argv=None):
     p.add_argument("--out", default="bench_levee")
     p.add_argument("--freeboard", type=float, default=0.15,
                    help="the river's level below the lowest true crest, m (default 0.15)")
-    p.add_argument("--duration", type=float, default=300.0)
+    p.add_argument("--duration", type=float, default=600.0)
+    p.add_argument("--rise", type=float, default=400.0,
+                   help="the river rises 1.2 m to its level over this many s, then holds")
     p.add_argument("--reuse", action="store_true", help="keep the demo mesh already in OUT")
     args = p.parse_args(argv)
     out = Path(args.out)
@@ -58,7 +60,8 @@ def main(argv=None):
     west_toe = float(np.interp(0.0, *levee.xy)) + profile.half_base
     scenario = scenario_from_dict({
         "duration_s": args.duration, "output_interval_s": 10, "manning": 0.035,
-        "boundaries": [{"kind": "level", "level_m": level, "snap_m": 0.5,
+        "boundaries": [{"kind": "level", "snap_m": 0.5,
+                        "levels": [[0, level - 1.2], [args.rise, level]],
                         "line": [[X0, Y0 + west_toe], [X0, Y0 + demo.HEIGHT]]}]})
     behind = shapely.Polygon(np.vstack([
         np.column_stack([xy[:, 0], xy[:, 1] - profile.half_base]) + (X0, Y0),

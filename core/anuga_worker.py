@@ -14,17 +14,18 @@ import sys
 import time
 
 
-def _hydrograph(times, rates):
-    """Q(t) by linear interpolation, 0 outside the series."""
+def _series(times, values, hold=False):
+    """f(t) by linear interpolation; outside the series 0 (a hydrograph) or, with ``hold``,
+    the first and last values (a level)."""
     import numpy as np
 
-    times, rates = np.asarray(times, float), np.asarray(rates, float)
+    times, values = np.asarray(times, float), np.asarray(values, float)
 
-    def q(t):
-        if t < times[0] or t > times[-1]:
+    def f(t):
+        if not hold and (t < times[0] or t > times[-1]):
             return 0.0
-        return float(np.interp(t, times, rates))
-    return q
+        return float(np.interp(t, times, values))
+    return f
 
 
 def _boundary_objects(anuga, domain, kinds: dict):
@@ -36,9 +37,13 @@ def _boundary_objects(anuga, domain, kinds: dict):
         elif kind == "outflow":
             objects[tag] = anuga.Transmissive_boundary(domain)
         elif kind == "level":
-            level = float(spec["level_m"])
+            if spec.get("levels"):
+                times, levels = zip(*spec["levels"])
+                stage = _series(times, levels, hold=True)
+            else:
+                stage = (lambda t, level=float(spec["level_m"]): level)
             objects[tag] = anuga.Transmissive_n_momentum_zero_t_momentum_set_stage_boundary(
-                domain, function=lambda t, level=level: level)
+                domain, function=stage)
         else:
             raise ValueError(f"unknown boundary kind {kind}")
     return objects
@@ -77,7 +82,7 @@ def run(job_dir: str) -> None:
     for k, inflow in enumerate(job["inflows"]):
         region = data[f"inflow_{k}"].tolist()
         if "times_s" in inflow:
-            q = _hydrograph(inflow["times_s"], inflow["rates_m3s"])
+            q = _series(inflow["times_s"], inflow["rates_m3s"])
         else:
             q = float(inflow["discharge_m3s"])
         inlets.append(anuga.Inlet_operator(domain, region, Q=q, verbose=False))

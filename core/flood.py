@@ -63,6 +63,7 @@ class Boundary:
     line: tuple = ()
     level_m: float | None = None
     snap_m: float = 1.0
+    levels: tuple = ()   # a level hydrograph ((time s, level m), ...) instead of level_m
 
 
 @dataclass(frozen=True)
@@ -111,8 +112,9 @@ class Scenario:
             if b.kind not in BOUNDARY_KINDS:
                 raise FloodMeshError(f"boundary kind {b.kind!r} is not one of "
                                      f"{', '.join(BOUNDARY_KINDS)}")
-            if b.kind == "level" and b.level_m is None:
-                raise FloodMeshError("a level boundary needs its water level (level_m)")
+            if b.kind == "level" and b.level_m is None and not b.levels:
+                raise FloodMeshError("a level boundary needs its water level (level_m, or levels: "
+                                     "[[time s, level m], ...])")
             bad = [s for s in b.sides if s not in SIDES + ("all",)]
             if bad or (not b.sides and len(b.line) < 2):
                 raise FloodMeshError(f"a boundary needs sides ({', '.join(SIDES)} or all) or a "
@@ -193,7 +195,11 @@ def scenario_from_dict(data: dict, base=".") -> Scenario:
                                   tuple(map(tuple, np.asarray(hydro, float).reshape(-1, 2)))))
         boundaries = [Boundary(b["kind"], tuple(b.get("sides", ())),
                                tuple(map(tuple, b.get("line", ()))), b.get("level_m"),
-                               float(b.get("snap_m", 1.0)))
+                               float(b.get("snap_m", 1.0)),
+                               tuple(map(tuple, np.asarray(
+                                   _read_xy_csv(base / b["levels"]) if isinstance(
+                                       b.get("levels"), str) else b.get("levels", ()),
+                                   float).reshape(-1, 2))))
                       for b in data.get("boundaries", [])]
         roughness = []
         for zone in data.get("roughness", []):
@@ -311,7 +317,8 @@ def tag_boundary(nodes, triangles, boundaries) -> tuple[np.ndarray, list, dict]:
                                  f"of the mesh ({where}): check its coordinates and CRS, or "
                                  "give a larger snap_m")
         tags.append(name)
-        kinds[name] = {"kind": boundary.kind, "level_m": boundary.level_m}
+        kinds[name] = {"kind": boundary.kind, "level_m": boundary.level_m,
+                       "levels": [list(p) for p in boundary.levels]}
         tag[pick] = len(tags) - 1
     edges[:, 2] = tag
     return edges, tags, kinds

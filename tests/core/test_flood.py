@@ -207,6 +207,9 @@ def test_bad_scenarios_are_refused_with_the_fix(tmp_path):
     with pytest.raises(FloodMeshError, match="level boundary needs"):
         scenario_from_dict({"duration_s": 10, "boundaries": [{"kind": "level",
                                                               "sides": ["east"]}]})
+    rising = scenario_from_dict({"duration_s": 10, "boundaries": [
+        {"kind": "level", "sides": ["east"], "levels": [[0, 1.0], [5, 2.0]]}]})
+    assert rising.boundaries[0].levels == ((0.0, 1.0), (5.0, 2.0))
     with pytest.raises(FloodMeshError, match="not valid JSON"):
         load_scenario(_write_text(tmp_path / "bad.json", "{"))
 
