@@ -16,7 +16,7 @@ import shapely
 
 from floodmesh.core import demo, io
 from floodmesh.core.flood import run_flood, scenario_from_dict
-from floodmesh.core.mesh import build_mesh
+from floodmesh.core.mesh import build_mesh, triangle_areas
 from floodmesh.core.options import RunOptions
 from floodmesh.core.pipeline import run_pipeline
 
@@ -73,9 +73,7 @@ def main(argv=None):
             centroids = r["nodes"][r["triangles"]][:, :, :2].mean(axis=1)
             mesh_nodes, mesh_tri, depth = r["nodes"], r["triangles"], r["max_depth"]
         inside = shapely.contains_xy(behind, centroids[:, 0], centroids[:, 1])
-        p_ = mesh_nodes[mesh_tri][:, :, :2]
-        areas = 0.5 * np.abs((p_[:, 1, 0] - p_[:, 0, 0]) * (p_[:, 2, 1] - p_[:, 0, 1])
-                             - (p_[:, 1, 1] - p_[:, 0, 1]) * (p_[:, 2, 0] - p_[:, 0, 0]))
+        areas = np.abs(triangle_areas(mesh_nodes, mesh_tri))
         wet_behind = inside & (depth > 0.05)
         crest_on_mesh = _crest_on_mesh(mesh_nodes, mesh_tri, xy + (X0, Y0))
         rows.append({"mesh": label, "nodes": report["nodes"], "cpu_s": report["cpu_s"],
