@@ -36,7 +36,7 @@ def test_plugin_loads_and_explains_missing_dependencies():
                          timeout=120, cwd=REPO, env={"QT_QPA_PLATFORM": "offscreen",
                                                      "PATH": "/usr/bin:/bin"})
     out = run.stdout
-    assert "ALGORITHMS 11" in out, run.stdout + run.stderr
+    assert "ALGORITHMS 12" in out, run.stdout + run.stderr
     check = next(line for line in out.splitlines() if line.startswith("CHECK"))
     assert check.startswith("CHECK False") and "numba" in check and "triangle" in check
     assert "pip install" in check
