@@ -157,7 +157,8 @@ def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> 
     try:
         child = subprocess.Popen([python, "-m", f"{PACKAGE}.core.worker"], stdin=subprocess.PIPE,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                 encoding="utf-8", errors="replace", env=_child_env())
+                                 encoding="utf-8", errors="replace", env=_child_env(),
+                                 start_new_session=True)  # its own children (ANUGA) go with it
     except OSError as exc:
         raise QgsProcessingException(
             f"FloodMesh could not start its worker {python} ({exc.strerror}): set "
@@ -174,7 +175,10 @@ def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> 
     while True:
         if feedback is not None and feedback.isCanceled() and not cancelled:
             cancelled = True
-            child.kill()
+            try:  # the worker and whatever it started
+                os.killpg(child.pid, signal.SIGKILL)
+            except OSError:
+                child.kill()
         try:
             line = lines.get(timeout=0.1)
         except queue.Empty:

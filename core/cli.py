@@ -103,6 +103,12 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
                    help="merge break lines (and vertices) closer than this, m (default d/2)")
     p.add_argument("--min-length", type=float, default=DEFAULTS.min_length,
                    help="drop break lines shorter than this, m (default %(default)s)")
+    p.add_argument("--min-spacing", type=float,
+                   help="smallest node spacing a flood model affords, m: detected lines kept "
+                        "2x this from the domain edge and this from other lines, vertices "
+                        "this far apart (default d; 0: off)")
+    p.add_argument("--flow-zone", help="polygon file (wet_zone.gpkg of floodmesh flood "
+                   "--size-field-area): detected lines kept only inside it")
     _add_domain_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle,
                    help="minimum triangle angle in degrees (default %(default)s)")
@@ -199,6 +205,8 @@ def _options(args) -> RunOptions:
                       log_kernel=args.log_kernel, zero_crossings=args.zero_crossings,
                       keep_every=args.keep_every, tolerance=args.tolerance, spline=args.spline,
                       min_distance=args.min_distance, min_length=args.min_length,
+                      min_spacing=getattr(args, "min_spacing", None),
+                      flow_zone=getattr(args, "flow_zone", None),
                       boundary=args.boundary, user_lines=args.user_lines,
                       size_field=getattr(args, "size_field", None),
                       min_area=getattr(args, "min_area", None),
@@ -749,6 +757,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="2DM: also write each element's centre elevation (BASEMENT 3)")
     p.add_argument("--breaklines", help="line layer written as the breaklines layer (gpkg)")
     p.set_defaults(func=cmd_export)
+
+    from .flood_cli import add_flood_commands
+    add_flood_commands(sub)
     return parser
 
 

@@ -223,6 +223,8 @@ class RunOptions:
     tolerance: float | None = None  # ... or Douglas–Peucker within this many metres ...
     spline: float | None = None     # ... or a cubic smoothing spline within this many metres
     min_distance: float | None = None  # m between lines and vertices; default Δ = d/2
+    min_spacing: float | None = None   # m: smallest spacing a flood model affords; default d, 0 off
+    flow_zone: str | None = None       # polygon file: detected lines kept only there (wet_zone.gpkg)
     min_angle: float = 25.0         # degrees
     max_area: float = 100.0         # m²
     holdout: float = 0.001          # fraction of points held out for assessment
@@ -268,6 +270,10 @@ class RunOptions:
         self.simplification()
         if self.min_distance is not None:
             check_min_distance(self.min_distance)
+        if self.min_spacing is not None and not (math.isfinite(self.min_spacing)
+                                                 and self.min_spacing >= 0):
+            raise FloodMeshError(f"the minimum spacing must be 0 (off) or more metres, got "
+                                 f"{self.min_spacing}; the cell size is a good choice")
         check_min_length(self.min_length)
         check_min_angle(self.min_angle)
         check_max_area(self.max_area)

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import shapely
 from pyproj import CRS
 
 from . import io
@@ -17,9 +18,11 @@ from .breakpoints import classify_breakpoints, log_breakpoints
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
+from .hydraulic_lines import lines_for_hydraulics
+from .hydraulics import hydraulic_checks
 from .limits import check_memory, check_triangles
 from .localise import fit_node_elevations, fit_window, localise_traced
-from .mesh import build_mesh, mesh_quality, size_from_slope, user_domain
+from .mesh import build_mesh, domain_from_dem, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
@@ -91,7 +94,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             log(compile_note())
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
-               "breaklines": 1, "simplify": 0.5, "localise": 0.5, "mesh": 2, "refine": 4,
+               "breaklines": 1, "simplify": 0.5, "localise": 0.5, "hydraulic lines": 0.1,
+               "mesh": 2, "refine": 4,
                "node elevations": 0.5, "assess": 1, "write": 2}
     del weights["node elevations" if options.refine else "refine"]
     if not options.localise:
@@ -126,7 +130,6 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
         size = far if size is None else far.with_values(np.fmin(far.values, size.values))
         max_area = options.far_field_area
-    mesh_lines = [line.coords for line in lines] + front.own_lines
     node_counts = {}
 
     def elevations(mesh):
@@ -138,6 +141,15 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         node_counts.update(counts)
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 
+    detected, line_stats = [line.coords for line in lines], None
+    spacing = dem.cell_size if options.min_spacing is None else options.min_spacing
+    if spacing > 0:  # lines a flood model can afford: see hydraulic_lines
+        domain = front.domain if front.domain is not None else domain_from_dem(dem)
+        detected, line_stats = steps.run(
+            "hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
+            own_lines=front.own_lines, within=shapely.union_all(
+                io.read_boundary(options.flow_zone)) if options.flow_zone else None)
+    mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
                      max_area=max_area, conforming=options.conforming, domain=front.domain,
                      size_field=size, max_triangles=options.max_triangles, note=note)
@@ -202,6 +214,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             **stats,
             "refinement": [asdict(r) for r in rounds],
             "terrain_fit": terrain_fit,
+            "hydraulic_lines": line_stats,
+            "hydraulics": hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
+                                           detected_lines=detected, dem=dem),
             "notes": notes,
             "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
             "seconds": steps.seconds,

@@ -285,6 +285,17 @@ def step_run(ch, *, input, output_folder, options):
             "rmse_m": report["rmse_m"], "crs": CRS.from_user_input(report["crs"]).to_wkt()}
 
 
+def step_flood(ch, *, mesh, scenario, output, crs=None):
+    from .flood import load_scenario, run_flood
+
+    report = run_flood(mesh, load_scenario(scenario), output, crs=crs, progress=ch.progress,
+                       log=ch.info)
+    for message in report["notes"]:
+        ch.note(message)
+    return {key: report[key] for key in ("cpu_s", "time_steps", "flooded_area_m2",
+                                         "mass_balance")}
+
+
 def _pipeline_log(ch):
     """run_pipeline's log: its notes (``note: …``) as notes, the rest as info."""
     def log(text):
@@ -299,7 +310,7 @@ def _pipeline_log(ch):
 STEPS = {"grid": step_grid, "slope": step_slope, "breakpoints": step_breakpoints,
          "trace": step_trace, "simplify": step_simplify, "build_mesh": step_build_mesh,
          "refine_mesh": step_refine_mesh, "assess": step_assess, "export": step_export,
-         "run": step_run}
+         "run": step_run, "flood": step_flood}
 
 
 NUMBA_STEPS = {step_grid, step_trace, step_run, step_slope}

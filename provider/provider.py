@@ -8,6 +8,7 @@ from ..algorithms.assess_accuracy import AssessAccuracyAlgorithm
 from ..algorithms.breakpoints import ClassifyBreakpointsAlgorithm
 from ..algorithms.build_mesh import BuildMeshAlgorithm
 from ..algorithms.export_mesh import ExportMeshAlgorithm
+from ..algorithms.flood_on_mesh import FloodOnMeshAlgorithm
 from ..algorithms.grid_points import GridPointsAlgorithm
 from ..algorithms.lidar_to_mesh import LidarToMeshAlgorithm
 from ..algorithms.refine_mesh import RefineMeshAlgorithm
@@ -18,7 +19,7 @@ from ..algorithms.trace_breaklines import TraceBreaklinesAlgorithm
 ALGORITHMS = (GridPointsAlgorithm, SlopeAlgorithm, ClassifyBreakpointsAlgorithm,
               TraceBreaklinesAlgorithm, SimplifyBreaklinesAlgorithm, BuildMeshAlgorithm,
               RefineMeshAlgorithm, AssessAccuracyAlgorithm, ExportMeshAlgorithm,
-              LidarToMeshAlgorithm)
+              LidarToMeshAlgorithm, FloodOnMeshAlgorithm)
 
 ROOT = Path(__file__).resolve().parent.parent
 ICON = ROOT / "icons" / "floodmesh.svg"

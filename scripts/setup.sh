@@ -68,6 +68,19 @@ fi
 mkdir -p .venv/share
 [ -e .venv/share/proj ] || ln -s /usr/share/proj .venv/share/proj
 
+# ANUGA, the flood solver of `floodmesh flood`, needs numpy >= 2, which Debian 12's QGIS stack
+# (numpy 1.24) cannot share a process with, and Debian's rasterio breaks its import: it gets its
+# own environment without system site packages; FloodMesh runs it as a child process.
+if [ ! -x .venv-flood/bin/python ]; then
+    echo "setup: creating .venv-flood (ANUGA's environment)"
+    /usr/bin/python3 -m venv .venv-flood
+fi
+if ! OMP_NUM_THREADS=1 .venv-flood/bin/python -c "import anuga" >/dev/null 2>&1; then
+    echo "setup: installing ANUGA into .venv-flood"
+    .venv-flood/bin/pip install -q --disable-pip-version-check "anuga==4.2.0" \
+        || echo "setup: ANUGA could not be installed; floodmesh flood will say so"
+fi
+
 # Compile the numba kernels now (about 2 minutes, once; seconds when cached), not in the first run.
 .venv/bin/python -m floodmesh.core.warmup
 

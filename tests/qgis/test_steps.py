@@ -20,7 +20,7 @@ def test_provider_lists_every_step(processing):
            .algorithms()}
     assert ids == {f"floodmesh:{n}" for n in (
         "gridpoints", "slope", "classifybreakpoints", "tracebreaklines", "simplifybreaklines",
-        "buildmesh", "refinemesh", "assessaccuracy", "exportmesh", "lidartomesh",
+        "buildmesh", "refinemesh", "assessaccuracy", "exportmesh", "lidartomesh", "floodonmesh",
         "LiDAR to mesh step by step")}
 
 

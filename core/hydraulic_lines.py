@@ -1,0 +1,123 @@
+"""Break lines a flood model can afford, applied to the lines before the PSLG is built.
+
+An explicit solver's time step is set by its smallest triangle (see ``hydraulics``). Detected
+break lines make tiny triangles in three places: where they run within a fraction of a metre
+of the domain edge, where they cross or nearly touch the modeller's own lines or each other,
+and where simplification left vertices closer together than the mesh can resolve. With a
+smallest spacing s (default: the cell size d):
+
+- detected lines are clipped back ``clearance`` (default 2 s) from the domain edge;
+- the parts of a detected line within s of an own line, or of a longer detected line, are cut
+  away (near-parallel lines merge into the longer one; crossings keep one line through them);
+- vertices closer than s to the previous kept vertex are dropped (the end points stay);
+- what is left shorter than 2 s is dropped.
+
+The modeller's own lines are kept as given.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def thin_vertices(coords: np.ndarray, spacing: float) -> np.ndarray:
+    """``coords`` (k, 2+) without vertices closer than ``spacing`` to the previous kept one;
+    both ends stay (the last kept inner vertex gives way to the end)."""
+    coords = np.asarray(coords, float)
+    if len(coords) <= 2:
+        return coords
+    keep = [0]
+    for i in range(1, len(coords) - 1):
+        if np.hypot(*(coords[i, :2] - coords[keep[-1], :2])) >= spacing:
+            keep.append(i)
+    while len(keep) > 1 and np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])) < spacing:
+        keep.pop()
+    keep.append(len(coords) - 1)
+    return coords[keep]
+
+
+def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | None = None,
+                         own_lines=(), within=None) -> tuple[list[np.ndarray], dict]:
+    """Detected ``lines`` ((k, 3) arrays) made affordable for a flood model inside ``domain``
+    (a shapely (Multi)Polygon), as the module says, and only ``within`` a polygon if given
+    (e.g. ``wet_zone`` of a first flood); returns (lines, counts of what was done)."""
+    import shapely
+
+    clearance = 2 * spacing if clearance is None else clearance
+    inner = domain.buffer(-clearance) if domain is not None else None
+    if within is not None:
+        inner = within if inner is None else shapely.intersection(inner, within)
+    taken = [shapely.LineString(np.asarray(c)[:, :2]) for c in own_lines if len(c) >= 2]
+    order = sorted(range(len(lines)), key=lambda k: -_length(lines[k]))
+    out, stats = [], {"lines_in": len(lines), "vertices_in": int(sum(len(c) for c in lines)),
+                      "clipped_at_edge": 0, "cut_near_other_lines": 0}
+    for k in order:
+        line = shapely.LineString(np.asarray(lines[k], float))
+        if inner is not None:
+            clipped = shapely.intersection(line, inner)
+            stats["clipped_at_edge"] += clipped.length < line.length - 1e-9
+            line = clipped
+        if taken and not line.is_empty:
+            near = shapely.union_all(taken).buffer(spacing)
+            cut = shapely.difference(line, near)
+            stats["cut_near_other_lines"] += cut.length < line.length - 1e-9
+            line = cut
+        own_pieces = []  # a cut leaves pieces that may end a hair apart: keep them s apart too
+        for part in _parts(line):
+            if own_pieces:
+                part = shapely.difference(part, shapely.union_all(own_pieces).buffer(spacing))
+            for piece in _parts(part):
+                coords = thin_vertices(shapely.get_coordinates(piece, include_z=True), spacing)
+                if _length(coords) >= 2 * spacing and len(coords) >= 2:
+                    out.append(coords)
+                    own_pieces.append(shapely.LineString(coords[:, :2]))
+        taken.extend(own_pieces)
+    stats.update(lines_out=len(out), vertices_out=int(sum(len(c) for c in out)),
+                 spacing_m=spacing, clearance_m=clearance)
+    return out, stats
+
+
+def _length(coords) -> float:
+    c = np.asarray(coords, float)
+    return float(np.hypot(*np.diff(c[:, :2], axis=0).T).sum()) if len(c) > 1 else 0.0
+
+
+def _parts(geometry):
+    if geometry.is_empty:
+        return []
+    if geometry.geom_type == "LineString":
+        return [geometry]
+    return [g for g in getattr(geometry, "geoms", []) if g.geom_type == "LineString"]
+
+
+
+def _wet_mask(max_depth, wet_depth: float, margin: float) -> np.ndarray:
+    from scipy.ndimage import binary_dilation
+
+    wet = np.nan_to_num(np.asarray(max_depth.values, float), nan=0.0) > wet_depth
+    steps = int(np.ceil(margin / max_depth.cell_size))
+    if steps:
+        disk = np.hypot(*np.mgrid[-steps:steps + 1, -steps:steps + 1]) <= steps
+        wet = binary_dilation(wet, structure=disk)
+    return wet
+
+
+def flood_size_field(max_depth, *, wet_area: float, wet_depth: float = 0.05,
+                     margin: float = 5.0):
+    """A size field (a Grid of local maximum triangle areas, m²; NaN: no limit) from a first
+    flood's maximum depth (a Grid, m): ``wet_area`` where the water was deeper than
+    ``wet_depth`` and within ``margin`` m of there, so that a second mesh puts its resolution
+    where the water flows."""
+    wet = _wet_mask(max_depth, wet_depth, margin)
+    return max_depth.with_values(np.where(wet, float(wet_area), np.nan).astype(np.float32))
+
+
+def wet_zone(max_depth, *, wet_depth: float = 0.05, margin: float = 10.0):
+    """The (Multi)Polygon where a first flood was deeper than ``wet_depth``, grown by
+    ``margin`` m: detected lines outside it shape no flow (``lines_for_hydraulics(within=)``)."""
+    import shapely
+    from rasterio.features import shapes
+
+    wet = _wet_mask(max_depth, wet_depth, margin).astype(np.uint8)
+    return shapely.union_all([shapely.geometry.shape(g) for g, v in
+                              shapes(wet, mask=wet.astype(bool), transform=max_depth.transform)
+                              if v == 1])

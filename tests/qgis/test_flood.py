@@ -1,0 +1,43 @@
+"""Flood on mesh in QGIS: Build mesh's output chained into the flood algorithm through
+processing.run (as the Graphical Modeler chains them); ANUGA runs in its child process and the
+maxima load as raster layers in the mesh's CRS."""
+import json
+
+import numpy as np
+import pytest
+from affine import Affine
+from pyproj import CRS
+from qgis.core import QgsRasterLayer
+
+from floodmesh.core import io
+from floodmesh.core.flood import flood_python
+from floodmesh.core.raster import Grid
+
+X0, Y0 = 382_000.0, 6_354_000.0
+
+
+@pytest.mark.skipif(flood_python() is None, reason="ANUGA is not installed (make setup)")
+def test_build_mesh_then_flood_on_it(processing, tmp_path):
+    x = np.arange(100) + 0.5
+    dem = Grid(np.tile(0.02 * (100 - x), (20, 1)).astype(np.float32),
+               Affine(1, 0, X0, 0, -1, Y0 + 20), CRS.from_epsg(32756))
+    io.write_raster(tmp_path / "dem.tif", dem)
+    mesh = processing.run("floodmesh:buildmesh", {
+        "DEM": str(tmp_path / "dem.tif"), "MAX_AREA": 2.0, "OUTPUT": str(tmp_path / "m.2dm")})
+    (tmp_path / "scenario.json").write_text(json.dumps({
+        "duration_s": 60, "output_interval_s": 10, "manning": 0.03,
+        "inflows": [{"line": [[X0 + 2, Y0 + 1], [X0 + 2, Y0 + 19]], "discharge_m3s": 2.0}],
+        "boundaries": [{"kind": "outflow", "sides": ["east"]}]}))
+    flood = processing.run("floodmesh:floodonmesh", {
+        "MESH": mesh["OUTPUT"], "SCENARIO": str(tmp_path / "scenario.json"),
+        "CRS": "EPSG:32756", "OUTPUT_FOLDER": str(tmp_path / "flood")})
+    depth = QgsRasterLayer(flood["MAX_DEPTH"], "depth")
+    assert depth.isValid() and depth.crs().authid() == "EPSG:32756"
+    stats = depth.dataProvider().bandStatistics(1)
+    assert 0.05 < stats.maximumValue < 1.0
+    for name in ("MAX_LEVEL", "MAX_SPEED", "ARRIVAL"):
+        assert QgsRasterLayer(flood[name], name).isValid()
+    with open(flood["REPORT"]) as fh:
+        report = json.load(fh)
+    assert abs(report["mass_balance"]["relative_error"]) < 1e-6
+    assert report["mass_balance"]["inflow_volume_m3"] == pytest.approx(120, rel=1e-6)
