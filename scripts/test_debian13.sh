@@ -78,13 +78,13 @@ echo "test_debian13: $(chroot "$ROOT" cat /etc/debian_version) root at $ROOT, re
 
 # The repository appears at its own path inside the root, so the plugin link and editable install
 # name the same folder on both sides. Its .venv is Debian 12's: inside, a venv of the root's own
-# (one per clone path, kept in the root) is mounted over it.
+# (one per clone path, kept in the root) is mounted over it; the same for .venv-flood (ANUGA's).
 # Each run starts from an empty /tmp, home folder (QGIS profile, caches) included, so that
 # nothing a previous run left changes this one's answer; pip's download cache is kept.
 rm -rf --one-file-system "$ROOT/tmp"
 mkdir -m 1777 "$ROOT/tmp"
 venv="$ROOT/var/lib/floodmesh/venvs/$(printf %s "$REPO" | sha1sum | cut -c1-12)"
-mkdir -p "$venv" "$REPO/.venv" "$ROOT$REPO"
+mkdir -p "$venv" "$venv-flood" "$REPO/.venv" "$REPO/.venv-flood" "$ROOT$REPO"
 shared=""
 [ -e "$REPO/../shared" ] && shared=$(cd "$REPO/../shared" && pwd -P)
 # a git worktree keeps its repository elsewhere: mount that too (read-only), for git ls-files
@@ -98,6 +98,7 @@ unshare --mount --propagation private bash -euc '
     mount -t proc proc "$root/proc"; mount --rbind /dev "$root/dev"; mount --rbind /sys "$root/sys"
     mount --bind "$repo" "$root$repo"
     mount --bind "$venv" "$root$repo/.venv"
+    mount --bind "$venv-flood" "$root$repo/.venv-flood"
     if [ -n "$gitdir" ]; then
         mount --bind "$gitdir" "$root$gitdir"; mount -o remount,bind,ro "$root$gitdir"
     fi
