@@ -10,10 +10,12 @@ over PyQt5 and PyQt6.
 from qgis.core import Qgis, QgsProcessing, QgsProcessingParameterNumber
 
 if hasattr(Qgis, "ProcessingSourceType"):  # QGIS >= 3.36
+    FILE_SOURCE = Qgis.ProcessingSourceType.File
     VECTOR_POINT = Qgis.ProcessingSourceType.VectorPoint
     VECTOR_LINE = Qgis.ProcessingSourceType.VectorLine
     VECTOR_POLYGON = Qgis.ProcessingSourceType.VectorPolygon
 else:
+    FILE_SOURCE = QgsProcessing.TypeFile
     VECTOR_POINT = QgsProcessing.TypeVectorPoint
     VECTOR_LINE = QgsProcessing.TypeVectorLine
     VECTOR_POLYGON = QgsProcessing.TypeVectorPolygon
@@ -28,8 +30,10 @@ else:
 if hasattr(Qgis, "WkbType"):  # QGIS >= 3.30
     POINT_Z, LINESTRING_Z, POLYGON_Z = (Qgis.WkbType.PointZ, Qgis.WkbType.LineStringZ,
                                         Qgis.WkbType.PolygonZ)
+    LINE_GEOMETRY = Qgis.GeometryType.Line
 else:
     from qgis.core import QgsWkbTypes
 
     POINT_Z, LINESTRING_Z, POLYGON_Z = (QgsWkbTypes.PointZ, QgsWkbTypes.LineStringZ,
                                         QgsWkbTypes.PolygonZ)
+    LINE_GEOMETRY = QgsWkbTypes.LineGeometry

@@ -5,10 +5,11 @@ from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSyste
                        QgsCoordinateTransform, QgsMapLayerType, QgsProcessingContext,
                        QgsProcessingException, QgsProcessingLayerPostProcessorInterface,
                        QgsRendererCategory, QgsSimpleLineSymbolLayer, QgsSingleSymbolRenderer,
-                       QgsSymbol, QgsWkbTypes)
+                       QgsSymbol)
 from qgis.PyQt.QtGui import QColor
 
 from ..core.options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS as COLOURS
+from .compat import LINE_GEOMETRY
 
 RESIDUAL_CLASSES = ((0, "< 10 cm", COLOURS[0]), (1, "10–25 cm", COLOURS[1]),
                     (2, "> 25 cm", COLOURS[2]), (-1, "outside the mesh", OUTSIDE_MESH_COLOUR))
@@ -61,7 +62,7 @@ def _rank(layer) -> int:
         return 3
     if layer.type() == QgsMapLayerType.RasterLayer:
         return 2
-    return 0 if layer.geometryType() == QgsWkbTypes.LineGeometry else 1
+    return 0 if layer.geometryType() == LINE_GEOMETRY else 1
 
 
 class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):

@@ -1,10 +1,10 @@
 """The tile parameters LiDAR to mesh and Grid LiDAR points share: several point (or DEM) tiles
 instead of one file, and the Dask workers or scheduler that grid them."""
-from qgis.core import (QgsProcessing, QgsProcessingException, QgsProcessingParameterDefinition,
+from qgis.core import (QgsProcessingException, QgsProcessingParameterDefinition,
                        QgsProcessingParameterMultipleLayers, QgsProcessingParameterNumber,
                        QgsProcessingParameterString)
 
-from .compat import INTEGER
+from .compat import FILE_SOURCE, INTEGER
 
 TILES, WORKERS, SCHEDULER = "TILES", "WORKERS", "SCHEDULER"
 
@@ -13,7 +13,7 @@ def add_tile_parameters(algorithm, what: str):
     """Add TILES (files; ``what`` they are), WORKERS and SCHEDULER (advanced) to ``algorithm``."""
     tr = algorithm.tr
     algorithm.addParameter(QgsProcessingParameterMultipleLayers(
-        TILES, tr(f"Tiles instead of one file: {what}"), layerType=QgsProcessing.TypeFile,
+        TILES, tr(f"Tiles instead of one file: {what}"), layerType=FILE_SOURCE,
         optional=True))
     for parameter in (
             QgsProcessingParameterNumber(

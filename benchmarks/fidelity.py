@@ -47,8 +47,9 @@ TERRAINS = {"demo geometry, seed 7": (demo.DEMO, 7), "oblique geometry, seed 11"
 # option sets of the chain: "landed" is the chain before issue 18's steps (no localisation, node
 # z from the DEM, conforming Delaunay), "default" today's
 CHAINS = {
-    "landed": dict(localise=False, node_elevation="dem", conforming=True),
-    "default": dict(),
+    "landed": dict(localise=False, node_elevation="dem", conforming=True, min_spacing=0),
+    "default": dict(),                        # with issue 16's line spacing for flood models
+    "no-spacing": dict(min_spacing=0),        # the terrain fits alone
     "conforming": dict(conforming=True),     # today's chain with Triangle's switch D
     "far-field": dict(far_field_area=400.0),  # today's chain, up to 400 m² where plane
 }

@@ -2,7 +2,10 @@
 as PNG, drawn by matplotlib's Agg renderer and written atomically (``io.atomic_output``)."""
 from __future__ import annotations
 
+import contextlib
 import math
+import signal
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -130,9 +133,41 @@ def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.n
     return save_png(fig, path)
 
 
+# signals whose Python handlers raise (Ctrl-C's KeyboardInterrupt, a caller's own alarm or term)
+DEFERRED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGALRM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def signals_deferred():
+    """Hold the Python handlers of ``DEFERRED_SIGNALS`` until the block ends, then run them.
+
+    matplotlib's state is not safe against an exception raised at an arbitrary bytecode: a
+    Ctrl-C while it built a figure left broken paths behind that made Agg crash (SIGSEGV) when a
+    later figure was drawn. The pictures take a fraction of a second, so Ctrl-C takes effect
+    just after them, as it does everywhere else."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught, previous = [], {}
+    for signum in DEFERRED_SIGNALS:
+        handler = signal.getsignal(signum)
+        if callable(handler):
+            previous[signum] = handler
+            signal.signal(signum, lambda number, frame: caught.append((number, frame)))
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        for number, frame in caught[:1]:
+            previous[number](number, frame)
+
+
 def write_report_pngs(folder, nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray,
                       res: np.ndarray) -> list[Path]:
-    """``residual_histogram.png`` and ``residual_map.png`` in ``folder``; returns their paths."""
+    """``residual_histogram.png`` and ``residual_map.png`` in ``folder``; returns their paths.
+    An interrupt waits until both are drawn (``signals_deferred``)."""
     folder = Path(folder)
-    return [write_residual_histogram(folder / HISTOGRAM_PNG, res),
-            write_residual_map(folder / MAP_PNG, nodes, triangles, xyz, res)]
+    with signals_deferred():
+        return [write_residual_histogram(folder / HISTOGRAM_PNG, res),
+                write_residual_map(folder / MAP_PNG, nodes, triangles, xyz, res)]

@@ -129,3 +129,29 @@ def test_write_report_pngs(tmp_path, classes_mix):
                                      classes_mix)
     assert [p.name for p in paths] == [report.HISTOGRAM_PNG, report.MAP_PNG]
     assert all(imread(p).ndim == 3 for p in paths)
+
+
+def test_an_interrupt_while_drawing_waits_until_the_pictures_are_written(tmp_path, classes_mix):
+    """Ctrl-C inside matplotlib left broken paths that crashed a later draw (SIGSEGV on Debian
+    13): the interrupt comes just after both pictures instead, and the handler is restored."""
+    import signal
+
+    nodes, triangles = hole_mesh()
+    raised = []
+
+    def interrupt(signum, frame):
+        raised.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.002)  # drawing takes far longer
+        with pytest.raises(KeyboardInterrupt):
+            report.write_report_pngs(tmp_path, nodes, triangles, check_points(classes_mix),
+                                     classes_mix)
+        assert signal.getsignal(signal.SIGALRM) is interrupt
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert raised == [signal.SIGALRM]
+    assert all(imread(tmp_path / name).ndim == 3 for name in (report.HISTOGRAM_PNG, report.MAP_PNG))
