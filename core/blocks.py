@@ -201,8 +201,12 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
                     dst.write(result.astype(dtype, copy=False), 1,
                               window=RioWindow(c0, r0, w, h))
 
+                # one thread uses both datasets: reading in a second thread while this one
+                # writes deadlocked GDAL 3.6 (its block cache shared by the two), with GDAL's
+                # own decoding and compression threads left to do the parallel part
                 run_blocks(read, write, shape, func, halo=halo, windows=windows,
-                           dtype=input_dtype, progress=progress, cancelled=cancelled)
+                           dtype=input_dtype, progress=progress, cancelled=cancelled,
+                           threads=False)
             if check_valid and not valid[0]:
                 raise no_valid_cells(src_path)  # before the move: no output is left
 
