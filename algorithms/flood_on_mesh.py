@@ -8,7 +8,7 @@ from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
                        QgsRasterLayer)
 
 from .base import FloodMeshAlgorithm, crs_or_none, layer_file
-from .styles import load_on_completion
+from .styles import load_results
 
 RASTERS = (("MAX_DEPTH", "Maximum depth (m)", "max_depth"),
            ("MAX_LEVEL", "Maximum water level (m)", "max_stage"),
@@ -64,8 +64,9 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
                           f"{mb['error_m3']:.3g} m³")
         results = {self.OUTPUT: str(out), self.HYDROGRAPH: str(out / "hydrograph.csv"),
                    self.REPORT: str(out / "report.json")}
+        layers = []
         for name, label, key in RASTERS:
-            path = str(out / RESULT_RASTERS[key])
-            load_on_completion(context, QgsRasterLayer(path, label), name)
-            results[name] = path
+            results[name] = str(out / RESULT_RASTERS[key])
+            layers.append((QgsRasterLayer(results[name], label), lambda layer: None, name))
+        load_results(context, crs, layers)
         return results
