@@ -57,7 +57,14 @@ class _Steps:
         if "progress" in kwargs and self.progress:
             base = self.done
             kwargs["progress"] = lambda f: self.progress((base + f * weight) / self.total)
-        result = func(*args, **kwargs)
+        try:
+            result = func(*args, **kwargs)
+        except SystemError as exc:
+            # Ctrl-C during a compiled (numba) call reaches Python as a SystemError whose
+            # cause is the KeyboardInterrupt: it is the interrupt
+            if isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt):
+                raise KeyboardInterrupt from None
+            raise
         self.seconds[name] = round(time.perf_counter() - start, 3)
         self.done += weight
         if self.progress:
@@ -270,7 +277,9 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         data = steps.run("read", io.read_input, input_path, crs=options.crs,
                          classes=options.classes, note=note)
     if isinstance(data, TiledDem):
-        dem, holdout, measured = data.dem, PointCloud(data.holdout, data.dem.crs), None
+        dem, holdout = data.dem, PointCloud(data.holdout, data.dem.crs)
+        # the tiles' points are not kept: the terrain fits use the DEM's cell centres
+        measured = _dem_check_points(dem, 1.0, options.seed).xyz
         holdout_source = "LiDAR points withheld from gridding, tile by tile"
         n_points = data.n_points
     elif isinstance(data, PointCloud):

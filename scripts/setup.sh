@@ -13,7 +13,7 @@ DEB_PACKAGES=(qgis python3-qgis qgis-providers python3-venv python3-numpy python
 # Debian's Python packages that pip must never replace (QGIS, GDAL and each other are built
 # against them): the environment is pinned to the versions installed.
 SYSTEM_PINS=(numpy scipy rasterio fiona pyproj matplotlib)
-DEB_PACKAGES+=(xvfb)  # a virtual display for the desktop QGIS test (tests/qgis/test_desktop.py)
+DEB_PACKAGES+=(xvfb xauth)  # a virtual display for the desktop QGIS test (tests/qgis/test_desktop.py)
 
 missing=()
 for p in "${DEB_PACKAGES[@]}"; do

@@ -71,7 +71,9 @@ def _lines(path):
 
 
 def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path):
-    options = RunOptions(holdout=0.0, scheduler=scheduler)
+    # the terrain fits (issue 18) use the points of one file but the DEM's cell centres for
+    # tiles, whose points are not kept: the chain up to the mesh is compared without them
+    options = RunOptions(holdout=0.0, scheduler=scheduler, localise=False, node_elevation="dem")
     tiled = run_pipeline(survey / "tiles", tmp_path / "tiled", options)
     single = run_pipeline(survey / "single.laz", tmp_path / "single", options)
     assert io.read_raster(tmp_path / "tiled" / "dem.tif").values.tobytes() == \

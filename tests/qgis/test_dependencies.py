@@ -14,6 +14,10 @@ from qgis.core import QgsApplication
 app = QgsApplication([], False); app.initQgis()
 from processing.core.Processing import Processing
 Processing.initialize()
+HEAVY = ("shapely", "triangle", "numba", "laspy", "lazrs", "rasterio", "fiona")
+# QGIS 3.40's qgis.core imports shapely itself when it can (its geometry conversions): what
+# counts is what FloodMesh adds
+before = {m for m in HEAVY if m in sys.modules}
 import floodmesh
 plugin = floodmesh.classFactory(None)
 plugin.initProcessing()
@@ -25,8 +29,7 @@ try:
     print("RAN")
 except Exception as exc:
     print("RUN", type(exc).__name__, exc)
-heavy = sorted(m for m in ("shapely", "triangle", "numba", "laspy", "lazrs", "rasterio", "fiona")
-               if m in sys.modules)
+heavy = sorted(m for m in HEAVY if m in sys.modules and m not in before)
 print("IMPORTED", heavy)
 """
 
