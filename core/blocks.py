@@ -28,9 +28,10 @@ BYTE_NODATA = 255
 # ZSTD level 1 without a predictor costs 0.19 s of CPU per 64 MB written (none: 0.06, DEFLATE:
 # 1.0-1.2, LZW with a predictor: 0.85-0.94, ZSTD 1 with the floating-point predictor: 0.45) and
 # reads back as fast as no compression, at 80 % of the size (the predictor saves another 15-30 %
-# but makes reading 3-5x slower). GDAL compresses tiles in parallel (NUM_THREADS).
+# but makes reading 3-5x slower). GDAL's own worker threads (NUM_THREADS, GDAL_NUM_THREADS)
+# are not used: GDAL 3.6's multi-threaded decoding hung in RasterIO (CPLJobQueue) in the tests.
 CREATION_OPTIONS = dict(compress="zstd", zstd_level=1, tiled=True, blockxsize=TILE,
-                        blockysize=TILE, num_threads="ALL_CPUS", bigtiff="if_safer")
+                        blockysize=TILE, bigtiff="if_safer")
 
 Window = tuple  # (row_off, col_off, height, width)
 
@@ -124,13 +125,6 @@ def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *,
     return out[0] if out else np.empty(values.shape, dtype=dtype or values.dtype)
 
 
-def tile_aligned(windows: Sequence[Window], shape) -> bool:
-    """True when every window covers whole output tiles (edges of the raster count)."""
-    rows, cols = shape
-    return all(r0 % TILE == 0 and c0 % TILE == 0 and (h % TILE == 0 or r0 + h == rows)
-               and (w % TILE == 0 or c0 + w == cols) for r0, c0, h, w in windows)
-
-
 def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
     """A tiled, compressed GeoTIFF profile (rasters under a tile stay striped)."""
     profile = dict(driver="GTiff", height=shape[0], width=shape[1], count=1, dtype=dtype,
@@ -170,7 +164,7 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
     valid = [False]
     check_valid = np.dtype(input_dtype).kind == "f"
     # GDAL sizes its block cache when first used: the environment comes before the first open
-    with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB, GDAL_NUM_THREADS="ALL_CPUS"), \
+    with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB), \
             _open(src_path) as src:
         crs = raster_crs(src, src_path, crs)
         shape = (src.height, src.width)
@@ -185,10 +179,6 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
             return block
 
         profile = raster_profile(shape, src.transform, crs, dtype, nodata)
-        if not tile_aligned(windows, shape):
-            # a tile written in parts may be read back while GDAL still compresses it in
-            # another thread: compress in this one
-            profile.pop("num_threads")
         with atomic_output(dst_path) as tmp:
             with rasterio.open(tmp, "w", **profile) as dst:
                 def write(window, result):

@@ -174,7 +174,10 @@ def test_command_interrupted_at_random_moments(runs, tmp_path, how):
         _, stderr = proc.communicate(timeout=120)
         if how == "SIGINT":
             assert proc.returncode in (0, 130), stderr
-            assert "Traceback" not in stderr
+            # a Ctrl-C inside a C extension's import (Cython) is reported by Python as
+            # "Exception ignored" and lost: the run goes on and ends normally
+            assert "Traceback" not in stderr or ("Exception ignored" in stderr
+                                                 and proc.returncode == 0), stderr
         # the folder being written lies beside the target: nothing partial is inside it
         assert [p.name for p in target.iterdir() if ".partial" in p.name] == []
         assert how == "SIGKILL" or _leftovers(target) == []
