@@ -4,14 +4,13 @@ One engine serves both: a step is a *kernel* ``func(padded) -> interior`` that r
 padded by ``halo`` cells on every side (``fill``, NaN, beyond the raster) and returns the block's
 interior. ``map_overlap`` runs it over an array; ``map_raster`` streams it from one GeoTIFF to
 another, reading each window with its halo, computing, and writing the window, so that only a
-few blocks are ever in memory whatever the raster's size. Reading the next window and writing
-the last one run in threads beside the kernel (GDAL and numba ``nogil`` kernels release the GIL).
+few blocks are ever in memory whatever the raster's size. Windows run one after the other in
+one thread: GDAL 3.6 hung when a reader thread ran beside the writer, or with its own workers.
 
 The result equals applying the kernel to the whole NaN-padded raster, for any window list.
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterable, Sequence
 
 import numpy as np
@@ -59,45 +58,19 @@ def run_blocks(read: Callable, write: Callable, shape: tuple[int, int],
                func: Callable[[np.ndarray], np.ndarray], *, halo: int,
                windows: Sequence[Window], fill=np.nan, dtype=np.float64,
                progress: Callable[[float], None] | None = None,
-               cancelled: Callable[[], bool] | None = None, threads: bool = True) -> None:
+               cancelled: Callable[[], bool] | None = None) -> None:
     """The engine: for each window, ``read(r0, r1, c0, c1)`` → pad → ``func`` →
-    ``write(window, interior)``. With ``threads`` the next window is read and the previous
-    written while ``func`` runs; writes keep the windows' order."""
+    ``write(window, interior)``, one window after the other in this thread (a reader thread
+    beside the writer deadlocked GDAL 3.6)."""
     from .errors import Cancelled
 
     windows = list(windows)
-    if not windows:
-        return
-
-    def load(window):
-        return _padded(read, shape, window, halo, fill, dtype)
-
-    pool = ThreadPoolExecutor(2) if threads and len(windows) > 1 else None
-    try:
-        pending_write = None
-        next_block = pool.submit(load, windows[0]) if pool else None
-        for k, window in enumerate(windows):
-            if cancelled is not None and cancelled():
-                raise Cancelled()
-            block = next_block.result() if pool else load(window)
-            if pool and k + 1 < len(windows):
-                next_block = pool.submit(load, windows[k + 1])
-            result = func(block)
-            del block
-            if pool:
-                if pending_write is not None:
-                    pending_write.result()
-                pending_write = pool.submit(write, window, result)
-            else:
-                write(window, result)
-            if progress is not None:
-                progress((k + 1) / len(windows))
-        if pending_write is not None:
-            pending_write.result()
-    finally:
-        if pool:
-            pool.shutdown(wait=True, cancel_futures=True)
-
+    for k, window in enumerate(windows):
+        if cancelled is not None and cancelled():
+            raise Cancelled()
+        write(window, func(_padded(read, shape, window, halo, fill, dtype)))
+        if progress is not None:
+            progress((k + 1) / len(windows))
 
 def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *, halo: int,
                 block_rows: int = DEFAULT_BLOCK_ROWS, fill=np.nan, dtype=None,
@@ -120,8 +93,7 @@ def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *,
     windows = row_windows(values.shape, block_rows) if windows is None else windows
     run_blocks(lambda r0, r1, c0, c1: values[r0:r1, c0:c1], write, values.shape, func,
                halo=halo, windows=windows, fill=fill,
-               dtype=np.result_type(values.dtype, np.asarray(fill).dtype), cancelled=cancelled,
-               threads=False)
+               dtype=np.result_type(values.dtype, np.asarray(fill).dtype), cancelled=cancelled)
     return out[0] if out else np.empty(values.shape, dtype=dtype or values.dtype)
 
 
@@ -191,12 +163,8 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
                     dst.write(result.astype(dtype, copy=False), 1,
                               window=RioWindow(c0, r0, w, h))
 
-                # one thread uses both datasets: reading in a second thread while this one
-                # writes deadlocked GDAL 3.6 (its block cache shared by the two), with GDAL's
-                # own decoding and compression threads left to do the parallel part
                 run_blocks(read, write, shape, func, halo=halo, windows=windows,
-                           dtype=input_dtype, progress=progress, cancelled=cancelled,
-                           threads=False)
+                           dtype=input_dtype, progress=progress, cancelled=cancelled)
             if check_valid and not valid[0]:
                 raise no_valid_cells(src_path)  # before the move: no output is left
 
