@@ -410,24 +410,15 @@ def _grid_tiles(args):
 
 
 def cmd_slope(args):
-    from . import io
-    from .slope import laplacian_of_gaussian, laplacian_of_gaussian_file, slope, slope_file
+    from .slope import slope_raster_file
 
-    if not io.nodata_tagged(args.dem):
-        # untagged nodata sentinels are found on the whole raster: this one goes in memory
-        dem = io.read_raster(args.dem, crs=args.crs, note=_print_note)
-        io.write_raster(args.out, laplacian_of_gaussian(dem, args.sigma, kernel=args.log_kernel)
-                        if args.method == "log" else slope(dem, args.method))
-    else:
-        bar = ProgressBar(args.method)
-        try:  # file to file, block by block
-            if args.method == "log":
-                laplacian_of_gaussian_file(args.dem, args.out, args.sigma, kernel=args.log_kernel,
-                                           crs=args.crs, progress=bar)
-            else:
-                slope_file(args.dem, args.out, args.method, crs=args.crs, progress=bar)
-        finally:
-            bar.close()
+    bar = ProgressBar(args.method)
+    try:
+        slope_raster_file(args.dem, args.out, args.method, sigma=args.sigma,
+                          log_kernel=args.log_kernel, crs=args.crs, note=_print_note,
+                          progress=bar)
+    finally:
+        bar.close()
     if args.method == "log":
         print(f"Laplacian-of-Gaussian response (sigma {args.sigma} m, m) written to {args.out}")
     else:

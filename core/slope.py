@@ -290,3 +290,25 @@ def _analytic_log_kernel(sigma, d, reach):
     k = (r2 - 2 * sigma ** 2) / (2 * np.pi * sigma ** 6) * np.exp(-r2 / (2 * sigma ** 2))
     k -= k.mean()
     return k * (4.0 / (k * r2).sum())
+
+
+def slope_raster_file(dem_path, out_path, method: str = "one-over-distance", *, sigma: float = 1.0,
+                      log_kernel: str = "pratt", crs=None, note=None, progress=None,
+                      cancelled=None) -> None:
+    """Slope (degrees) or, with ``method="log"``, the LoG response of a DEM file into a GeoTIFF:
+    streamed block by block, except a raster without a nodata tag, whose sentinels
+    (``io.read_raster``, which tells ``note``) are found on the whole raster in memory."""
+    from . import io
+
+    if io.nodata_tagged(dem_path):
+        if method == "log":
+            laplacian_of_gaussian_file(dem_path, out_path, sigma, kernel=log_kernel, crs=crs,
+                                       progress=progress, cancelled=cancelled)
+        else:
+            slope_file(dem_path, out_path, method, crs=crs, progress=progress,
+                       cancelled=cancelled)
+        return
+    dem = io.read_raster(dem_path, crs=crs, note=note)
+    io.write_raster(out_path, laplacian_of_gaussian(dem, sigma, kernel=log_kernel,
+                                                    cancelled=cancelled)
+                    if method == "log" else slope(dem, method, cancelled=cancelled))

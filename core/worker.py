@@ -121,17 +121,11 @@ def step_grid(ch, *, input, output, cell_size, crs=None, classes=None, max_gap=N
 
 
 def step_slope(ch, *, input, output, method, sigma=1.0, log_kernel="pratt"):
-    from . import io
-    from .slope import laplacian_of_gaussian, slope
+    from .slope import slope_raster_file
 
-    dem = io.read_raster(input)
-    if method == "log":
-        result = laplacian_of_gaussian(dem, sigma, kernel=log_kernel, cancelled=ch.cancelled)
-    else:
-        result = slope(dem, method, cancelled=ch.cancelled)
-    io.write_raster(output, result)
+    slope_raster_file(input, output, method, sigma=sigma, log_kernel=log_kernel, note=ch.note,
+                      progress=ch.progress)
     return {"OUTPUT": output}
-
 
 def step_breakpoints(ch, *, input, output, s_crit=10.0, sensitivity=None, zero_crossings=False):
     import numpy as np
