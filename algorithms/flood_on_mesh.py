@@ -19,7 +19,7 @@ RASTERS = (("MAX_DEPTH", "Maximum depth (m)", "max_depth"),
 class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "floodonmesh"
     DISPLAY_NAME = "Flood on mesh (ANUGA)"
-    GROUP, GROUP_ID = "Flood", "flood"
+    GROUP, GROUP_ID = "5 · Flood", "flood"
     HELP = ("Runs a flood on a FloodMesh mesh (SMS 2DM) with ANUGA, Geoscience Australia's "
             "finite-volume shallow-water solver (flow algorithm DE0, one thread), in a child "
             "process; Cancel stops it. The scenario is a JSON file (see the README): inflows "
