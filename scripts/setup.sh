@@ -14,6 +14,16 @@ DEB_PACKAGES=(qgis python3-qgis qgis-providers python3-venv python3-numpy python
 # against them): the environment is pinned to the versions installed.
 SYSTEM_PINS=(numpy scipy rasterio fiona pyproj matplotlib)
 DEB_PACKAGES+=(xvfb xauth)  # a virtual display for the desktop QGIS test (tests/qgis/test_desktop.py)
+# shapely: Debian's own where it is shapely 2 (Debian 13: 2.1, built against the GEOS that QGIS
+# links). QGIS 3.40's qgis.core imports shapely itself, so a PyQGIS script run from .venv would
+# otherwise load PyPI's wheel, with a GEOS of its own, into a process that has QGIS's. Debian 12's
+# is shapely 1.8: there the wheel comes from PyPI (and only the worker, never QGIS, imports it).
+shapely_candidate=$(apt-cache policy python3-shapely 2>/dev/null | awk '/Candidate:/ {print $2}')
+if [ -n "$shapely_candidate" ] && [ "$shapely_candidate" != "(none)" ] \
+        && dpkg --compare-versions "$shapely_candidate" ge 2; then
+    DEB_PACKAGES+=(python3-shapely)
+    SYSTEM_PINS+=(shapely)
+fi
 
 missing=()
 for p in "${DEB_PACKAGES[@]}"; do
@@ -47,6 +57,12 @@ for name in sys.argv[1:]:
         pass
 EOF
 } >.venv/constraints.txt.new
+# a shapely wheel an earlier setup put into .venv gives way to the system's pinned one
+if grep -q '^shapely==' .venv/constraints.txt.new \
+        && [ -n "$(compgen -G '.venv/lib/python3*/site-packages/shapely' || true)" ]; then
+    echo "setup: using Debian's python3-shapely instead of PyPI's wheel"
+    .venv/bin/pip uninstall -q -y shapely
+fi
 stamp=.venv/.floodmesh-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] \
         || ! cmp -s .venv/constraints.txt.new .venv/constraints.txt; then
