@@ -10,7 +10,7 @@ from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
 from qgis.PyQt.QtCore import QCoreApplication, QUrl
 
 from ..core.errors import FloodMeshError
-from .compat import VECTOR_LINE, VECTOR_POLYGON
+from .compat import METRES, VECTOR_LINE, VECTOR_POLYGON
 from .child import run_step
 
 
@@ -84,6 +84,18 @@ PARAMETER_HELP = {
 }
 
 
+def distance(algorithm, name, label, default, parent, *, optional=False, minimum=0.0):
+    """A horizontal distance in metres as QGIS's distance parameter: the dialog shows its unit
+    (the ``parent`` layer's or CRS parameter's, metres when that is not set) and converts from
+    others. Vertical amounts (residuals, offsets, LoG responses) stay numbers with (m)."""
+    from qgis.core import QgsProcessingParameterDistance
+
+    parameter = QgsProcessingParameterDistance(name, algorithm.tr(label), default, parent,
+                                               optional, minimum)
+    parameter.setDefaultUnit(METRES)
+    return parameter
+
+
 def labels(ids) -> list:
     """The labels an enum parameter shows for core's option ids (in their order)."""
     return [LABELS.get(i, i) for i in ids]
@@ -144,9 +156,9 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
 
         try:
             check_outputs(*self.files(parameters, context))
+            return self.process(parameters, context, feedback)
         except FloodMeshError as exc:
             raise QgsProcessingException(str(exc)) from None
-        return self.process(parameters, context, feedback)
 
     def files(self, parameters, context) -> tuple[list, list]:
         """(files read, files written) by the parameters, for core's check that no output is
@@ -176,6 +188,9 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
                 inputs += self.parameterAsFileList(parameters, name, context)
             elif isinstance(p, QgsProcessingParameterRasterLayer):
                 layer = self.parameterAsRasterLayer(parameters, name, context)
+                inputs.append(layer.source() if layer else None)
+            elif p.name() == POINT_CLOUD:
+                layer = self.parameterAsPointCloudLayer(parameters, name, context)
                 inputs.append(layer.source() if layer else None)
             elif isinstance(p, QgsProcessingParameterMeshLayer):
                 layer = self.parameterAsMeshLayer(parameters, name, context)
@@ -225,6 +240,33 @@ def crs_or_none(algorithm, parameters, name, context):
     if not crs.isValid():
         return None
     return crs.authid() if crs.authid().upper().startswith("EPSG:") else crs.toWkt()
+
+
+POINT_CLOUD = "POINT_CLOUD"
+
+
+def point_cloud_parameter(algorithm, label):
+    """A point-cloud layer (QGIS's own LAS/LAZ/COPC layers where QGIS has PDAL, EPT and COPC
+    everywhere), optional beside the file parameters, which stay for qgis_process, models and
+    QGIS builds without PDAL (Debian's)."""
+    from qgis.core import QgsProcessingParameterPointCloudLayer
+
+    return QgsProcessingParameterPointCloudLayer(POINT_CLOUD, algorithm.tr(label), optional=True)
+
+
+def point_cloud_file(algorithm, parameters, context):
+    """The file behind the POINT_CLOUD layer (LAS/LAZ, COPC or an EPT's ept.json), or None."""
+    from ..core.io import is_point_source
+
+    layer = algorithm.parameterAsPointCloudLayer(parameters, POINT_CLOUD, context)
+    if layer is None:
+        return None
+    path = layer.source()
+    if not Path(path).is_file() or not is_point_source(path):
+        raise FloodMeshError(
+            f"Point cloud layer {layer.name()} is not a LAS/LAZ, COPC or EPT (ept.json) file "
+            f"FloodMesh can read ({path}): export it to LAZ first")
+    return path
 
 
 BOUNDARY, USER_LINES = "BOUNDARY", "USER_LINES"

@@ -37,3 +37,10 @@ else:
     POINT_Z, LINESTRING_Z, POLYGON_Z = (QgsWkbTypes.PointZ, QgsWkbTypes.LineStringZ,
                                         QgsWkbTypes.PolygonZ)
     LINE_GEOMETRY = QgsWkbTypes.LineGeometry
+
+if hasattr(Qgis, "DistanceUnit"):  # QGIS >= 3.30
+    METRES = Qgis.DistanceUnit.Meters
+else:
+    from qgis.core import QgsUnitTypes
+
+    METRES = QgsUnitTypes.DistanceMeters

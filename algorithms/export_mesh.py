@@ -10,7 +10,7 @@ from .compat import DOUBLE, VECTOR_LINE, VECTOR_POLYGON
 
 from ..core.options import EXPORT_EXTENSIONS as EXTENSIONS
 from ..core.options import EXPORT_FORMAT_LABELS, EXPORT_FORMATS
-from .base import FloodMeshAlgorithm, crs_or_none, layer_file
+from .base import FloodMeshAlgorithm, crs_or_none, distance, layer_file
 FILE_FILTER = ";;".join(f"{label} (*{EXTENSIONS[f]})"
                         for f, label in zip(EXPORT_FORMATS, EXPORT_FORMAT_LABELS))
 
@@ -42,9 +42,8 @@ class ExportMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.OPEN_BOUNDARIES, self.tr("Open boundary lines (inflow, outflow sections)"),
             [VECTOR_LINE], optional=True))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.SNAP, self.tr("Snapping distance to open boundary lines (m)"),
-            DOUBLE, 1.0, minValue=0.001))
+        self.addParameter(distance(self, self.SNAP, "Snapping distance to open boundary lines",
+                                   1.0, self.INPUT, minimum=0.001))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.REGIONS, self.tr("Region polygons (material ids)"),
             [VECTOR_POLYGON], optional=True))

@@ -6,7 +6,7 @@ from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
 
 from ..core.options import check_cell_size, check_holdout, check_max_gap
 from .compat import DOUBLE, INTEGER
-from .base import FloodMeshAlgorithm, crs_or_none
+from .base import FloodMeshAlgorithm, crs_or_none, distance, point_cloud_parameter
 from .tiles import add_tile_parameters, dask_settings, input_or_tiles
 
 POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
@@ -25,20 +25,19 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
     HOLDOUT, SEED, OUTPUT, HOLDOUT_OUTPUT = "HOLDOUT", "SEED", "OUTPUT", "HOLDOUT_OUTPUT"
 
     def initAlgorithm(self, config=None):  # noqa: N802
-        self.addParameter(QgsProcessingParameterFile(self.INPUT, self.tr("LiDAR points"),
-                                                     fileFilter=POINT_FILTER, optional=True))
+        self.addParameter(point_cloud_parameter(self, "LiDAR point cloud layer"))
+        self.addParameter(QgsProcessingParameterFile(self.INPUT, self.tr(
+            "… or LiDAR points from a file (LAS/LAZ, XYZ/CSV; a folder: its tiles)"),
+            fileFilter=POINT_FILTER, optional=True))
         add_tile_parameters(self, "LAS/LAZ/XYZ point tiles")
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, self.tr("CRS of the points (when the file has none)"), optional=True))
         self.addParameter(QgsProcessingParameterString(
             self.CLASSES, self.tr("LAS classes to grid, e.g. 2,9 (empty: 2 when classified)"),
             optional=True))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.CELL_SIZE, self.tr("Cell size d (m)"), DOUBLE, 1.0,
-            minValue=0.0))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_GAP, self.tr("Maximum gap bridged (m; empty: 10 cells)"),
-            DOUBLE, None, optional=True, minValue=0.0))
+        self.addParameter(distance(self, self.CELL_SIZE, "Cell size d", 1.0, self.CRS))
+        self.addParameter(distance(self, self.MAX_GAP, "Maximum gap bridged (empty: 10 cells)",
+                                   None, self.CRS, optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.HOLDOUT, self.tr("Fraction of points held out"),
             DOUBLE, 0.0, minValue=0.0, maxValue=1.0))

@@ -13,7 +13,8 @@ from ..core.errors import FloodMeshError
 from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
                             LOG_KERNELS, MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions)
 from .compat import DOUBLE, INTEGER, VECTOR_LINE
-from .base import FloodMeshAlgorithm, add_domain_parameters, crs_or_none, domain_files, labels
+from .base import (FloodMeshAlgorithm, add_domain_parameters, crs_or_none, distance,
+                   domain_files, labels, point_cloud_parameter)
 from .build_mesh import max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
 from .tiles import add_tile_parameters, dask_settings, input_or_tiles
@@ -68,28 +69,28 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         defaults = RunOptions()
+        self.addParameter(point_cloud_parameter(self, "LiDAR point cloud layer"))
         self.addParameter(QgsProcessingParameterFile(
-            self.INPUT, self.tr("LiDAR points or DEM"), fileFilter=INPUT_FILTER, optional=True))
+            self.INPUT, self.tr("… or LiDAR points or a DEM from a file (a folder: its tiles)"),
+            fileFilter=INPUT_FILTER, optional=True))
         add_tile_parameters(self, "LAS/LAZ/XYZ point tiles, or GeoTIFF DEM tiles")
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, self.tr("CRS of the input (when the file has none)"), optional=True))
         self.addParameter(QgsProcessingParameterString(
             self.CLASSES, self.tr("LAS classes to grid, e.g. 2,9 for ground and water (empty: 2 "
                                   "when classified)"), optional=True))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.CELL_SIZE, self.tr("Grid cell size d (m)"), DOUBLE,
-            defaults.cell_size, minValue=0.0))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MAX_GAP, self.tr("Maximum gap bridged (m; empty: 10 cells)"),
-            DOUBLE, None, optional=True, minValue=0.0))
+        self.addParameter(distance(self, self.CELL_SIZE, "Grid cell size d", defaults.cell_size,
+                                   self.CRS))
+        self.addParameter(distance(self, self.MAX_GAP, "Maximum gap bridged (empty: 10 cells)",
+                                   None, self.CRS, optional=True))
         self.addParameter(QgsProcessingParameterEnum(
             self.SLOPE_METHOD, self.tr("Slope method"), options=labels(METHODS),
             defaultValue=METHODS.index(defaults.slope_method)))
-        for name, label, value in (
-                (self.SIGMA, "LoG: Gaussian sigma (m)", defaults.sigma),
-                (self.SENSITIVITY, "LoG: sensitivity, |response| (m)", defaults.sensitivity)):
-            parameter = QgsProcessingParameterNumber(
-                name, self.tr(label), DOUBLE, value, minValue=0.0)
+        for parameter in (
+                distance(self, self.SIGMA, "LoG: Gaussian sigma", defaults.sigma, self.CRS),
+                QgsProcessingParameterNumber(
+                    self.SENSITIVITY, self.tr("LoG: sensitivity, |response| (m)"), DOUBLE,
+                    defaults.sensitivity, minValue=0.0)):
             parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
             self.addParameter(parameter)
         kernel = QgsProcessingParameterEnum(self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"),
@@ -109,9 +110,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterEnum(
             self.SIMPLIFY, self.tr("Break-line simplification"), options=list(SIMPLIFY_LABELS),
             defaultValue=0))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.TOLERANCE, self.tr("Tolerance for Douglas–Peucker or spline (m)"),
-            DOUBLE, 0.9, minValue=0.001))
+        self.addParameter(distance(self, self.TOLERANCE, "Tolerance for Douglas–Peucker or "
+                                   "spline", 0.9, self.CRS, minimum=0.001))
         add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),

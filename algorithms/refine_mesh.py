@@ -6,7 +6,8 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
 
 from ..core.errors import FloodMeshError
 from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POINT
-from .base import FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args
+from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args,
+                   point_cloud_file, point_cloud_parameter)
 from .grid_points import POINT_FILTER
 from .styles import load_mesh
 
@@ -37,6 +38,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.POINTS, self.tr("Measured points (3-D layer) driving the refinement"),
             [VECTOR_POINT], optional=True))
+        self.addParameter(point_cloud_parameter(
+            self, "… or measured points from a LiDAR point cloud layer (ground class)"))
         self.addParameter(QgsProcessingParameterFile(
             self.POINTS_FILE, self.tr("… or measured points from a LiDAR file (LAS/LAZ ground, "
                                       "XYZ)"), fileFilter=POINT_FILTER, optional=True))
@@ -69,13 +72,17 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
 
     def measured_points(self, parameters, context):
         layer = self.parameterAsVectorLayer(parameters, self.POINTS, context)
-        if layer is not None:
-            return layer_file(layer, "Measured points")
-        path = self.parameterAsFile(parameters, self.POINTS_FILE, context)
-        if not path:
+        given = [g for g in (layer_file(layer, "Measured points") if layer is not None else None,
+                             point_cloud_file(self, parameters, context),
+                             self.parameterAsFile(parameters, self.POINTS_FILE, context)) if g]
+        if len(given) > 1:
+            raise FloodMeshError("Refine mesh takes one set of measured points: a 3-D point "
+                                 "layer, a point cloud layer or a LiDAR file, not several")
+        if not given:
             raise FloodMeshError("Refine mesh needs measured points: a 3-D point layer (e.g. "
-                                 "Grid LiDAR points' held-out points) or a LiDAR file")
-        return path
+                                 "Grid LiDAR points' held-out points), a point cloud layer or a "
+                                 "LiDAR file")
+        return given[0]
 
     def check_values(self, parameters, context):
         self.measured_points(parameters, context)

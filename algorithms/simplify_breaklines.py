@@ -2,10 +2,10 @@
 from qgis.core import (QgsProcessingParameterEnum,
                        QgsProcessingParameterFeatureSource, QgsProcessingParameterNumber,
                        QgsProcessingParameterVectorDestination)
-from .compat import DOUBLE, INTEGER, VECTOR_LINE
+from .compat import INTEGER, VECTOR_LINE
 
 from ..core.options import SIMPLIFY_METHODS
-from .base import FloodMeshAlgorithm, layer_file
+from .base import FloodMeshAlgorithm, distance, layer_file
 from .styles import style_breaklines, style_when_loaded
 
 METHODS = ("keep every n-th point", "Douglas-Peucker", "cubic smoothing spline")
@@ -33,12 +33,10 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.KEEP_EVERY, self.tr("Keep every n-th point"),
             INTEGER, 4, minValue=1))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.TOLERANCE, self.tr("Tolerance for Douglas–Peucker or spline (m)"),
-            DOUBLE, 0.9, minValue=0.0))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MIN_DISTANCE, self.tr("Minimum distance between lines (m)"),
-            DOUBLE, 0.5, minValue=0.0))
+        self.addParameter(distance(self, self.TOLERANCE, "Tolerance for Douglas–Peucker or "
+                                   "spline", 0.9, self.INPUT))
+        self.addParameter(distance(self, self.MIN_DISTANCE, "Minimum distance between lines",
+                                   0.5, self.INPUT))
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Simplified break lines"), VECTOR_LINE))
 

@@ -1,10 +1,9 @@
 """Slope: one of the six first-order kernels, or the Laplacian of Gaussian."""
-from qgis.core import (QgsProcessingParameterEnum, QgsProcessingParameterNumber,
+from qgis.core import (QgsProcessingParameterEnum,
                        QgsProcessingParameterRasterDestination, QgsProcessingParameterRasterLayer)
-from .compat import DOUBLE
 
 from ..core.options import BREAKPOINT_METHODS, LOG_KERNELS
-from .base import FloodMeshAlgorithm, labels, layer_file
+from .base import FloodMeshAlgorithm, distance, labels, layer_file
 
 
 class SlopeAlgorithm(FloodMeshAlgorithm):
@@ -25,9 +24,7 @@ class SlopeAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterEnum(
             self.METHOD, self.tr("Method"), options=labels(BREAKPOINT_METHODS),
             defaultValue=BREAKPOINT_METHODS.index("one-over-distance")))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.SIGMA, self.tr("LoG: Gaussian sigma (m)"), DOUBLE,
-            1.0, minValue=0.0))
+        self.addParameter(distance(self, self.SIGMA, "LoG: Gaussian sigma", 1.0, self.INPUT))
         self.addParameter(QgsProcessingParameterEnum(
             self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"), options=labels(LOG_KERNELS),
             defaultValue=0))

@@ -27,15 +27,22 @@ def add_tile_parameters(algorithm, what: str):
 
 
 def input_or_tiles(algorithm, parameters, context, input_name: str):
-    """The one input file, or the list of tiles; exactly one of the two must be given."""
+    """The point-cloud layer's file, the one input file (or folder of tiles), or the list of
+    tiles; exactly one of them must be given."""
+    from .base import point_cloud_file
+
     # QGIS 3.22 gives [''] for an absent list
     tiles = [t for t in algorithm.parameterAsFileList(parameters, TILES, context) if t]
-    source = algorithm.parameterAsFile(parameters, input_name, context)
-    if tiles and source:
-        raise QgsProcessingException("give either one input file or tiles, not both")
-    if not tiles and not source:
-        raise QgsProcessingException("give an input file, or tiles (several files)")
-    return tiles if tiles else source
+    given = [g for g in (point_cloud_file(algorithm, parameters, context),
+                         algorithm.parameterAsFile(parameters, input_name, context),
+                         tiles) if g]
+    if len(given) > 1:
+        raise QgsProcessingException("give one of a point cloud layer, an input file or tiles, "
+                                     "not several")
+    if not given:
+        raise QgsProcessingException("give a point cloud layer, an input file, or tiles "
+                                     "(several files)")
+    return given[0]
 
 
 def dask_settings(algorithm, parameters, context) -> dict:

@@ -6,7 +6,7 @@ from .compat import DOUBLE, INTEGER, VECTOR_LINE
 
 from ..core.options import TRACING_MODES as MODES
 from ..core.options import check_min_points, check_s_crit
-from .base import FloodMeshAlgorithm, labels, layer_file
+from .base import FloodMeshAlgorithm, distance, labels, layer_file
 from .styles import style_breaklines, style_when_loaded
 
 
@@ -41,9 +41,7 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_POINTS, self.tr("Minimum points per line"),
             INTEGER, 3, minValue=2))
-        self.addParameter(QgsProcessingParameterNumber(
-            self.MIN_LENGTH, self.tr("Minimum line length (m)"),
-            DOUBLE, 0.0, minValue=0.0))
+        self.addParameter(distance(self, self.MIN_LENGTH, "Minimum line length", 0.0, self.DEM))
         self.addParameter(QgsProcessingParameterBoolean(
             self.JOIN, self.tr("Join pieces cut at staircase corners"), defaultValue=True))
         seed = QgsProcessingParameterNumber(self.SEED, self.tr("Random seed for ties"),

@@ -56,14 +56,17 @@ def _require_file(path, what: str) -> Path:
 # ---------------------------------------------------------------------------------------------
 # points
 def read_points(path, *, crs=None, classes=None, note=None) -> PointCloud:
-    """Read ground points from LAS/LAZ (class 2 when classified, or ``classes``) or XYZ/CSV text.
+    """Read ground points from LAS/LAZ or an EPT index (class 2 when classified, or ``classes``)
+    or XYZ/CSV text.
 
     ``crs`` overrides the file's own CRS (needed for text files, which carry none). ``note``
     receives what was assumed on the user's behalf (e.g. an unclassified file used whole).
     """
     path = _require_file(path, "point file")
     ext = path.suffix.lower()
-    if ext in (".las", ".laz"):
+    if path.name == EPT_NAME:
+        xyz, file_crs = _read_ept(path, classes, note)
+    elif ext in (".las", ".laz"):
         xyz, file_crs = _read_las(path, classes, note)
     elif ext in (".xyz", ".txt", ".csv", ".pts"):
         xyz, file_crs = _read_xyz(path), None
@@ -90,7 +93,17 @@ def _read_las(path: Path, classes, note=None):
         raise
     except Exception as exc:
         raise FloodMeshError(f"{path.name} is not a readable LAS/LAZ file ({exc})") from None
-    cls = np.asarray(las.classification)
+    try:
+        file_crs = las.header.parse_crs()
+    except Exception:
+        file_crs = None
+    xyz = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
+    return _classes_kept(xyz, np.asarray(las.classification), classes, path.name, note), file_crs
+
+
+def _classes_kept(xyz, cls, classes, name: str, note=None):
+    """The points of ``classes``, or of the ground class (2) when classified, or all of an
+    unclassified cloud (with a note)."""
     present = ", ".join(str(c) for c in np.unique(cls)) or "none"
     if classes is None:
         if np.any(cls == GROUND_CLASS):
@@ -98,26 +111,65 @@ def _read_las(path: Path, classes, note=None):
         elif np.isin(cls, UNCLASSIFIED).all():
             keep = np.ones(len(cls), bool)
             if note:
-                note(f"{path.name} is not classified (classes {present} only): all {len(cls):,} "
+                note(f"{name} is not classified (classes {present} only): all {len(cls):,} "
                      "points are used as ground; classify the ground first (e.g. pdal "
                      "filters.smrf) if they include vegetation or buildings")
         else:
             raise FloodMeshError(
-                f"{path.name} is classified but has no ground points (class 2; classes present: "
+                f"{name} is classified but has no ground points (class 2; classes present: "
                 f"{present}): give the classes to grid (--classes, 'LAS classes' in QGIS), or "
                 "classify the ground first (e.g. pdal translate with filters.smrf)")
     else:
         keep = np.isin(cls, list(classes))
         if not keep.any():
-            raise FloodMeshError(f"{path.name} has no points of classes {sorted(classes)} "
+            raise FloodMeshError(f"{name} has no points of classes {sorted(classes)} "
                                  f"(classes present: {present}); choose other classes")
-    xyz = np.column_stack([np.asarray(las.x)[keep], np.asarray(las.y)[keep],
-                           np.asarray(las.z)[keep]])
+    return xyz[keep]
+
+
+EPT_NAME = "ept.json"  # an Entwine Point Tile index, as QGIS's point-cloud layers open them
+
+
+def is_point_source(path) -> bool:
+    """True for a point file FloodMesh reads: LAS/LAZ (COPC too), XYZ/CSV text, or an EPT."""
+    path = Path(path)
+    return path.suffix.lower() in POINT_EXTENSIONS or path.name == EPT_NAME
+
+
+def _read_ept(path: Path, classes, note=None):
+    """The points of an Entwine Point Tile index (``ept.json`` with LAZ nodes in ``ept-data``,
+    as Entwine, untwine and QGIS 3.22 with PDAL write): every node, since each point lies in
+    exactly one."""
+    import json
+
+    import laspy
+
     try:
-        file_crs = las.header.parse_crs()
-    except Exception:
-        file_crs = None
-    return xyz, file_crs
+        meta = json.loads(path.read_text())
+        kind, count = meta.get("dataType"), int(meta.get("points", 0))
+    except (OSError, ValueError, AttributeError) as exc:
+        raise FloodMeshError(f"{path} is not a readable EPT index ({exc})") from None
+    if kind != "laszip":
+        raise FloodMeshError(f"{path}: EPT nodes of type {kind!r} cannot be read, only laszip "
+                             "(LAZ): give the LAS/LAZ files the index was built from")
+    nodes = sorted((path.parent / "ept-data").glob("*.laz"))
+    if not nodes:
+        raise FloodMeshError(f"{path}: its ept-data folder holds no LAZ nodes")
+    check_memory(points=count, advice="give the LAS/LAZ tiles the index was built from as "
+                                      "tiles")
+    parts, cls = [], []
+    for node in nodes:
+        try:
+            las = laspy.read(node)
+        except Exception as exc:
+            raise FloodMeshError(f"{path}: node {node.name} is not readable LAZ ({exc})") from None
+        parts.append(np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)]))
+        cls.append(np.asarray(las.classification))
+    srs = meta.get("srs") or {}
+    file_crs = srs.get("wkt") or (f"{srs['authority']}:{srs['horizontal']}"
+                                  if srs.get("authority") and srs.get("horizontal") else None)
+    name = f"{path.parent.name}/{EPT_NAME}"
+    return _classes_kept(np.vstack(parts), np.concatenate(cls), classes, name, note), file_crs
 
 
 def _read_xyz(path: Path) -> np.ndarray:
@@ -306,7 +358,7 @@ def read_input(path, *, crs=None, classes=None, note=None):
     ext = Path(path).suffix.lower()
     if ext in RASTER_EXTENSIONS:
         return read_raster(path, crs=crs, note=note)
-    if ext in POINT_EXTENSIONS:
+    if is_point_source(path):
         return read_points(path, crs=crs, classes=classes, note=note)
     _require_file(path, "input")
     raise FloodMeshError(f"{Path(path).name}: unknown input type '{ext}'; give a LAS/LAZ or XYZ/CSV "

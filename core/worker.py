@@ -73,7 +73,7 @@ def _points_xyz(path, crs=None):
     from . import io
     from .raster import require_metric_crs
 
-    if Path(path).suffix.lower() in io.POINT_EXTENSIONS:
+    if io.is_point_source(path):
         cloud = io.read_points(path, crs=crs)
         return cloud.xyz, cloud.crs
     return io.read_points_vector(path), require_metric_crs(crs or io.vector_crs(path),

@@ -53,6 +53,7 @@ def test_a_worker_python_without_the_packages_says_what_to_install(real_data, tm
     command, not a ModuleNotFoundError."""
     run = _run([real_data / "merewether_topography1.asc", tmp_path / "slope.tif"],
                FLOODMESH_PYTHON="/usr/bin/python3")
+    assert "RUN" in run.stdout, run.stdout + run.stderr
     ran = run.stdout[run.stdout.index("RUN"):]
     assert "QgsProcessingException" in ran and "triangle" in ran and "numba" in ran
     assert "pip install" in ran and "FLOODMESH_PYTHON" in ran
