@@ -74,27 +74,70 @@ def ensure_python(feedback) -> str:
         return python
     venv = managed_venv()
     feedback.pushInfo(f"{FIRST_RUN_MESSAGE} Setting up {venv} …")
+    create_managed_venv(venv, feedback)
+    return str(venv / "bin" / "python")
+
+
+def create_managed_venv(venv: Path, feedback) -> None:
+    """Create ``venv`` from the system's Python and pip-install MANAGED_PACKAGES into it, each
+    command a child process in its own group that Cancel kills at once. Only a complete
+    environment gets the READY mark; a cancelled or failed one is removed, and so is one that
+    an earlier run left unmarked (QGIS killed mid-install), so no run takes a half-made one."""
+    import shutil
+
+    if venv.exists() and not (venv / READY).exists():
+        shutil.rmtree(venv, ignore_errors=True)
     numpy = subprocess.run([SYSTEM_PYTHON, "-c", "import numpy; print(numpy.__version__)"],
                            capture_output=True, text=True)
     pin = [f"numpy=={numpy.stdout.strip()}"] if numpy.returncode == 0 else []
     commands = [[SYSTEM_PYTHON, "-m", "venv", "--system-site-packages", str(venv)],
                 [str(venv / "bin" / "python"), "-m", "pip", "install", "--disable-pip-version-check",
                  "-q", *MANAGED_PACKAGES, *pin]]
-    for command in commands:
-        done = subprocess.run(command, capture_output=True, text=True)
-        if done.returncode != 0:
-            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or [""]
-            raise QgsProcessingException(
-                f"FloodMesh could not set up its Python packages ({' '.join(command[:4])}…: "
-                f"{tail[0]}); on Debian/Ubuntu install python3-venv (apt install python3-venv) "
-                f"and check the internet connection, or set {ENV_VARIABLE} to a Python with "
-                f"triangle, laspy[lazrs], numba and shapely 2 (see the README's 'In QGIS')")
-    proj = venv / "share" / "proj"
-    if not proj.exists() and Path("/usr/share/proj").is_dir():
-        proj.parent.mkdir(parents=True, exist_ok=True)
-        proj.symlink_to("/usr/share/proj")
-    (venv / READY).write_text(" ".join(MANAGED_PACKAGES + tuple(pin)) + "\n")
-    return str(venv / "bin" / "python")
+    try:
+        for command in commands:
+            code, output = _run_cancellable(command, feedback)
+            if code is None:
+                raise QgsProcessingException(
+                    "Cancelled while FloodMesh set up its Python packages; the unfinished "
+                    f"environment {venv} was removed, the next run sets it up again")
+            if code != 0:
+                tail = output.strip().splitlines()[-1:] or [""]
+                raise QgsProcessingException(
+                    f"FloodMesh could not set up its Python packages ({' '.join(command[:4])}…: "
+                    f"{tail[0]}); on Debian/Ubuntu install python3-venv (apt install "
+                    f"python3-venv) and check the internet connection, or set {ENV_VARIABLE} to "
+                    f"a Python with triangle, laspy[lazrs], numba and shapely 2 (see the "
+                    f"README's 'In QGIS')")
+        proj = venv / "share" / "proj"
+        if not proj.exists() and Path("/usr/share/proj").is_dir():
+            proj.parent.mkdir(parents=True, exist_ok=True)
+            proj.symlink_to("/usr/share/proj")
+        (venv / READY).write_text(" ".join(MANAGED_PACKAGES + tuple(pin)) + "\n")
+    except BaseException:
+        shutil.rmtree(venv, ignore_errors=True)
+        raise
+
+
+def _run_cancellable(command, feedback) -> tuple:
+    """(exit code, output) of ``command``, or (None, "") when Cancel ended it: it runs in a
+    process group of its own (pip's own children included), killed whole on Cancel."""
+    with tempfile.TemporaryFile("w+", encoding="utf-8", errors="replace") as log:
+        child = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                                 stdin=subprocess.DEVNULL, start_new_session=True)
+        while True:
+            try:
+                code = child.wait(timeout=0.2)
+                break
+            except subprocess.TimeoutExpired:
+                if feedback is not None and feedback.isCanceled():
+                    try:
+                        os.killpg(child.pid, signal.SIGKILL)
+                    except OSError:
+                        child.kill()
+                    child.wait()
+                    return None, ""
+        log.seek(0)
+        return code, log.read()
 
 
 def _import_root() -> Path:
