@@ -161,3 +161,109 @@ def test_a_killed_worker_is_one_clear_error_and_leaves_no_partial_file(qgis_proc
     assert "Traceback" not in output
     assert not (out / "mesh.2dm").exists()
     assert not out.exists() or [p.name for p in out.glob(".*")] == []
+
+
+def _write_ept(laz, folder):
+    """An Entwine Point Tile index of ``laz`` (ept.json, one LAZ node holding every point), the
+    point-cloud format Debian's QGIS (built without PDAL) opens as a layer."""
+    import laspy
+
+    (folder / "ept-data").mkdir(parents=True)
+    (folder / "ept-hierarchy").mkdir()
+    las = laspy.read(laz)
+    las.write(folder / "ept-data" / "0-0-0-0.laz")
+    header = las.header
+    low, high = header.mins, header.maxs
+    half, middle = float(max(high - low)) / 2 + 1, (low + high) / 2
+    axes = [{"name": n, "type": "signed", "size": 4, "scale": float(s), "offset": float(o)}
+            for n, s, o in zip("XYZ", header.scales, header.offsets)]
+    meta = {"bounds": [*map(float, middle - half), *map(float, middle + half)],
+            "boundsConforming": [*map(float, low), *map(float, high)], "dataType": "laszip",
+            "hierarchyType": "json", "points": int(header.point_count), "span": 128,
+            "schema": axes + [{"name": "Classification", "type": "unsigned", "size": 1}],
+            "srs": {"wkt": header.parse_crs().to_wkt()}, "version": "1.0.0"}
+    (folder / "ept.json").write_text(json.dumps(meta))
+    (folder / "ept-hierarchy" / "0-0-0-0.json").write_text(
+        json.dumps({"0-0-0-0": int(header.point_count)}))
+    return folder / "ept.json"
+
+
+def test_a_point_cloud_layer_grids_and_refines_as_its_laz_does(qgis_process, topography,
+                                                                real_data, tmp_path):
+    """Topography.laz as a point-cloud layer (QGIS's `ept://` source form on the command
+    line; in the dialog the layer loaded in the project): the same DEM as from the file, and
+    refinement takes its points."""
+    ept = _write_ept(real_data / "Topography.laz", tmp_path / "topography-ept")
+    layer = f"ept://{ept}"
+    from_layer = _run(qgis_process, "gridpoints", POINT_CLOUD=layer, CELL_SIZE=2.0,
+                      OUTPUT=tmp_path / "layer.tif")
+    from_file = _run(qgis_process, "gridpoints", INPUT=real_data / "Topography.laz",
+                     CELL_SIZE=2.0, OUTPUT=tmp_path / "file.tif")
+    a, b = io.read_raster(from_layer["OUTPUT"]), io.read_raster(from_file["OUTPUT"])
+    assert a.transform == b.transform and np.array_equal(a.values, b.values, equal_nan=True)
+    out, _ = topography
+    refined = _run(qgis_process, "refinemesh", DEM=out / "dem.tif",
+                   BREAKLINES=out / "breaklines.gpkg", POINT_CLOUD=layer, MAX_AREA=100,
+                   MAX_ROUNDS=1, OUTPUT=tmp_path / "refined.2dm")
+    assert refined["NODES"] > json.loads((out / "report.json").read_text())["nodes"]
+
+
+ECHO_PLUGIN = '''
+from qgis.core import (QgsApplication, QgsProcessingAlgorithm, QgsProcessingException,
+                       QgsProcessingProvider)
+class Fails(QgsProcessingAlgorithm):
+    def name(self): return "fails"
+    def displayName(self): return "fails"
+    def createInstance(self): return Fails()
+    def initAlgorithm(self, config=None): pass
+    def processAlgorithm(self, parameters, context, feedback):
+        raise QgsProcessingException("the one error")
+class Provider(QgsProcessingProvider):
+    def id(self): return "echo"
+    def name(self): return "echo"
+    def loadAlgorithms(self): self.addAlgorithm(Fails())
+class Plugin:
+    def __init__(self, iface): self.provider = None
+    def initProcessing(self):
+        self.provider = Provider()
+        QgsApplication.processingRegistry().addProvider(self.provider)
+    def initGui(self): self.initProcessing()
+    def unload(self): pass
+def classFactory(iface): return Plugin(iface)
+'''
+
+
+@pytest.mark.parametrize("json_mode", [False, True])
+def test_an_error_is_echoed_only_as_qgis_process_echoes_any_algorithm_error(
+        qgis_process, tmp_path, json_mode):
+    """qgis_process (3.22 and 3.40) prints an algorithm's QgsProcessingException three times:
+    QgsProcessingAlgorithm::run logs it (Critical) and qgis_process echoes every Critical log
+    line to stderr; its console feedback prints `ERROR:\t…`; and QgsProcessingFeedback's
+    reportError logs it once more, echoed again (with --json the `ERROR:` line is left out).
+    A minimal plugin that raises gives the same count: FloodMesh adds no echo of its own."""
+    exe, env = qgis_process
+    plugins = tmp_path / "plugins" / "echoplugin"
+    plugins.mkdir(parents=True)
+    (plugins / "__init__.py").write_text(ECHO_PLUGIN)
+    (plugins / "metadata.txt").write_text(
+        "[general]\nname=echoplugin\nqgisMinimumVersion=3.22\ndescription=x\nversion=1\n"
+        "author=x\nemail=x@example.invalid\nabout=x\nrepository=x\ntracker=x\n"
+        "hasProcessingProvider=yes\n")
+    env = {**env, "QGIS_PLUGINPATH": f"{env['QGIS_PLUGINPATH']}:{tmp_path / 'plugins'}"}
+    subprocess.run([exe, "plugins", "enable", "echoplugin"], env=env, capture_output=True,
+                   timeout=120)
+    flag = ["--json"] if json_mode else []
+
+    def output(*arguments):
+        run = subprocess.run([exe, "run", *arguments[:1], *flag, "--", *arguments[1:]], env=env,
+                             capture_output=True, text=True, timeout=300)
+        assert run.returncode == 1
+        return run.stdout + run.stderr
+
+    peer = output("echo:fails")
+    missing = tmp_path / "missing.laz"
+    ours = output("floodmesh:lidartomesh", f"INPUT={missing}", f"OUTPUT_FOLDER={tmp_path / 'o'}")
+    message = f"point file {missing} does not exist: check the path"
+    assert ours.count(message) == peer.count("the one error") == (2 if json_mode else 3), ours
+    assert ours.count(f"ERROR:\t{message}") == peer.count("ERROR:\tthe one error")
+    assert "Traceback" not in ours
