@@ -9,7 +9,7 @@ import subprocess
 
 import pytest
 
-from .conftest import REPO
+from .conftest import REPO, write_ept
 
 SCRIPT = r"""
 import json, os, sys, traceback
@@ -27,6 +27,19 @@ try:
     out["mesh_crs"] = mesh.crs().authid()
     out["edges"] = mesh.rendererSettings().nativeMeshSettings().isEnabled()
     out["scale"] = iface.mapCanvas().scale()
+    # what the dialog shows: the cell size's unit (the CRS parameter is empty: metres)
+    from qgis.PyQt.QtWidgets import QComboBox, QLabel
+    from qgis.core import QgsPointCloudLayer
+    dialog = processing.createAlgorithmDialog("floodmesh:lidartomesh", {})
+    widget = dialog.mainWidget().wrappers["CELL_SIZE"].wrappedWidget()
+    out["cell_size_unit"] = ([l.text() for l in widget.findChildren(QLabel)]
+                             + [c.currentText() for c in widget.findChildren(QComboBox)])
+    # a point-cloud layer of the project as the LiDAR input
+    cloud = QgsPointCloudLayer(os.environ["FM_EPT"], "Topography", "ept")
+    project.addMapLayer(cloud)
+    grid = processing.run("floodmesh:gridpoints", {"POINT_CLOUD": cloud.id(), "CELL_SIZE": 2.0,
+                                                   "OUTPUT": os.environ["FM_OUTPUT"] + ".tif"})
+    out["grid"] = grid["OUTPUT"]
     out["imported"] = sorted(m for m in ("shapely", "triangle", "numba", "laspy")
                              if m in sys.modules)
 except Exception:
@@ -47,7 +60,8 @@ def test_the_desktop_runs_lidar_to_mesh_and_shows_the_result(real_data, tmp_path
     env.update(HOME=str(tmp_path), XDG_DATA_HOME=str(tmp_path / "data"),
                QGIS_PLUGINPATH=str(REPO / "build" / "plugins"),
                FM_INPUT=str(real_data / "Topography.laz"), FM_OUTPUT=str(tmp_path / "run"),
-               FM_RESULT=str(result))  # the script's arguments (qgis.bin would open more)
+               FM_RESULT=str(result),
+               FM_EPT=str(write_ept(real_data / "Topography.laz", tmp_path / "ept")))  # the script's arguments (qgis.bin would open more)
     run = subprocess.run(["xvfb-run", "-a", "qgis.bin", "--noversioncheck", "--nologo",
                           "--code", str(tmp_path / "run.py")],
                          env=env, capture_output=True, text=True, timeout=300)
@@ -57,4 +71,6 @@ def test_the_desktop_runs_lidar_to_mesh_and_shows_the_result(real_data, tmp_path
     assert seen["order"] == ["Break lines", "Residuals", "Mesh"]
     assert seen["mesh_crs"] == "EPSG:2949" and seen["edges"]
     assert seen["scale"] < 100_000  # zoomed to the 286 m tile, not the whole world
+    assert any("meter" in text.lower() for text in seen["cell_size_unit"]), seen
+    assert seen["grid"] == str(tmp_path / "run.tif") and (tmp_path / "run.tif").exists()
     assert seen["imported"] == []

@@ -17,6 +17,7 @@ from floodmesh.core import io
 from floodmesh.core.raster import Grid
 
 from ..conftest import REAL_DATA
+from .conftest import write_ept
 
 TOPOGRAPHY_CRS = CRS.from_epsg(2949)
 
@@ -163,37 +164,12 @@ def test_a_killed_worker_is_one_clear_error_and_leaves_no_partial_file(qgis_proc
     assert not out.exists() or [p.name for p in out.glob(".*")] == []
 
 
-def _write_ept(laz, folder):
-    """An Entwine Point Tile index of ``laz`` (ept.json, one LAZ node holding every point), the
-    point-cloud format Debian's QGIS (built without PDAL) opens as a layer."""
-    import laspy
-
-    (folder / "ept-data").mkdir(parents=True)
-    (folder / "ept-hierarchy").mkdir()
-    las = laspy.read(laz)
-    las.write(folder / "ept-data" / "0-0-0-0.laz")
-    header = las.header
-    low, high = header.mins, header.maxs
-    half, middle = float(max(high - low)) / 2 + 1, (low + high) / 2
-    axes = [{"name": n, "type": "signed", "size": 4, "scale": float(s), "offset": float(o)}
-            for n, s, o in zip("XYZ", header.scales, header.offsets)]
-    meta = {"bounds": [*map(float, middle - half), *map(float, middle + half)],
-            "boundsConforming": [*map(float, low), *map(float, high)], "dataType": "laszip",
-            "hierarchyType": "json", "points": int(header.point_count), "span": 128,
-            "schema": axes + [{"name": "Classification", "type": "unsigned", "size": 1}],
-            "srs": {"wkt": header.parse_crs().to_wkt()}, "version": "1.0.0"}
-    (folder / "ept.json").write_text(json.dumps(meta))
-    (folder / "ept-hierarchy" / "0-0-0-0.json").write_text(
-        json.dumps({"0-0-0-0": int(header.point_count)}))
-    return folder / "ept.json"
-
-
 def test_a_point_cloud_layer_grids_and_refines_as_its_laz_does(qgis_process, topography,
                                                                 real_data, tmp_path):
     """Topography.laz as a point-cloud layer (QGIS's `ept://` source form on the command
     line; in the dialog the layer loaded in the project): the same DEM as from the file, and
     refinement takes its points."""
-    ept = _write_ept(real_data / "Topography.laz", tmp_path / "topography-ept")
+    ept = write_ept(real_data / "Topography.laz", tmp_path / "topography-ept")
     layer = f"ept://{ept}"
     from_layer = _run(qgis_process, "gridpoints", POINT_CLOUD=layer, CELL_SIZE=2.0,
                       OUTPUT=tmp_path / "layer.tif")
