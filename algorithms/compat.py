@@ -44,3 +44,10 @@ else:
     from qgis.core import QgsUnitTypes
 
     METRES = QgsUnitTypes.DistanceMeters
+
+if hasattr(Qgis, "ProcessingFileParameterBehavior"):  # QGIS >= 3.36
+    FOLDER = Qgis.ProcessingFileParameterBehavior.Folder
+else:
+    from qgis.core import QgsProcessingParameterFile
+
+    FOLDER = QgsProcessingParameterFile.Folder

@@ -1,19 +1,23 @@
 """The tile parameters LiDAR to mesh and Grid LiDAR points share: several point (or DEM) tiles
 instead of one file, and the Dask workers or scheduler that grid them."""
 from qgis.core import (QgsProcessingException, QgsProcessingParameterDefinition,
-                       QgsProcessingParameterMultipleLayers, QgsProcessingParameterNumber,
-                       QgsProcessingParameterString)
+                       QgsProcessingParameterFile, QgsProcessingParameterMultipleLayers,
+                       QgsProcessingParameterNumber, QgsProcessingParameterString)
 
-from .compat import FILE_SOURCE, INTEGER
+from .compat import FILE_SOURCE, FOLDER, INTEGER
 
-TILES, WORKERS, SCHEDULER = "TILES", "WORKERS", "SCHEDULER"
+TILES, TILE_FOLDER, WORKERS, SCHEDULER = "TILES", "TILE_FOLDER", "WORKERS", "SCHEDULER"
 
 
 def add_tile_parameters(algorithm, what: str):
-    """Add TILES (files; ``what`` they are), WORKERS and SCHEDULER (advanced) to ``algorithm``."""
+    """Add TILES (files; ``what`` they are), TILE_FOLDER (a folder of them), WORKERS and
+    SCHEDULER (advanced) to ``algorithm``."""
     tr = algorithm.tr
     algorithm.addParameter(QgsProcessingParameterMultipleLayers(
         TILES, tr(f"Tiles instead of one file: {what}"), layerType=FILE_SOURCE,
+        optional=True))
+    algorithm.addParameter(QgsProcessingParameterFile(
+        TILE_FOLDER, tr("… or a folder of tiles (its point or DEM files)"), behavior=FOLDER,
         optional=True))
     for parameter in (
             QgsProcessingParameterNumber(
@@ -35,13 +39,14 @@ def input_or_tiles(algorithm, parameters, context, input_name: str):
     tiles = [t for t in algorithm.parameterAsFileList(parameters, TILES, context) if t]
     given = [g for g in (point_cloud_file(algorithm, parameters, context),
                          algorithm.parameterAsFile(parameters, input_name, context),
-                         tiles) if g]
+                         tiles, algorithm.parameterAsFile(parameters, TILE_FOLDER, context))
+             if g]
     if len(given) > 1:
-        raise QgsProcessingException("give one of a point cloud layer, an input file or tiles, "
-                                     "not several")
+        raise QgsProcessingException("give one of a point cloud layer, an input file, tiles or "
+                                     "a folder of tiles, not several")
     if not given:
         raise QgsProcessingException("give a point cloud layer, an input file, or tiles "
-                                     "(several files)")
+                                     "(several files or a folder)")
     return given[0]
 
 

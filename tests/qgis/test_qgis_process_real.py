@@ -167,16 +167,22 @@ def test_a_killed_worker_is_one_clear_error_and_leaves_no_partial_file(qgis_proc
 def test_a_point_cloud_layer_grids_and_refines_as_its_laz_does(qgis_process, topography,
                                                                 real_data, tmp_path):
     """Topography.laz as a point-cloud layer (QGIS's `ept://` source form on the command
-    line; in the dialog the layer loaded in the project): the same DEM as from the file, and
-    refinement takes its points."""
+    line; in the dialog the layer loaded in the project) and a folder of tiles: the same DEM as
+    from the file; refinement takes the layer's points."""
     ept = write_ept(real_data / "Topography.laz", tmp_path / "topography-ept")
     layer = f"ept://{ept}"
     from_layer = _run(qgis_process, "gridpoints", POINT_CLOUD=layer, CELL_SIZE=2.0,
                       OUTPUT=tmp_path / "layer.tif")
     from_file = _run(qgis_process, "gridpoints", INPUT=real_data / "Topography.laz",
                      CELL_SIZE=2.0, OUTPUT=tmp_path / "file.tif")
-    a, b = io.read_raster(from_layer["OUTPUT"]), io.read_raster(from_file["OUTPUT"])
-    assert a.transform == b.transform and np.array_equal(a.values, b.values, equal_nan=True)
+    (tmp_path / "tiles").mkdir()
+    (tmp_path / "tiles" / "Topography.laz").symlink_to(real_data / "Topography.laz")
+    from_folder = _run(qgis_process, "gridpoints", TILE_FOLDER=tmp_path / "tiles",
+                       CELL_SIZE=2.0, OUTPUT=tmp_path / "folder.tif")
+    b = io.read_raster(from_file["OUTPUT"])
+    for other in (from_layer, from_folder):
+        a = io.read_raster(other["OUTPUT"])
+        assert a.transform == b.transform and np.array_equal(a.values, b.values, equal_nan=True)
     out, _ = topography
     refined = _run(qgis_process, "refinemesh", DEM=out / "dem.tif",
                    BREAKLINES=out / "breaklines.gpkg", POINT_CLOUD=layer, MAX_AREA=100,
