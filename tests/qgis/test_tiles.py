@@ -35,7 +35,7 @@ def test_grid_and_mesh_tiles_through_processing(processing, survey, tmp_path):
     assert tiled.transform == single.transform
     np.testing.assert_array_equal(tiled.values, single.values)
     assert progress and max(progress) == pytest.approx(100)
-    with pytest.raises(Exception, match="either one input file or tiles"):
+    with pytest.raises(Exception, match="an input file, tiles or a folder of tiles, not several"):
         processing.run("floodmesh:gridpoints", {
             "INPUT": str(survey / "single.laz"), "TILES": tiles, "CELL_SIZE": 1.0,
             "OUTPUT": str(tmp_path / "both.tif")},
