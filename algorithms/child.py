@@ -21,6 +21,7 @@ import signal
 import subprocess
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 from qgis.core import QgsMessageLog, QgsProcessingException
@@ -118,6 +119,17 @@ def create_managed_venv(venv: Path, feedback) -> None:
         raise
 
 
+def _deliver_cancel() -> None:
+    """Let a Cancel that waits in the event queue through: qgis_process runs the algorithm in
+    its main thread and turns Ctrl-C into feedback.cancel() only when events are processed (the
+    dialog runs it in a task thread, whose Cancel needs none of this)."""
+    from qgis.PyQt.QtCore import QCoreApplication, QThread
+
+    app = QCoreApplication.instance()
+    if app is not None and QThread.currentThread() == app.thread():
+        QCoreApplication.processEvents()
+
+
 def _run_cancellable(command, feedback) -> tuple:
     """(exit code, output) of ``command``, or (None, "") when Cancel ended it: it runs in a
     process group of its own (pip's own children included), killed whole on Cancel."""
@@ -129,6 +141,7 @@ def _run_cancellable(command, feedback) -> tuple:
                 code = child.wait(timeout=0.2)
                 break
             except subprocess.TimeoutExpired:
+                _deliver_cancel()
                 if feedback is not None and feedback.isCanceled():
                     try:
                         os.killpg(child.pid, signal.SIGKILL)
@@ -215,7 +228,11 @@ def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> 
     child.stdin.close()
     result = error = None
     cancelled = False
+    polled = time.monotonic()
     while True:
+        if time.monotonic() - polled > 0.2:
+            _deliver_cancel()
+            polled = time.monotonic()
         if feedback is not None and feedback.isCanceled() and not cancelled:
             cancelled = True
             try:  # the worker and whatever it started

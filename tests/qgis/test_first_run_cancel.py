@@ -3,14 +3,21 @@ ZIP): the real `python -m venv` and `pip install`, against a package index that 
 connection and never answers (a slow or hung mirror), end within a second of Cancel, pip's
 process group with them, and no half-made environment is left for a later run to take."""
 import os
+import shutil
+import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
+import zipfile
 
 import pytest
 from qgis.core import QgsProcessingException, QgsProcessingFeedback
 
 from floodmesh.algorithms import child
+
+from .conftest import REPO
 
 
 def _pip_of(venv):
@@ -35,14 +42,21 @@ def _alive(pid):
         return False
 
 
-def test_cancel_kills_the_first_run_pip_install_and_keeps_no_half_made_venv(tmp_path,
-                                                                             monkeypatch):
+def _hung_index():
+    """A package index that accepts connections and never answers, and pip's settings for it."""
     hung = socket.socket()
     hung.bind(("127.0.0.1", 0))
     hung.listen(64)  # the kernel completes the connections; nothing ever answers
-    monkeypatch.setenv("PIP_CONFIG_FILE", "/dev/null")  # no mirror from the machine's pip.conf
-    monkeypatch.setenv("PIP_INDEX_URL", f"http://127.0.0.1:{hung.getsockname()[1]}/simple/")
-    monkeypatch.setenv("PIP_DEFAULT_TIMEOUT", "120")
+    return hung, {"PIP_CONFIG_FILE": "/dev/null",  # no mirror from the machine's pip.conf
+                  "PIP_INDEX_URL": f"http://127.0.0.1:{hung.getsockname()[1]}/simple/",
+                  "PIP_DEFAULT_TIMEOUT": "120"}
+
+
+def test_cancel_kills_the_first_run_pip_install_and_keeps_no_half_made_venv(tmp_path,
+                                                                             monkeypatch):
+    hung, settings = _hung_index()
+    for name, value in settings.items():
+        monkeypatch.setenv(name, value)
     venv = tmp_path / "profile" / "floodmesh" / "venv"
     feedback = QgsProcessingFeedback()
     seen = {}
@@ -85,3 +99,44 @@ def test_an_unmarked_venv_from_a_killed_first_run_is_not_taken(tmp_path, monkeyp
     with pytest.raises(QgsProcessingException, match="could not set up its Python packages"):
         child.create_managed_venv(venv, QgsProcessingFeedback())
     assert not venv.exists()
+
+
+def test_ctrl_c_in_qgis_process_stops_the_first_run_setup(tmp_path, real_data):
+    """The plugin installed from its ZIP into a fresh profile, as on a stock QGIS: Ctrl-C
+    (SIGINT) to qgis_process while pip waits ends the run at once, with the message once from
+    FloodMesh and no environment left in the profile."""
+    exe = shutil.which("qgis_process.bin") or shutil.which("qgis_process")
+    built = subprocess.run([sys.executable, str(REPO / "scripts" / "build_plugin_zip.py"),
+                            str(tmp_path / "dist")], capture_output=True, text=True)
+    assert built.returncode == 0, built.stderr
+    profile = tmp_path / "home" / "data" / "QGIS" / "QGIS3" / "profiles" / "default"
+    with zipfile.ZipFile(next((tmp_path / "dist").glob("floodmesh-*.zip"))) as z:
+        z.extractall(profile / "python" / "plugins")
+    hung, settings = _hung_index()
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("QGIS_PLUGINPATH", "PYTHONPATH", "FLOODMESH_PYTHON")}
+    env.update(QT_QPA_PLATFORM="offscreen", HOME=str(tmp_path / "home"),
+               XDG_DATA_HOME=str(tmp_path / "home" / "data"), **settings)
+    subprocess.run([exe, "plugins", "enable", "floodmesh"], env=env, capture_output=True,
+                   timeout=120)
+    venv = profile / "floodmesh" / "venv"
+    run = subprocess.Popen([exe, "run", "floodmesh:slope", "--",
+                            f"INPUT={real_data / 'merewether_topography1.asc'}",
+                            f"OUTPUT={tmp_path / 'slope.tif'}"], env=env, text=True,
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        deadline = time.monotonic() + 120
+        while _pip_of(venv) is None and time.monotonic() < deadline and run.poll() is None:
+            time.sleep(0.1)
+        pip = _pip_of(venv)
+        assert pip is not None, "pip never started"
+        time.sleep(2.0)
+        run.send_signal(signal.SIGINT)
+        output, _ = run.communicate(timeout=20)  # not pip's 120 s timeout
+    finally:
+        hung.close()
+        if run.poll() is None:
+            run.kill()
+    assert run.returncode == 1 and "Cancelled while FloodMesh set up" in output, output
+    assert "Traceback" not in output
+    assert not _alive(pip) and not venv.exists()
