@@ -75,6 +75,11 @@ PARAMETER_HELP = {
     "POINTS": "3-D points (z) that drive the refinement, e.g. Grid LiDAR points' held-out "
               "points.",
     "POINTS_FILE": "A LAS/LAZ (ground class) or XYZ file of measured points, instead of a layer.",
+    "POINT_CLOUD": "A point cloud layer of the project: LAS/LAZ (QGIS with PDAL), COPC or an "
+                   "EPT index (ept.json). Debian's QGIS opens no plain LAS/LAZ as a layer: give "
+                   "the file below instead. On the command line: ept:///path/ept.json.",
+    "TILE_FOLDER": "A folder whose LAS/LAZ/XYZ (or GeoTIFF DEM) files are the tiles (not "
+                   "recursive).",
     "CHECK": "3-D points only measured each round, never inserted: an independent check.",
     "SNAP": "Boundary nodes within this distance (m) of an open boundary line become open.",
     "REGIONS": "Polygons whose triangles (by centroid) get a material id.",

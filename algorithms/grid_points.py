@@ -27,7 +27,7 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(point_cloud_parameter(self, "LiDAR point cloud layer"))
         self.addParameter(QgsProcessingParameterFile(self.INPUT, self.tr(
-            "… or LiDAR points from a file (LAS/LAZ, XYZ/CSV; a folder: its tiles)"),
+            "… or LiDAR points from a file (LAS/LAZ, XYZ/CSV)"),
             fileFilter=POINT_FILTER, optional=True))
         add_tile_parameters(self, "LAS/LAZ/XYZ point tiles")
         self.addParameter(QgsProcessingParameterCrs(

@@ -71,7 +71,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         defaults = RunOptions()
         self.addParameter(point_cloud_parameter(self, "LiDAR point cloud layer"))
         self.addParameter(QgsProcessingParameterFile(
-            self.INPUT, self.tr("… or LiDAR points or a DEM from a file (a folder: its tiles)"),
+            self.INPUT, self.tr("… or LiDAR points or a DEM from a file"),
             fileFilter=INPUT_FILTER, optional=True))
         add_tile_parameters(self, "LAS/LAZ/XYZ point tiles, or GeoTIFF DEM tiles")
         self.addParameter(QgsProcessingParameterCrs(
