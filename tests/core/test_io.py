@@ -341,3 +341,23 @@ def test_points_gpkg_attributes_round_trip(tmp_path):
     np.testing.assert_allclose([f["properties"]["value"] for f in feats], floats, rtol=0, atol=0)
     assert [f["properties"]["label"] for f in feats] == strs.tolist()
     np.testing.assert_allclose(io.read_points_vector(path), xyz, rtol=0, atol=1e-9)
+
+
+def test_an_ept_index_reads_as_the_laz_it_was_built_from(real_data, tmp_path):
+    """Every node of an Entwine Point Tile index, each point in exactly one: the same ground
+    points (class 2) and CRS as the LAZ."""
+    import json
+
+    from ..ept import write_ept
+
+    ept = write_ept(real_data / "Topography.laz", tmp_path / "ept", nodes=3)
+    from_ept = io.read_points(ept)
+    from_laz = io.read_points(real_data / "Topography.laz")
+    order = lambda xyz: xyz[np.lexsort(xyz.T)]  # noqa: E731
+    np.testing.assert_array_equal(order(from_ept.xyz), order(from_laz.xyz))
+    assert from_ept.crs == from_laz.crs
+    assert io.is_point_source(ept) and not io.is_point_source(tmp_path / "other.json")
+    meta = json.loads(ept.read_text())
+    ept.write_text(json.dumps({**meta, "dataType": "binary"}))
+    with pytest.raises(FloodMeshError, match="EPT nodes of type 'binary' cannot be read"):
+        io.read_points(ept)

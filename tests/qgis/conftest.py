@@ -15,6 +15,8 @@ sys.path.append("/usr/share/qgis/python/plugins")  # the Processing framework
 
 import pytest  # noqa: E402
 
+from ..ept import write_ept  # noqa: E402,F401  (the QGIS tests' point-cloud layers)
+
 qgis_core = pytest.importorskip("qgis.core", reason="QGIS (python3-qgis) is not installed")
 QgsApplication = qgis_core.QgsApplication
 _QGS = QgsApplication([], False)  # kept alive for the whole session; never exitQgis (segfaults)
@@ -60,30 +62,3 @@ def qgis_process(tmp_path_factory):
                             capture_output=True, text=True, timeout=120)
     assert enable.returncode == 0, enable.stdout + enable.stderr
     return exe, env
-
-
-def write_ept(laz, folder):
-    """An Entwine Point Tile index of ``laz`` (ept.json, one LAZ node holding every point), the
-    point-cloud format Debian's QGIS (built without PDAL) opens as a layer."""
-    import json
-
-    import laspy
-
-    (folder / "ept-data").mkdir(parents=True)
-    (folder / "ept-hierarchy").mkdir()
-    las = laspy.read(laz)
-    las.write(folder / "ept-data" / "0-0-0-0.laz")
-    header = las.header
-    low, high = header.mins, header.maxs
-    half, middle = float(max(high - low)) / 2 + 1, (low + high) / 2
-    axes = [{"name": n, "type": "signed", "size": 4, "scale": float(s), "offset": float(o)}
-            for n, s, o in zip("XYZ", header.scales, header.offsets)]
-    meta = {"bounds": [*map(float, middle - half), *map(float, middle + half)],
-            "boundsConforming": [*map(float, low), *map(float, high)], "dataType": "laszip",
-            "hierarchyType": "json", "points": int(header.point_count), "span": 128,
-            "schema": axes + [{"name": "Classification", "type": "unsigned", "size": 1}],
-            "srs": {"wkt": header.parse_crs().to_wkt()}, "version": "1.0.0"}
-    (folder / "ept.json").write_text(json.dumps(meta))
-    (folder / "ept-hierarchy" / "0-0-0-0.json").write_text(
-        json.dumps({"0-0-0-0": int(header.point_count)}))
-    return folder / "ept.json"
