@@ -73,9 +73,25 @@ def ensure_python(feedback) -> str:
     python = find_python()
     if python:
         return python
+    import fcntl
+
     venv = managed_venv()
-    feedback.pushInfo(f"{FIRST_RUN_MESSAGE} Setting up {venv} …")
-    create_managed_venv(venv, feedback)
+    venv.parent.mkdir(parents=True, exist_ok=True)
+    # one setup at a time (two first runs at once): the second waits, then takes the first's
+    with open(venv.parent / "venv.lock", "w") as lock:
+        while True:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                _deliver_cancel()
+                if feedback.isCanceled():
+                    raise QgsProcessingException("Cancelled while waiting for another run to set "
+                                                 "up FloodMesh's Python packages") from None
+                time.sleep(0.2)
+        if not (venv / READY).exists():
+            feedback.pushInfo(f"{FIRST_RUN_MESSAGE} Setting up {venv} …")
+            create_managed_venv(venv, feedback)
     return str(venv / "bin" / "python")
 
 
