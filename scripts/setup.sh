@@ -14,6 +14,7 @@ DEB_PACKAGES=(qgis python3-qgis qgis-providers python3-venv python3-numpy python
 # against them): the environment is pinned to the versions installed.
 SYSTEM_PINS=(numpy scipy rasterio fiona pyproj matplotlib)
 DEB_PACKAGES+=(xvfb xauth)  # a virtual display for the desktop QGIS test (tests/qgis/test_desktop.py)
+DEB_PACKAGES+=(gcc python3-dev)  # numba's ahead-of-time build of the raster kernels (core/compiled.py)
 
 missing=()
 for p in "${DEB_PACKAGES[@]}"; do
