@@ -12,6 +12,7 @@ releases the GIL.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib
 import sys
@@ -87,7 +88,8 @@ def build(log=None) -> bool:
             return False
     for stale in HERE.glob(f"{PREFIX}*"):
         if not stale.name.startswith(name):
-            stale.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                stale.unlink()
     _loaded.clear()
     return ahead_of_time()
 
