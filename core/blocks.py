@@ -4,8 +4,10 @@ One engine serves both: a step is a *kernel* ``func(padded) -> interior`` that r
 padded by ``halo`` cells on every side (``fill``, NaN, beyond the raster) and returns the block's
 interior. ``map_overlap`` runs it over an array; ``map_raster`` streams it from one GeoTIFF to
 another, reading each window with its halo, computing, and writing the window, so that only a
-few blocks are ever in memory whatever the raster's size. Windows run one after the other in
-one thread: GDAL 3.6 hung when a reader thread ran beside the writer, or with its own workers.
+few blocks are ever in memory whatever the raster's size. The kernel of one window runs in a
+worker thread while the calling thread reads the next and writes the previous one; every GDAL
+call stays in the calling thread (GDAL 3.6 hung when a reader thread ran beside the writer, or
+with its own workers).
 
 The result equals applying the kernel to the whole NaN-padded raster, for any window list.
 """
@@ -28,7 +30,7 @@ BYTE_NODATA = 255
 # on 16 M float32 cells ZSTD level 1 costs 0.19 s of CPU per 64 MB and saves only 17-20 % (the
 # cells' low bits are noise), 30 % more CPU for the whole slope step; its floating-point
 # predictor saves another 10 % at twice the CPU; LZW and DEFLATE are slower still. Integer
-# rasters (breakpoints: mostly 0) take ZSTD level 1, which shrinks them 20-50x for almost
+# rasters (breakpoints: mostly 0) take ZSTD level 1, which shrinks them 8x and more for almost
 # nothing. GDAL's own worker threads (NUM_THREADS, GDAL_NUM_THREADS) are not used: GDAL 3.6's
 # multi-threaded decoding hung in RasterIO (CPLJobQueue) in the tests.
 CREATION_OPTIONS = dict(tiled=True, blockxsize=TILE, blockysize=TILE, bigtiff="if_safer")
