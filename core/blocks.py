@@ -4,8 +4,10 @@ One engine serves both: a step is a *kernel* ``func(padded) -> interior`` that r
 padded by ``halo`` cells on every side (``fill``, NaN, beyond the raster) and returns the block's
 interior. ``map_overlap`` runs it over an array; ``map_raster`` streams it from one GeoTIFF to
 another, reading each window with its halo, computing, and writing the window, so that only a
-few blocks are ever in memory whatever the raster's size. Windows run one after the other in
-one thread: GDAL 3.6 hung when a reader thread ran beside the writer, or with its own workers.
+few blocks are ever in memory whatever the raster's size. The kernel of one window runs in a
+worker thread while the calling thread reads the next and writes the previous one; every GDAL
+call stays in the calling thread (GDAL 3.6 hung when a reader thread ran beside the writer, or
+with its own workers).
 
 The result equals applying the kernel to the whole NaN-padded raster, for any window list.
 """
@@ -23,14 +25,17 @@ TILE = 256
 GDAL_CACHE_MB = 128
 FLOAT_NODATA = -9999.0
 BYTE_NODATA = 255
-# Chosen by measurement (benchmarks/run.py --only codec, 4000² DEM, slope and breakpoints):
-# ZSTD level 1 without a predictor costs 0.19 s of CPU per 64 MB written (none: 0.06, DEFLATE:
-# 1.0-1.2, LZW with a predictor: 0.85-0.94, ZSTD 1 with the floating-point predictor: 0.45) and
-# reads back as fast as no compression, at 80 % of the size (the predictor saves another 15-30 %
-# but makes reading 3-5x slower). GDAL's own worker threads (NUM_THREADS, GDAL_NUM_THREADS)
-# are not used: GDAL 3.6's multi-threaded decoding hung in RasterIO (CPLJobQueue) in the tests.
-CREATION_OPTIONS = dict(compress="zstd", zstd_level=1, tiled=True, blockxsize=TILE,
-                        blockysize=TILE, bigtiff="if_safer")
+# Codecs chosen by measurement (benchmarks/run.py --only codec, and slope file to file on a
+# 6000² DEM): float rasters (DEM, slope, LoG) are written uncompressed, as gdaldem writes them:
+# on 16 M float32 cells ZSTD level 1 costs 0.19 s of CPU per 64 MB and saves only 17-20 % (the
+# cells' low bits are noise), 30 % more CPU for the whole slope step; its floating-point
+# predictor saves another 10 % at twice the CPU; LZW and DEFLATE are slower still. Integer
+# rasters (breakpoints: mostly 0) take ZSTD level 1, which shrinks them 8x and more for almost
+# nothing. GDAL's own worker threads (NUM_THREADS, GDAL_NUM_THREADS) are not used: GDAL 3.6's
+# multi-threaded decoding hung in RasterIO (CPLJobQueue) in the tests.
+CREATION_OPTIONS = dict(tiled=True, blockxsize=TILE, blockysize=TILE, bigtiff="if_safer")
+INTEGER_COMPRESSION = dict(compress="zstd", zstd_level=1)
+
 
 Window = tuple  # (row_off, col_off, height, width)
 
@@ -41,36 +46,67 @@ def row_windows(shape: tuple[int, int], block_rows: int) -> list[Window]:
     return [(r0, 0, min(block_rows, rows - r0), cols) for r0 in range(0, rows, block_rows)]
 
 
-def _padded(read: Callable, shape, window: Window, halo: int, fill, dtype) -> np.ndarray:
-    """The window grown by ``halo`` on every side; ``read(r0, r1, c0, c1)`` gives the part
-    inside the raster, ``fill`` elsewhere."""
+def _fill_window(buffer: np.ndarray, read_into: Callable, shape, window: Window, halo: int,
+                 fill) -> np.ndarray:
+    """``buffer`` (the window grown by ``halo`` on every side) filled: ``read_into(view, r0, r1,
+    c0, c1)`` writes the part inside the raster into ``view``, ``fill`` goes elsewhere."""
     rows, cols = shape
     r0, c0, h, w = window
     lo_r, hi_r = max(0, r0 - halo), min(rows, r0 + h + halo)
     lo_c, hi_c = max(0, c0 - halo), min(cols, c0 + w + halo)
-    block = np.full((h + 2 * halo, w + 2 * halo), fill, dtype=dtype)
     top, left = halo - (r0 - lo_r), halo - (c0 - lo_c)
-    block[top:top + hi_r - lo_r, left:left + hi_c - lo_c] = read(lo_r, hi_r, lo_c, hi_c)
-    return block
+    bottom, right = top + hi_r - lo_r, left + hi_c - lo_c
+    buffer[:top], buffer[bottom:] = fill, fill
+    buffer[top:bottom, :left], buffer[top:bottom, right:] = fill, fill
+    read_into(buffer[top:bottom, left:right], lo_r, hi_r, lo_c, hi_c)
+    return buffer
 
 
-def run_blocks(read: Callable, write: Callable, shape: tuple[int, int],
+def run_blocks(read_into: Callable, write: Callable, shape: tuple[int, int],
                func: Callable[[np.ndarray], np.ndarray], *, halo: int,
                windows: Sequence[Window], fill=np.nan, dtype=np.float64,
                progress: Callable[[float], None] | None = None,
                cancelled: Callable[[], bool] | None = None) -> None:
-    """The engine: for each window, ``read(r0, r1, c0, c1)`` → pad → ``func`` →
-    ``write(window, interior)``, one window after the other in this thread (a reader thread
-    beside the writer deadlocked GDAL 3.6)."""
+    """The engine: for each window, ``read_into(view, r0, r1, c0, c1)`` fills a preallocated
+    padded buffer, ``func`` computes the interior, ``write(window, interior)`` stores it.
+
+    ``func`` runs in one worker thread while this thread reads the next window and writes the
+    previous one, so reading, computing and writing overlap; ``read_into`` and ``write`` (the
+    GDAL calls) stay in this thread: GDAL 3.6 hung with a reader thread beside a writer. Two
+    buffers per window shape alternate, so the kernel may return a view of its input."""
+    from concurrent.futures import ThreadPoolExecutor
+
     from .errors import Cancelled
 
     windows = list(windows)
-    for k, window in enumerate(windows):
-        if cancelled is not None and cancelled():
-            raise Cancelled()
-        write(window, func(_padded(read, shape, window, halo, fill, dtype)))
+    buffers: dict = {}
+    pending = None  # (window, future) of the window being computed
+
+    def finish(done, k):
+        window, future = done
+        write(window, future.result())
         if progress is not None:
-            progress((k + 1) / len(windows))
+            progress(k / len(windows))
+
+    with ThreadPoolExecutor(1, thread_name_prefix="floodmesh-block") as pool:
+        try:
+            for k, window in enumerate(windows):
+                if cancelled is not None and cancelled():
+                    raise Cancelled()
+                size = (window[2] + 2 * halo, window[3] + 2 * halo)
+                buffer = buffers.get((k % 2, size))
+                if buffer is None:
+                    buffer = buffers[k % 2, size] = np.empty(size, dtype)
+                _fill_window(buffer, read_into, shape, window, halo, fill)
+                previous, pending = pending, (window, pool.submit(func, buffer))
+                if previous is not None:
+                    finish(previous, k)
+            if pending is not None:
+                finish(pending, len(windows))
+        finally:
+            if pending is not None:
+                pending[1].cancel()
+
 
 def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *, halo: int,
                 block_rows: int = DEFAULT_BLOCK_ROWS, fill=np.nan, dtype=None,
@@ -91,16 +127,22 @@ def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *,
         out[0][r0:r0 + h, c0:c0 + w] = result
 
     windows = row_windows(values.shape, block_rows) if windows is None else windows
-    run_blocks(lambda r0, r1, c0, c1: values[r0:r1, c0:c1], write, values.shape, func,
+    def read_into(view, r0, r1, c0, c1):
+        view[...] = values[r0:r1, c0:c1]
+
+    run_blocks(read_into, write, values.shape, func,
                halo=halo, windows=windows, fill=fill,
                dtype=np.result_type(values.dtype, np.asarray(fill).dtype), cancelled=cancelled)
     return out[0] if out else np.empty(values.shape, dtype=dtype or values.dtype)
 
 
 def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
-    """A tiled, compressed GeoTIFF profile (rasters under a tile stay striped)."""
+    """A tiled GeoTIFF profile, compressed for integer rasters (``CREATION_OPTIONS``; rasters
+    under a tile stay striped)."""
     profile = dict(driver="GTiff", height=shape[0], width=shape[1], count=1, dtype=dtype,
                    crs=crs.to_wkt(), transform=transform, nodata=nodata, **CREATION_OPTIONS)
+    if np.dtype(dtype).kind != "f":
+        profile.update(INTEGER_COMPRESSION)
     if shape[0] < TILE or shape[1] < TILE:
         for key in ("tiled", "blockxsize", "blockysize"):
             profile.pop(key)
@@ -112,8 +154,8 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
                block_rows: int = STREAM_BLOCK_ROWS, input_dtype=np.float32, crs=None,
                progress: Callable[[float], None] | None = None,
                cancelled: Callable[[], bool] | None = None) -> None:
-    """Stream ``func`` (a kernel as for ``map_overlap``) from band 1 of ``src_path`` to a tiled,
-    compressed GeoTIFF ``dst_path`` on the same grid, window by window.
+    """Stream ``func`` (a kernel as for ``map_overlap``) from band 1 of ``src_path`` to a tiled
+    GeoTIFF ``dst_path`` (``raster_profile``) on the same grid, window by window.
 
     The kernel receives ``input_dtype`` (float32) blocks with NaN for nodata, ±inf and beyond the
     raster, and returns the interior in any dtype; NaN in a float result is written as
@@ -127,14 +169,14 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
     halo) it is given.
     """
     import rasterio
+    from rasterio.windows import Window
 
-    from .io import _read_band, _require_file, atomic_output, no_valid_cells, raster_crs
+    from .io import _require_file, atomic_output, no_valid_cells, raster_crs
 
     if nodata is None:
         nodata = FLOAT_NODATA if np.dtype(dtype).kind == "f" else BYTE_NODATA
     src_path = _require_file(src_path, "raster")
-    valid = [False]
-    check_valid = np.dtype(input_dtype).kind == "f"
+    valid = [np.dtype(input_dtype).kind != "f"]  # whether a finite cell has been read
     # GDAL sizes its block cache when first used: the environment comes before the first open
     with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB), \
             _open(src_path) as src:
@@ -142,31 +184,70 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
         shape = (src.height, src.width)
         windows = row_windows(shape, block_rows) if windows is None else list(windows)
 
-        def read(r0, r1, c0, c1):
-            from rasterio.windows import Window as RioWindow
+        read_band = _band_reader(src, input_dtype)
+        nan_to_value = _kernel("nan_to_value", dtype)
 
-            block = _read_band(src, RioWindow(c0, r0, c1 - c0, r1 - r0), input_dtype)
-            if check_valid and not valid[0]:
-                valid[0] = bool(np.isfinite(block).any())
-            return block
+        def read_into(view, r0, r1, c0, c1):
+            if read_band(view, Window(c0, r0, c1 - c0, r1 - r0)) and not valid[0]:
+                valid[0] = True
 
         profile = raster_profile(shape, src.transform, crs, dtype, nodata)
         with atomic_output(dst_path) as tmp:
             with rasterio.open(tmp, "w", **profile) as dst:
                 def write(window, result):
-                    from rasterio.windows import Window as RioWindow
-
                     result = np.asarray(result)
                     if result.dtype.kind == "f":
-                        result = np.where(np.isnan(result), nodata, result)
+                        kind = dtype if np.dtype(dtype).kind == "f" else result.dtype
+                        result = nan_to_value(np.array(result, kind, copy=False, order="C"),
+                                              np.dtype(kind).type(nodata))
                     r0, c0, h, w = window
-                    dst.write(result.astype(dtype, copy=False), 1,
-                              window=RioWindow(c0, r0, w, h))
+                    dst.write(result.astype(dtype, copy=False), 1, window=Window(c0, r0, w, h))
 
-                run_blocks(read, write, shape, func, halo=halo, windows=windows,
+                run_blocks(read_into, write, shape, func, halo=halo, windows=windows,
                            dtype=input_dtype, progress=progress, cancelled=cancelled)
-            if check_valid and not valid[0]:
+            if not valid[0]:
                 raise no_valid_cells(src_path)  # before the move: no output is left
+
+
+def _band_reader(src, dtype):
+    """``read(view, window)``: band 1 of the open ``src`` in ``window`` into the array ``view``
+    (any strides) as ``dtype``, NaN for nodata and ±inf in floats; returns whether a finite
+    cell was read. Straight into the caller's buffer, except for files that mask cells by a mask
+    band rather than a nodata value."""
+    from rasterio.enums import MaskFlags
+
+    from .io import _read_band
+
+    flags = src.mask_flag_enums[0]
+    if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags or np.dtype(dtype).kind != "f":
+        def read(view, window):
+            view[...] = _read_band(src, window, dtype)
+            return np.dtype(dtype).kind != "f" or bool(np.isfinite(view).any())
+        return read
+    # the nodata value as the file stores it, then as the buffer holds it (io._read_band)
+    missing = np.dtype(dtype).type(np.nan)
+    if src.nodata is not None and np.isfinite(src.nodata):
+        native = np.dtype(src.dtypes[0])
+        missing = np.dtype(dtype).type(native.type(src.nodata) if native.kind == "f"
+                                       else src.nodata)
+
+    missing_to_nan = _kernel("missing_to_nan", dtype)
+
+    def read(view, window):
+        src.read(1, window=window, out=view)
+        return missing_to_nan(view, missing)
+    return read
+
+
+def _kernel(name: str, dtype):
+    """``raster_kernels``' ``_name``: ahead of time for float32 (``compiled``), else numba's."""
+    if np.dtype(dtype) == np.float32:
+        from .compiled import kernel
+
+        return kernel(f"{name}_f32")
+    from . import raster_kernels
+
+    return getattr(raster_kernels, f"_{name}")
 
 
 def _open(path):

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from .blocks import cell_size, map_overlap, map_raster
@@ -28,48 +27,6 @@ from .options import LOG_KERNELS, SLOPE_METHOD_NAMES, check_choice, check_sigma_
 from .raster import Grid
 
 SQRT2 = math.sqrt(2.0)
-
-
-@numba.njit(inline="always")
-def _max_slope(z1, z2, z3, z4, z5, z6, z7, z8, z9, d, diagonal):
-    """Shanholtz: max |z9 − zi| / L over the 8 neighbours, L = d, or √2·d on diagonals."""
-    g = max(abs(z9 - z2), abs(z9 - z4), abs(z9 - z6), abs(z9 - z8)) / d
-    return max(g, max(abs(z9 - z1), abs(z9 - z3), abs(z9 - z5), abs(z9 - z7)) / diagonal)
-
-
-@numba.njit(inline="always")
-def _one_over_distance(z1, z2, z3, z4, z5, z6, z7, z8, d):
-    """NOAA: neighbours weighted 1, √2, 1 on each side."""
-    w = (4.0 + 2.0 * SQRT2) * d
-    return (((z3 + SQRT2 * z4 + z5) - (z1 + SQRT2 * z8 + z7)) / w,
-            ((z1 + SQRT2 * z2 + z3) - (z7 + SQRT2 * z6 + z5)) / w)
-
-
-@numba.njit(inline="always")
-def _sharpnack_akin(z1, z2, z3, z4, z5, z6, z7, z8, d):
-    """Sharpnack & Akin (= Horn): weights 1, 2, 1."""
-    return (((z3 + 2.0 * z4 + z5) - (z1 + 2.0 * z8 + z7)) / (8.0 * d),
-            ((z1 + 2.0 * z2 + z3) - (z7 + 2.0 * z6 + z5)) / (8.0 * d))
-
-
-@numba.njit(inline="always")
-def _wood(z1, z2, z3, z4, z5, z6, z7, z8, d):
-    """Wood: least-squares (constrained) quadratic, equal weights."""
-    return (((z3 + z4 + z5) - (z1 + z8 + z7)) / (6.0 * d),
-            ((z1 + z2 + z3) - (z7 + z6 + z5)) / (6.0 * d))
-
-
-@numba.njit(inline="always")
-def _zevenbergen_thorne(z1, z2, z3, z4, z5, z6, z7, z8, d):
-    """Zevenbergen & Thorne: central differences of the partial quartic."""
-    return (z4 - z8) / (2.0 * d), (z2 - z6) / (2.0 * d)
-
-
-@numba.njit(inline="always")
-def _ritter(z1, z2, z3, z4, z5, z6, z7, z8, d):
-    """Ritter: central differences along the two diagonals (orthogonal axes at 45°)."""
-    return (z3 - z7) / (2.0 * SQRT2 * d), (z1 - z5) / (2.0 * SQRT2 * d)
-
 
 # name → (code, summary); the code selects the kernel inside the compiled loop
 SLOPE_METHODS = dict(zip(SLOPE_METHOD_NAMES, (
@@ -80,63 +37,6 @@ SLOPE_METHODS = dict(zip(SLOPE_METHOD_NAMES, (
     (4, "quadratic surface (Zevenbergen & Thorne)"),
     (5, "diagonal differences (Ritter)"),
 )))
-
-
-@numba.njit(inline="always")
-def _fill(zk, zopp, z9):
-    if not math.isnan(zk):
-        return zk
-    if math.isnan(zopp):
-        return z9
-    return 2.0 * z9 - zopp
-
-
-@numba.njit(inline="always")
-def _fill_diagonal(zk, zopp, za, zb, z9):
-    """A diagonal neighbour: itself, else through the centre, else from its two orthogonal
-    neighbours ``za``, ``zb`` (already filled)."""
-    if not math.isnan(zk):
-        return zk
-    if not math.isnan(zopp):
-        return 2.0 * z9 - zopp
-    return za + zb - z9
-
-
-@numba.njit(parallel=True, cache=True, nogil=True)
-def _slope_block(padded, out, d, method, diagonal):
-    """Slope (degrees) of the interior of ``padded`` (float32 or float64) into ``out``; the
-    arithmetic is float64 whatever the input, so float32 files give the float64 result."""
-    rows, cols = padded.shape[0] - 2, padded.shape[1] - 2
-    for i in numba.prange(rows):
-        for j in range(cols):
-            z9 = np.float64(padded[i + 1, j + 1])
-            if math.isnan(z9):
-                out[i, j] = np.nan
-                continue
-            a1, a2 = np.float64(padded[i, j]), np.float64(padded[i, j + 1])
-            a3, a8 = np.float64(padded[i, j + 2]), np.float64(padded[i + 1, j])
-            a4, a7 = np.float64(padded[i + 1, j + 2]), np.float64(padded[i + 2, j])
-            a6, a5 = np.float64(padded[i + 2, j + 1]), np.float64(padded[i + 2, j + 2])
-            z2, z6 = _fill(a2, a6, z9), _fill(a6, a2, z9)
-            z4, z8 = _fill(a4, a8, z9), _fill(a8, a4, z9)
-            z1, z5 = _fill_diagonal(a1, a5, z2, z8, z9), _fill_diagonal(a5, a1, z4, z6, z9)
-            z3, z7 = _fill_diagonal(a3, a7, z2, z4, z9), _fill_diagonal(a7, a3, z6, z8, z9)
-            if method == 0:
-                g = _max_slope(z1, z2, z3, z4, z5, z6, z7, z8, z9, d, diagonal)
-            else:
-                if method == 1:
-                    dzdx, dzdy = _one_over_distance(z1, z2, z3, z4, z5, z6, z7, z8, d)
-                elif method == 2:
-                    dzdx, dzdy = _sharpnack_akin(z1, z2, z3, z4, z5, z6, z7, z8, d)
-                elif method == 3:
-                    dzdx, dzdy = _wood(z1, z2, z3, z4, z5, z6, z7, z8, d)
-                elif method == 4:
-                    dzdx, dzdy = _zevenbergen_thorne(z1, z2, z3, z4, z5, z6, z7, z8, d)
-                else:
-                    dzdx, dzdy = _ritter(z1, z2, z3, z4, z5, z6, z7, z8, d)
-                g = math.sqrt(dzdx * dzdx + dzdy * dzdy)
-            out[i, j] = math.degrees(math.atan(g))
-    return out
 
 
 def _method_code(method: str) -> int:
@@ -156,6 +56,8 @@ def slope_block(padded: np.ndarray, d: float, method: str = "one-over-distance",
     is float64); the result is ``dtype``. ``diagonal_distance`` applies to "max-slope":
     diagonal neighbours at √2·d (True) or d.
     """
+    from .raster_kernels import _slope_block
+
     diagonal = SQRT2 * d if diagonal_distance else d
     padded = np.asarray(padded)
     if padded.dtype not in (np.float32, np.float64):
@@ -181,12 +83,30 @@ def slope_file(dem_path, out_path, method: str = "one-over-distance", *,
                cancelled=None) -> None:
     """Slope (degrees, float32) of a DEM file into a GeoTIFF, streamed block by block in float32
     (``blocks.map_raster``; ``windows`` as there); the same values as ``slope`` on the DEM."""
-    _method_code(method)
-    d = cell_size(dem_path)
-    map_raster(dem_path, out_path,
-               lambda padded: slope_block(padded, d, method, diagonal_distance=diagonal_distance,
-                                          dtype=np.float32),
-               halo=1, crs=crs, windows=windows, progress=progress, cancelled=cancelled)
+    from concurrent.futures import ThreadPoolExecutor
+
+    from . import compiled
+
+    code, d = _method_code(method), cell_size(dem_path)
+    diagonal = SQRT2 * d if diagonal_distance else d
+    kernel = compiled.kernel("slope_f32")
+    # the ahead-of-time kernel runs in one thread: a helper takes the block's upper half (numba's
+    # own kernel is parallel already)
+    helpers = 1 if compiled.ahead_of_time() else 0
+
+    def block(padded):
+        out = np.empty((padded.shape[0] - 2, padded.shape[1] - 2), np.float32)
+        half = out.shape[0] // 2 if helpers else 0
+        upper = pool.submit(kernel, padded[:half + 2], out[:half], d, code, diagonal) \
+            if half else None
+        kernel(padded[half:], out[half:], d, code, diagonal)
+        if upper is not None:
+            upper.result()
+        return out
+
+    with ThreadPoolExecutor(max(helpers, 1), thread_name_prefix="floodmesh-slope") as pool:
+        map_raster(dem_path, out_path, block, halo=1, crs=crs, windows=windows,
+                   progress=progress, cancelled=cancelled)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -20,7 +20,8 @@ COMPILE_NOTE = ("compiling FloodMesh's numba kernels: first run only, about 2 mi
 
 # Kernels called from Python (the others compile into them and keep no cache of their own).
 ENTRY_KERNELS = (("grid", "_bucket_sort"), ("grid", "_rasterise_tin"), ("delaunay", "_sweep"),
-                 ("slope", "_slope_block"), ("breaklines", "_trace"),
+                 ("raster_kernels", "_slope_block"), ("raster_kernels", "_missing_to_nan"),
+                 ("raster_kernels", "_nan_to_value"), ("breaklines", "_trace"),
                  ("breaklines", "_join_fragments"))
 
 
@@ -83,6 +84,14 @@ def main() -> int:
     seconds = compile_kernels(log=lambda message: print(f"floodmesh: {message}",
                                                         file=sys.stderr))
     print(f"floodmesh: kernels ready in {cache_folder()} ({seconds:.0f} s)", file=sys.stderr)
+    # after the numba kernels (which serve where the build cannot): the streaming raster
+    # kernels ahead of time, so that `floodmesh slope` starts without numba
+    from .compiled import build
+
+    start = time.perf_counter()
+    if build(log=lambda message: print(f"floodmesh: {message}", file=sys.stderr)):
+        print(f"floodmesh: raster kernels built ahead of time ({time.perf_counter() - start:.0f} s)",
+              file=sys.stderr)
     return 0
 
 

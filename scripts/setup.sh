@@ -14,11 +14,19 @@ DEB_PACKAGES=(qgis python3-qgis qgis-providers python3-venv python3-numpy python
 # against them): the environment is pinned to the versions installed.
 SYSTEM_PINS=(numpy scipy rasterio fiona pyproj matplotlib)
 DEB_PACKAGES+=(xvfb xauth)  # a virtual display for the desktop QGIS test (tests/qgis/test_desktop.py)
+DEB_PACKAGES+=(gcc python3-dev)  # numba's ahead-of-time build of the raster kernels (core/compiled.py)
 # shapely: Debian's own where it is shapely 2 (Debian 13: 2.1, built against the GEOS that QGIS
 # links). QGIS 3.40's qgis.core imports shapely itself, so a PyQGIS script run from .venv would
 # otherwise load PyPI's wheel, with a GEOS of its own, into a process that has QGIS's. Debian 12's
 # is shapely 1.8: there the wheel comes from PyPI (and only the worker, never QGIS, imports it).
-shapely_candidate=$(apt-cache policy python3-shapely 2>/dev/null | awk '/Candidate:/ {print $2}')
+shapely_candidate() { apt-cache policy python3-shapely 2>/dev/null | awk '/Candidate:/ {print $2}'; }
+shapely_candidate=$(shapely_candidate)
+if { [ -z "$shapely_candidate" ] || [ "$shapely_candidate" = "(none)" ]; } \
+        && ! ls /var/lib/apt/lists/*_Packages* >/dev/null 2>&1; then
+    # a fresh machine has no package lists yet: fetch them before asking
+    $( [ "$(id -u)" -eq 0 ] || echo sudo ) apt-get -o DPkg::Lock::Timeout=600 update -qq
+    shapely_candidate=$(shapely_candidate)
+fi
 if [ -n "$shapely_candidate" ] && [ "$shapely_candidate" != "(none)" ] \
         && dpkg --compare-versions "$shapely_candidate" ge 2; then
     DEB_PACKAGES+=(python3-shapely)

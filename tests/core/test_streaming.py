@@ -114,11 +114,17 @@ def test_log_and_its_breakpoints_file_equal_memory(dem_file, tmp_path, kernel, s
     assert_array_equal(np.where(bp == 255, 0, bp), expected)
 
 
-def test_output_is_tiled_compressed_and_georeferenced(dem_file, tmp_path):
+def test_output_is_tiled_georeferenced_and_compressed_when_integer(dem_file, tmp_path):
+    """Float rasters are written uncompressed (as gdaldem does: ZSTD saved too little for its
+    CPU), breakpoints with ZSTD."""
     slope_file(dem_file, tmp_path / "s.tif", crs="EPSG:25833")
-    with rasterio.open(tmp_path / "s.tif") as src, rasterio.open(dem_file) as dem:
+    breakpoints_file(tmp_path / "s.tif", tmp_path / "bp.tif", s_crit=10.0)
+    with rasterio.open(tmp_path / "s.tif") as src, rasterio.open(dem_file) as dem, \
+            rasterio.open(tmp_path / "bp.tif") as bp:
         assert src.profile["tiled"] and src.block_shapes[0] == (256, 256)
-        assert src.compression.name.lower() == blocks.CREATION_OPTIONS["compress"]
+        assert src.compression is None
+        assert bp.compression.name.lower() == blocks.INTEGER_COMPRESSION["compress"]
+        assert bp.profile["tiled"] and bp.block_shapes[0] == (256, 256)
         assert src.transform == dem.transform and src.nodata == blocks.FLOAT_NODATA
         assert src.crs.to_epsg() == 25833  # --crs overrides the file's
 
