@@ -183,7 +183,8 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
     for chain, n, rmse, score, angle, seconds in rows:
         ratio = nodes_at(rmse, uniform) / n
         peer = nodes_at(rmse, delatin, extrapolate=False) / n if delatin else np.nan
-        peer = f"{peer:>14.1f}" if np.isfinite(peer) else f"{'never':>14}"
+        peer = (f"{peer:>14.1f}" if np.isfinite(peer) else f"{'never':>14}" if delatin
+                else f"{'n/a':>14}")  # n/a: pydelatin not installed (make bench installs it)
         print(f"{chain:<10}{n:>8,}{100 * rmse:>14.2f}{ratio:>13.1f}x{peer}"
               f"{score['recall']:>8.3f}{score['precision']:>10.3f}{score['mean_pieces']:>8.2f}"
               f"{angle:>10.1f}°{seconds:>6.0f}  {'/'.join(map(str, score['breaks'].values()))}")
