@@ -1,13 +1,15 @@
 """Terrain fidelity per node: FloodMesh's chain against a uniform 25° mesh and pydelatin on
 analytic floodplains whose true surface and true break lines are known.
 
-    nice .venv/bin/python benchmarks/fidelity.py [--quick] [--chains landed,default]
+    nice .venv/bin/python benchmarks/fidelity.py [--quick] [--chains landed,default,no-join,no-spacing]
 
 For each terrain (the demo's geometry with a seed it never saw, and an oblique one: a straight
 river at 32° to the grid, a tributary, a levee and a road), noise (5, 15 cm) and density
 (9, 2 ground points/m²), the whole chain (``run_pipeline``, reference-case options) runs once per
 chain of options; its mesh is scored against the TRUE surface (RMSE over 100,000 random points)
-and its break lines against the true ones (recall, precision within 2 m, pieces per true line).
+and its break lines against the true ones (recall, precision within 2 m, pieces per true line,
+where the pieces of each true line meet: junction or crossing, mid-run, second line in the band)
+and the whole segments the PSLG left out for the angle bound are counted.
 Peers, in the same run: uniform 25° Triangle meshes without break lines whose nodes carry the
 exact elevation (the node count at FloodMesh's RMSE interpolated in log-log), and pydelatin
 (greedy TIN, no angle bound) on the same DEM. Ratios are uniform nodes / FloodMesh nodes at the
@@ -202,7 +204,7 @@ def main():
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
                         help="only the reference case (demo geometry, 9 points/m², 5 cm)")
-    parser.add_argument("--chains", default="landed,default",
+    parser.add_argument("--chains", default="landed,default,no-join,no-spacing",
                         help=f"option sets to run, of {', '.join(CHAINS)}")
     args = parser.parse_args()
     chains = args.chains.split(",")

@@ -81,3 +81,12 @@ def test_localised_crest_broken_mid_run_joins_unless_a_channel_cuts_it(channel):
     assert counts["pieces_joined"] == (0 if channel else 1)
     follows = _ground_follows(points, window)
     assert follows(lines[0].coords[-1], lines[1].coords[0]) is (not channel)
+
+
+def test_a_negative_join_gap_is_refused():
+    from floodmesh.core.errors import FloodMeshError
+    from floodmesh.core.options import RunOptions
+
+    with pytest.raises(FloodMeshError, match="join gap must be 0"):
+        RunOptions(join_gap=-1.0)
+    assert RunOptions(join_gap=0.0).join_gap == 0.0
