@@ -1,13 +1,15 @@
 """Terrain fidelity per node: FloodMesh's chain against a uniform 25° mesh and pydelatin on
 analytic floodplains whose true surface and true break lines are known.
 
-    nice .venv/bin/python benchmarks/fidelity.py [--quick] [--chains landed,default]
+    nice .venv/bin/python benchmarks/fidelity.py [--quick] [--chains landed,default,no-join,no-spacing]
 
 For each terrain (the demo's geometry with a seed it never saw, and an oblique one: a straight
 river at 32° to the grid, a tributary, a levee and a road), noise (5, 15 cm) and density
 (9, 2 ground points/m²), the whole chain (``run_pipeline``, reference-case options) runs once per
 chain of options; its mesh is scored against the TRUE surface (RMSE over 100,000 random points)
-and its break lines against the true ones (recall, precision within 2 m, pieces per true line).
+and its break lines against the true ones (recall, precision within 2 m, pieces per true line,
+where the pieces of each true line meet: junction or crossing, mid-run, second line in the band)
+and the whole segments the PSLG left out for the angle bound are counted.
 Peers, in the same run: uniform 25° Triangle meshes without break lines whose nodes carry the
 exact elevation (the node count at FloodMesh's RMSE interpolated in log-log), and pydelatin
 (greedy TIN, no angle bound) on the same DEM. Ratios are uniform nodes / FloodMesh nodes at the
@@ -18,6 +20,7 @@ precision ≥ 0.95.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import tempfile
 import time
@@ -50,6 +53,7 @@ CHAINS = {
     "landed": dict(localise=False, node_elevation="dem", conforming=True, min_spacing=0),
     "default": dict(),                        # with issue 16's line spacing for flood models
     "no-spacing": dict(min_spacing=0),        # the terrain fits alone
+    "no-join": dict(join_gap=0),              # localised pieces left unjoined
     "conforming": dict(conforming=True),     # today's chain with Triangle's switch D
     "far-field": dict(far_field_area=400.0),  # today's chain, up to 400 m² where plane
 }
@@ -104,6 +108,44 @@ def delatin_curve(dem, floodplain, sample, truth):
     return curve
 
 
+def feature_of_lines(floodplain) -> list:
+    """The feature (its name, or "terrace") of each of ``demo.true_breaklines``' lines."""
+    area = shapely.box(0, 0, demo.WIDTH, demo.HEIGHT)
+    names = [name for name, (line, profile) in floodplain.features.items()
+             for r in profile.break_offsets for side in (r, -r)
+             if not shapely.intersection(line.offset_curve(side), area).is_empty]
+    return names + ["terrace"] * (2 if floodplain.terrace is not None else 0)
+
+
+def breaks(lines, reference, features, tolerance: float = 2.0) -> dict:
+    """Where the pieces of each true line (as ``score_breaklines`` counts them) meet: at a
+    junction or crossing (the gap within 8 m of another feature's line), mid-run, or a second
+    line beside the first in the same band (overlapping along the true line)."""
+    traced = [shapely.LineString(np.asarray(c)[:, :2]) for c in lines]
+    tree = shapely.STRtree(traced)
+    kinds = {"junction": 0, "mid-run": 0, "second line": 0}
+    for i, ref in enumerate(reference):
+        zone = ref.buffer(tolerance)
+        spans = []
+        for j in tree.query(zone, predicate="intersects"):
+            overlap = shapely.intersection(traced[j], zone)
+            if overlap.length < 3 * tolerance:
+                continue
+            ends = shapely.get_coordinates(overlap)
+            along = ref.project(shapely.points(ends))
+            spans.append((along.min(), along.max()))
+        spans.sort()
+        others = shapely.union_all([r for r, f in zip(reference, features) if f != features[i]])
+        for (_, a1), (b0, _) in zip(spans[:-1], spans[1:]):
+            if b0 < a1 - 1.0:
+                kinds["second line"] += 1
+            elif ref.interpolate(0.5 * (a1 + b0)).distance(others) < 8 + 0.5 * (b0 - a1):
+                kinds["junction"] += 1
+            else:
+                kinds["mid-run"] += 1
+    return kinds
+
+
 def run_case(name, floodplain, seed, noise, density, chains, work: Path):
     points, classes = demo.synthetic_floodplain(density=density, noise=noise, seed=seed,
                                                 floodplain=floodplain)
@@ -124,7 +166,12 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
         seconds = time.perf_counter() - start
         nodes, triangles = io.read_mesh_2dm(out / "mesh.2dm")
         mesh = Mesh(nodes, triangles, points.crs)
-        score = score_breaklines(io.read_lines_gpkg(out / "breaklines.gpkg"), reference, 2.0)
+        traced = io.read_lines_gpkg(out / "breaklines.gpkg")
+        score = score_breaklines(traced, reference, 2.0)
+        score["breaks"] = breaks(traced, reference, feature_of_lines(floodplain))
+        # whole break-line segments the PSLG left out for the angle bound (see build_pslg)
+        score["dropped"] = sum(int(m) for n in report["notes"]
+                               for m in re.findall(r"\((\d+) too short were left out\)", n))
         rows.append((chain, len(nodes), true_rmse(mesh, floodplain, sample, truth), score,
                      report["min_angle_deg"], seconds))
         dem = io.read_raster(out / "dem.tif")
@@ -133,15 +180,16 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
     print(f"\n## {name}, {density:g} points/m², {100 * noise:g} cm noise")
     print(f"{'chain':<10}{'nodes':>8}{'true RMSE cm':>14}{'uniform/ours':>14}"
           f"{'delatin/ours':>14}{'recall':>8}{'precision':>10}{'pieces':>8}{'min angle':>11}"
-          f"{'s':>6}")
+          f"{'s':>6}  breaks (junction/mid-run/second line)")
     results = []
     for chain, n, rmse, score, angle, seconds in rows:
         ratio = nodes_at(rmse, uniform) / n
         peer = nodes_at(rmse, delatin, extrapolate=False) / n if delatin else np.nan
-        peer = f"{peer:>14.1f}" if np.isfinite(peer) else f"{'never':>14}"
+        peer = (f"{peer:>14.1f}" if np.isfinite(peer) else f"{'never':>14}" if delatin
+                else f"{'n/a':>14}")  # n/a: pydelatin not installed (make bench installs it)
         print(f"{chain:<10}{n:>8,}{100 * rmse:>14.2f}{ratio:>13.1f}x{peer}"
               f"{score['recall']:>8.3f}{score['precision']:>10.3f}{score['mean_pieces']:>8.2f}"
-              f"{angle:>10.1f}°{seconds:>6.0f}")
+              f"{angle:>10.1f}°{seconds:>6.0f}  {'/'.join(map(str, score['breaks'].values()))}")
         results.append((chain, ratio, score))
     print("uniform 25° (exact z): " + ", ".join(f"{n:,} nodes {100 * r:.2f} cm"
                                                 for n, r in uniform[2::2]))
@@ -156,7 +204,7 @@ def main():
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
                         help="only the reference case (demo geometry, 9 points/m², 5 cm)")
-    parser.add_argument("--chains", default="landed,default",
+    parser.add_argument("--chains", default="landed,default,no-join,no-spacing",
                         help=f"option sets to run, of {', '.join(CHAINS)}")
     args = parser.parse_args()
     chains = args.chains.split(",")
@@ -175,7 +223,8 @@ def main():
     for terrain, noise, density, chain, ratio, score in summary:
         print(f"{terrain:<28}{density:>4g}/m² {100 * noise:>3g} cm  {chain:<10}{ratio:>6.1f}x  "
               f"pieces {score['mean_pieces']:.2f}  recall {score['recall']:.3f}  "
-              f"precision {score['precision']:.3f}")
+              f"precision {score['precision']:.3f}  breaks {score['breaks']}  "
+              f"segments dropped {score['dropped']}")
 
 
 if __name__ == "__main__":

@@ -160,6 +160,9 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
     p.add_argument("--node-radius", type=float,
                    help="radius of the node elevation plane fit, m (default from the point "
                         "density and noise)")
+    p.add_argument("--join-gap", type=float,
+                   help="join localised break-line pieces whose ends face each other across at "
+                        "most this gap, m (default 6 cell sizes; 0: off)")
     p.add_argument("--far-field-area", type=float,
                    help="larger triangles, up to this many m², away from the break lines where "
                         "the terrain is plane (default: max area everywhere)")
@@ -220,6 +223,7 @@ def _options(args) -> RunOptions:
                       localise=getattr(args, "localise", DEFAULTS.localise),
                       node_elevation=getattr(args, "node_elevation", DEFAULTS.node_elevation),
                       node_radius=getattr(args, "node_radius", None),
+                      join_gap=getattr(args, "join_gap", None),
                       far_field_area=getattr(args, "far_field_area", None),
                       conforming=getattr(args, "conforming", DEFAULTS.conforming),
                       workers=getattr(args, "workers", None),

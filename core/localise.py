@@ -373,36 +373,77 @@ def _hops_cut(keep: np.ndarray, kink: np.ndarray) -> list[np.ndarray]:
     return np.split(keep, cuts)
 
 
+def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5):
+    """A check for ``join_pieces``: whether the measured points between two line ends (x, y, z)
+    follow the straight line between them, i.e. the median z of the points near each of the
+    gap's sample positions (every ``spacing`` m) lies on average within 0.05 m plus the noise
+    of the line's z. Gaps under a metre pass unchecked."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points[:, :2])
+    radius = max(spacing, float(np.sqrt(8 / (np.pi * window.density))))
+    tolerance = 0.05 + window.noise
+
+    def follows(a, b) -> bool:
+        gap = float(np.hypot(*(b[:2] - a[:2])))
+        if gap < 1.0 or len(a) < 3 or not (np.isfinite(a[2]) and np.isfinite(b[2])):
+            return True
+        t = np.linspace(0, 1, max(3, int(gap / spacing)) + 2)[1:-1, None]
+        at = a[None, :3] * (1 - t) + b[None, :3] * t
+        near = tree.query_ball_point(at[:, :2], radius)
+        off = [abs(np.median(points[k, 2]) - z) for k, z in zip(near, at[:, 2]) if len(k) >= 3]
+        return not off or float(np.mean(off)) <= tolerance
+
+    return follows
+
+
 def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
-                    max_gap: float = 12.0) -> tuple[list, list[float], dict]:
+                    max_gap: float = 12.0, join_gap: float | None = None,
+                    join_lateral: float = 1.0) -> tuple[list, list[float], dict]:
     """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
     move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within
     ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
-    are cut where they hop across a band from crest to toe (``_hops_cut``). Returns the
-    BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN where
-    none moved) and counts."""
+    are cut where they hop across a band from crest to toe (``_hops_cut``), and pieces of one
+    kind (crest or toe) whose ends face each other across at most ``join_gap`` m are joined
+    (``joining.join_pieces``, lateral offset ``join_lateral`` m; None or 0: no joining). Returns
+    the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
+    where none moved) and counts."""
     from .breaklines import BreakLine
+    from .joining import join_pieces
     from .simplify import douglas_peucker_mask
 
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
                                                    window, s_crit=s_crit)
-    out, per_line, hops = [], [], 0
+    pieces, hops = [], 0  # (coords, slopes, component, fit RMS, kink) per piece
     for line, coords, fit, kink in zip(lines, moved, confidence, kinks):
         fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap)
         keep = np.nonzero(fitted)[0][douglas_peucker_mask(coords[fitted], tolerance)]
         for piece in _hops_cut(keep, kink):
             hops += 1
             if len(piece) >= 2:
-                out.append(BreakLine(coords[piece], line.slopes[piece], line.component))
-                per_line.append(float(np.nanmedian(fit[piece])) if np.isfinite(fit[piece]).any()
-                                else float("nan"))
+                pieces.append((coords[piece], line.slopes[piece], line.component, fit[piece],
+                               kink[piece]))
         hops -= 1
+    chains = [[(k, False, 0, len(p[0]))] for k, p in enumerate(pieces)]
+    if join_gap:
+        kinds = [np.sign(np.nanmedian(p[4])) if np.isfinite(p[4]).any() else 0 for p in pieces]
+        chains = join_pieces([p[0] for p in pieces], kinds, max_gap=join_gap,
+                             lateral=join_lateral, ground=_ground_follows(points, window))
+    out, per_line = [], []
+    for chain in chains:
+        parts = [[(p[j][::-1] if reverse else p[j])[first:stop] for j in (0, 1, 3)]
+                 for p, reverse, first, stop in ((pieces[k], *rest) for k, *rest in chain)]
+        coords, slopes, fit = (np.concatenate([part[j] for part in parts]) for j in range(3))
+        out.append(BreakLine(coords, slopes, min(pieces[k][2] for k, *_ in chain)))
+        per_line.append(float(np.nanmedian(fit)) if np.isfinite(fit).any() else float("nan"))
     every = np.concatenate(confidence) if confidence else np.zeros(0)
     done = np.isfinite(every)
     return out, per_line, {"vertices": int(every.size), "vertices_localised": int(done.sum()),
                            "vertices_kept": int(sum(len(line.coords) for line in out)),
                            "hop_segments_cut": hops,
+                           "pieces_joined": len(pieces) - len(chains),
+                           "join_gap_m": join_gap or 0.0,
                            "thinning_tolerance_m": tolerance,
                            "median_fit_rms_m": float(np.median(every[done])) if done.any()
                            else None}

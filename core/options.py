@@ -247,6 +247,7 @@ class RunOptions:
     localise: bool = True           # break-line vertices onto a two-plane (hinge) fit's kink
     node_elevation: str = "plane"   # NODE_ELEVATIONS: other nodes' z from a local plane fit
     node_radius: float | None = None  # m, the plane fit's radius; default from density, noise
+    join_gap: float | None = None   # m: localised pieces joined across gaps; default 6 d, 0 off
     conforming: bool = False        # conforming Delaunay (Triangle's switch D)
     far_field_area: float | None = None  # m², larger triangles away from the break lines
     workers: int | None = None      # point tiles: local Dask workers (default one per core)
@@ -294,6 +295,10 @@ class RunOptions:
         check_choice(self.node_elevation, NODE_ELEVATIONS, "node elevation")
         if self.node_radius is not None:
             _positive(self.node_radius, "node elevation radius", "metres")
+        if self.join_gap is not None and not (math.isfinite(self.join_gap)
+                                              and self.join_gap >= 0):
+            raise FloodMeshError(f"the join gap must be 0 (off) or more metres, got "
+                                 f"{self.join_gap}; six cell sizes is the default")
         if self.far_field_area is not None:
             far = _positive(self.far_field_area, "far-field area", "m²")
             if far < self.max_area:

@@ -126,7 +126,10 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         lines, confidence, counts = steps.run("localise", localise_traced, lines, front.measured,
                                               window, s_crit=options.s_crit,
                                               tolerance=dem.cell_size / 10,
-                                              max_gap=20 * dem.cell_size)
+                                              max_gap=20 * dem.cell_size,
+                                              join_gap=(6 * dem.cell_size if options.join_gap
+                                                        is None else options.join_gap),
+                                              join_lateral=dem.cell_size)
         terrain_fit.update(counts)
     size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
