@@ -138,9 +138,10 @@ def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *,
 
 def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
     """A tiled GeoTIFF profile, compressed for integer rasters (``CREATION_OPTIONS``; rasters
-    under a tile stay striped)."""
+    under a tile stay striped); ``crs`` a pyproj CRS or WKT."""
+    wkt = crs if isinstance(crs, str) else crs.to_wkt()
     profile = dict(driver="GTiff", height=shape[0], width=shape[1], count=1, dtype=dtype,
-                   crs=crs.to_wkt(), transform=transform, nodata=nodata, **CREATION_OPTIONS)
+                   crs=wkt, transform=transform, nodata=nodata, **CREATION_OPTIONS)
     if np.dtype(dtype).kind != "f":
         profile.update(INTEGER_COMPRESSION)
     if shape[0] < TILE or shape[1] < TILE:
@@ -171,7 +172,7 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
     import rasterio
     from rasterio.windows import Window
 
-    from .io import _require_file, atomic_output, no_valid_cells, raster_crs
+    from .io import _require_file, atomic_output, no_valid_cells, raster_crs_wkt
 
     if nodata is None:
         nodata = FLOAT_NODATA if np.dtype(dtype).kind == "f" else BYTE_NODATA
@@ -180,7 +181,7 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
     # GDAL sizes its block cache when first used: the environment comes before the first open
     with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB), \
             _open(src_path) as src:
-        crs = raster_crs(src, src_path, crs)
+        crs = raster_crs_wkt(src, src_path, crs)
         shape = (src.height, src.width)
         windows = row_windows(shape, block_rows) if windows is None else list(windows)
 

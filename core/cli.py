@@ -374,14 +374,13 @@ def _check_files(args) -> None:
     writable, and the rasters written are GeoTIFFs (run and series check their folder in
     core)."""
     from .outputs import check_outputs, require_suffix
-    from .tiles import expand_tiles, is_tile_set
 
     reads, writes = _FILES.get(args.command, ((), ()))
     inputs = [getattr(args, name) for name in reads if getattr(args, name) != "slope"]
-    if args.command == "grid" and is_tile_set(_input(args)):
-        inputs = expand_tiles(_input(args))
-    elif args.command == "grid":
-        inputs = [_input(args)]
+    if args.command == "grid":  # tiles (NumPy, pyproj) only here: the other steps start faster
+        from .tiles import expand_tiles, is_tile_set
+
+        inputs = expand_tiles(_input(args)) if is_tile_set(_input(args)) else [_input(args)]
     outputs = [getattr(args, name) for name in writes]
     if args.command == "grid" and args.holdout:
         outputs.append(_holdout_target(args))

@@ -17,7 +17,7 @@ from .errors import FloodMeshError
 from .points import PointCloud, clean_points
 from .limits import check_memory
 from .outputs import remove_stale_temporaries, temp_name
-from .raster import Grid, check_transform, require_metric_crs
+from .raster import METRE_NAMES, Grid, check_transform, require_metric_crs
 
 POINT_EXTENSIONS = (".las", ".laz", ".xyz", ".txt", ".csv", ".pts")
 RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
@@ -238,6 +238,21 @@ def raster_crs(src, path: Path, crs=None):
     return require_metric_crs(crs if crs is not None else
                               (file_crs.to_wkt() if file_crs else None),
                               f"raster {path.name}", kind="raster")
+
+
+def raster_crs_wkt(src, path: Path, crs=None) -> str:
+    """``raster_crs`` as WKT, for a raster step that passes the CRS through: the file's own WKT
+    where GDAL reads it as a projected (not compound) CRS in metres, without pyproj (0.1 s of
+    start-up, a fifth of ``floodmesh slope``'s at 6000²); else ``raster_crs``, its checks and
+    messages."""
+    file_crs = src.crs
+    if crs is None and file_crs and not src.gcps[0]:
+        wkt = file_crs.to_wkt()
+        unit, factor = file_crs.linear_units_factor if wkt.startswith("PROJCS[") else ("", 0)
+        if factor == 1.0 and unit.lower() in METRE_NAMES:
+            check_transform(src.transform, f"raster {path.name}")
+            return wkt
+    return raster_crs(src, path, crs).to_wkt()
 
 
 def no_valid_cells(path) -> FloodMeshError:

@@ -2,13 +2,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from pyproj import CRS
 
 from .errors import FloodMeshError
 from .options import check_holdout_count, check_seed
 from .raster import require_metric_crs
+
+if TYPE_CHECKING:  # pyproj is imported where a CRS is checked: it costs 0.1 s of start-up
+    from pyproj import CRS
 
 
 @dataclass(frozen=True)

@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from affine import Affine
-from pyproj import CRS
 
 from .errors import FloodMeshError
+
+if TYPE_CHECKING:  # pyproj is imported where a CRS is checked: it costs 0.1 s of start-up
+    from pyproj import CRS
 
 METRE_NAMES = {"metre", "meter", "metres", "meters"}
 REPROJECT_POINTS = ("pdal translate IN OUT -f filters.reprojection "
@@ -28,6 +31,8 @@ def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     """Return ``crs`` as a pyproj CRS, refusing none, geographic, and horizontal or vertical
     units other than metres. ``kind`` ("points" or "raster") picks the reprojection command the
     message suggests."""
+    from pyproj import CRS
+
     if crs is None:
         raise FloodMeshError(
             f"{what} has no coordinate reference system: give one (--crs EPSG:XXXX, or the CRS "

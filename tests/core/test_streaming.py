@@ -201,3 +201,36 @@ def test_streaming_commands_refuse_bad_rasters_in_one_line(tmp_path, capsys, com
         lines = capsys.readouterr().err.strip().splitlines()
         assert len(lines) == 1 and words in lines[0], lines
         assert not (tmp_path / "out.tif").exists()
+
+
+def _dem_in(path, crs):
+    """A small nodata-tagged float32 DEM in ``crs`` (any GDAL user input)."""
+    z = rough_dem(rows=40, cols=50).values.astype(np.float32)
+    with rasterio.open(path, "w", driver="GTiff", height=40, width=50, count=1,
+                       dtype="float32", crs=crs, transform=Affine(0.5, 0, 400, 0, -0.5, 900),
+                       nodata=-9999.0) as dst:
+        dst.write(np.where(np.isnan(z), -9999.0, z), 1)
+    return path
+
+
+@pytest.mark.parametrize("crs", ["EPSG:25832", "EPSG:25832+5783"])
+def test_streamed_slope_keeps_a_metric_crs(tmp_path, crs):
+    """The streaming steps pass the file's CRS through as WKT (pyproj only where GDAL does not
+    call it a plain projected CRS in metres): the output has the input's CRS."""
+    dem = _dem_in(tmp_path / "dem.tif", crs)
+    slope_file(dem, tmp_path / "s.tif", "sharpnack-akin")
+    with rasterio.open(dem) as a, rasterio.open(tmp_path / "s.tif") as b:
+        assert b.crs == a.crs
+
+
+@pytest.mark.parametrize("crs", ["EPSG:2272", "EPSG:4326", "EPSG:25832+6360"])
+def test_streamed_slope_refuses_a_crs_not_in_metres_as_reading_does(tmp_path, crs):
+    """Feet, degrees, or elevations in feet: the same one-line error as reading the raster,
+    and no output."""
+    dem = _dem_in(tmp_path / "dem.tif", crs)
+    with pytest.raises(FloodMeshError) as read:
+        io.read_raster(dem)
+    with pytest.raises(FloodMeshError) as streamed:
+        slope_file(dem, tmp_path / "s.tif", "sharpnack-akin")
+    assert str(streamed.value) == str(read.value)
+    assert not (tmp_path / "s.tif").exists()
