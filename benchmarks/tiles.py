@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -152,7 +153,7 @@ def main():
     args = parser.parse_args()
     data = Path(args.data)
     data.mkdir(parents=True, exist_ok=True)
-    out = data / "out"
+    out = data / f"out-{os.getpid()}"  # this run's outputs, removed at the end
     out.mkdir(exist_ok=True)
     areas = [int(a) for a in args.areas.split(",") if a]
     chain = [int(a) for a in args.run.split(",") if a]
