@@ -157,14 +157,23 @@ def holdout_mask(n_points: int, fraction: float, seed: int, name: str) -> np.nda
     return mask
 
 
-def _tile_points(path: str, crs_wkt: str, classes, holdout: float, seed: int, notes=None):
-    """(gridding xyz, held-out xyz) of one tile."""
-    from .io import read_points
+def _tile_points(path: str, crs_wkt: str, classes, holdout: float, seed: int, notes=None, *,
+                 checked: bool = False):
+    """(gridding xyz, held-out xyz) of one tile; ``checked``: the tile passed ``read_points``'s
+    checks in round one, so round two only reads it and drops the same non-finite points."""
+    from .io import _read_las, _read_xyz, read_points
 
-    cloud = read_points(path, crs=crs_wkt, classes=classes,
-                        note=notes.append if notes is not None else None)
-    held = holdout_mask(len(cloud), holdout, seed, Path(path).name)
-    return cloud.xyz[~held], cloud.xyz[held]
+    if checked:
+        path_ = Path(path)
+        xyz = (_read_las(path_, classes)[0] if path_.suffix.lower() in LAS_EXTENSIONS
+               else _read_xyz(path_))
+        xyz = np.asarray(xyz, dtype=np.float64)
+        xyz = xyz[np.isfinite(xyz).all(axis=1)]
+    else:
+        xyz = read_points(path, crs=crs_wkt, classes=classes,
+                          note=notes.append if notes is not None else None).xyz
+    held = holdout_mask(len(xyz), holdout, seed, Path(path).name)
+    return xyz[~held], xyz[held]
 
 
 def _within(xyz: np.ndarray, box) -> np.ndarray:
@@ -207,7 +216,7 @@ def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes, hol
     box = window["box"]
     parts = [xyz[_within(xyz, box)] for xyz in edges]
     for path in full:
-        xyz = _tile_points(path, crs_wkt, classes, holdout, seed)[0]
+        xyz = _tile_points(path, crs_wkt, classes, holdout, seed, checked=True)[0]
         parts.append(xyz[_within(xyz, box)])
     xyz = np.concatenate(parts) if parts else np.empty((0, 3))
     return grid_window(xyz, window["cell_size"], window["max_gap"], window["x0"], window["y1"],
