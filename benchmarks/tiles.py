@@ -2,19 +2,24 @@
 local Dask cluster as the area grows, and one file against tiles of the same 4 km² (identical
 DEMs). Prints a table.
 
-    .venv/bin/python benchmarks/tiles.py [--areas 1,4,16] [--data /tmp/floodmesh-tiles]
-                                         [--workers 2] [--density 9] [--run 1,4] [--keep-data]
+    nice .venv/bin/python benchmarks/tiles.py [--areas 1,4,16,36] [--run 1,4]
+                 [--data /var/tmp/floodmesh-bench] [--workers 2] [--density 9] [--clean]
 
 The synthetic floodplain (9 ground points/m², 5 cm noise: a sinuous river with levees in every
 1 km band, a road embankment every 2 km, undulating ground) is generated once into ``--data``
-(not the repository) and removed at the end unless ``--keep-data``. Peak memory is the largest
-sum of the resident memory of the command and its Dask worker processes, sampled every 0.1 s;
-CPU seconds are theirs too (user + system), the measure of work when the machine is shared.
+(outside the repository; about 60 MB per 1 km² tile, 2.2 GB for 36 km²) and kept there, so a
+rerun measures the chain, not the generator; ``--clean`` removes it at the end. Each area is
+gridded (``floodmesh grid``); the areas of ``--run`` also go through the whole chain
+(``floodmesh run``), whose report's step times are printed too. Peak memory is the largest sum
+of the resident memory of the command and its Dask worker processes, sampled every 0.1 s; CPU
+seconds are theirs too (user + system), the measure of work when the machine is shared.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -63,10 +68,23 @@ def make_tile(path: Path, col: int, row: int, density: float, seed: int):
     tmp.rename(path)
 
 
+TILE_BYTES = 62e6  # one 9 points/m² LAZ tile, as generated
+
+
 def tiles_for(data: Path, area_km2: int, density: float) -> list[Path]:
-    """The tiles of a square of ``area_km2`` (generated where missing)."""
+    """The tiles of a square of ``area_km2`` (generated where missing, after checking the
+    disk has room for them)."""
     side = int(math.isqrt(area_km2))
-    assert side * side == area_km2, "areas are squares: 1, 4, 9, 16, 25, 36 km²"
+    if side * side != area_km2:
+        raise SystemExit(f"areas are squares (1, 4, 9, 16, 25, 36 km²), got {area_km2}")
+    missing = sum(not (data / f"tile_{c:02d}_{r:02d}.laz").exists()
+                  for c in range(side) for r in range(side))
+    need = missing * TILE_BYTES * density / 9 + 2e9  # tiles, outputs and a margin
+    free = shutil.disk_usage(data).free
+    if missing and free < need:
+        raise SystemExit(f"{data} has {free / 1e9:.1f} GB free, the {missing} missing tiles of "
+                         f"{area_km2} km² and the outputs need about {need / 1e9:.1f} GB: give "
+                         "--data on a larger disk or fewer --areas")
     paths = []
     for col in range(side):
         for row in range(side):
@@ -122,41 +140,49 @@ def measured(command: list[str]) -> tuple[float, float, float, str]:
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--areas", default="1,4,16", help="km², squares (default 1,4,16)")
-    parser.add_argument("--data", default="/tmp/floodmesh-tiles", help="tile folder")
+    parser.add_argument("--areas", default="1,4,16,36",
+                        help="km² gridded, squares (default 1,4,16,36)")
+    parser.add_argument("--data", default="/var/tmp/floodmesh-bench",
+                        help="tile cache, kept between runs (default /var/tmp/floodmesh-bench)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--density", type=float, default=9.0)
-    parser.add_argument("--run", default="1,4", help="areas also run through the whole chain")
-    parser.add_argument("--keep-data", action="store_true")
+    parser.add_argument("--run", default="1,4",
+                        help="km² also run through the whole chain (default 1,4)")
+    parser.add_argument("--clean", action="store_true",
+                        help="remove the generated tiles at the end")
     args = parser.parse_args()
     data = Path(args.data)
     data.mkdir(parents=True, exist_ok=True)
-    out = data / "out"
+    out = data / f"out-{os.getpid()}"  # this run's outputs, removed at the end
     out.mkdir(exist_ok=True)
-    areas = [int(a) for a in args.areas.split(",")]
+    areas = [int(a) for a in args.areas.split(",") if a]
     chain = [int(a) for a in args.run.split(",") if a]
-    rows = []
+    rows, steps = [], []
     try:
-        for area in areas:
+        for area in sorted(set(areas) | set(chain)):
             tiles = tiles_for(data, area, args.density)
             points = int(args.density * 1e6 * area)
             folder = str(tile_folder(data, area, tiles))
-            seconds, cpu, peak, _ = measured([FLOODMESH, "grid", folder, "--cell-size",
-                                              "1", "--workers", str(args.workers),
-                                              "--out", str(out / f"dem_{area}.tif")])
-            rows.append(("grid tiles", area, points, seconds, cpu, peak))
-            print(f"  grid {area} km²: {seconds:.0f} s, {peak:.0f} MB", file=sys.stderr,
-                  flush=True)
+            if area in areas:
+                seconds, cpu, peak, _ = measured([FLOODMESH, "grid", folder, "--cell-size",
+                                                  "1", "--workers", str(args.workers),
+                                                  "--out", str(out / f"dem_{area}.tif")])
+                rows.append(("grid tiles", area, points, seconds, cpu, peak))
+                print(f"  grid {area} km²: {seconds:.0f} s, {peak:.0f} MB", file=sys.stderr,
+                      flush=True)
             if area in chain:
                 seconds, cpu, peak, _ = measured([FLOODMESH, "run", folder,
                                                   "--workers", str(args.workers), "--out",
                                                   str(out / f"run_{area}")])
                 rows.append(("run tiles", area, points, seconds, cpu, peak))
+                report = json.loads((out / f"run_{area}" / "report.json").read_text())
+                steps.append((area, report["seconds"], report["triangles"]))
+                shutil.rmtree(out / f"run_{area}")
                 print(f"  run {area} km²: {seconds:.0f} s, {peak:.0f} MB", file=sys.stderr,
                       flush=True)
         # one file against tiles: the same 4 km², the same DEM
         compare = None
-        if 4 in areas:
+        if 4 in areas:  # needs the tiles' DEM of 4 km²
             import laspy
 
             tiles = tiles_for(data, 4, args.density)
@@ -183,7 +209,8 @@ def main():
                        float(np.nanmax(np.abs(a.values - b.values))) if same_nan else math.nan,
                        a.shape)
     finally:
-        if not args.keep_data:
+        shutil.rmtree(out, ignore_errors=True)
+        if args.clean:
             shutil.rmtree(data, ignore_errors=True)
     print(f"\n## A floodplain as 1 km² LAZ tiles, {args.density:g} points/m², 1 m DEM, "
           f"{args.workers} local Dask workers")
@@ -192,6 +219,9 @@ def main():
     for what, area, points, seconds, cpu, peak in rows:
         print(f"{what:<22}{area:>5}{points:>14,}{seconds:>9.1f}{cpu:>9.1f}{cpu / area:>11.1f}"
               f"{peak:>13.0f}")
+    for area, seconds, triangles in steps:
+        print(f"run {area} km² ({triangles:,} triangles), seconds per step: " + ", ".join(
+            f"{name} {value:.0f}" for name, value in seconds.items() if value >= 0.5))
     if compare:
         same_transform, same_nan, diff, shape = compare
         print(f"4 km² one file vs tiles: DEM {shape[1]} x {shape[0]} cells, same georeference "

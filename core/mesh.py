@@ -472,7 +472,8 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
     check_triangles(domain.area, max_area, max_triangles)
     pslg = build_pslg(lines, domain, snap=snap, note=note)
     if points is not None and len(points):
-        points = _points_apart(np.asarray(points, float), pslg.vertices, domain, snap)
+        points = _points_apart(np.asarray(points, float), pslg.vertices, domain, snap,
+                               segments=pslg.segments)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
                                            conforming=conforming, points=points,
                                            local_areas=local_areas,
@@ -506,9 +507,12 @@ def _nearest_value(grid: Grid, x, y) -> np.ndarray:
     return out
 
 
-def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float) -> np.ndarray:
+def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float, *,
+                  segments: np.ndarray | None = None) -> np.ndarray:
     """The points inside ``domain`` (by more than ``snap``) that lie at least ``snap`` from the
-    PSLG's vertices and from each other (first come, first kept)."""
+    PSLG's vertices, its ``segments`` and each other (first come, first kept). A point a hair
+    off a segment (a DEM cell centre on a traced line) would make Triangle refine towards it
+    without end, leaving nodes on one spot and a triangulation no point can be located in."""
     from scipy.spatial import cKDTree
 
     inside = shapely.contains_xy(domain.buffer(-snap), points[:, 0], points[:, 1])
@@ -517,6 +521,10 @@ def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float)
         return points.reshape(0, 3)
     far = cKDTree(vertices).query(points[:, :2])[0] >= snap
     points = points[far]
+    if segments is not None and len(segments) and len(points):
+        tree = shapely.STRtree(shapely.linestrings(vertices[np.asarray(segments)]))
+        hit = tree.query(shapely.points(points[:, :2]), predicate="dwithin", distance=snap)[0]
+        points = np.delete(points, np.unique(hit), axis=0)
     keep = np.ones(len(points), bool)
     for i, j in sorted(cKDTree(points[:, :2]).query_pairs(snap)):
         if keep[i]:

@@ -281,7 +281,8 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                          classes=options.classes, note=note)
     if isinstance(data, TiledDem):
         dem, holdout = data.dem, PointCloud(data.holdout, data.dem.crs)
-        # the tiles' points are not kept: the terrain fits use the DEM's cell centres
+        # the tiles' points are not kept: the terrain fits and --refine use the DEM's cell
+        # centres; the per-tile held-out points stay the independent check
         measured = _dem_check_points(dem, 1.0, options.seed).xyz
         holdout_source = "LiDAR points withheld from gridding, tile by tile"
         n_points = data.n_points
@@ -335,11 +336,6 @@ def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None,
     paths = expand_tiles(inputs)
     if tile_kind(paths[0]) == "dem":
         return read_dem_tiles(paths, crs=options.crs)
-    if options.refine:
-        raise FloodMeshError("--refine ('Refine' in QGIS) needs all points in memory and is not "
-                             "available with point tiles: run without it, then refine a part "
-                             "with floodmesh refine DEM --points TILE")
-
     def check(plan):
         check_triangles(plan["area"], options.max_area, options.max_triangles)
 

@@ -166,3 +166,20 @@ def test_xyz_tiles_with_a_given_crs(survey, scheduler, tmp_path):
                                 scheduler=scheduler)
     assert from_xyz.dem.transform == from_laz.dem.transform
     np.testing.assert_allclose(from_xyz.dem.values, from_laz.dem.values, atol=1e-6)
+
+
+def test_refine_on_tiles_uses_the_dem_and_checks_on_the_tiles_holdout(survey, scheduler,
+                                                                       tmp_path):
+    # the tiles' points are not kept: the DEM's cell centres drive the refinement and the points
+    # each tile held back check it, round by round
+    options = RunOptions(holdout=0.01, scheduler=scheduler, refine=True, localise=False,
+                         node_elevation="dem")
+    report = run_pipeline(survey / "tiles", tmp_path / "refined", options)
+    rounds = report["refinement"]
+    assert len(rounds) >= 2 and report["nodes"] == rounds[-1]["nodes"] > rounds[0]["nodes"]
+    assert rounds[-1]["max_abs_m"] < rounds[0]["max_abs_m"]
+    assert rounds[-1]["rmse_m"] < rounds[0]["rmse_m"]
+    assert rounds[-1]["check_rmse_m"] < rounds[0]["check_rmse_m"]
+    assert report["holdout_source"] == "LiDAR points withheld from gridding, tile by tile"
+    # the check points are the tiles' own held-out LiDAR points, 1 % of each tile
+    assert abs(report["n_holdout"] - 0.01 * report["n_points"]) <= 4
