@@ -136,7 +136,8 @@ def snap_t_junctions(lines, *, tolerance: float, min_angle: float = 30.0,
     where an end's direction (its chord over ``reach`` m, default 2·``tolerance``) meets another
     line's segment at ``min_angle`` degrees or more and within ``tolerance`` m ahead of (or
     behind) the end, the end is extended (or trimmed) to the meeting point and that point
-    becomes a vertex of the other line too, with the other line's z there: one shared node, a
+    becomes a vertex of the other line too, with the other line's z there (its nearest vertex,
+    where one lies within a quarter of ``tolerance``: no short edge): one shared node, a
     T-junction. Not where the other line's z there differs from the end's by more than
     ``rise`` m plus ``grade`` times the distance (it passes above or below: a levee's crest
     ending beside a channel's toe is no junction on the ground, and a node there would tie the
@@ -189,6 +190,9 @@ def snap_t_junctions(lines, *, tolerance: float, min_angle: float = 30.0,
                 continue
             m = np.nonzero(ok)[0][np.argmin(np.abs(ahead[ok]))]
             hit = seg_a[k[m]] + at[m] * (seg_b[k[m]] - seg_a[k[m]])
+            for vertex in (seg_a[k[m]], seg_b[k[m]]):  # near a vertex: that one, no short edge
+                if np.hypot(*(vertex[:2] - hit[:2])) < 0.25 * tolerance:
+                    hit = vertex
             end = c[-1 if side == 1 else 0]
             if c.shape[1] > 2 and abs(hit[2] - end[2]) > rise + grade * abs(ahead[m]):
                 continue  # the other line lies higher or lower: no junction on the ground

@@ -114,6 +114,10 @@ def test_an_end_short_of_a_line_becomes_a_shared_vertex_of_it():
     assert node[2] == pytest.approx(10.0 + 0.002 * 30.5)  # the main line's z there
     assert len(new_branch) == len(branch) + 1 and np.array_equal(new_branch[1:], branch)
     assert list(takes[1]) == [0] + list(range(len(branch)))
+    # aimed 0.2 m beside a vertex of the line: that vertex is the node, no short edge
+    (near_main, near), _, snapped = snap_t_junctions([main, _branch(0.6, 20.6, 1.2)],
+                                                     tolerance=1.6)
+    assert snapped == 1 and len(near_main) == len(main) and np.allclose(near[0], main[31])
     # an end that ran 0.6 m past the line is trimmed to it: no stub beyond the node
     (_, crossing), _, snapped = snap_t_junctions([main, _branch(-0.6, 20.4)], tolerance=1.6)
     assert snapped == 1 and np.allclose(crossing[0, :2], node[:2])
