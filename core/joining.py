@@ -131,7 +131,8 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
 
 
 def snap_t_junctions(lines, *, tolerance: float, min_angle: float = 30.0,
-                     rise: float = 0.1, grade: float = 0.18, reach: float | None = None) -> tuple[list, list, int]:
+                     rise: float = 0.1, grade: float = 0.18, reach: float | None = None
+                     ) -> tuple[list, list, int]:
     """Line ends that stop short of (or run just past) another line's interior, snapped onto it:
     where an end's direction (its chord over ``reach`` m, default 2·``tolerance``) meets another
     line's segment at ``min_angle`` degrees or more and within ``tolerance`` m ahead of (or

@@ -159,3 +159,14 @@ def test_a_snapped_t_junction_meshes_at_25_degrees_with_a_node_of_degree_3():
     apart = build_pslg([_piece(-30, 30), _branch(0.6, 20.6)], shapely.box(0, 0, 120, 110),
                        snap=0.5)
     assert (np.bincount(apart.segments.ravel()) == 3).sum() == 0
+
+
+def test_two_ends_crossing_at_a_corner_meet_in_one_node():
+    from floodmesh.core.joining import snap_t_junctions
+
+    a = np.vstack([_piece(-30, 0), _piece(0.8, 0.8)])  # runs 0.8 m past the other line
+    b = _branch(-0.5, 20, s=0.0)  # starts 0.5 m past the first
+    (a2, b2), _, snapped = snap_t_junctions([a, b], tolerance=1.6)
+    assert snapped == 1
+    assert np.allclose(a2[-1, :2], 50.0) and np.allclose(b2[0, :2], 50.0)  # an L, no stubs
+    assert len(a2) == len(a) - 1 and len(b2) == len(b)
