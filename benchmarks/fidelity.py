@@ -9,7 +9,8 @@ river at 32° to the grid, a tributary, a levee and a road), noise (5, 15 cm) an
 chain of options; its mesh is scored against the TRUE surface (RMSE over 100,000 random points)
 and its break lines against the true ones (recall, precision within 2 m, pieces per true line,
 where the pieces of each true line meet: junction or crossing, mid-run, second line in the band)
-and the whole segments the PSLG left out for the angle bound are counted.
+and the whole segments the PSLG left out for the angle bound and the line ends snapped onto
+another line (T-junctions) are counted.
 Peers, in the same run: uniform 25° Triangle meshes without break lines whose nodes carry the
 exact elevation (the node count at FloodMesh's RMSE interpolated in log-log), and pydelatin
 (greedy TIN, no angle bound) on the same DEM. Ratios are uniform nodes / FloodMesh nodes at the
@@ -170,6 +171,7 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
         score = score_breaklines(traced, reference, 2.0)
         score["breaks"] = breaks(traced, reference, feature_of_lines(floodplain))
         # whole break-line segments the PSLG left out for the angle bound (see build_pslg)
+        score["t_junctions"] = report["terrain_fit"].get("t_junctions_snapped", 0)
         score["dropped"] = sum(int(m) for n in report["notes"]
                                for m in re.findall(r"\((\d+) too short were left out\)", n))
         rows.append((chain, len(nodes), true_rmse(mesh, floodplain, sample, truth), score,
@@ -224,7 +226,7 @@ def main():
         print(f"{terrain:<28}{density:>4g}/m² {100 * noise:>3g} cm  {chain:<10}{ratio:>6.1f}x  "
               f"pieces {score['mean_pieces']:.2f}  recall {score['recall']:.3f}  "
               f"precision {score['precision']:.3f}  breaks {score['breaks']}  "
-              f"segments dropped {score['dropped']}")
+              f"segments dropped {score['dropped']}  T-junctions snapped {score['t_junctions']}")
 
 
 if __name__ == "__main__":

@@ -11,6 +11,9 @@ both of one kind (a crest joins no toe), and, if ``ground`` is given, the ground
 following the straight line between the two ends' z (a channel cut through an embankment, a
 tributary's mouth in a river bank, breaks the line: there the terrain has no break to join).
 Cheapest joins (short, straight) first; no end joins twice and no chain closes on itself.
+After that, ``snap_t_junctions`` snaps an end that stops within about a cell of another line's
+interior, pointing at it at its height, onto it as a shared node (a T-junction); crossings are
+noded by ``mesh.build_pslg``.
 """
 from __future__ import annotations
 
@@ -125,3 +128,122 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
     for i in np.nonzero(~done)[0]:  # closed loops cannot occur (no cycles), but be safe
         chains.append([(int(i), False, 0, len(lines[i]))])
     return chains
+
+
+def snap_t_junctions(lines, *, tolerance: float, min_angle: float = 30.0,
+                     rise: float = 0.1, grade: float = 0.18, reach: float | None = None
+                     ) -> tuple[list, list, int]:
+    """Line ends that stop short of (or run just past) another line's interior, snapped onto it:
+    where an end's direction (its chord over ``reach`` m, default 2·``tolerance``) meets another
+    line's segment at ``min_angle`` degrees or more and within ``tolerance`` m ahead of (or
+    behind) the end, the end is extended (or trimmed) to the meeting point and that point
+    becomes a vertex of the other line too, with the other line's z there (its nearest vertex,
+    where one lies within a quarter of ``tolerance``: no short edge): one shared node, a
+    T-junction. Not where the other line's z there differs from the end's by more than
+    ``rise`` m plus ``grade`` times the distance (it passes above or below: a levee's crest
+    ending beside a channel's toe is no junction on the ground, and a node there would tie the
+    two heights together across the slope), nor where the end runs alongside a line (under
+    ``min_angle``) or lies farther off. Lines of any kind meet (x, y, z arrays; z is what
+    decides): a bank's crest ending on a road embankment's toe at the same height is a network
+    node, and to the mesh either near-miss is a gap narrower than a cell that Triangle fills
+    with small triangles. Closest ends first; where two lines' ends would each snap onto the
+    other at one corner, the second line's stub beyond the node is trimmed instead (an L).
+    Returns the lines, per line the index of the input vertex each output vertex comes from
+    (an inserted vertex: its segment's first), and how many ends were snapped."""
+    from scipy.spatial import cKDTree
+
+    lines = [np.asarray(c, float) for c in lines]
+    takes = [np.arange(len(c)) for c in lines]
+    reach = 2 * tolerance if reach is None else reach
+    seg_a, seg_b, seg_line, seg_first = [], [], [], []
+    for i, c in enumerate(lines):
+        if len(c) >= 2:
+            seg_a.append(c[:-1])
+            seg_b.append(c[1:])
+            seg_line.append(np.full(len(c) - 1, i))
+            seg_first.append(np.arange(len(c) - 1))
+    if not tolerance > 0 or len(seg_a) < 2:
+        return lines, takes, 0
+    seg_a, seg_b = np.concatenate(seg_a), np.concatenate(seg_b)
+    seg_line, seg_first = np.concatenate(seg_line), np.concatenate(seg_first)
+    span = seg_b[:, :2] - seg_a[:, :2]
+    half = 0.5 * np.hypot(*span.T)
+    tree = cKDTree(0.5 * (seg_a[:, :2] + seg_b[:, :2]))
+    sin_min = np.sin(np.radians(min_angle))
+    best = []  # (|ahead|, line, side, hit row, direction, target line)
+    for i, c in enumerate(lines):
+        for side in (0, 1) if len(c) >= 2 else ():
+            p, d = _end_frame(c, side == 0, reach)
+            if d is None:
+                continue
+            k = np.asarray(tree.query_ball_point(p, tolerance + half.max()), int)
+            k = k[seg_line[k] != i]
+            if not k.size:
+                continue
+            cross = d[0] * span[k, 1] - d[1] * span[k, 0]  # d × (b - a)
+            rel = seg_a[k, :2] - p
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ahead = (rel[:, 0] * span[k, 1] - rel[:, 1] * span[k, 0]) / cross
+                at = (rel[:, 0] * d[1] - rel[:, 1] * d[0]) / cross
+            ok = ((np.abs(cross) >= sin_min * 2 * half[k]) & (np.abs(ahead) <= tolerance)
+                  & (at >= 0) & (at <= 1))
+            if not ok.any():
+                continue
+            m = np.nonzero(ok)[0][np.argmin(np.abs(ahead[ok]))]
+            hit = seg_a[k[m]] + at[m] * (seg_b[k[m]] - seg_a[k[m]])
+            for vertex in (seg_a[k[m]], seg_b[k[m]]):  # near a vertex: that one, no short edge
+                if np.hypot(*(vertex[:2] - hit[:2])) < 0.25 * tolerance:
+                    hit = vertex
+            end = c[-1 if side == 1 else 0]
+            if c.shape[1] > 2 and abs(hit[2] - end[2]) > rise + grade * abs(ahead[m]):
+                continue  # the other line lies higher or lower: no junction on the ground
+            best.append((abs(ahead[m]), i, side, hit, d, int(seg_line[k[m]])))
+    best.sort(key=lambda t: t[0])
+    nodes = {}  # (line, target line) -> node of an applied snap
+    snapped = 0
+    for _, i, side, hit, d, j in best:
+        if (j, i) in nodes:  # j's end already met i here: trim i's stub beyond that node
+            _trim_stub(lines, takes, i, side, nodes[(j, i)], 2 * tolerance)
+            continue
+        c, take = (lines[i], takes[i]) if side == 1 else (lines[i][::-1], takes[i][::-1])
+        past = (c[:, :2] - hit[:2]) @ d >= 0
+        stop = len(c)
+        while stop > 1 and past[stop - 1]:
+            stop -= 1
+        c, take = c[:stop], take[:stop]
+        if stop > 1 and np.hypot(*(c[-1, :2] - hit[:2])) < 0.25 * tolerance:
+            c, take = c[:-1], take[:-1]
+        c, take = np.vstack([c, hit[None, :c.shape[1]]]), np.r_[take, take[-1]]
+        lines[i], takes[i] = (c, take) if side == 1 else (c[::-1], take[::-1])
+        _insert_vertex(lines, takes, j, hit)
+        nodes[(i, j)] = hit
+        snapped += 1
+    return lines, takes, snapped
+
+
+def _insert_vertex(lines, takes, j, point):
+    """``point`` made a vertex of line ``j`` on its nearest segment (unless it is one)."""
+    c = lines[j]
+    a, span = c[:-1, :2], np.diff(c[:, :2], axis=0)
+    length2 = np.maximum((span ** 2).sum(axis=1), 1e-18)
+    t = np.clip(((point[:2] - a) * span).sum(axis=1) / length2, 0, 1)
+    k = int(np.argmin(np.hypot(*(a + t[:, None] * span - point[:2]).T)))
+    if min(np.hypot(*(c[k, :2] - point[:2])), np.hypot(*(c[k + 1, :2] - point[:2]))) < 1e-6:
+        return
+    lines[j] = np.vstack([c[:k + 1], point[None, :c.shape[1]], c[k + 1:]])
+    takes[j] = np.r_[takes[j][:k + 1], takes[j][k], takes[j][k + 1:]]
+
+
+def _trim_stub(lines, takes, i, side, node, longest):
+    """Line ``i``'s vertices beyond ``node`` (one of its vertices) at its ``side`` end cut off,
+    where that stub is at most ``longest`` m long."""
+    c = lines[i] if side == 1 else lines[i][::-1]
+    at = np.nonzero(np.hypot(*(c[:, :2] - node[:2]).T) < 1e-6)[0]
+    if not at.size or at[-1] < 1:
+        return
+    k = int(at[-1])
+    if np.hypot(*np.diff(c[k:, :2], axis=0).T).sum() > longest:
+        return
+    take = takes[i] if side == 1 else takes[i][::-1]
+    c, take = c[:k + 1], take[:k + 1]
+    lines[i], takes[i] = (c, take) if side == 1 else (c[::-1], take[::-1])

@@ -406,11 +406,14 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
     are cut where they hop across a band from crest to toe (``_hops_cut``), and pieces of one
     kind (crest or toe) whose ends face each other across at most ``join_gap`` m are joined
-    (``joining.join_pieces``, lateral offset ``join_lateral`` m; None or 0: no joining). Returns
+    (``joining.join_pieces``, lateral offset ``join_lateral`` m; None or 0: no joining), and line
+    ends that stop within ``join_lateral`` plus a tenth of ``join_gap`` m of another line's
+    interior, pointing at it at its height (within ``tolerance`` m plus a rise at ``s_crit``),
+    are snapped onto it (``joining.snap_t_junctions``). Returns
     the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
     where none moved) and counts."""
     from .breaklines import BreakLine
-    from .joining import join_pieces
+    from .joining import join_pieces, snap_t_junctions
     from .simplify import douglas_peucker_mask
 
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
@@ -437,12 +440,20 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
         coords, slopes, fit = (np.concatenate([part[j] for part in parts]) for j in range(3))
         out.append(BreakLine(coords, slopes, min(pieces[k][2] for k, *_ in chain)))
         per_line.append(float(np.nanmedian(fit)) if np.isfinite(fit).any() else float("nan"))
+    t_junctions = 0
+    if join_gap and out:
+        snapped, takes, t_junctions = snap_t_junctions(
+            [line.coords for line in out], tolerance=join_lateral + 0.1 * join_gap,
+            rise=tolerance, grade=float(np.tan(np.radians(s_crit))))
+        out = [BreakLine(c, line.slopes[take], line.component)
+               for c, take, line in zip(snapped, takes, out)]
     every = np.concatenate(confidence) if confidence else np.zeros(0)
     done = np.isfinite(every)
     return out, per_line, {"vertices": int(every.size), "vertices_localised": int(done.sum()),
                            "vertices_kept": int(sum(len(line.coords) for line in out)),
                            "hop_segments_cut": hops,
                            "pieces_joined": len(pieces) - len(chains),
+                           "t_junctions_snapped": t_junctions,
                            "join_gap_m": join_gap or 0.0,
                            "thinning_tolerance_m": tolerance,
                            "median_fit_rms_m": float(np.median(every[done])) if done.any()

@@ -90,3 +90,83 @@ def test_a_negative_join_gap_is_refused():
     with pytest.raises(FloodMeshError, match="join gap must be 0"):
         RunOptions(join_gap=-1.0)
     assert RunOptions(join_gap=0.0).join_gap == 0.0
+
+
+def _branch(u0, u1, s=0.5):
+    """A line leaving the ``_piece`` line at right angles, from ``u0`` to ``u1`` m off it, at
+    ``s`` m along it (between two of its vertices): its start is the end that meets it."""
+    u = np.arange(u0, u1 + 1e-9, 1.0)
+    xy = 50.0 + s * TANGENT + u[:, None] * NORMAL
+    return np.column_stack([xy, np.full(len(u), 10.0)])
+
+
+def test_an_end_short_of_a_line_becomes_a_shared_vertex_of_it():
+    from floodmesh.core.joining import snap_t_junctions
+
+    main, branch = _piece(-30, 30), _branch(0.6, 20.6)  # 0.6 cells short of the middle
+    main[:, 2] = 10.0 + 0.002 * np.arange(len(main))
+    (new_main, new_branch), takes, snapped = snap_t_junctions([main, branch], tolerance=1.6)
+    assert snapped == 1
+    node = new_branch[0]
+    assert np.allclose(node[:2], 50.0 + 0.5 * TANGENT)  # the foot on the main line
+    assert len(new_main) == len(main) + 1 and (np.hypot(*(new_main[:, :2] - node[:2]).T)
+                                               < 1e-9).sum() == 1
+    assert node[2] == pytest.approx(10.0 + 0.002 * 30.5)  # the main line's z there
+    assert len(new_branch) == len(branch) + 1 and np.array_equal(new_branch[1:], branch)
+    assert list(takes[1]) == [0] + list(range(len(branch)))
+    # aimed 0.2 m beside a vertex of the line: that vertex is the node, no short edge
+    (near_main, near), _, snapped = snap_t_junctions([main, _branch(0.6, 20.6, 1.2)],
+                                                     tolerance=1.6)
+    assert snapped == 1 and len(near_main) == len(main) and np.allclose(near[0], main[31])
+    # an end that ran 0.6 m past the line is trimmed to it: no stub beyond the node
+    (_, crossing), _, snapped = snap_t_junctions([main, _branch(-0.6, 20.4)], tolerance=1.6)
+    assert snapped == 1 and np.allclose(crossing[0, :2], node[:2])
+    assert ((crossing[:, :2] - 50.0) @ NORMAL >= -1e-9).all()
+
+
+@pytest.mark.parametrize("case", ["parallel", "far", "higher"])
+def test_ends_alongside_far_from_or_above_a_line_are_not_snapped(case):
+    from floodmesh.core.joining import snap_t_junctions
+
+    main = _piece(-30, 30)
+    other = (_piece(1.5, 30, 0.6) if case == "parallel" else _branch(3.0, 23.0)
+             if case == "far" else _branch(0.6, 20.6) + [0, 0, 0.5])  # a crest 0.5 m up
+    lines, _, snapped = snap_t_junctions([main, other], tolerance=1.6)
+    assert snapped == 0
+    assert np.array_equal(lines[0], main) and np.array_equal(lines[1], other)
+
+
+def test_a_snapped_t_junction_meshes_at_25_degrees_with_a_node_of_degree_3():
+    import shapely
+
+    from floodmesh.core.joining import snap_t_junctions
+    from floodmesh.core.mesh import build_pslg, triangulate_pslg
+
+    lines, _, snapped = snap_t_junctions([_piece(-30, 30), _branch(0.6, 20.6)], tolerance=1.6)
+    assert snapped == 1
+    pslg = build_pslg(lines, shapely.box(0, 0, 120, 110), snap=0.5)
+    degree = np.bincount(pslg.segments.ravel(), minlength=len(pslg.vertices))
+    node = np.argmin(np.hypot(*(pslg.vertices - lines[1][0, :2]).T))
+    assert degree[node] == 3 and np.hypot(*(pslg.vertices[node] - lines[1][0, :2])) < 0.1
+    vertices, triangles = triangulate_pslg(pslg, min_angle=25.0, max_area=100.0)
+    corners = vertices[triangles]
+    sides = np.hypot(*(np.roll(corners, -1, axis=1) - corners).transpose(2, 0, 1))
+    a, b, c = sides.T
+    cos = np.clip([(b * b + c * c - a * a) / (2 * b * c), (a * a + c * c - b * b) / (2 * a * c),
+                   (a * a + b * b - c * c) / (2 * a * b)], -1, 1)
+    assert np.degrees(np.arccos(cos)).min() >= 25.0 - 1e-6
+    # the same lines left 0.6 m apart: no node joins them, the network has a gap there
+    apart = build_pslg([_piece(-30, 30), _branch(0.6, 20.6)], shapely.box(0, 0, 120, 110),
+                       snap=0.5)
+    assert (np.bincount(apart.segments.ravel()) == 3).sum() == 0
+
+
+def test_two_ends_crossing_at_a_corner_meet_in_one_node():
+    from floodmesh.core.joining import snap_t_junctions
+
+    a = np.vstack([_piece(-30, 0), _piece(0.8, 0.8)])  # runs 0.8 m past the other line
+    b = _branch(-0.5, 20, s=0.0)  # starts 0.5 m past the first
+    (a2, b2), _, snapped = snap_t_junctions([a, b], tolerance=1.6)
+    assert snapped == 1
+    assert np.allclose(a2[-1, :2], 50.0) and np.allclose(b2[0, :2], 50.0)  # an L, no stubs
+    assert len(a2) == len(a) - 1 and len(b2) == len(b)
