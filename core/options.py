@@ -249,6 +249,7 @@ class RunOptions:
     node_radius: float | None = None  # m, the plane fit's radius; default from density, noise
     conforming: bool = False        # conforming Delaunay (Triangle's switch D)
     far_field_area: float | None = None  # m², larger triangles away from the break lines
+    flow_area: float | None = None  # m², smaller triangles on low ground by drainage lines (HAND)
     workers: int | None = None      # point tiles: local Dask workers (default one per core)
     scheduler: str | None = None    # point tiles: a running dask.distributed scheduler's address
     processes: bool = True          # point tiles: local workers are processes (False: threads)
@@ -294,6 +295,8 @@ class RunOptions:
         check_choice(self.node_elevation, NODE_ELEVATIONS, "node elevation")
         if self.node_radius is not None:
             _positive(self.node_radius, "node elevation radius", "metres")
+        if self.flow_area is not None:
+            _positive(self.flow_area, "flow area", "m²")
         if self.far_field_area is not None:
             far = _positive(self.far_field_area, "far-field area", "m²")
             if far < self.max_area:

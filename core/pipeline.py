@@ -15,6 +15,7 @@ from . import io
 from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
+from .drainage import flow_size
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
@@ -137,6 +138,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
         size = far if size is None else far.with_values(np.fmin(far.values, size.values))
         max_area = options.far_field_area
+    if options.flow_area is not None:  # resolution where water flows (see drainage)
+        flow = flow_size(dem, flow_area=options.flow_area)
+        size = flow if size is None else flow.with_values(np.fmin(flow.values, size.values))
     node_counts = {}
 
     def elevations(mesh):
