@@ -257,3 +257,21 @@ def test_a_level_boundary_fills_a_basin_to_its_level_not_above(tmp_path):
     assert np.abs(stage[-1, 1:] - 1.0).max() < 0.05
     assert report["mass_balance"]["boundary_inflow_volume_m3"] == pytest.approx(
         150 * 10 * stage[-1, 1:].mean(), rel=0.05)
+
+
+def test_spatial_order_keeps_the_mesh_and_brings_neighbours_together():
+    from floodmesh.core.flood import spatial_order
+
+    rng = np.random.default_rng(1)
+    corners = np.array([[0, 0], [60, 0], [60, 40], [0, 40]], float)
+    xy, tri = triangulate_pslg(PSLG(corners, np.array([[0, 1], [1, 2], [2, 3], [3, 0]]),
+                                    np.empty((0, 2))), min_angle=25.0, max_area=2.0)
+    shuffle = rng.permutation(len(xy))  # a mesh whose numbering is scattered
+    nodes = np.column_stack([xy, np.zeros(len(xy))])[shuffle]
+    tri = np.argsort(shuffle)[tri][rng.permutation(len(tri))]
+    ordered_nodes, ordered = spatial_order(nodes, tri)
+    as_set = {tuple(sorted(map(tuple, np.round(t, 9)))) for t in nodes[tri][:, :, :2]}
+    assert as_set == {tuple(sorted(map(tuple, np.round(t, 9))))
+                      for t in ordered_nodes[ordered][:, :, :2]}
+    spread = lambda t: np.mean(t.max(axis=1) - t.min(axis=1))  # noqa: E731
+    assert spread(ordered) < spread(tri) / 10
