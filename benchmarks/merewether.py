@@ -111,6 +111,8 @@ def main(argv=None):
                    help="keep flood runs already in OUT (e.g. the reference)")
     p.add_argument("--flow-area", type=float, default=25.0,
                    help="floodmesh-flow-area: run --flow-area, m² (default 25)")
+    p.add_argument("--repeat", type=int, default=3,
+                   help="ANUGA runs per mesh, the best CPU counts (default 3; the reference once)")
     p.add_argument("--max-area", type=float, default=100.0,
                    help="FloodMesh's maximum area (default: its default, 100 m²)")
     args = p.parse_args(argv)
@@ -146,10 +148,14 @@ def main(argv=None):
         if args.reuse and (folder / "report.json").is_file():
             runs[label] = json.loads((folder / "report.json").read_text())
             return
-        start = time.perf_counter()
-        runs[label] = run_flood(meshes[label][0], sc, folder, crs=CRS)
-        print(f"{label}: {runs[label]['nodes']} nodes, ANUGA {runs[label]['cpu_s']:.1f} s CPU "
-              f"({time.perf_counter() - start:.0f} s wall)", flush=True)
+        start, cpus = time.perf_counter(), []
+        for _ in range(1 if label == "reference" else max(1, args.repeat)):
+            runs[label] = run_flood(meshes[label][0], sc, folder, crs=CRS)
+            cpus.append(runs[label]["cpu_s"])
+        runs[label]["cpu_runs_s"], runs[label]["cpu_s"] = cpus, min(cpus)
+        print(f"{label}: {runs[label]['nodes']} nodes, ANUGA {min(cpus):.1f} s CPU, best of "
+              f"{[round(c, 1) for c in cpus]} ({time.perf_counter() - start:.0f} s wall, "
+              f"load {os.getloadavg()[0]:.1f})", flush=True)
 
     # the second mesh puts its resolution where the first flood went, and its detected lines
     flood("floodmesh")
@@ -181,7 +187,9 @@ def main(argv=None):
         rows.append({
             "mesh": label, "nodes": r["nodes"],
             "min_inradius_m": r["hydraulics"]["min_inradius_m"],
-            "cpu_s": r["cpu_s"], "mean_time_step_s": r["mean_time_step_s"],
+            "cpu_s": r["cpu_s"], "cpu_runs_s": r.get("cpu_runs_s", [r["cpu_s"]]),
+            "cpu_per_step_ms": 1000 * r["cpu_s"] / max(r["time_steps"], 1),
+            "mean_time_step_s": r["mean_time_step_s"],
             "time_steps": r["time_steps"],
             "extent_iou": c["extent_iou"] if c else 1.0,
             "max_depth_rmse_m": c["max_depth_rmse_m"] if c else 0.0,
@@ -199,14 +207,17 @@ def main(argv=None):
     io.write_json(out / "merewether.json", summary)
     print(f"\nMerewether, {args.duration:.0f} s, {'houses raised' if args.houses else 'bare earth'};"
           f" reference: uniform {args.reference_area} m² ({runs['reference']['nodes']} nodes)")
-    print(f"{'mesh':<22}{'nodes':>7}{'min r_in m':>11}{'CPU s':>8}{'steps':>7}{'IoU':>7}"
+    print(f"load average {os.getloadavg()[0]:.1f} ({os.cpu_count()} cores); CPU: best of "
+          f"{args.repeat} runs, ms/step: that CPU per time step")
+    print(f"{'mesh':<22}{'nodes':>7}{'min r_in m':>11}{'CPU s':>8}{'steps':>7}{'ms/step':>8}{'IoU':>7}"
           f"{'RMSE m':>8}{'bias m':>8}{'stage RMSE m':>13}")
     for row in rows:
         print(f"{row['mesh']:<22}{row['nodes']:>7}{row['min_inradius_m']:>11.3f}"
-              f"{row['cpu_s']:>8.1f}{row['time_steps']:>7}{row['extent_iou']:>7.3f}"
+              f"{row['cpu_s']:>8.1f}{row['time_steps']:>7}{row['cpu_per_step_ms']:>8.2f}"
+              f"{row['extent_iou']:>7.3f}"
               f"{row['max_depth_rmse_m']:>8.3f}{row['max_depth_bias_m']:>+8.3f}"
               f"{row['peak_stage_rmse_vs_observed_m']:>13.2f}")
-    print(f"{'TUFLOW (ARR report)':<22}{'':>7}{'':>11}{'':>8}{'':>7}{'':>7}{'':>8}{'':>8}"
+    print(f"{'TUFLOW (ARR report)':<22}{'':>7}{'':>11}{'':>8}{'':>7}{'':>8}{'':>7}{'':>8}{'':>8}"
           f"{summary['tuflow_peak_stage_rmse_vs_observed_m']:>13.2f}")
     print("peak stages (m) at " + ", ".join(o["name"] for o in obs) + ":")
     print(f"  observed {observed.tolist()}\n  TUFLOW   {tuflow.tolist()}")

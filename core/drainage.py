@@ -106,3 +106,14 @@ def flow_size(dem: Grid, *, flow_area: float, height: float = 1.0,
     hand, _ = height_above_drainage(dem, channel_area=channel_area)
     low = np.nan_to_num(np.asarray(hand.values, float), nan=np.inf) <= height
     return dem.with_values(np.where(low, float(flow_area), np.nan).astype(np.float32))
+
+
+def flow_spacing(dem: Grid, *, flow_area: float, height: float = 3.0,
+                 channel_area: float = 5000.0) -> Grid:
+    """Break-line spacing (m) where a flood may go: the side of an equilateral triangle of
+    ``flow_area`` on the ground less than ``height`` m above a drainage line (wider than the
+    flow zone of ``flow_size``: water rises above it, and a short segment anywhere wet sets the
+    time step), NaN elsewhere (see ``hydraulic_lines``)."""
+    zone = flow_size(dem, flow_area=flow_area, height=height, channel_area=channel_area)
+    return zone.with_values(np.sqrt(4 / np.sqrt(3) * np.asarray(zone.values, float))
+                            .astype(np.float32))

@@ -73,3 +73,30 @@ def test_run_flow_area_puts_triangles_of_that_size_on_the_low_ground(demo_points
     zone = np.isfinite(low[cols.astype(int), rows.astype(int)])
     assert zone.mean() > 0.2                  # the river and its low floodplain
     assert np.abs(triangle_areas(nodes, tri))[zone].max() <= 20.0 * 1.05
+
+
+
+def test_no_line_segment_where_water_flows_is_shorter_than_its_triangles(demo_points_file,
+                                                                        tmp_path):
+    """A short break-line segment where water goes makes the smallest wet triangle, which sets
+    the flood model's time step: with the flow spacing none is shorter than the flow zone's
+    triangle side, on the demo's detected lines."""
+    from floodmesh.core import io
+    from floodmesh.core.drainage import flow_spacing
+    from floodmesh.core.hydraulic_lines import _spacing_at, lines_for_hydraulics
+    from floodmesh.core.options import RunOptions
+    from floodmesh.core.pipeline import run_pipeline
+
+    run_pipeline(demo_points_file, tmp_path, RunOptions(min_spacing=0.0))
+    dem = io.read_raster(tmp_path / "dem.tif")
+    lines = [np.asarray(c, float) for c in io.read_lines_gpkg(tmp_path / "breaklines.gpkg")]
+    side = flow_spacing(dem, flow_area=20.0)
+    assert np.nanmax(side.values) == pytest.approx(np.sqrt(4 / np.sqrt(3) * 20.0), rel=1e-6)
+    plain, _ = lines_for_hydraulics(lines, None, spacing=1.0)
+    out, _ = lines_for_hydraulics(lines, None, spacing=1.0, flow_spacing=side)
+
+    def short(coords):   # segments shorter than the spacing at their end vertex
+        return sum(int((np.hypot(*np.diff(c[:, :2], axis=0).T)
+                        < _spacing_at(side, c, 1.0)[1:] - 1e-6).sum()) for c in coords)
+
+    assert short(plain) > 50 and short(out) == 0
