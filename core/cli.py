@@ -165,7 +165,8 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
                         "the terrain is plane (default: max area everywhere)")
     p.add_argument("--flow-area", type=float,
                    help="smaller triangles, at most this many m², where water flows: ground "
-                        "less than 1 m above a drainage line draining 5000 m² (default: off)")
+                        "less than 1 m above a drainage line draining 5000 m²; break lines "
+                        "where a flood may go thinned to that triangle's side (default: off)")
     _add_conforming(p)
 
 
