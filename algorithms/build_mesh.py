@@ -21,10 +21,11 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             "keep their z; other nodes take z bilinearly from the DEM. A model domain polygon "
             "(with holes for buildings or islands) replaces the data's extent; your own lines "
             "are kept as mesh edges. A size field raster (m², nodata: no limit) sets a local "
-            "maximum area. Writes SMS 2DM and, optionally, the triangles as "
-            "PolygonZ.")
+            "maximum area, and so does the flow area (m², optional) on ground less than 1 m "
+            "above a drainage line (height above the nearest drainage), where a flood goes "
+            "first. Writes SMS 2DM and, optionally, the triangles as PolygonZ.")
     DEM, BREAKLINES, MIN_ANGLE, MAX_AREA = "DEM", "BREAKLINES", "MIN_ANGLE", "MAX_AREA"
-    SIZE_FIELD, MAX_TRIANGLES = "SIZE_FIELD", "MAX_TRIANGLES"
+    SIZE_FIELD, MAX_TRIANGLES, FLOW_AREA = "SIZE_FIELD", "MAX_TRIANGLES", "FLOW_AREA"
     OUTPUT, TRIANGLES, NODES, TRIANGLE_COUNT = "OUTPUT", "TRIANGLES", "NODES", "TRIANGLE_COUNT"
 
     def initAlgorithm(self, config=None):  # noqa: N802
@@ -41,6 +42,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             DOUBLE, 100.0, minValue=0.0))
         self.addParameter(QgsProcessingParameterRasterLayer(
             self.SIZE_FIELD, self.tr("Size field: local maximum area (m²)"), optional=True))
+        self.addParameter(flow_area_parameter(self.FLOW_AREA, self.tr))
         self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT, self.tr("Mesh (SMS 2DM)"), fileFilter="SMS 2DM (*.2dm)"))
@@ -65,10 +67,18 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
             "size_field": layer_file(size_layer, "Size field") if size_layer else None,
             "max_triangles": self.parameterAsInt(parameters, self.MAX_TRIANGLES, context),
+            "flow_area": self.optional_number(parameters, self.FLOW_AREA, context),
             "output": out, "triangles": triangles_out or None}, feedback, out, triangles_out)
         load_mesh(context, out, "Mesh", self.OUTPUT, result["crs"])
         return {k: v for k, v in result.items()
                 if k in (self.OUTPUT, self.NODES, self.TRIANGLE_COUNT, self.TRIANGLES)}
+
+
+def flow_area_parameter(name, tr):
+    """Optional: the triangle area (m²) where water flows, shared with LiDAR to mesh."""
+    return QgsProcessingParameterNumber(
+        name, tr("Triangle area where water flows: low ground by the drainage lines (m², "
+                 "optional)"), DOUBLE, optional=True, minValue=0.0)
 
 
 def max_triangles_parameter(name, tr):

@@ -15,7 +15,7 @@ from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FOR
 from .compat import DOUBLE, INTEGER, VECTOR_LINE
 from .base import (FloodMeshAlgorithm, add_domain_parameters, crs_or_none, distance,
                    domain_files, labels, point_cloud_parameter)
-from .build_mesh import max_triangles_parameter
+from .build_mesh import flow_area_parameter, max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
 from .tiles import add_tile_parameters, dask_settings, input_or_tiles
 from .styles import load_results, style_breaklines, style_mesh, style_residuals
@@ -52,7 +52,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     CLASSES, MAX_GAP, SIGMA, SENSITIVITY = "CLASSES", "MAX_GAP", "SIGMA", "SENSITIVITY"
     LOG_KERNEL, ZERO_CROSSINGS = "LOG_KERNEL", "ZERO_CROSSINGS"
     LOCALISE, NODE_ELEVATION = "LOCALISE", "NODE_ELEVATION"
-    CONFORMING, FAR_FIELD_AREA = "CONFORMING", "FAR_FIELD_AREA"
+    CONFORMING, FAR_FIELD_AREA, FLOW_AREA = "CONFORMING", "FAR_FIELD_AREA", "FLOW_AREA"
     MIN_ANGLE = "MIN_ANGLE"
     MAX_AREA = "MAX_AREA"
     MAX_TRIANGLES = "MAX_TRIANGLES"
@@ -146,6 +146,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.FAR_FIELD_AREA, self.tr("Far-field triangle area where the terrain is plane "
                                          "(m²)"), DOUBLE, optional=True, minValue=0.0))
+        self.addParameter(flow_area_parameter(self.FLOW_AREA, self.tr))
         self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
@@ -194,6 +195,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
                                                                 context)],
             conforming=self.parameterAsBool(parameters, self.CONFORMING, context),
             far_field_area=self.optional_number(parameters, self.FAR_FIELD_AREA, context),
+            flow_area=self.optional_number(parameters, self.FLOW_AREA, context),
             **dask_settings(self, parameters, context))
 
     def check_values(self, parameters, context):

@@ -3,7 +3,7 @@ the levee crest (a level boundary across the river and its north floodplain at t
 rising 1.2 m over --rise s, then held; walls elsewhere), flooded by ANUGA on FloodMesh's mesh and on a uniform mesh of the same node
 count: how much water gets behind the levee.
 
-    .venv/bin/python benchmarks/demo_levee.py [--out DIR] [--freeboard 0.15] [--duration 600] [--rise 400] [--reuse]
+    .venv/bin/python benchmarks/demo_levee.py [--out DIR] [--freeboard 0.15] [--duration 600] [--rise 400] [--flow-area A] [--reuse]
 """
 from __future__ import annotations
 
@@ -32,6 +32,8 @@ def main(argv=None):
     p.add_argument("--rise", type=float, default=400.0,
                    help="the river rises 1.2 m to its level over this many s, then holds")
     p.add_argument("--reuse", action="store_true", help="keep the demo mesh already in OUT")
+    p.add_argument("--flow-area", type=float,
+                   help="FloodMesh's mesh with run --flow-area, m² (default: run's default)")
     args = p.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -40,7 +42,8 @@ def main(argv=None):
         points, classes = demo.synthetic_floodplain(seed=0)
         source = out / "demo_points.laz"
         io.write_points_las(source, points, classes=classes)
-        run_pipeline(source, out / "floodmesh", RunOptions())
+        run_pipeline(source, out / "floodmesh", RunOptions(
+            **({} if args.flow_area is None else {"flow_area": args.flow_area})))
     nodes, _ = io.read_mesh_2dm(mesh_path)
     dem = io.read_raster(out / "floodmesh" / "dem.tif")
     area = 40.0

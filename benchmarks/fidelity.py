@@ -57,6 +57,7 @@ CHAINS = {
     "no-join": dict(join_gap=0),              # localised pieces left unjoined
     "conforming": dict(conforming=True),     # today's chain with Triangle's switch D
     "far-field": dict(far_field_area=400.0),  # today's chain, up to 400 m² where plane
+    "flow-area": dict(flow_area=25.0),        # smaller triangles where water flows (issue 16)
 }
 UNIFORM_AREAS = (50, 20, 10, 5, 2.5, 1.2, 0.6, 0.3)
 DELATIN_ERRORS = (0.6, 0.4, 0.25, 0.15, 0.1, 0.07, 0.05)

@@ -42,8 +42,11 @@ def _boundary_objects(anuga, domain, kinds: dict):
                 stage = _series(times, levels, hold=True)
             else:
                 stage = (lambda t, level=float(spec["level_m"]): level)
-            objects[tag] = anuga.Transmissive_n_momentum_zero_t_momentum_set_stage_boundary(
-                domain, function=stage)
+            # water at rest outside at that level: the Riemann flux lets water in while the
+            # inside is lower and out once it is higher (transmitting the normal momentum
+            # instead kept a filling basin's inflow going: 0.7 m above the level on the demo)
+            objects[tag] = anuga.Time_boundary(
+                domain, function=(lambda t, stage=stage: [stage(t), 0.0, 0.0]))
         else:
             raise ValueError(f"unknown boundary kind {kind}")
     return objects

@@ -166,6 +166,10 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
     p.add_argument("--far-field-area", type=float,
                    help="larger triangles, up to this many m², away from the break lines where "
                         "the terrain is plane (default: max area everywhere)")
+    p.add_argument("--flow-area", type=float,
+                   help="smaller triangles, at most this many m², where water flows: ground "
+                        "less than 1 m above a drainage line draining 5000 m²; break lines "
+                        "where a flood may go thinned to that triangle's side (default: off)")
     _add_conforming(p)
 
 
@@ -225,6 +229,7 @@ def _options(args) -> RunOptions:
                       node_radius=getattr(args, "node_radius", None),
                       join_gap=getattr(args, "join_gap", None),
                       far_field_area=getattr(args, "far_field_area", None),
+                      flow_area=getattr(args, "flow_area", None),
                       conforming=getattr(args, "conforming", DEFAULTS.conforming),
                       workers=getattr(args, "workers", None),
                       scheduler=getattr(args, "scheduler", None))

@@ -12,6 +12,12 @@ smallest spacing s (default: the cell size d):
 - vertices closer than s to the previous kept vertex are dropped (the end points stay);
 - what is left shorter than 2 s is dropped.
 
+Where the mesh gets a flow size (``flow_spacing``: the side of the flow zone's triangles, see
+``drainage``), vertices are thinned to that spacing and shorter pieces dropped, so no break-line
+segment there is shorter than the triangles around it (a short segment in the wet zone would
+make the smallest wet triangle, which sets the flood model's time step), and a vertex where the
+thinned line turns sharply (an angle under 60°, where Triangle splits the segments into small triangles) is dropped there too.
+
 The modeller's own lines are kept as given.
 """
 from __future__ import annotations
@@ -19,27 +25,52 @@ from __future__ import annotations
 import numpy as np
 
 
-def thin_vertices(coords: np.ndarray, spacing: float) -> np.ndarray:
-    """``coords`` (k, 2+) without vertices closer than ``spacing`` to the previous kept one;
-    both ends stay (the last kept inner vertex gives way to the end)."""
+def thin_vertices(coords: np.ndarray, spacing) -> np.ndarray:
+    """``coords`` (k, 2+) without vertices closer than ``spacing`` (m, one value or one per
+    vertex) to the previous kept one; both ends stay (the last kept inner vertex gives way to
+    the end)."""
     coords = np.asarray(coords, float)
     if len(coords) <= 2:
         return coords
+    spacing = np.broadcast_to(np.asarray(spacing, float), (len(coords),))
     keep = [0]
     for i in range(1, len(coords) - 1):
-        if np.hypot(*(coords[i, :2] - coords[keep[-1], :2])) >= spacing:
+        if np.hypot(*(coords[i, :2] - coords[keep[-1], :2])) >= spacing[i]:
             keep.append(i)
-    while len(keep) > 1 and np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])) < spacing:
+    while len(keep) > 1 and np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])) < max(
+            spacing[-1], spacing[keep[-1]]):
         keep.pop()
     keep.append(len(coords) - 1)
     return coords[keep]
 
 
+def drop_spikes(coords: np.ndarray, where=None, min_angle: float = 60.0) -> np.ndarray:
+    """``coords`` (k, 2+) without the inner vertices (of those ``where`` is true) at which the
+    line folds back, its two segments meeting at less than ``min_angle`` degrees."""
+    coords = np.asarray(coords, float)
+    where = np.ones(len(coords), bool) if where is None else np.asarray(where, bool)
+    keep = list(range(len(coords)))
+    i = 1
+    while i < len(keep) - 1:
+        a, b, c = (coords[keep[j], :2] for j in (i - 1, i, i + 1))
+        u, v = a - b, c - b
+        cos = u @ v / max(np.hypot(*u) * np.hypot(*v), 1e-12)
+        if where[keep[i]] and cos > np.cos(np.radians(min_angle)):
+            del keep[i]
+            i = max(1, i - 1)
+        else:
+            i += 1
+    return coords[keep]
+
+
 def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | None = None,
-                         own_lines=(), within=None) -> tuple[list[np.ndarray], dict]:
+                         own_lines=(), within=None,
+                         flow_spacing=None) -> tuple[list[np.ndarray], dict]:
     """Detected ``lines`` ((k, 3) arrays) made affordable for a flood model inside ``domain``
     (a shapely (Multi)Polygon), as the module says, and only ``within`` a polygon if given
-    (e.g. ``wet_zone`` of a first flood); returns (lines, counts of what was done)."""
+    (e.g. ``wet_zone`` of a first flood); ``flow_spacing`` (a Grid of spacings in m, NaN
+    outside the flow zone) widens the spacing where it is larger; returns (lines, counts of
+    what was done)."""
     import shapely
 
     clearance = 2 * spacing if clearance is None else clearance
@@ -51,7 +82,11 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     out, stats = [], {"lines_in": len(lines), "vertices_in": int(sum(len(c) for c in lines)),
                       "clipped_at_edge": 0, "cut_near_other_lines": 0}
     for k in order:
-        line = shapely.LineString(np.asarray(lines[k], float))
+        coords = np.asarray(lines[k], float)
+        if flow_spacing is not None:  # thinned first, so the cuts below see the final chords
+            coords = thin_vertices(coords, _spacing_at(flow_spacing, coords, spacing))
+            coords = drop_spikes(coords, _spacing_at(flow_spacing, coords, spacing) > spacing)
+        line = shapely.LineString(coords)
         if inner is not None:
             clipped = shapely.intersection(line, inner)
             stats["clipped_at_edge"] += clipped.length < line.length - 1e-9
@@ -66,14 +101,28 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
             if own_pieces:
                 part = shapely.difference(part, shapely.union_all(own_pieces).buffer(spacing))
             for piece in _parts(part):
-                coords = thin_vertices(shapely.get_coordinates(piece, include_z=True), spacing)
-                if _length(coords) >= 2 * spacing and len(coords) >= 2:
+                coords = shapely.get_coordinates(piece, include_z=True)
+                local = _spacing_at(flow_spacing, coords, spacing)
+                coords = thin_vertices(coords, local)
+                if _length(coords) >= max(2 * spacing, local.max()) and len(coords) >= 2:
                     out.append(coords)
                     own_pieces.append(shapely.LineString(coords[:, :2]))
         taken.extend(own_pieces)
     stats.update(lines_out=len(out), vertices_out=int(sum(len(c) for c in out)),
                  spacing_m=spacing, clearance_m=clearance)
     return out, stats
+
+
+def _spacing_at(flow_spacing, coords, spacing: float) -> np.ndarray:
+    """The spacing at each vertex: ``spacing``, or the flow spacing of its cell if larger."""
+    local = np.full(len(coords), float(spacing))
+    if flow_spacing is None or not len(coords):
+        return local
+    row, col = flow_spacing.fractional_index(coords[:, 0], coords[:, 1])
+    ny, nx = flow_spacing.shape
+    row = np.clip(np.rint(row).astype(int), 0, ny - 1)
+    col = np.clip(np.rint(col).astype(int), 0, nx - 1)
+    return np.fmax(local, np.asarray(flow_spacing.values, float)[row, col])
 
 
 def _length(coords) -> float:

@@ -15,6 +15,7 @@ from . import io
 from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
+from .drainage import flow_size, flow_spacing
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
@@ -140,6 +141,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
         size = far if size is None else far.with_values(np.fmin(far.values, size.values))
         max_area = options.far_field_area
+    if options.flow_area is not None:  # resolution where water flows (see drainage)
+        flow = flow_size(dem, flow_area=options.flow_area)
+        size = flow if size is None else flow.with_values(np.fmin(flow.values, size.values))
     node_counts = {}
 
     def elevations(mesh):
@@ -158,7 +162,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         detected, line_stats = steps.run(
             "hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
             own_lines=front.own_lines, within=shapely.union_all(
-                io.read_boundary(options.flow_zone)) if options.flow_zone else None)
+                io.read_boundary(options.flow_zone)) if options.flow_zone else None,
+            flow_spacing=flow_spacing(dem, flow_area=options.flow_area) if options.flow_area is not None else None)
     mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
                      max_area=max_area, conforming=options.conforming, domain=front.domain,

@@ -15,7 +15,8 @@ import numpy as np
 from . import io
 from .accuracy import accuracy_statistics, residuals
 from .errors import FloodMeshError
-from .mesh import Mesh, build_mesh
+from .hydraulic_lines import lines_for_hydraulics
+from .mesh import Mesh, build_mesh, domain_from_dem
 from .options import RunOptions
 from .outputs import check_output_folder, staged_folder
 from .simplify import simplify_breaklines
@@ -64,15 +65,18 @@ def settings_grid(max_areas, method: str = "keep-every", amounts=(4,)) -> list[S
 
 def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Setting], *,
                  min_angle: float = 25.0, min_distance: float | None = None, domain=None,
-                 own_lines: list = (),
+                 own_lines: list = (), min_spacing: float | None = None,
                  log: Callable[[str], None] | None = None) -> tuple[list[dict], list[Mesh]]:
     """Mesh ``dem`` with the ``traced`` break lines once per setting and assess each mesh on the
     check points ``check_xyz`` (n, 3; m). ``min_distance`` (m) defaults to half a cell;
-    ``domain`` and ``own_lines`` as for ``build_mesh`` (a user's domain and lines).
+    ``domain`` and ``own_lines`` as for ``build_mesh`` (a user's domain and lines);
+    ``min_spacing`` (m; default the cell size, 0 off) as ``run``'s: the detected lines made
+    affordable for a flood model (``hydraulic_lines``).
 
     Returns one row per setting (``COLUMNS``: errors in metres, ``share_over_25cm`` a fraction)
     and the meshes, in the order of ``settings``."""
     min_distance = dem.cell_size / 2 if min_distance is None else min_distance
+    spacing = dem.cell_size if min_spacing is None else min_spacing
     simplified = {}
     rows, meshes = [], []
     for setting in settings:
@@ -82,6 +86,10 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
         if key not in simplified:
             simplified[key] = [line.coords for line in simplify_breaklines(
                 traced, setting.method, setting.amount, min_distance=min_distance)]
+            if spacing > 0:
+                simplified[key], _ = lines_for_hydraulics(
+                    simplified[key], domain_from_dem(dem) if domain is None else domain,
+                    spacing=spacing, own_lines=own_lines)
         mesh = build_mesh(dem, simplified[key] + list(own_lines), min_angle=min_angle,
                           max_area=setting.max_area, domain=domain)
         stats = accuracy_statistics(residuals(mesh, check_xyz))
@@ -155,7 +163,8 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
     rows, meshes = scale_series(front.dem, front.traced, front.holdout.xyz, settings,
                                 min_angle=options.min_angle,
                                 min_distance=options.min_distance, domain=front.domain,
-                                own_lines=front.own_lines, log=log)
+                                own_lines=front.own_lines, min_spacing=options.min_spacing,
+                                log=log)
     # the folder is replaced as a whole: an interrupt leaves the old series' files or these
     with staged_folder(out, own=_is_own, keep=inputs) as stage:
         for row, mesh in zip(rows, meshes):

@@ -170,13 +170,21 @@ def step_simplify(ch, *, input, output, crs, method, amount, min_distance):
 
 
 def step_build_mesh(ch, *, dem, output, min_angle, max_area, max_triangles, breaklines=None,
-                    boundary=None, user_lines=None, size_field=None, triangles=None):
+                    boundary=None, user_lines=None, size_field=None, triangles=None,
+                    flow_area=None):
     from . import io
     from .mesh import build_mesh, mesh_quality
     from .pipeline import size_field as size_from
 
     grid, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines)
     size = size_from(size_field, grid, max_area=max_area) if size_field else None
+    if flow_area is not None:  # smaller triangles where water flows (see drainage)
+        import numpy as np
+
+        from .drainage import flow_size
+
+        flow = flow_size(grid, flow_area=flow_area)
+        size = flow if size is None else flow.with_values(np.fmin(flow.values, size.values))
     mesh = build_mesh(grid, lines, min_angle=min_angle, max_area=max_area, domain=domain,
                       size_field=size, max_triangles=max_triangles, note=ch.note)
     quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)

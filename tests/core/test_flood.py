@@ -236,3 +236,42 @@ def _write(path, data):
 def _write_text(path, text):
     path.write_text(text)
     return path
+
+
+@needs_anuga
+def test_a_level_boundary_fills_a_basin_to_its_level_not_above(tmp_path):
+    """A dry, flat, walled 150 × 10 m basin open at its west end to a level rising from 0.5 to
+    1 m over 60 s: the water comes in, runs to the far wall and settles at the level; it may
+    not overshoot it (transmitting the inflow's momentum at the boundary, as before, kept
+    pushing water in: 1.70 m at the far wall, and the demo's levee overtopped)."""
+    mesh = tmp_path / "basin.2dm"
+    rectangle_mesh(mesh, 150, 10, lambda x, y: 0.0 * x, max_area=4.0)
+    scenario = scenario_from_dict({
+        "duration_s": 240, "output_interval_s": 10, "manning": 0.02,
+        "boundaries": [{"kind": "level", "sides": ["west"], "levels": [[0, 0.5], [60, 1.0]]}],
+        "observation_points": [{"name": "far", "x": X0 + 145, "y": Y0 + 5},
+                               {"name": "near", "x": X0 + 5, "y": Y0 + 5}]})
+    report = run_flood(mesh, scenario, tmp_path / "out", crs=CRS)
+    assert max(o["peak_stage_m"] for o in report["observations"]) < 1.05
+    stage = np.loadtxt(tmp_path / "out" / "observations.csv", delimiter=",", skiprows=1)
+    assert np.abs(stage[-1, 1:] - 1.0).max() < 0.05
+    assert report["mass_balance"]["boundary_inflow_volume_m3"] == pytest.approx(
+        150 * 10 * stage[-1, 1:].mean(), rel=0.05)
+
+
+def test_spatial_order_keeps_the_mesh_and_brings_neighbours_together():
+    from floodmesh.core.flood import spatial_order
+
+    rng = np.random.default_rng(1)
+    corners = np.array([[0, 0], [60, 0], [60, 40], [0, 40]], float)
+    xy, tri = triangulate_pslg(PSLG(corners, np.array([[0, 1], [1, 2], [2, 3], [3, 0]]),
+                                    np.empty((0, 2))), min_angle=25.0, max_area=2.0)
+    shuffle = rng.permutation(len(xy))  # a mesh whose numbering is scattered
+    nodes = np.column_stack([xy, np.zeros(len(xy))])[shuffle]
+    tri = np.argsort(shuffle)[tri][rng.permutation(len(tri))]
+    ordered_nodes, ordered = spatial_order(nodes, tri)
+    as_set = {tuple(sorted(map(tuple, np.round(t, 9)))) for t in nodes[tri][:, :, :2]}
+    assert as_set == {tuple(sorted(map(tuple, np.round(t, 9))))
+                      for t in ordered_nodes[ordered][:, :, :2]}
+    spread = lambda t: np.mean(t.max(axis=1) - t.min(axis=1))  # noqa: E731
+    assert spread(ordered) < spread(tri) / 10

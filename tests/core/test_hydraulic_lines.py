@@ -83,3 +83,36 @@ def test_a_first_flood_sets_the_size_field_and_the_flow_zone():
     out, _ = lines_for_hydraulics([line], None, spacing=1.0, within=zone)
     assert len(out) == 1 and out[0][0, 0] == pytest.approx(10) and out[0][-1, 0] == \
         pytest.approx(30)
+
+
+def test_flow_spacing_thins_lines_to_the_flow_zone_triangle_side():
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.raster import Grid
+
+    # a 1 m grid, x < 50 in the flow zone with a spacing of 6 m, no limit elsewhere
+    values = np.full((20, 100), np.nan, np.float32)
+    values[:, :50] = 6.0
+    zone = Grid(values, Affine(1.0, 0, 0, 0, -1.0, 20.0), CRS.from_epsg(32756))
+    line = np.column_stack([np.arange(0.0, 100.0, 1.5), np.full(67, 10.0), np.zeros(67)])
+    short = np.array([[10, 2, 0], [11, 2.5, 0], [13, 3, 0]])   # 3.2 m long, in the zone
+    (out,), _ = lines_for_hydraulics([line, short], None, spacing=1.0, flow_spacing=zone)
+    steps = np.diff(out[:, 0])
+    wet, dry = out[1:, 0] < 50, out[:-1, 0] >= 50
+    assert (steps[wet] >= 6.0 - 1e-9).all() and (steps[dry] == 1.5).all()
+    assert out[0, 0] == 0 and out[-1, 0] == line[-1, 0]     # the ends stay
+    # without the field the spacing is the plain one and the short line stays
+    plain, _ = lines_for_hydraulics([line, short], None, spacing=1.0)
+    assert len(plain) == 2 and len(plain[0]) == len(line)
+
+
+def test_drop_spikes_removes_sharp_turns_only_where_asked():
+    from floodmesh.core.hydraulic_lines import drop_spikes
+
+    # a hairpin at x = 10 (the line turns back at about 11°) and a right angle at (20, 2)
+    line = np.array([[0, 0], [10, 0], [0, 2], [20, 2], [20, 10]], float)
+    out = drop_spikes(line)
+    assert [10, 0] not in out.tolist() and [20, 2] in out.tolist()
+    assert out[0].tolist() == [0, 0] and out[-1].tolist() == [20, 10]
+    assert len(drop_spikes(line, where=np.zeros(5, bool))) == 5

@@ -102,3 +102,21 @@ def test_series_command_with_tolerances(demo_points_file, tmp_path):
     bad = subprocess.run([floodmesh, "series", str(demo_points_file), "--out", str(out),
                           "--max-areas", "0"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2
+
+
+def test_series_meshes_have_runs_spacing_for_a_flood_model(series_run, demo_points_file,
+                                                           tmp_path):
+    """Each series mesh gets run's default --min-spacing (the cell size): no sliver at the
+    domain edge where detected lines graze it; 0 turns it off, as for run."""
+    from floodmesh.core.hydraulics import inradii
+
+    out, result, _ = series_run
+    plain = run_series(demo_points_file, tmp_path / "plain",
+                       RunOptions(holdout=0.01, min_spacing=0),
+                       settings_grid(AREAS[:1], "keep-every", (4,)))
+    label = result["rows"][0]["label"]
+    spaced = io.read_mesh_2dm(out / f"mesh_{label}.2dm")
+    unspaced = io.read_mesh_2dm(tmp_path / "plain" / f"mesh_{label}.2dm")
+    r_spaced, r_plain = (inradii(nodes, tri) for nodes, tri in (spaced, unspaced))
+    assert r_plain.min() < 0.15 <= r_spaced.min()
+    assert plain["rows"][0]["nodes"] > result["rows"][0]["nodes"]

@@ -1,0 +1,102 @@
+"""Where water flows (floodmesh.core.drainage): height above the nearest drainage on surfaces
+whose drainage is known, and the flow size field in the chain."""
+import numpy as np
+import pytest
+from affine import Affine
+from pyproj import CRS
+
+from floodmesh.core.drainage import flow_size, height_above_drainage
+from floodmesh.core.raster import Grid
+
+
+def grid(z):
+    return Grid(np.asarray(z, float), Affine(1.0, 0, 0, 0, -1.0, 100.0),
+                CRS.from_epsg(32756))
+
+
+def valley(pit=False):
+    """A valley along row 50 falling 0.1 % to x = 0, sides rising 10 % from its thalweg."""
+    jj, ii = np.meshgrid(np.arange(100) + 0.5, np.arange(101) + 0.5)
+    z = 0.001 * jj + 0.1 * np.abs(ii - 50.5)
+    if pit:  # a 0.5 m deep pit on the thalweg: it fills and drains over its rim
+        z[48:53, 58:63] -= 0.5
+    return z
+
+
+def test_hand_of_a_valley_is_the_height_above_its_thalweg():
+    hand, drained = height_above_drainage(grid(valley()), channel_area=500.0)
+    rows = np.abs(np.arange(101) - 50)[:, None] + np.zeros(100)
+    cols = np.arange(100)[None, :] + np.zeros((101, 1))
+    # a path down a side runs diagonally (D8) and meets the thalweg as many cells downstream as
+    # it starts from it (0.1 % lower each); nearer the grid's west edge it leaves the grid
+    # first: not low ground, NaN
+    meets = (cols > rows + 1) & (rows < 49) & (cols < 99)   # the east edge's cells: outlets
+    assert np.abs(hand.values - 0.1 * rows)[meets].max() < 0.001 * 50 + 1e-4
+    assert np.isnan(hand.values[(cols < rows - 1) & (rows > 1)]).all()
+    # the thalweg drains the valley above it: about half of the grid at its foot
+    assert drained.values[50, 1] > 0.4 * 101 * 100
+
+
+def test_a_pit_fills_and_drains_over_its_rim():
+    hand, drained = height_above_drainage(grid(valley(pit=True)), channel_area=500.0)
+    # the water reaching the pit goes on down the valley: the thalweg below it drains as much
+    # as without the pit
+    _, plain = height_above_drainage(grid(valley()), channel_area=500.0)
+    assert drained.values[50, 20] == pytest.approx(plain.values[50, 20], rel=0.01)
+    # the pit lies on the drainage line, its floor below it: low ground
+    assert (hand.values[48:53, 58:63] <= 0.11).all() and hand.values[48:53, 58:63].min() < -0.4
+
+
+def test_flow_size_is_the_flow_area_on_low_ground_only():
+    field = flow_size(grid(valley()), flow_area=20.0, height=1.0, channel_area=500.0)
+    v = field.values[:, 20:-1]   # the east edge's cells are outlets
+    rows = np.abs(np.arange(101) - 50)
+    assert (v[rows <= 9] == 20).all()       # 0.9 m or less above the thalweg
+    assert np.isnan(v[rows >= 11]).all()    # 1.1 m or more
+
+
+def test_run_flow_area_puts_triangles_of_that_size_on_the_low_ground(demo_points_file,
+                                                                     tmp_path):
+    from floodmesh.core import io
+    from floodmesh.core.mesh import triangle_areas
+    from floodmesh.core.options import RunOptions
+    from floodmesh.core.pipeline import run_pipeline
+
+    base = run_pipeline(demo_points_file, tmp_path / "base", RunOptions())
+    flow = run_pipeline(demo_points_file, tmp_path / "flow", RunOptions(flow_area=20.0))
+    assert flow["nodes"] > base["nodes"]
+    nodes, tri = io.read_mesh_2dm(tmp_path / "flow" / "mesh.2dm")
+    dem = io.read_raster(tmp_path / "flow" / "dem.tif")
+    low = flow_size(dem, flow_area=20.0).values
+    centre = nodes[tri][:, :, :2].mean(axis=1)
+    rows, cols = ~dem.transform * (centre[:, 0], centre[:, 1])
+    zone = np.isfinite(low[cols.astype(int), rows.astype(int)])
+    assert zone.mean() > 0.2                  # the river and its low floodplain
+    assert np.abs(triangle_areas(nodes, tri))[zone].max() <= 20.0 * 1.05
+
+
+
+def test_no_line_segment_where_water_flows_is_shorter_than_its_triangles(demo_points_file,
+                                                                        tmp_path):
+    """A short break-line segment where water goes makes the smallest wet triangle, which sets
+    the flood model's time step: with the flow spacing none is shorter than the flow zone's
+    triangle side, on the demo's detected lines."""
+    from floodmesh.core import io
+    from floodmesh.core.drainage import flow_spacing
+    from floodmesh.core.hydraulic_lines import _spacing_at, lines_for_hydraulics
+    from floodmesh.core.options import RunOptions
+    from floodmesh.core.pipeline import run_pipeline
+
+    run_pipeline(demo_points_file, tmp_path, RunOptions(min_spacing=0.0))
+    dem = io.read_raster(tmp_path / "dem.tif")
+    lines = [np.asarray(c, float) for c in io.read_lines_gpkg(tmp_path / "breaklines.gpkg")]
+    side = flow_spacing(dem, flow_area=20.0)
+    assert np.nanmax(side.values) == pytest.approx(np.sqrt(4 / np.sqrt(3) * 20.0), rel=1e-6)
+    plain, _ = lines_for_hydraulics(lines, None, spacing=1.0)
+    out, _ = lines_for_hydraulics(lines, None, spacing=1.0, flow_spacing=side)
+
+    def short(coords):   # segments shorter than the spacing at their end vertex
+        return sum(int((np.hypot(*np.diff(c[:, :2], axis=0).T)
+                        < _spacing_at(side, c, 1.0)[1:] - 1e-6).sum()) for c in coords)
+
+    assert short(plain) > 50 and short(out) == 0
