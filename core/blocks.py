@@ -199,7 +199,7 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
                     result = np.asarray(result)
                     if result.dtype.kind == "f":
                         kind = dtype if np.dtype(dtype).kind == "f" else result.dtype
-                        result = nan_to_value(np.array(result, kind, copy=False, order="C"),
+                        result = nan_to_value(np.ascontiguousarray(result, kind),
                                               np.dtype(kind).type(nodata))
                     r0, c0, h, w = window
                     dst.write(result.astype(dtype, copy=False), 1, window=Window(c0, r0, w, h))

@@ -79,6 +79,13 @@ def build(log=None) -> bool:
     if name is None:
         return False
     if not any(HERE.glob(f"{name}.*")):
+        import importlib.util
+
+        if importlib.util.find_spec("numpy.distutils") is None:
+            if log:  # numba.pycc builds through numpy.distutils, gone for Python >= 3.12
+                log("no ahead-of-time raster kernels: numba's ahead-of-time compiler needs "
+                    "numpy.distutils, which this NumPy lacks; numba's kernels serve")
+            return False
         try:
             _compile(name)
         except Exception as exc:  # noqa: BLE001 - any failure leaves the JIT kernels in use
