@@ -78,6 +78,7 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     if within is not None:
         inner = within if inner is None else shapely.intersection(inner, within)
     taken = [shapely.LineString(np.asarray(c)[:, :2]) for c in own_lines if len(c) >= 2]
+    taken_bounds = [shapely.bounds(line) for line in taken]
     order = sorted(range(len(lines)), key=lambda k: -_length(lines[k]))
     out, stats = [], {"lines_in": len(lines), "vertices_in": int(sum(len(c) for c in lines)),
                       "clipped_at_edge": 0, "cut_near_other_lines": 0}
@@ -92,7 +93,9 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
             stats["clipped_at_edge"] += clipped.length < line.length - 1e-9
             line = clipped
         if taken and not line.is_empty:
-            near = shapely.union_all(taken).buffer(spacing)
+            # only the lines whose buffer can reach this one: the union of all of them for
+            # every line made the step quadratic in the number of lines
+            near = _near(taken, taken_bounds, shapely.bounds(line), spacing)
             cut = shapely.difference(line, near)
             stats["cut_near_other_lines"] += cut.length < line.length - 1e-9
             line = cut
@@ -108,9 +111,21 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
                     out.append(coords)
                     own_pieces.append(shapely.LineString(coords[:, :2]))
         taken.extend(own_pieces)
+        taken_bounds.extend(shapely.bounds(piece) for piece in own_pieces)
     stats.update(lines_out=len(out), vertices_out=int(sum(len(c) for c in out)),
                  spacing_m=spacing, clearance_m=clearance)
     return out, stats
+
+
+def _near(lines: list, bounds: list, box, spacing: float):
+    """The union of those ``lines`` (with their ``bounds``) within ``spacing`` of the box
+    ``box`` (xmin, ymin, xmax, ymax), grown by ``spacing``."""
+    import shapely
+
+    b = np.asarray(bounds, float).reshape(-1, 4)
+    close = ((b[:, 0] <= box[2] + spacing) & (b[:, 2] >= box[0] - spacing)
+             & (b[:, 1] <= box[3] + spacing) & (b[:, 3] >= box[1] - spacing))
+    return shapely.union_all([lines[k] for k in np.flatnonzero(close)]).buffer(spacing)
 
 
 def _spacing_at(flow_spacing, coords, spacing: float) -> np.ndarray:
@@ -136,7 +151,6 @@ def _parts(geometry):
     if geometry.geom_type == "LineString":
         return [geometry]
     return [g for g in getattr(geometry, "geoms", []) if g.geom_type == "LineString"]
-
 
 
 def _wet_mask(max_depth, wet_depth: float, margin: float) -> np.ndarray:
