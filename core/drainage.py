@@ -17,6 +17,8 @@ import numpy as np
 
 from .raster import Grid
 
+CHANNEL_AREA = 5000.0  # m²: a cell draining this much is on a drainage line
+
 
 @numba.njit(cache=True)
 def _priority_flood(z):
@@ -100,20 +102,23 @@ def height_above_drainage(dem: Grid, *, channel_area: float) -> tuple[Grid, Grid
 
 
 def flow_size(dem: Grid, *, flow_area: float, height: float = 1.0,
-              channel_area: float = 5000.0) -> Grid:
+              channel_area: float = CHANNEL_AREA, hand: Grid | None = None) -> Grid:
     """A size field (local maximum triangle areas, m²; NaN: no limit): ``flow_area`` on the
-    ground less than ``height`` m above a drainage line draining ``channel_area`` m² or more."""
-    hand, _ = height_above_drainage(dem, channel_area=channel_area)
+    ground less than ``height`` m above a drainage line draining ``channel_area`` m² or more
+    (``hand``: that HAND grid of ``dem``, when already computed)."""
+    if hand is None:
+        hand, _ = height_above_drainage(dem, channel_area=channel_area)
     low = np.nan_to_num(np.asarray(hand.values, float), nan=np.inf) <= height
     return dem.with_values(np.where(low, float(flow_area), np.nan).astype(np.float32))
 
 
 def flow_spacing(dem: Grid, *, flow_area: float, height: float = 3.0,
-                 channel_area: float = 5000.0) -> Grid:
+                 channel_area: float = CHANNEL_AREA, hand: Grid | None = None) -> Grid:
     """Break-line spacing (m) where a flood may go: the side of an equilateral triangle of
     ``flow_area`` on the ground less than ``height`` m above a drainage line (wider than the
     flow zone of ``flow_size``: water rises above it, and a short segment anywhere wet sets the
     time step), NaN elsewhere (see ``hydraulic_lines``)."""
-    zone = flow_size(dem, flow_area=flow_area, height=height, channel_area=channel_area)
+    zone = flow_size(dem, flow_area=flow_area, height=height, channel_area=channel_area,
+                     hand=hand)
     return zone.with_values(np.sqrt(4 / np.sqrt(3) * np.asarray(zone.values, float))
                             .astype(np.float32))

@@ -15,7 +15,7 @@ from . import io
 from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
-from .drainage import flow_size, flow_spacing
+from .drainage import CHANNEL_AREA, flow_size, flow_spacing, height_above_drainage
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
@@ -31,7 +31,7 @@ from .options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_
 from .outputs import check_output_folder, staged_folder
 from .refine import refine_mesh
 from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
-from .sizing import far_field_size
+from .sizing import far_field_size, finer
 from .slope import laplacian_of_gaussian, slope
 from .tiles import (TiledDem, expand_tiles, grid_point_tiles, is_tile_set, read_dem_tiles,
                     tile_kind)
@@ -139,11 +139,12 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         far = far_field_size(dem, breakpoints, max_area=max_area,
                              far_field_area=options.far_field_area,
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
-        size = far if size is None else far.with_values(np.fmin(far.values, size.values))
+        size = finer(size, far)
         max_area = options.far_field_area
+    hand = None
     if options.flow_area is not None:  # resolution where water flows (see drainage)
-        flow = flow_size(dem, flow_area=options.flow_area)
-        size = flow if size is None else flow.with_values(np.fmin(flow.values, size.values))
+        hand, _ = height_above_drainage(dem, channel_area=CHANNEL_AREA)
+        size = finer(size, flow_size(dem, flow_area=options.flow_area, hand=hand))
     node_counts = {}
 
     def elevations(mesh):
@@ -163,7 +164,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             "hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
             own_lines=front.own_lines, within=shapely.union_all(
                 io.read_boundary(options.flow_zone)) if options.flow_zone else None,
-            flow_spacing=flow_spacing(dem, flow_area=options.flow_area) if options.flow_area is not None else None)
+            flow_spacing=None if hand is None else flow_spacing(dem, flow_area=options.flow_area,
+                                                                hand=hand))
     mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
                      max_area=max_area, conforming=options.conforming, domain=front.domain,

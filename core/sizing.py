@@ -33,3 +33,9 @@ def far_field_size(dem: Grid, breakpoints: Grid, *, max_area: float, far_field_a
         edge = np.sqrt(8 * tolerance / curvature)
     allowed = np.sqrt(3) / 4 * edge ** 2
     return dem.with_values(np.clip(np.minimum(area, allowed), max_area, far_field_area))
+
+
+def finer(size: Grid | None, other: Grid) -> Grid:
+    """The smaller of two size fields (local maximum triangle areas, m²; NaN: no limit) cell by
+    cell on one grid; ``other`` alone where ``size`` is None."""
+    return other if size is None else other.with_values(np.fmin(other.values, size.values))
