@@ -162,7 +162,6 @@ def _slope_block(padded, out, d, method, diagonal):
     return out
 
 
-
 @numba.njit(cache=True, nogil=True)
 def _missing_to_nan(values, missing):
     """NaN for ``missing`` and ±inf in a 2-D float array, in place; whether a finite cell is

@@ -124,8 +124,9 @@ def step_slope(ch, *, input, output, method, sigma=1.0, log_kernel="pratt"):
     from .slope import slope_raster_file
 
     slope_raster_file(input, output, method, sigma=sigma, log_kernel=log_kernel, note=ch.note,
-                      progress=ch.progress)
+                      progress=ch.progress, cancelled=ch.cancelled)
     return {"OUTPUT": output}
+
 
 def step_breakpoints(ch, *, input, output, s_crit=10.0, sensitivity=None, zero_crossings=False):
     import numpy as np
@@ -179,12 +180,10 @@ def step_build_mesh(ch, *, dem, output, min_angle, max_area, max_triangles, brea
     grid, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines)
     size = size_from(size_field, grid, max_area=max_area) if size_field else None
     if flow_area is not None:  # smaller triangles where water flows (see drainage)
-        import numpy as np
-
         from .drainage import flow_size
+        from .sizing import finer
 
-        flow = flow_size(grid, flow_area=flow_area)
-        size = flow if size is None else flow.with_values(np.fmin(flow.values, size.values))
+        size = finer(size, flow_size(grid, flow_area=flow_area))
     mesh = build_mesh(grid, lines, min_angle=min_angle, max_area=max_area, domain=domain,
                       size_field=size, max_triangles=max_triangles, note=ch.note)
     quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)
