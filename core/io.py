@@ -63,18 +63,23 @@ def read_points(path, *, crs=None, classes=None, note=None) -> PointCloud:
     receives what was assumed on the user's behalf (e.g. an unclassified file used whole).
     """
     path = _require_file(path, "point file")
-    ext = path.suffix.lower()
-    if path.name == EPT_NAME:
-        xyz, file_crs = _read_ept(path, classes, note)
-    elif ext in (".las", ".laz"):
-        xyz, file_crs = _read_las(path, classes, note)
-    elif ext in (".xyz", ".txt", ".csv", ".pts"):
-        xyz, file_crs = _read_xyz(path), None
-    else:
-        raise FloodMeshError(f"{path.name}: unknown point file type '{ext}'; use LAS/LAZ or "
-                             "XYZ/CSV text (x y z per line), or a GeoTIFF DEM")
+    xyz, file_crs = read_point_file(path, classes, note)
     return clean_points(xyz, crs if crs is not None else file_crs, f"point file {path.name}",
                         kind="points", note=note)
+
+
+def read_point_file(path: Path, classes=None, note=None):
+    """(xyz as stored, the file's CRS or None) of a point file by its type, the points of
+    ``classes`` as ``read_points`` keeps them, before its checks (``points.clean_points``)."""
+    ext = path.suffix.lower()
+    if path.name == EPT_NAME:
+        return _read_ept(path, classes, note)
+    if ext in (".las", ".laz"):
+        return _read_las(path, classes, note)
+    if ext in (".xyz", ".txt", ".csv", ".pts"):
+        return _read_xyz(path), None
+    raise FloodMeshError(f"{path.name}: unknown point file type '{ext}'; use LAS/LAZ or "
+                         "XYZ/CSV text (x y z per line), or a GeoTIFF DEM")
 
 
 def _read_las(path: Path, classes, note=None):

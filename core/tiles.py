@@ -161,13 +161,10 @@ def _tile_points(path: str, crs_wkt: str, classes, holdout: float, seed: int, no
                  checked: bool = False):
     """(gridding xyz, held-out xyz) of one tile; ``checked``: the tile passed ``read_points``'s
     checks in round one, so round two only reads it and drops the same non-finite points."""
-    from .io import _read_las, _read_xyz, read_points
+    from .io import read_point_file, read_points
 
     if checked:
-        path_ = Path(path)
-        xyz = (_read_las(path_, classes)[0] if path_.suffix.lower() in LAS_EXTENSIONS
-               else _read_xyz(path_))
-        xyz = np.asarray(xyz, dtype=np.float64)
+        xyz = np.asarray(read_point_file(Path(path), classes)[0], dtype=np.float64)
         xyz = xyz[np.isfinite(xyz).all(axis=1)]
     else:
         xyz = read_points(path, crs=crs_wkt, classes=classes,
