@@ -24,6 +24,7 @@ import shapely
 from numba import njit
 
 from .errors import FloodMeshError
+from .nearest import nearest_line, point_tree
 
 
 @dataclass(frozen=True)
@@ -39,15 +40,16 @@ class FitWindow:
 
 
 def fit_window(points: np.ndarray, area: float, cell_size: float, *,
-               node_radius: float | None = None, seed: int = 0) -> FitWindow:
+               node_radius: float | None = None, seed: int = 0, tree=None) -> FitWindow:
     """The fitting windows for ``points`` (n, 3) covering ``area`` m² on a grid of
-    ``cell_size`` m: sized from their density and their noise (estimated from them)."""
+    ``cell_size`` m: sized from their density and their noise (estimated from them).
+    ``tree``: ``nearest.point_tree(points)`` if already built (here and in every fit below)."""
     if not area > 0 or len(points) < 10:
         raise FloodMeshError("too few measured points to fit the terrain to; turn off break-line "
                              "localisation and plane node elevations (--no-localise "
                              "--node-elevation dem)")
     density = len(points) / area
-    noise = estimate_noise(points, density, seed=seed)
+    noise = estimate_noise(points, density, seed=seed, tree=tree)
     wanted = (40 + 800 * noise) / density  # m² of window
     half_width = float(np.clip(np.sqrt(wanted) / 2, cell_size, 1.5 * cell_size))
     half_length = float(np.clip(wanted / (4 * half_width), half_width, 6 * cell_size))
@@ -57,15 +59,13 @@ def fit_window(points: np.ndarray, area: float, cell_size: float, *,
 
 
 def estimate_noise(points: np.ndarray, density: float, *, samples: int = 400,
-                   seed: int = 0) -> float:
+                   seed: int = 0, tree=None) -> float:
     """Vertical noise (m) of the points: the median RMS residual of least-squares planes fitted
     to about 30 points around randomly chosen points (terrain curvature adds a little)."""
-    from scipy.spatial import cKDTree
-
     rng = np.random.default_rng(seed)
     centres = points[rng.choice(len(points), size=min(samples, len(points)), replace=False), :2]
     radius = np.sqrt(30 / density / np.pi)
-    _, rms, count = _plane_fits(cKDTree(points[:, :2]), points, centres,
+    _, rms, count = _plane_fits(tree if tree is not None else point_tree(points), points, centres,
                                 np.full(len(centres), radius))
     good = count >= 10
     return float(np.median(rms[good])) if good.any() else 0.0
@@ -272,18 +272,16 @@ def _tangents(coords: np.ndarray) -> np.ndarray:
 
 
 def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: FitWindow, *,
-                        s_crit: float = 10.0, iterations: int = 2, min_f_ratio: float = 10.0
-                        ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+                        s_crit: float = 10.0, iterations: int = 2, min_f_ratio: float = 10.0,
+                        tree=None) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """Break-line vertices moved onto the hinge of a two-plane fit to ``points`` (n, 3), z from
     the fit (see the module's docstring). ``lines`` are (k, 3) arrays. Returns the moved lines
     and, per line, each vertex's fit RMS residual (m) and the change of slope across the hinge
     (negative on a crest, positive at a toe, whichever way the line runs), both NaN where the
     vertex was not moved."""
-    from scipy.spatial import cKDTree
-
     if not lines:
         return [], [], []
-    tree = cKDTree(points[:, :2])
+    tree = tree if tree is not None else point_tree(points)
     px, py, pz = (np.ascontiguousarray(points[:, k], dtype=float) for k in range(3))
     min_kink = 0.5 * np.tan(np.radians(s_crit))
     sizes = [len(c) for c in lines]
@@ -311,13 +309,12 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
 
 
 def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.ndarray],
-                        radius: float, *, on_line: float) -> tuple[np.ndarray, dict]:
+                        radius: float, *, on_line: float, tree=None) -> tuple[np.ndarray, dict]:
     """Node elevations (n,) with the noise taken out: nodes within ``on_line`` m of a break line
     (k, 3 arrays) take z along it; the others z of a least-squares plane of ``points`` within
     ``radius`` m (at most 0.9 of their distance to the nearest line, at least ``on_line``·10),
-    or keep theirs where fewer than 6 points are there. Returns z and counts."""
-    from scipy.spatial import cKDTree
-
+    or keep theirs where fewer than 6 points are there (a node equally near two lines takes
+    the one listed first). Returns z and counts."""
     z = np.asarray(nodes[:, 2], float).copy()
     xy = np.asarray(nodes[:, :2], float)
     usable = [np.asarray(c, float) for c in lines if len(c) >= 2]
@@ -327,21 +324,16 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
         geoms = np.array([shapely.LineString(c[:, :3] if c.shape[1] >= 3 else c[:, :2])
                           for c in usable], dtype=object)
         where = shapely.points(xy)
-        tree = shapely.STRtree(geoms)
-        (node, line), distance_found = tree.query_nearest(where, return_distance=True,
-                                                          all_matches=False)
-        distance[node] = distance_found
+        nearest, distance = nearest_line(xy, usable)
         on = distance <= on_line
         with_z = np.array([c.shape[1] >= 3 for c in usable])
         pick = np.nonzero(on)[0]
-        nearest = np.empty(len(xy), np.int64)
-        nearest[node] = line
         pick = pick[with_z[nearest[pick]]]
         along = shapely.line_locate_point(geoms[nearest[pick]], where[pick])
         z[pick] = shapely.get_z(shapely.line_interpolate_point(geoms[nearest[pick]], along))
     off = ~on
     r = np.clip(0.9 * distance[off], min(radius, 10 * on_line), radius)
-    plane, _, count = _plane_fits(cKDTree(points[:, :2]), points, xy[off], r)
+    plane, _, count = _plane_fits(tree if tree is not None else point_tree(points), points, xy[off], r)
     fitted = count >= 6
     idx = np.nonzero(off)[0][fitted]
     z[idx] = plane[fitted]
@@ -373,14 +365,12 @@ def _hops_cut(keep: np.ndarray, kink: np.ndarray) -> list[np.ndarray]:
     return np.split(keep, cuts)
 
 
-def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5):
+def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5, tree=None):
     """A check for ``join_pieces``: whether the measured points between two line ends (x, y, z)
     follow the straight line between them, i.e. the median z of the points near each of the
     gap's sample positions (every ``spacing`` m) lies on average within 0.05 m plus the noise
     of the line's z. Gaps under a metre pass unchecked."""
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(points[:, :2])
+    tree = tree if tree is not None else point_tree(points)
     radius = max(spacing, float(np.sqrt(8 / (np.pi * window.density))))
     tolerance = 0.05 + window.noise
 
@@ -400,7 +390,7 @@ def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5)
 def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
                     max_gap: float = 12.0, join_gap: float | None = None,
-                    join_lateral: float = 1.0) -> tuple[list, list[float], dict]:
+                    join_lateral: float = 1.0, tree=None) -> tuple[list, list[float], dict]:
     """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
     move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within
     ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
@@ -411,13 +401,14 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     interior, pointing at it at its height (within ``tolerance`` m plus a rise at ``s_crit``),
     are snapped onto it (``joining.snap_t_junctions``). Returns
     the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
-    where none moved) and counts."""
+    where none moved) and counts. ``tree``: ``nearest.point_tree(points)`` if built."""
     from .breaklines import BreakLine
     from .joining import join_pieces, snap_t_junctions
     from .simplify import douglas_peucker_mask
 
+    tree = tree if tree is not None else point_tree(points)  # one for both uses below
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
-                                                   window, s_crit=s_crit)
+                                                   window, s_crit=s_crit, tree=tree)
     pieces, hops = [], 0  # (coords, slopes, component, fit RMS, kink) per piece
     for line, coords, fit, kink in zip(lines, moved, confidence, kinks):
         fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap)
@@ -432,7 +423,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     if join_gap:
         kinds = [np.sign(np.nanmedian(p[4])) if np.isfinite(p[4]).any() else 0 for p in pieces]
         chains = join_pieces([p[0] for p in pieces], kinds, max_gap=join_gap,
-                             lateral=join_lateral, ground=_ground_follows(points, window))
+                             lateral=join_lateral, ground=_ground_follows(points, window,
+                                                                     tree=tree))
     out, per_line = [], []
     for chain in chains:
         parts = [[(p[j][::-1] if reverse else p[j])[first:stop] for j in (0, 1, 3)]

@@ -23,6 +23,7 @@ from .hydraulic_lines import lines_for_hydraulics
 from .hydraulics import hydraulic_checks
 from .limits import check_memory, check_triangles
 from .localise import fit_node_elevations, fit_window, localise_traced
+from .nearest import point_tree
 from .mesh import build_mesh, domain_from_dem, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
@@ -46,14 +47,14 @@ class _Steps:
     def __init__(self, weights: dict, progress, cancelled, log):
         self.weights, self.total = weights, float(sum(weights.values()))
         self.progress, self.cancelled, self.log = progress, cancelled, log
-        self.done, self.seconds = 0.0, {}
+        self.done, self.seconds, self.cpu_seconds = 0.0, {}, {}
 
     def run(self, name: str, func: Callable, *args, **kwargs):
         if self.cancelled and self.cancelled():
             raise Cancelled()
         if self.log:
             self.log(f"{name}...")
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         weight = self.weights.get(name, 1.0)
         if "progress" in kwargs and self.progress:
             base = self.done
@@ -67,6 +68,7 @@ class _Steps:
                 raise KeyboardInterrupt from None
             raise
         self.seconds[name] = round(time.perf_counter() - start, 3)
+        self.cpu_seconds[name] = round(time.process_time() - cpu, 3)  # all threads
         self.done += weight
         if self.progress:
             self.progress(self.done / self.total)
@@ -102,12 +104,14 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             log(compile_note())
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
-               "breaklines": 1, "simplify": 0.5, "localise": 0.5, "hydraulic lines": 0.1,
-               "mesh": 2, "refine": 4,
-               "node elevations": 0.5, "assess": 1, "write": 2}
+               "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
+               "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
+               "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
     del weights["node elevations" if options.refine else "refine"]
     if not options.localise:
         del weights["localise"]
+    if not (options.localise or options.node_elevation == "plane"):
+        del weights["fit window"]
     steps = _Steps(weights, progress, cancelled, log)
     front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
@@ -118,10 +122,11 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                                    min_distance=min_distance)
     terrain_fit, confidence, window = {"localise": options.localise,
                                        "node_elevation": options.node_elevation}, None, None
+    tree = None  # of the measured points: one for every terrain fit of the run
     if options.localise or options.node_elevation == "plane":
         area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
-        window = fit_window(front.measured, area, dem.cell_size,
-                            node_radius=options.node_radius, seed=options.seed)
+        tree, window = steps.run("fit window", _fit_window, front.measured, area, dem.cell_size,
+                                 node_radius=options.node_radius, seed=options.seed)
         terrain_fit.update(asdict(window))
     if options.localise:
         lines, confidence, counts = steps.run("localise", localise_traced, lines, front.measured,
@@ -130,7 +135,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                                               max_gap=20 * dem.cell_size,
                                               join_gap=(6 * dem.cell_size if options.join_gap
                                                         is None else options.join_gap),
-                                              join_lateral=dem.cell_size)
+                                              join_lateral=dem.cell_size, tree=tree)
         terrain_fit.update(counts)
     size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
@@ -152,7 +157,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         if options.node_elevation != "plane":
             return mesh
         z, counts = fit_node_elevations(mesh.nodes, front.measured, mesh_lines,
-                                        window.node_radius, on_line=delta / 10)
+                                        window.node_radius, on_line=delta / 10, tree=tree)
         node_counts.update(counts)
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 
@@ -185,10 +190,15 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         terrain_fit["nodes"] = node_counts
     res = steps.run("assess", residuals, mesh, holdout.xyz)
 
-    deviation = max_deviation(traced, simplified)
-    alpha = deviation / delta if method == "keep-every" else amount / delta
-    quality = mesh_quality(mesh, min_angle=options.min_angle, max_area=max_area)
-    stats = accuracy_statistics(res, alpha=alpha, delta=delta)
+    def figures():
+        deviation = max_deviation(traced, simplified)
+        alpha = deviation / delta if method == "keep-every" else amount / delta
+        return (deviation, mesh_quality(mesh, min_angle=options.min_angle, max_area=max_area),
+                accuracy_statistics(res, alpha=alpha, delta=delta),
+                hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
+                                 detected_lines=detected, dem=dem))
+
+    deviation, quality, stats, hydraulics = steps.run("figures", figures)
 
     def write_all(out):
         valid = np.isfinite(dem.values)
@@ -232,14 +242,21 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             "refinement": [asdict(r) for r in rounds],
             "terrain_fit": terrain_fit,
             "hydraulic_lines": line_stats,
-            "hydraulics": hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
-                                           detected_lines=detected, dem=dem),
+            "hydraulics": hydraulics,
             "notes": notes,
             "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
             "seconds": steps.seconds,
+            "cpu_seconds": steps.cpu_seconds,
         }
         io.write_json(stage / "report.json", report)
     return report
+
+
+def _fit_window(points, area, cell_size, *, node_radius, seed):
+    """(KD-tree of the points, ``FitWindow``): the tree serves every later terrain fit."""
+    tree = point_tree(points)
+    return tree, fit_window(points, area, cell_size, node_radius=node_radius, seed=seed,
+                            tree=tree)
 
 
 def run_inputs(input_path, options: RunOptions) -> list:

@@ -15,6 +15,7 @@ import numpy as np
 import shapely
 
 from .breaklines import BreakLine
+from .nearest import nearest_line
 from .options import (SIMPLIFY_METHODS, check_choice, check_min_distance, check_positive_int,
                       check_tolerance)
 
@@ -78,11 +79,10 @@ def _deviation(a, b, pts):
 
 def max_deviation(original: list[BreakLine], simplified: list[BreakLine]) -> float:
     """Largest horizontal distance (m) from an original vertex to the nearest simplified line."""
-    geoms = [shapely.LineString(line.coords[:, :2]) for line in simplified if len(line.coords) > 1]
-    if not original or not geoms:
+    kept = [line.coords for line in simplified if len(line.coords) > 1]
+    if not original or not kept:
         return 0.0
-    pts = shapely.points(np.concatenate([line.coords[:, :2] for line in original]))
-    _, distance = shapely.STRtree(geoms).query_nearest(pts, return_distance=True, all_matches=False)
+    _, distance = nearest_line(np.concatenate([line.coords[:, :2] for line in original]), kept)
     return float(distance.max())
 
 

@@ -37,6 +37,7 @@ def _contents(folder: Path) -> dict:
         if path.name == "report.json":
             report = json.loads(data)
             report.pop("seconds")
+            report.pop("cpu_seconds")
             report.pop("input")
             data = json.dumps(report, sort_keys=True).encode()
         out[path.name] = data
