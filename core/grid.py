@@ -30,15 +30,18 @@ TILE = 256
 
 
 def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float | None = None,
-                       progress=None, cancelled=None, workers: int | None = None) -> Grid:
+                       progress=None, cancelled=None, workers: int | None = None,
+                       plan: dict | None = None) -> Grid:
     """DEM of cell size ``cell_size`` (m) by linear interpolation on the points' Delaunay TIN.
 
     ``max_gap`` (m, default 10 cell sizes) is the longest triangle edge bridged; wider gaps become
     nodata. Duplicate points are harmless (the triangulation skips them). Progress and
-    cancellation are polled per tile.
+    cancellation are polled per tile. ``plan``: what ``check_grid`` returned for these points
+    and arguments, where the caller checked them already (the points' footprint is a pass over
+    all of them).
     """
     cell_size = check_cell_size(cell_size)
-    plan = check_grid(points, cell_size, max_gap)
+    plan = plan if plan is not None else check_grid(points, cell_size, max_gap)
     max_gap, rows, cols, x0, y1 = (plan[k] for k in ("max_gap", "rows", "cols", "x0", "y1"))
     values = grid_window(points.xyz, cell_size, max_gap, x0, y1, rows, cols, progress=progress,
                          cancelled=cancelled, workers=workers)

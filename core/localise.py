@@ -24,7 +24,7 @@ import shapely
 from numba import njit
 
 from .errors import FloodMeshError
-from .nearest import nearest_line, point_tree
+from .nearest import nearest_line, point_index
 
 
 @dataclass(frozen=True)
@@ -40,16 +40,16 @@ class FitWindow:
 
 
 def fit_window(points: np.ndarray, area: float, cell_size: float, *,
-               node_radius: float | None = None, seed: int = 0, tree=None) -> FitWindow:
+               node_radius: float | None = None, seed: int = 0, index=None) -> FitWindow:
     """The fitting windows for ``points`` (n, 3) covering ``area`` m² on a grid of
     ``cell_size`` m: sized from their density and their noise (estimated from them).
-    ``tree``: ``nearest.point_tree(points)`` if already built (here and in every fit below)."""
+    ``index``: ``nearest.point_index(points)`` if built (here and in every fit below)."""
     if not area > 0 or len(points) < 10:
         raise FloodMeshError("too few measured points to fit the terrain to; turn off break-line "
                              "localisation and plane node elevations (--no-localise "
                              "--node-elevation dem)")
     density = len(points) / area
-    noise = estimate_noise(points, density, seed=seed, tree=tree)
+    noise = estimate_noise(points, density, seed=seed, index=index)
     wanted = (40 + 800 * noise) / density  # m² of window
     half_width = float(np.clip(np.sqrt(wanted) / 2, cell_size, 1.5 * cell_size))
     half_length = float(np.clip(wanted / (4 * half_width), half_width, 6 * cell_size))
@@ -59,32 +59,22 @@ def fit_window(points: np.ndarray, area: float, cell_size: float, *,
 
 
 def estimate_noise(points: np.ndarray, density: float, *, samples: int = 400,
-                   seed: int = 0, tree=None) -> float:
+                   seed: int = 0, index=None) -> float:
     """Vertical noise (m) of the points: the median RMS residual of least-squares planes fitted
     to about 30 points around randomly chosen points (terrain curvature adds a little)."""
     rng = np.random.default_rng(seed)
     centres = points[rng.choice(len(points), size=min(samples, len(points)), replace=False), :2]
     radius = np.sqrt(30 / density / np.pi)
-    _, rms, count = _plane_fits(tree if tree is not None else point_tree(points), points, centres,
-                                np.full(len(centres), radius))
+    index = index if index is not None else point_index(points)
+    _, rms, count = _plane_fits(index, points, centres, np.full(len(centres), radius))
     good = count >= 10
     return float(np.median(rms[good])) if good.any() else 0.0
 
 
-def _neighbours(tree, xy: np.ndarray, radius) -> tuple[np.ndarray, np.ndarray]:
-    """CSR (indptr, indices) of the tree's points within ``radius`` of each of ``xy``."""
-    found = tree.query_ball_point(xy, radius)
-    counts = np.fromiter((len(f) for f in found), np.int64, len(found))
-    indptr = np.r_[0, np.cumsum(counts)]
-    indices = (np.concatenate([np.asarray(f, np.int64) for f in found]) if indptr[-1]
-               else np.zeros(0, np.int64))
-    return indptr, indices
-
-
-def _plane_fits(tree, points, centres, radius):
+def _plane_fits(index, points, centres, radius):
     """Least-squares planes of the points within ``radius`` of each centre: (z at the centre,
     RMS residual, point count); NaN where fewer than 4 points."""
-    indptr, indices = _neighbours(tree, centres, radius)
+    indptr, indices = index.neighbours(centres, radius)
     count = np.diff(indptr)
     z = np.full(len(centres), np.nan)
     rms = np.full(len(centres), np.nan)
@@ -273,7 +263,7 @@ def _tangents(coords: np.ndarray) -> np.ndarray:
 
 def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: FitWindow, *,
                         s_crit: float = 10.0, iterations: int = 2, min_f_ratio: float = 10.0,
-                        tree=None) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+                        index=None) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """Break-line vertices moved onto the hinge of a two-plane fit to ``points`` (n, 3), z from
     the fit (see the module's docstring). ``lines`` are (k, 3) arrays. Returns the moved lines
     and, per line, each vertex's fit RMS residual (m) and the change of slope across the hinge
@@ -281,7 +271,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     vertex was not moved."""
     if not lines:
         return [], [], []
-    tree = tree if tree is not None else point_tree(points)
+    index = index if index is not None else point_index(points)
     px, py, pz = (np.ascontiguousarray(points[:, k], dtype=float) for k in range(3))
     min_kink = 0.5 * np.tan(np.radians(s_crit))
     sizes = [len(c) for c in lines]
@@ -292,7 +282,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     reach = float(np.hypot(window.half_width, window.half_length))
     for _ in range(iterations):
         tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
-        indptr, indices = _neighbours(tree, coords[:, :2], reach)
+        indptr, indices = index.neighbours(coords[:, :2], reach)
         fits = _hinge_fits(px, py, pz, indptr, indices, coords[:, 0].copy(), coords[:, 1].copy(),
                            tangents[:, 0].copy(), tangents[:, 1].copy(), window.half_width,
                            window.half_length)
@@ -309,7 +299,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
 
 
 def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.ndarray],
-                        radius: float, *, on_line: float, tree=None) -> tuple[np.ndarray, dict]:
+                        radius: float, *, on_line: float, index=None) -> tuple[np.ndarray, dict]:
     """Node elevations (n,) with the noise taken out: nodes within ``on_line`` m of a break line
     (k, 3 arrays) take z along it; the others z of a least-squares plane of ``points`` within
     ``radius`` m (at most 0.9 of their distance to the nearest line, at least ``on_line``·10),
@@ -333,7 +323,8 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
         z[pick] = shapely.get_z(shapely.line_interpolate_point(geoms[nearest[pick]], along))
     off = ~on
     r = np.clip(0.9 * distance[off], min(radius, 10 * on_line), radius)
-    plane, _, count = _plane_fits(tree if tree is not None else point_tree(points), points, xy[off], r)
+    index = index if index is not None else point_index(points)
+    plane, _, count = _plane_fits(index, points, xy[off], r)
     fitted = count >= 6
     idx = np.nonzero(off)[0][fitted]
     z[idx] = plane[fitted]
@@ -365,12 +356,12 @@ def _hops_cut(keep: np.ndarray, kink: np.ndarray) -> list[np.ndarray]:
     return np.split(keep, cuts)
 
 
-def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5, tree=None):
+def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5, index=None):
     """A check for ``join_pieces``: whether the measured points between two line ends (x, y, z)
     follow the straight line between them, i.e. the median z of the points near each of the
     gap's sample positions (every ``spacing`` m) lies on average within 0.05 m plus the noise
     of the line's z. Gaps under a metre pass unchecked."""
-    tree = tree if tree is not None else point_tree(points)
+    index = index if index is not None else point_index(points)
     radius = max(spacing, float(np.sqrt(8 / (np.pi * window.density))))
     tolerance = 0.05 + window.noise
 
@@ -380,7 +371,8 @@ def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5,
             return True
         t = np.linspace(0, 1, max(3, int(gap / spacing)) + 2)[1:-1, None]
         at = a[None, :3] * (1 - t) + b[None, :3] * t
-        near = tree.query_ball_point(at[:, :2], radius)
+        indptr, indices = index.neighbours(at[:, :2], radius)
+        near = np.split(indices, indptr[1:-1])
         off = [abs(np.median(points[k, 2]) - z) for k, z in zip(near, at[:, 2]) if len(k) >= 3]
         return not off or float(np.mean(off)) <= tolerance
 
@@ -390,7 +382,7 @@ def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5,
 def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
                     max_gap: float = 12.0, join_gap: float | None = None,
-                    join_lateral: float = 1.0, tree=None) -> tuple[list, list[float], dict]:
+                    join_lateral: float = 1.0, index=None) -> tuple[list, list[float], dict]:
     """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
     move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within
     ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
@@ -401,14 +393,14 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     interior, pointing at it at its height (within ``tolerance`` m plus a rise at ``s_crit``),
     are snapped onto it (``joining.snap_t_junctions``). Returns
     the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
-    where none moved) and counts. ``tree``: ``nearest.point_tree(points)`` if built."""
+    where none moved) and counts. ``index``: ``nearest.point_index(points)`` if built."""
     from .breaklines import BreakLine
     from .joining import join_pieces, snap_t_junctions
     from .simplify import douglas_peucker_mask
 
-    tree = tree if tree is not None else point_tree(points)  # one for both uses below
+    index = index if index is not None else point_index(points)  # one for both uses below
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
-                                                   window, s_crit=s_crit, tree=tree)
+                                                   window, s_crit=s_crit, index=index)
     pieces, hops = [], 0  # (coords, slopes, component, fit RMS, kink) per piece
     for line, coords, fit, kink in zip(lines, moved, confidence, kinks):
         fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap)
@@ -424,7 +416,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
         kinds = [np.sign(np.nanmedian(p[4])) if np.isfinite(p[4]).any() else 0 for p in pieces]
         chains = join_pieces([p[0] for p in pieces], kinds, max_gap=join_gap,
                              lateral=join_lateral, ground=_ground_follows(points, window,
-                                                                     tree=tree))
+                                                                     index=index))
     out, per_line = [], []
     for chain in chains:
         parts = [[(p[j][::-1] if reverse else p[j])[first:stop] for j in (0, 1, 3)]

@@ -1,8 +1,9 @@
 """Nearest-neighbour look-ups shared by the steps: the nearest line to each point, and the
-KD-tree of the measured points that every terrain fit of a run queries."""
+index of the measured points that every terrain fit of a run queries."""
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 
 def nearest_line(xy: np.ndarray, lines: list) -> tuple[np.ndarray, np.ndarray]:
@@ -35,15 +36,101 @@ def nearest_line(xy: np.ndarray, lines: list) -> tuple[np.ndarray, np.ndarray]:
     return nearest, found
 
 
-def point_tree(points: np.ndarray):
-    """A KD-tree (scipy cKDTree) of ``points``' x, y (n, 2+), for the radius queries of the
-    terrain fits (``localise``).
+def point_index(points: np.ndarray) -> "PointIndex":
+    """The index of ``points``' x, y (n, 2+) that the terrain fits (``localise``) query."""
+    return PointIndex(points)
 
-    Built with the sliding-midpoint rule and without shrinking the nodes to their points: a
-    third of the CPU of scipy's default median split for 9 M points (4 s against 13 s); a
-    query for many centres returns each centre's neighbours sorted by index, so the answers
-    are the same whichever tree holds the points."""
-    from scipy.spatial import cKDTree
 
-    return cKDTree(np.ascontiguousarray(np.asarray(points)[:, :2], dtype=float),
-                   balanced_tree=False, compact_nodes=False)
+class PointIndex:
+    """Points' x, y counting-sorted into square cells holding about 64 points each (at the
+    mean density of their bounding box), for radius queries.
+
+    It answers as scipy's cKDTree ``query_ball_point`` does (the same points, distance
+    ≤ r by the same sum of squares, each centre's sorted by index), in CSR form: building it
+    for 9 M points in random order takes about as long as the tree's (3–4 s of CPU on the
+    shared machine; 13 s with scipy's default median split), its queries half as long, with
+    no Python list per centre."""
+
+    def __init__(self, points: np.ndarray):
+        xy = np.ascontiguousarray(np.asarray(points)[:, :2], dtype=float)
+        if not len(xy) or not np.isfinite(xy).all():
+            raise ValueError("a point index needs finite points")
+        n = len(xy)
+        self.lo = xy.min(axis=0)
+        span = xy.max(axis=0) - self.lo
+        cells = max(n / 64.0, 1.0)  # fewer, larger cells: the sort's scatter stays in cache
+        self.cell = float(max(np.sqrt(span[0] * span[1] / cells), span.max() / cells, 1e-9))
+        self.cols = int(span[0] // self.cell) + 1
+        self.rows = int(span[1] // self.cell) + 1
+        self.order, self.bounds, self.xy = _cell_sort(xy, self.lo[0], self.lo[1], self.cell,
+                                                      self.cols, self.rows)
+
+    def neighbours(self, centres: np.ndarray, radius) -> tuple[np.ndarray, np.ndarray]:
+        """CSR (indptr, indices) of the points within ``radius`` (m, one or one per centre) of
+        each of ``centres`` (k, 2+), each centre's indices ascending."""
+        centres = np.ascontiguousarray(np.asarray(centres, float)[:, :2])
+        radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, float),
+                                                      (len(centres),)))
+        return _ball_csr(self.xy, self.order, self.bounds, self.lo[0], self.lo[1], self.cell,
+                         self.cols, self.rows, centres, radius)
+
+
+@njit(cache=True, nogil=True)
+def _cell_sort(xy, x0, y0, cell, cols, rows):
+    """(original index of each point in cell order, first point of each cell + the end,
+    the points' x, y in cell order)."""
+    n = xy.shape[0]
+    key = np.empty(n, np.int64)
+    bounds = np.zeros(rows * cols + 1, np.int64)
+    for p in range(n):
+        c = min(int((xy[p, 0] - x0) // cell), cols - 1)
+        r = min(int((xy[p, 1] - y0) // cell), rows - 1)
+        key[p] = r * cols + c
+        bounds[key[p] + 1] += 1
+    for k in range(rows * cols):
+        bounds[k + 1] += bounds[k]
+    fill = bounds[:-1].copy()
+    order = np.empty(n, np.int64)
+    ordered = np.empty((n, 2))
+    for p in range(n):
+        k = fill[key[p]]
+        fill[key[p]] += 1
+        order[k] = p
+        ordered[k, 0] = xy[p, 0]
+        ordered[k, 1] = xy[p, 1]
+    return order, bounds, ordered
+
+
+@njit(cache=True, nogil=True)
+def _ball_csr(xy, order, bounds, x0, y0, cell, cols, rows, centres, radius):
+    m = centres.shape[0]
+    indptr = np.zeros(m + 1, np.int64)
+    for stage in range(2):  # count, then fill
+        if stage == 1:
+            for i in range(m):
+                indptr[i + 1] += indptr[i]
+            indices = np.empty(indptr[m], np.int64)
+        else:
+            indices = np.empty(0, np.int64)
+        for i in range(m):
+            cx, cy, r = centres[i, 0], centres[i, 1], radius[i]
+            r2 = r * r
+            # clipped so that a centre off the points indexes no cell (an empty range)
+            c0 = min(max(int((cx - r - x0) // cell), 0), cols)
+            c1 = max(min(int((cx + r - x0) // cell), cols - 1), -1)
+            r0 = max(int((cy - r - y0) // cell), 0)
+            r1 = min(int((cy + r - y0) // cell), rows - 1)
+            k = indptr[i] if stage == 1 else 0
+            for row in range(r0, r1 + 1):
+                for q in range(bounds[row * cols + c0], bounds[row * cols + c1 + 1]):
+                    dx = xy[q, 0] - cx
+                    dy = xy[q, 1] - cy
+                    if dx * dx + dy * dy <= r2:
+                        if stage == 1:
+                            indices[k] = order[q]
+                        k += 1
+            if stage == 0:
+                indptr[i + 1] = k
+            else:
+                indices[indptr[i]:k].sort()
+    return indptr, indices

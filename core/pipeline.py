@@ -23,7 +23,7 @@ from .hydraulic_lines import lines_for_hydraulics
 from .hydraulics import hydraulic_checks
 from .limits import check_memory, check_triangles
 from .localise import fit_node_elevations, fit_window, localise_traced
-from .nearest import point_tree
+from .nearest import point_index
 from .mesh import build_mesh, domain_from_dem, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
@@ -122,10 +122,10 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                                    min_distance=min_distance)
     terrain_fit, confidence, window = {"localise": options.localise,
                                        "node_elevation": options.node_elevation}, None, None
-    tree = None  # of the measured points: one for every terrain fit of the run
+    index = None  # of the measured points: one for every terrain fit of the run
     if options.localise or options.node_elevation == "plane":
         area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
-        tree, window = steps.run("fit window", _fit_window, front.measured, area, dem.cell_size,
+        index, window = steps.run("fit window", _fit_window, front.measured, area, dem.cell_size,
                                  node_radius=options.node_radius, seed=options.seed)
         terrain_fit.update(asdict(window))
     if options.localise:
@@ -135,7 +135,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                                               max_gap=20 * dem.cell_size,
                                               join_gap=(6 * dem.cell_size if options.join_gap
                                                         is None else options.join_gap),
-                                              join_lateral=dem.cell_size, tree=tree)
+                                              join_lateral=dem.cell_size, index=index)
         terrain_fit.update(counts)
     size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
@@ -157,7 +157,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         if options.node_elevation != "plane":
             return mesh
         z, counts = fit_node_elevations(mesh.nodes, front.measured, mesh_lines,
-                                        window.node_radius, on_line=delta / 10, tree=tree)
+                                        window.node_radius, on_line=delta / 10,
+                                        index=index)
         node_counts.update(counts)
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 
@@ -253,10 +254,10 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
 
 
 def _fit_window(points, area, cell_size, *, node_radius, seed):
-    """(KD-tree of the points, ``FitWindow``): the tree serves every later terrain fit."""
-    tree = point_tree(points)
-    return tree, fit_window(points, area, cell_size, node_radius=node_radius, seed=seed,
-                            tree=tree)
+    """(index of the points, ``FitWindow``): the index serves every later terrain fit."""
+    index = point_index(points)
+    return index, fit_window(points, area, cell_size, node_radius=node_radius, seed=seed,
+                             index=index)
 
 
 def run_inputs(input_path, options: RunOptions) -> list:
@@ -322,7 +323,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                      triangles=triangles, advice="give a larger cell size or maximum area, or "
                                                  "split the data into tiles")
         dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
-                        max_gap=options.max_gap, progress=None, cancelled=cancelled)
+                        max_gap=options.max_gap, progress=None, cancelled=cancelled, plan=plan)
         holdout_source = "LiDAR points withheld from gridding"
         n_points = len(data)
     else:

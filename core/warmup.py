@@ -22,7 +22,8 @@ COMPILE_NOTE = ("compiling FloodMesh's numba kernels: first run only, about 2 mi
 ENTRY_KERNELS = (("grid", "_bucket_sort"), ("grid", "_rasterise_tin"), ("delaunay", "_sweep"),
                  ("raster_kernels", "_slope_block"), ("raster_kernels", "_missing_to_nan"),
                  ("raster_kernels", "_nan_to_value"), ("breaklines", "_trace"),
-                 ("breaklines", "_join_fragments"))
+                 ("breaklines", "_join_fragments"), ("nearest", "_cell_sort"),
+                 ("nearest", "_ball_csr"))
 
 
 def _dispatchers():

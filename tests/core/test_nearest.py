@@ -3,7 +3,7 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from floodmesh.core.nearest import nearest_line, point_tree
+from floodmesh.core.nearest import nearest_line, point_index
 
 
 def _random_lines(rng, n=40):
@@ -39,10 +39,30 @@ def test_nearest_line_is_the_whole_line_tree_answer():
     assert (nearest != len(lines) - 1).all()  # the copy of line 0 never wins over line 0
 
 
-def test_point_tree_finds_the_same_neighbours_as_the_default_tree():
+def _same_as_ckdtree(points, centres, radius):
+    indptr, indices = point_index(points).neighbours(centres, radius)
+    tree = cKDTree(points[:, :2])
+    radii = np.broadcast_to(radius, (len(centres),))
+    for k, (c, r) in enumerate(zip(centres, radii)):
+        assert list(indices[indptr[k]:indptr[k + 1]]) == sorted(tree.query_ball_point(c, r))
+
+
+def test_point_index_finds_the_points_cKDTree_finds():
+    """The same points, sorted by index, as scipy's ball query: random points with one radius
+    and one radius per centre, centres off the points, and points on a whole-metre lattice
+    where many lie at exactly the radius (distance ≤ r counts)."""
     rng = np.random.default_rng(1)
     points = np.column_stack([rng.uniform(0, 100, (20000, 2)), rng.normal(0, 1, 20000)])
-    centres = rng.uniform(0, 100, (500, 2))
-    ours = point_tree(points).query_ball_point(centres, 1.7)
-    default = cKDTree(points[:, :2]).query_ball_point(centres, 1.7)
-    assert all(list(a) == list(b) for a, b in zip(ours, default))
+    centres = np.vstack([rng.uniform(-5, 105, (400, 2)), [[-50.0, 50.0], [500.0, 500.0]]])
+    _same_as_ckdtree(points, centres, 1.7)
+    _same_as_ckdtree(points, centres, rng.uniform(0.1, 6.0, len(centres)))
+    yy, xx = np.mgrid[0:40, 0:30].astype(float)
+    lattice = np.column_stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)])
+    _same_as_ckdtree(lattice, lattice[::7, :2], 2.0)
+    _same_as_ckdtree(lattice, lattice[::5, :2] + 0.5, np.sqrt(2.0) / 2)
+
+
+def test_point_index_of_points_on_one_line():
+    x = np.linspace(0, 1000, 5000)
+    points = np.column_stack([x, np.full_like(x, 7.0), x])
+    _same_as_ckdtree(points, points[::50, :2], 3.0)
