@@ -52,13 +52,12 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
 
 def _check_area(xy: np.ndarray, source: str) -> None:
     """Refuse points that all lie at one place or on one straight line (in any direction)."""
-    span = np.ptp(xy, axis=0)
-    if span.max() <= 0:
+    from .point_kernels import spread  # loads numba: only where points are read
+
+    span, across, along = spread(xy[:, 0], xy[:, 1])
+    if span <= 0:
         raise FloodMeshError(f"{source}: all points lie at one place ({xy[0, 0]:.3f}, "
                              f"{xy[0, 1]:.3f}); a terrain model needs points spread over an area")
-    centred = xy - xy.mean(axis=0)
-    _, axes = np.linalg.eigh(centred.T @ centred)
-    across, along = np.ptp(centred @ axes, axis=0)
     if across <= max(1e-6 * along, 0.005):  # 5 mm: coordinates rounded to the millimetre
         raise FloodMeshError(f"{source}: all points lie on one straight line ({along:.3g} m long, "
                              f"{across:.2g} m across); a terrain model needs points spread over "
@@ -68,11 +67,11 @@ def _check_area(xy: np.ndarray, source: str) -> None:
 def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
     """Say how many points repeat another's x, y (to 0.1 mm) with a different z, and by how
     much. One integer key per point, sorted: a few seconds for 10 million points."""
-    cell = np.round((xyz[:, :2] - xyz[:, :2].min(axis=0)) / 1e-4).astype(np.int64)
-    rows = int(cell[:, 1].max()) + 1
-    if (int(cell[:, 0].max()) + 1) * rows >= 2 ** 62:  # over ~400 km across: not checked
+    from .point_kernels import position_keys
+
+    key = position_keys(xyz[:, 0], xyz[:, 1], 1e-4)
+    if len(key) < len(xyz):  # over ~400 km across: not checked
         return
-    key = cell[:, 0] * rows + cell[:, 1]
     # sorting the keys alone finds the repeated ones (few); only their points are then ordered
     # (an argsort of all keys took 2-3x as long)
     ordered = np.sort(key)
