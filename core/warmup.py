@@ -23,7 +23,8 @@ ENTRY_KERNELS = (("grid", "_bucket_sort"), ("grid", "_rasterise_tin"), ("delauna
                  ("raster_kernels", "_slope_block"), ("raster_kernels", "_missing_to_nan"),
                  ("raster_kernels", "_nan_to_value"), ("breaklines", "_trace"),
                  ("breaklines", "_join_fragments"), ("nearest", "_cell_sort"),
-                 ("nearest", "_ball_csr"))
+                 ("nearest", "_ball_csr"), ("point_kernels", "spread"),
+                 ("point_kernels", "position_keys"))
 
 
 def _dispatchers():
