@@ -576,16 +576,27 @@ def input_corner_angles(nodes: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """Smallest angle (degrees) between the input segments meeting at each node; 180 where fewer
     than two segments meet."""
     smallest = np.full(len(nodes), 180.0)
-    incident = {}
-    for a, b in segments:
-        incident.setdefault(a, []).append(b)
-        incident.setdefault(b, []).append(a)
-    for v, others in incident.items():
-        d = nodes[others, :2] - nodes[v, :2]
-        d /= np.hypot(*d.T)[:, None]
-        cos = np.clip(d @ d.T, -1, 1)
-        np.fill_diagonal(cos, -1)
-        smallest[v] = np.degrees(np.arccos(cos.max())) if len(others) > 1 else 180.0
+    segments = np.asarray(segments, np.int64).reshape(-1, 2)
+    if not len(segments):
+        return smallest
+    # every segment as two directions, one from each end; around a node the smallest angle
+    # between any two is between two that follow each other by polar angle (the last and
+    # the first included), so only those pairs are measured (a loop over nodes did them all)
+    at = np.concatenate([segments[:, 0], segments[:, 1]])
+    d = nodes[np.concatenate([segments[:, 1], segments[:, 0]]), :2] - nodes[at, :2]
+    d = d / np.hypot(*d.T)[:, None]
+    order = np.lexsort((np.arctan2(d[:, 1], d[:, 0]), at))
+    at, d = at[order], d[order]
+    first = np.r_[True, at[1:] != at[:-1]]
+    last = np.r_[first[1:], True]
+    following = np.arange(1, len(at) + 1)
+    following[last] = np.flatnonzero(first)[np.cumsum(first)[last] - 1]
+    pair = following != np.arange(len(at))  # a node with one segment has no angle
+    cos = np.clip((d[pair] * d[following[pair]]).sum(axis=1), -1, 1)
+    best = np.full(len(nodes), -np.inf)
+    np.maximum.at(best, at[pair], cos)
+    met = best > -np.inf
+    smallest[met] = np.degrees(np.arccos(best[met]))
     return smallest
 
 
