@@ -109,27 +109,29 @@ def _read_las(path: Path, classes, note=None):
 def _classes_kept(xyz, cls, classes, name: str, note=None):
     """The points of ``classes``, or of the ground class (2) when classified, or all of an
     unclassified cloud (with a note)."""
-    present = ", ".join(str(c) for c in np.unique(cls)) or "none"
+    def present() -> str:  # for the messages alone: np.unique sorts every point's class
+        return ", ".join(str(c) for c in np.unique(cls)) or "none"
+
     if classes is None:
         if np.any(cls == GROUND_CLASS):
             keep = cls == GROUND_CLASS
         elif np.isin(cls, UNCLASSIFIED).all():
             keep = np.ones(len(cls), bool)
             if note:
-                note(f"{name} is not classified (classes {present} only): all {len(cls):,} "
+                note(f"{name} is not classified (classes {present()} only): all {len(cls):,} "
                      "points are used as ground; classify the ground first (e.g. pdal "
                      "filters.smrf) if they include vegetation or buildings")
         else:
             raise FloodMeshError(
                 f"{name} is classified but has no ground points (class 2; classes present: "
-                f"{present}): give the classes to grid (--classes, 'LAS classes' in QGIS), or "
+                f"{present()}): give the classes to grid (--classes, 'LAS classes' in QGIS), or "
                 "classify the ground first (e.g. pdal translate with filters.smrf)")
     else:
         keep = np.isin(cls, list(classes))
         if not keep.any():
             raise FloodMeshError(f"{name} has no points of classes {sorted(classes)} "
-                                 f"(classes present: {present}); choose other classes")
-    return xyz[keep]
+                                 f"(classes present: {present()}); choose other classes")
+    return xyz if keep.all() else xyz[keep]  # a ground-only file needs no copy
 
 
 EPT_NAME = "ept.json"  # an Entwine Point Tile index, as QGIS's point-cloud layers open them
