@@ -394,9 +394,24 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None):
 
 
 def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
-    rows, cols = np.nonzero(np.isfinite(dem.values))
-    n = max(int(round(fraction * rows.size)), min(rows.size, 30))
-    pick = np.random.default_rng(seed).choice(rows.size, size=n, replace=False)
-    x, y = dem.cell_centres(rows[pick], cols[pick])
-    return PointCloud(np.column_stack([x, y, dem.values[rows[pick], cols[pick]]]), dem.crs)
+    """A seeded random ``fraction`` of the DEM's valid cells as points (cell centre, z), in the
+    draw's order. Built column by column into one (n, 3) array, Fortran-ordered so that each
+    coordinate is contiguous (the terrain fits read them so without copies), from the flat cell
+    indices: 8 B a cell of index beside the 24 B of the points, where row and column grids and
+    a stacked copy took some 80 B a cell more (the same numbers, as ``Grid.cell_centres``)."""
+    cells = np.flatnonzero(np.isfinite(dem.values))
+    n = max(int(round(fraction * cells.size)), min(cells.size, 30))
+    cells = cells[np.random.default_rng(seed).choice(cells.size, size=n, replace=False)]
+    xyz = np.empty((3, n)).T
+    t, width = dem.transform, dem.shape[1]
+    for axis, index, scale, offset in ((0, cells % width, t.a, t.c),
+                                       (1, cells // width, t.e, t.f)):
+        column = xyz[:, axis]
+        column[...] = index
+        del index
+        column += 0.5
+        column *= scale
+        column += offset
+    np.take(dem.values, cells, out=xyz[:, 2])
+    return PointCloud(xyz, dem.crs)
 
