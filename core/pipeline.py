@@ -114,6 +114,11 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
                                                      front.breakpoints, front.traced)
     n_breakpoints = int(breakpoints.values.sum())
+    if front.files:  # traced, and on disk for the output: only the size fields may read them
+        if options.size_field != "slope":
+            front.slope_grid = slope_grid = None
+        if options.far_field_area is None:
+            front.breakpoints = breakpoints = None
     delta = dem.cell_size / 2
     min_distance = delta if options.min_distance is None else options.min_distance
     simplified = lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
@@ -143,8 +148,6 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
         size = finer(size, far)
         max_area = options.far_field_area
-    if front.files:  # slope and breakpoints are on disk and no step after needs them
-        front.slope_grid = front.breakpoints = slope_grid = breakpoints = None
     hand = None
     if options.flow_area is not None:  # resolution where water flows (see drainage)
         hand, _ = height_above_drainage(dem, channel_area=CHANNEL_AREA)
