@@ -22,7 +22,7 @@ from .export import export_formats
 from .grid import check_grid, grid_points_linear
 from .hydraulic_lines import lines_for_hydraulics
 from .hydraulics import hydraulic_checks
-from .limits import check_memory, check_triangles
+from .limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
 from .localise import fit_node_elevations, fit_window, localise_traced
 from .mesh import build_mesh, domain_from_dem, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
@@ -337,7 +337,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         dem = data  # a DEM keeps its own cell size
         valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
         triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
-        check_memory(cells=dem.values.size, triangles=triangles,
+        check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
                      advice="resample the DEM to larger cells or split it into tiles")
         holdout = _dem_check_points(dem, options.holdout, options.seed)
         measured = _dem_check_points(dem, 1.0, options.seed).xyz
@@ -373,8 +373,12 @@ def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None,
     paths = expand_tiles(inputs)
     if tile_kind(paths[0]) == "dem":
         return read_dem_tiles(paths, crs=options.crs)
-    def check(plan):
-        check_triangles(plan["area"], options.max_area, options.max_triangles)
+    def check(plan):  # before round two: the chain after gridding, which holds the whole DEM
+        triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
+        check_memory(cells=plan["rows"] * plan["cols"], triangles=triangles,
+                     cell_bytes=BYTES_PER_FITTED_CELL,
+                     advice="give a larger cell size or maximum area, or grid the tiles alone "
+                            "(floodmesh grid TILES --out dem.tif) and mesh it in parts")
 
     tiled = grid_point_tiles(paths, options.cell_size, max_gap=options.max_gap, crs=options.crs,
                              classes=options.classes, holdout=options.holdout, seed=options.seed,
