@@ -11,8 +11,10 @@ The synthetic floodplain (9 ground points/m², 5 cm noise: a sinuous river with 
 rerun measures the chain, not the generator; ``--clean`` removes it at the end. Each area is
 gridded (``floodmesh grid``); the areas of ``--run`` also go through the whole chain
 (``floodmesh run``), whose report's step times are printed too. Peak memory is the largest sum
-of the resident memory of the command and its Dask worker processes, sampled every 0.1 s; CPU
-seconds are theirs too (user + system), the measure of work when the machine is shared.
+of the resident memory of the command and its Dask worker processes, sampled every 0.1 s, and
+the command's own peak beside it (the part that grows with the area: after gridding it holds
+the whole-raster state); CPU seconds are theirs too (user + system), the measure of work when
+the machine is shared.
 """
 from __future__ import annotations
 
