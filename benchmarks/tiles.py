@@ -11,8 +11,10 @@ The synthetic floodplain (9 ground points/m², 5 cm noise: a sinuous river with 
 rerun measures the chain, not the generator; ``--clean`` removes it at the end. Each area is
 gridded (``floodmesh grid``); the areas of ``--run`` also go through the whole chain
 (``floodmesh run``), whose report's step times are printed too. Peak memory is the largest sum
-of the resident memory of the command and its Dask worker processes, sampled every 0.1 s; CPU
-seconds are theirs too (user + system), the measure of work when the machine is shared.
+of the resident memory of the command and its Dask worker processes, sampled every 0.1 s, and
+the command's own peak beside it (the part that grows with the area: after gridding it holds
+the whole-raster state); CPU seconds are theirs too (user + system), the measure of work when
+the machine is shared.
 """
 from __future__ import annotations
 
@@ -109,9 +111,10 @@ def tile_folder(data: Path, area_km2: int, tiles: list[Path]) -> Path:
     return folder
 
 
-def measured(command: list[str]) -> tuple[float, float, float, str]:
+def measured(command: list[str]) -> tuple[float, float, float, float, str]:
     """(wall seconds, CPU seconds of the command and its workers, peak MB of the process tree's
-    summed RSS, stdout) of a command."""
+    summed RSS, peak MB of the command's own RSS, stdout) of a command. The command's own peak
+    is the part that grows with the area (after gridding it holds the whole-raster state)."""
     import resource
 
     import psutil
@@ -124,18 +127,19 @@ def measured(command: list[str]) -> tuple[float, float, float, str]:
     start = time.perf_counter()
     proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     top = psutil.Process(proc.pid)
-    peak = 0
+    peak = own = 0
     while proc.poll() is None:
         try:
             tree = [top] + top.children(recursive=True)
             peak = max(peak, sum(p.memory_info().rss for p in tree if p.is_running()))
+            own = max(own, top.memory_info().rss)
         except psutil.Error:
             pass
         time.sleep(0.1)
     out, err = proc.communicate()
     if proc.returncode:
         raise SystemExit(f"{' '.join(command)} failed:\n{err}")
-    return time.perf_counter() - start, cpu() - cpu0, peak / 1e6, out
+    return time.perf_counter() - start, cpu() - cpu0, peak / 1e6, own / 1e6, out
 
 
 def main():
@@ -164,17 +168,17 @@ def main():
             points = int(args.density * 1e6 * area)
             folder = str(tile_folder(data, area, tiles))
             if area in areas:
-                seconds, cpu, peak, _ = measured([FLOODMESH, "grid", folder, "--cell-size",
+                seconds, cpu, peak, own, _ = measured([FLOODMESH, "grid", folder, "--cell-size",
                                                   "1", "--workers", str(args.workers),
                                                   "--out", str(out / f"dem_{area}.tif")])
-                rows.append(("grid tiles", area, points, seconds, cpu, peak))
+                rows.append(("grid tiles", area, points, seconds, cpu, peak, own))
                 print(f"  grid {area} km²: {seconds:.0f} s, {peak:.0f} MB", file=sys.stderr,
                       flush=True)
             if area in chain:
-                seconds, cpu, peak, _ = measured([FLOODMESH, "run", folder,
+                seconds, cpu, peak, own, _ = measured([FLOODMESH, "run", folder,
                                                   "--workers", str(args.workers), "--out",
                                                   str(out / f"run_{area}")])
-                rows.append(("run tiles", area, points, seconds, cpu, peak))
+                rows.append(("run tiles", area, points, seconds, cpu, peak, own))
                 report = json.loads((out / f"run_{area}" / "report.json").read_text())
                 steps.append((area, report["seconds"], report["triangles"]))
                 shutil.rmtree(out / f"run_{area}")
@@ -195,10 +199,10 @@ def main():
                         with laspy.open(path) as reader:
                             for chunk in reader.chunk_iterator(2_000_000):
                                 writer.write_points(chunk)
-            seconds, cpu, peak, _ = measured([FLOODMESH, "grid", str(single), "--cell-size",
+            seconds, cpu, peak, own, _ = measured([FLOODMESH, "grid", str(single), "--cell-size",
                                               "1", "--out", str(out / "dem_single_4.tif")])
             rows.append(("grid one file (peer)", 4, int(args.density * 4e6), seconds, cpu,
-                         peak))
+                         peak, own))
             from floodmesh.core import io
 
             a = io.read_raster(out / "dem_single_4.tif")
@@ -215,10 +219,10 @@ def main():
     print(f"\n## A floodplain as 1 km² LAZ tiles, {args.density:g} points/m², 1 m DEM, "
           f"{args.workers} local Dask workers")
     print(f"{'what':<22}{'km²':>5}{'points':>14}{'wall s':>9}{'CPU s':>9}{'CPU s/km²':>11}"
-          f"{'peak RSS MB':>13}")
-    for what, area, points, seconds, cpu, peak in rows:
+          f"{'peak RSS MB':>13}{'command MB':>12}")
+    for what, area, points, seconds, cpu, peak, own in rows:
         print(f"{what:<22}{area:>5}{points:>14,}{seconds:>9.1f}{cpu:>9.1f}{cpu / area:>11.1f}"
-              f"{peak:>13.0f}")
+              f"{peak:>13.0f}{own:>12.0f}")
     for area, seconds, triangles in steps:
         print(f"run {area} km² ({triangles:,} triangles), seconds per step: " + ", ".join(
             f"{name} {value:.0f}" for name, value in seconds.items() if value >= 0.5))

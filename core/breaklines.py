@@ -80,8 +80,10 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
         raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
                              f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")
     if mode == "auto":
-        valid = slope.values[np.isfinite(slope.values)]
-        mode = "steep" if valid.size and np.median(valid) >= s_crit else "flat"
+        valid = slope.values[np.isfinite(slope.values)]  # a copy: the median may sort it
+        mode = "steep" if valid.size and np.median(valid, overwrite_input=True) >= s_crit \
+            else "flat"
+        del valid
     bp = np.ascontiguousarray(breakpoints.values, dtype=np.bool_)
     # the tracer reads slope only at breakpoints, where it is finite (slope >= S_crit)
     slope_values = np.ascontiguousarray(slope.values, dtype=np.float64)

@@ -36,10 +36,12 @@ def log_breakpoints(response: Grid, sensitivity: float, *, zero_crossings: bool 
 
 def breakpoints_file(src_path, out_path, *, s_crit: float | None = None,
                      sensitivity: float | None = None, zero_crossings: bool = False, crs=None,
-                     windows=None, progress=None, cancelled=None) -> int:
+                     windows=None, input_dtype=np.float32, progress=None,
+                     cancelled=None) -> int:
     """Breakpoints of a slope raster (``s_crit``) or of a LoG response (``sensitivity``) into a
     uint8 GeoTIFF (1 breakpoint, 0 not, 255 where the input is nodata), streamed block by block
-    (``blocks.map_raster``; ``windows`` as there). Returns the number of breakpoints."""
+    (``blocks.map_raster``; ``windows`` and ``input_dtype``, what the rules compare, as there).
+    Returns the number of breakpoints."""
     if sensitivity is None:
         block, halo = _threshold_block(check_s_crit(s_crit), True)
     else:
@@ -54,7 +56,8 @@ def breakpoints_file(src_path, out_path, *, s_crit: float | None = None,
         return out
 
     map_raster(src_path, out_path, with_nodata, halo=halo, dtype="uint8", crs=crs,
-               windows=windows, progress=progress, cancelled=cancelled)
+               windows=windows, input_dtype=input_dtype, progress=progress,
+               cancelled=cancelled)
     return count[0]
 
 

@@ -19,6 +19,10 @@ from .errors import FloodMeshError
 
 BYTES_PER_POINT = 160       # read (laspy records + x, y, z), holdout split, bucket sort, tile TINs
 BYTES_PER_CELL = 64         # DEM, slope, breakpoints, tracing masks, GeoTIFF copies
+# The chain after gridding where the terrain fits take the DEM's cell centres (point tiles, a
+# DEM): the centres (24 B) and their search trees beside the DEM; measured with
+# benchmarks/tiles.py as the growth of the command's peak from 1 to 4 km² of tiles.
+BYTES_PER_FITTED_CELL = 100
 BYTES_PER_TRIANGLE = 1600   # Triangle, nodes/triangles, quality, 2DM and GeoPackage records
 # Triangle's quality refinement leaves triangles of about 0.64 of the area bound on open ground
 # (measured: 1.94 M triangles over 249 001 m² at 0.2 m²) and refines around input vertices.
@@ -73,10 +77,11 @@ def check_triangles(area: float, max_area: float, max_triangles: int, input_vert
 
 
 def check_memory(*, points: int = 0, cells: int = 0, triangles: int = 0,
-                 memory: int | None = None, advice: str) -> int:
+                 memory: int | None = None, cell_bytes: int = BYTES_PER_CELL,
+                 advice: str) -> int:
     """Refuse a run whose estimated peak memory exceeds ``memory`` bytes (by default what the
-    system has available); returns the estimate in bytes."""
-    need = points * BYTES_PER_POINT + cells * BYTES_PER_CELL + triangles * BYTES_PER_TRIANGLE
+    system has available), at ``cell_bytes`` a grid cell; returns the estimate in bytes."""
+    need = points * BYTES_PER_POINT + cells * cell_bytes + triangles * BYTES_PER_TRIANGLE
     memory = available_memory() if memory is None else memory
     if memory is not None and need > memory:
         parts = [f"{n:,} {name}" for n, name in ((points, "points"), (cells, "grid cells"),

@@ -2,6 +2,7 @@
 with every intermediate written to an output folder and a report of figures and timings."""
 from __future__ import annotations
 
+import tempfile
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -14,14 +15,14 @@ from pyproj import CRS
 from . import io
 from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
-from .breakpoints import classify_breakpoints, log_breakpoints
+from .breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
 from .drainage import CHANNEL_AREA, flow_size, flow_spacing, height_above_drainage
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
 from .hydraulic_lines import lines_for_hydraulics
 from .hydraulics import hydraulic_checks
-from .limits import check_memory, check_triangles
+from .limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
 from .localise import fit_node_elevations, fit_window, localise_traced
 from .nearest import point_index
 from .mesh import build_mesh, domain_from_dem, mesh_quality, size_from_slope, user_domain
@@ -34,8 +35,8 @@ from .refine import refine_mesh
 from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .sizing import far_field_size, finer
 from .slope import laplacian_of_gaussian, slope
-from .tiles import (TiledDem, expand_tiles, grid_point_tiles, is_tile_set, read_dem_tiles,
-                    tile_kind)
+from .tiles import (TiledDem, expand_tiles, grid_point_tiles, is_tile_set, read_back,
+                    read_dem_tiles, slope_file64, tile_kind, write_front_rasters)
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
                 "mesh.prj", "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG, "report.json")
@@ -116,6 +117,12 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
                                                      front.breakpoints, front.traced)
+    n_breakpoints = int(breakpoints.values.sum())
+    if front.files:  # traced, and on disk for the output: only the size fields may read them
+        if options.size_field != "slope":
+            front.slope_grid = slope_grid = None
+        if options.far_field_area is None:
+            front.breakpoints = breakpoints = None
     delta = dem.cell_size / 2
     min_distance = delta if options.min_distance is None else options.min_distance
     simplified = lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
@@ -202,10 +209,12 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     deviation, quality, stats, hydraulics = steps.run("figures", figures)
 
     def write_all(out):
-        valid = np.isfinite(dem.values)
         io.write_raster(out / "dem.tif", dem)
-        io.write_raster(out / "slope.tif", slope_grid)
-        io.write_raster(out / "breakpoints.tif", breakpoints, valid=valid)
+        if front.files:
+            write_front_rasters(front.files, out)
+        else:
+            io.write_raster(out / "slope.tif", slope_grid)
+            io.write_raster(out / "breakpoints.tif", breakpoints, valid=np.isfinite(dem.values))
         io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs, fit_rms=confidence)
         # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
         if "2dm" not in options.formats:
@@ -231,7 +240,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             "holdout_source": front.holdout_source,
             "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
                      "valid_cells": int(np.isfinite(dem.values).sum())},
-            "n_breakpoints": int(breakpoints.values.sum()),
+            "n_breakpoints": n_breakpoints,
             "n_breaklines_traced": len(traced),
             "n_breaklines": len(lines),
             "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
@@ -287,6 +296,7 @@ class Front:
     domain: object = None    # the user's domain (Multi)Polygon, None: the DEM's data
     own_lines: list = field(default_factory=list)  # the modeller's own lines (k, 3) arrays
     measured: np.ndarray | None = None  # (n, 3) points gridded (or DEM cell centres): refinement
+    files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
 
 
 def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, *,
@@ -297,14 +307,29 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
     repaired on the user's behalf. Grids and meshes too large for the triangle limit or the
     memory are refused before the work."""
     steps = steps or _Steps({}, None, cancelled, None)
+    files = None
     if is_tile_set(input_path):
         paths = expand_tiles(input_path)  # point tiles are read and gridded in one step
+        if tile_kind(paths[0]) == "points" and options.slope_method != "log":
+            # the DEM, slope and breakpoints go file to file, block by block (see tiles)
+            files = {"folder": tempfile.TemporaryDirectory(prefix="floodmesh-tiles-")}
+            files["dem"] = Path(files["folder"].name) / "dem.tif"
         data = steps.run("grid" if tile_kind(paths[0]) == "points" else "read", read_tile_set,
-                         paths, options, cancelled=cancelled, note=note, progress=None)
+                         paths, options, cancelled=cancelled, note=note, progress=None,
+                         dem_path=files and files["dem"])
     else:
         data = steps.run("read", io.read_input, input_path, crs=options.crs,
                          classes=options.classes, note=note)
     if isinstance(data, TiledDem):
+        if files:
+            folder, crs_wkt = files["dem"].parent, data.crs.to_wkt()
+            files["slope"] = steps.run("slope", slope_file64, files["dem"], folder / "slope.tif",
+                                       options.slope_method, crs=crs_wkt, cancelled=cancelled)
+            files["breakpoints"] = folder / "breakpoints.tif"
+            steps.run("breakpoints", breakpoints_file, files["slope"], files["breakpoints"],
+                      s_crit=options.s_crit, input_dtype=np.float64, crs=crs_wkt,
+                      cancelled=cancelled)
+            data.dem = read_back(files["dem"], data.crs)
         dem, holdout = data.dem, PointCloud(data.holdout, data.dem.crs)
         # the tiles' points are not kept: the terrain fits and --refine use the DEM's cell
         # centres; the per-tile held-out points stay the independent check
@@ -330,7 +355,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         dem = data  # a DEM keeps its own cell size
         valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
         triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
-        check_memory(cells=dem.values.size, triangles=triangles,
+        check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
                      advice="resample the DEM to larger cells or split it into tiles")
         holdout = _dem_check_points(dem, options.holdout, options.seed)
         measured = _dem_check_points(dem, 1.0, options.seed).xyz
@@ -338,7 +363,10 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         n_points = 0
     domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
                                   options.user_lines)
-    if options.slope_method == "log":
+    if files:
+        slope_grid = read_back(files["slope"], dem.crs)
+        breakpoints = read_back(files["breakpoints"], dem.crs)
+    elif options.slope_method == "log":
         # second order: breakpoints from the LoG; the tracer still follows first-order slope
         response = steps.run("slope", laplacian_of_gaussian, dem, options.sigma,
                              kernel=options.log_kernel, cancelled=cancelled)
@@ -353,19 +381,27 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
-                 domain, own_lines, measured)
+                 domain, own_lines, measured, files)
 
 
-def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None, note=None):
-    """Point tiles gridded on Dask (``tiles.TiledDem``), or DEM tiles as one ``Grid``."""
+def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None, note=None,
+                  dem_path=None):
+    """Point tiles gridded on Dask (``tiles.TiledDem``), or DEM tiles as one ``Grid``; with
+    ``dem_path`` the DEM goes there (float64) instead of into memory."""
     paths = expand_tiles(inputs)
     if tile_kind(paths[0]) == "dem":
         return read_dem_tiles(paths, crs=options.crs)
-    def check(plan):
-        check_triangles(plan["area"], options.max_area, options.max_triangles)
+    def check(plan):  # before round two: the chain after gridding, which holds the whole DEM
+        triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
+        check_memory(cells=plan["rows"] * plan["cols"], triangles=triangles,
+                     cell_bytes=BYTES_PER_FITTED_CELL,
+                     advice="give a larger cell size or maximum area, or grid the tiles alone "
+                            "(floodmesh grid TILES --out dem.tif) and mesh it in parts")
 
     tiled = grid_point_tiles(paths, options.cell_size, max_gap=options.max_gap, crs=options.crs,
                              classes=options.classes, holdout=options.holdout, seed=options.seed,
+                             out_path=dem_path, keep=dem_path is None,
+                             dtype="float32" if dem_path is None else "float64",
                              workers=options.workers, scheduler=options.scheduler,
                              processes=options.processes, progress=progress,
                              cancelled=cancelled, check=check)
@@ -412,9 +448,24 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None):
 
 
 def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
-    rows, cols = np.nonzero(np.isfinite(dem.values))
-    n = max(int(round(fraction * rows.size)), min(rows.size, 30))
-    pick = np.random.default_rng(seed).choice(rows.size, size=n, replace=False)
-    x, y = dem.cell_centres(rows[pick], cols[pick])
-    return PointCloud(np.column_stack([x, y, dem.values[rows[pick], cols[pick]]]), dem.crs)
+    """A seeded random ``fraction`` of the DEM's valid cells as points (cell centre, z), in the
+    draw's order. Built column by column into one (n, 3) array, Fortran-ordered so that each
+    coordinate is contiguous (the terrain fits read them so without copies), from the flat cell
+    indices: 8 B a cell of index beside the 24 B of the points, where row and column grids and
+    a stacked copy took some 80 B a cell more (the same numbers, as ``Grid.cell_centres``)."""
+    cells = np.flatnonzero(np.isfinite(dem.values))
+    n = max(int(round(fraction * cells.size)), min(cells.size, 30))
+    cells = cells[np.random.default_rng(seed).choice(cells.size, size=n, replace=False)]
+    xyz = np.empty((3, n)).T
+    t, width = dem.transform, dem.shape[1]
+    for axis, index, scale, offset in ((0, cells % width, t.a, t.c),
+                                       (1, cells // width, t.e, t.f)):
+        column = xyz[:, axis]
+        column[...] = index
+        del index
+        column += 0.5
+        column *= scale
+        column += offset
+    np.take(dem.values, cells, out=xyz[:, 2])
+    return PointCloud(xyz, dem.crs)
 

@@ -290,14 +290,16 @@ class TiledDem:
 
 def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
                      crs=None, classes=None, holdout: float = 0.0, seed: int = 0,
-                     out_path=None, keep: bool = True, workers: int | None = None,
+                     out_path=None, keep: bool = True, dtype: str = "float32",
+                     workers: int | None = None,
                      scheduler: str | None = None, processes: bool = True,
                      progress: Callable[[float], None] | None = None,
                      cancelled: Callable[[], bool] | None = None,
                      check: Callable[[dict], None] | None = None) -> TiledDem:
     """Grid LAS/LAZ/XYZ tiles (a folder, glob or list) to one DEM of ``cell_size`` m, tile by
     tile on Dask (see the module). The DEM is written block by block to ``out_path`` (a tiled
-    GeoTIFF) when given, and kept in memory when ``keep``. ``check`` receives the layout
+    GeoTIFF of ``dtype``: float32 compressed, or float64 as gridded) when given, and kept in
+    memory when ``keep``. ``check`` receives the layout
     (``check_layout``'s dict) before round two, to refuse a run before its main work."""
     from .grid import check_layout, halo_width
     from .limits import check_memory
@@ -383,7 +385,7 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
         edges = near = edge = None
         values = np.full((rows, cols), np.nan) if keep else None
         any_valid = False
-        with _dem_writer(out_path, rows, cols, transform, tile_crs) as write:
+        with _dem_writer(out_path, rows, cols, transform, tile_crs, dtype) as write:
             for i, block_values in _as_completed(client, tasks, progress=progress,
                                                  cancelled=cancelled, base=0.3, weight=0.7):
                 r0, c0 = windows[i]
@@ -405,9 +407,11 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
 
 
 @contextlib.contextmanager
-def _dem_writer(path, rows: int, cols: int, transform, crs: CRS):
-    """``write(row0, col0, values)`` into a tiled, compressed float32 GeoTIFF (BigTIFF when
-    needed) at ``path``, put in place only when complete; a no-op writer without ``path``."""
+def _dem_writer(path, rows: int, cols: int, transform, crs: CRS, dtype: str = "float32"):
+    """``write(row0, col0, values)`` into a tiled GeoTIFF (BigTIFF when needed) at ``path``, put
+    in place only when complete; a no-op writer without ``path``. float32 is compressed; float64
+    (the gridded values themselves, for the raster steps of ``run``) is not, as blocks writes
+    floats."""
     if path is None:
         yield lambda r0, c0, values: None
         return
@@ -417,14 +421,59 @@ def _dem_writer(path, rows: int, cols: int, transform, crs: CRS):
     from .io import atomic_output
 
     nodata = -9999.0
-    profile = dict(driver="GTiff", height=rows, width=cols, count=1, dtype="float32",
-                   crs=crs.to_wkt(), transform=transform, nodata=nodata, compress="deflate",
-                   tiled=True, blockxsize=256, blockysize=256, BIGTIFF="IF_SAFER")
+    profile = dict(driver="GTiff", height=rows, width=cols, count=1, dtype=dtype,
+                   crs=crs.to_wkt(), transform=transform, nodata=nodata, tiled=True,
+                   blockxsize=256, blockysize=256, BIGTIFF="IF_SAFER",
+                   **({"compress": "deflate"} if dtype == "float32" else {}))
     with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
         def write(r0, c0, values):
-            out = np.where(np.isfinite(values), values, nodata).astype(np.float32)
+            out = np.where(np.isfinite(values), values, nodata).astype(dtype)
             dst.write(out, 1, window=Window(c0, r0, out.shape[1], out.shape[0]))
         yield write
+
+
+def slope_file64(dem_path, slope_path, method: str, *, crs=None, cancelled=None) -> Path:
+    """Slope (degrees) of a float64 DEM file into a float64 file, block by block with a one-cell
+    halo (``blocks.map_raster``), never holding the whole raster: the very numbers of
+    ``slope.slope`` on the DEM in memory, as the kernel is the same and reads float64 (the
+    float32 ``slope.slope_file`` rounds the DEM first). ``breakpoints.breakpoints_file`` with
+    ``input_dtype=np.float64`` then gives ``classify_breakpoints``' breakpoints."""
+    from .blocks import cell_size, map_raster
+    from .slope import slope_block
+
+    d = cell_size(dem_path)
+    map_raster(dem_path, slope_path, lambda padded: slope_block(padded, d, method), halo=1,
+               dtype="float64", input_dtype=np.float64, crs=crs, cancelled=cancelled)
+    return Path(slope_path)
+
+
+def read_back(path, crs: CRS) -> Grid:
+    """A raster a run wrote (float64 with its nodata, or breakpoints: uint8, nodata 255) as the
+    Grid the steps in memory give: float64 with NaN, breakpoints 0 or 1."""
+    import rasterio
+
+    from .io import _read_band
+
+    with rasterio.open(path) as src:
+        if np.dtype(src.dtypes[0]) == np.uint8:
+            values = src.read(1)
+            values[values == src.nodata] = 0
+        else:
+            values = _read_band(src)
+        return Grid(values, src.transform, crs)
+
+
+def write_front_rasters(files: dict, out) -> None:
+    """slope.tif (float32, as ``io.write_raster`` writes the slope in memory) and
+    breakpoints.tif of a run into ``out``, block by block from ``files`` (``slope``,
+    ``breakpoints``: the float64 slope and the breakpoints files)."""
+    import shutil
+
+    from .blocks import map_raster
+
+    map_raster(files["slope"], Path(out) / "slope.tif", lambda padded: padded, halo=0,
+               input_dtype=np.float64)
+    shutil.copyfile(files["breakpoints"], Path(out) / "breakpoints.tif")
 
 
 # ---------------------------------------------------------------------------------------------

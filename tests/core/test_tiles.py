@@ -17,8 +17,10 @@ from floodmesh.core.options import RunOptions
 from floodmesh.core.pipeline import run_pipeline
 from floodmesh.core.points import PointCloud
 from floodmesh.core.raster import Grid
-from floodmesh.core.tiles import (_tile_points, grid_point_tiles, holdout_mask,
-                                  read_dem_tiles)
+from floodmesh.core.breakpoints import breakpoints_file, classify_breakpoints
+from floodmesh.core.slope import slope
+from floodmesh.core.tiles import (_tile_points, grid_point_tiles, holdout_mask, read_back,
+                                  read_dem_tiles, slope_file64)
 
 from ..conftest import survey_tiles
 
@@ -80,6 +82,12 @@ def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path):
         io.read_raster(tmp_path / "single" / "dem.tif").values.tobytes()
     for key in ("nodes", "triangles", "n_breakpoints", "n_breaklines", "min_angle_deg"):
         assert tiled[key] == single[key], key
+    # slope and breakpoints went file to file for the tiles, in memory for the one file
+    for name in ("slope.tif", "breakpoints.tif"):
+        with rasterio.open(tmp_path / "tiled" / name) as a, \
+                rasterio.open(tmp_path / "single" / name) as b:
+            assert a.profile == b.profile, name
+            assert np.array_equal(a.read(1), b.read(1)), name
     lines = _lines(tmp_path / "tiled" / "breaklines.gpkg")
     assert lines == _lines(tmp_path / "single" / "breaklines.gpkg")
     # break lines run on across the tile edges: the river and the levee cross x = EDGE_X
@@ -88,6 +96,28 @@ def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path):
     crossing_y = [c for c in lines if min(p[1] for p in c) < EDGE_Y - 5 < EDGE_Y + 5
                   < max(p[1] for p in c)]
     assert len(crossing_x) >= 4 and len(crossing_y) >= 1
+
+
+def test_slope_and_breakpoints_file_to_file_equal_them_in_memory(survey, scheduler, tmp_path):
+    # what run does with point tiles: the gridded float64 DEM on disk, slope and breakpoints
+    # block by block (strips of 512 rows: the halo crosses strip edges), read back for the tracer
+    tiled = grid_point_tiles(survey / "tiles", 0.25, scheduler=scheduler, keep=False,
+                             dtype="float64", out_path=tmp_path / "dem.tif")
+    assert tiled.dem is None
+    dem = read_back(tmp_path / "dem.tif", tiled.crs)
+    whole = grid_point_tiles(survey / "tiles", 0.25, scheduler=scheduler).dem
+    assert np.array_equal(dem.values, whole.values, equal_nan=True)
+    assert dem.shape[0] > 512
+    slope_file64(tmp_path / "dem.tif", tmp_path / "slope.tif", "one-over-distance")
+    breakpoints_file(tmp_path / "slope.tif", tmp_path / "bp.tif", s_crit=10.0,
+                     input_dtype=np.float64)
+    in_memory = slope(dem, "one-over-distance")
+    assert np.array_equal(read_back(tmp_path / "slope.tif", tiled.crs).values, in_memory.values,
+                          equal_nan=True)
+    marks = classify_breakpoints(in_memory, 10.0).values
+    streamed = read_back(tmp_path / "bp.tif", tiled.crs).values
+    assert streamed.dtype == np.uint8 and marks.sum() > 1000
+    assert np.array_equal(streamed, marks)
 
 
 def test_a_tile_in_another_crs_or_none_is_refused_by_name(survey, tmp_path):
