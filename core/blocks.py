@@ -185,36 +185,43 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
         shape = (src.height, src.width)
         windows = row_windows(shape, block_rows) if windows is None else list(windows)
 
-        read_band = _band_reader(src, input_dtype)
+        read_band, to_nan = _band_reader(src, input_dtype)
         nan_to_value = _kernel("nan_to_value", dtype)
 
         def read_into(view, r0, r1, c0, c1):
-            if read_band(view, Window(c0, r0, c1 - c0, r1 - r0)) and not valid[0]:
+            read_band(view, Window(c0, r0, c1 - c0, r1 - r0))
+
+        def compute(padded):
+            """In the worker thread: the per-cell passes (nodata to NaN, the kernel, NaN to
+            nodata), so that this thread only reads and writes."""
+            if to_nan(padded) and not valid[0]:
                 valid[0] = True
+            result = np.asarray(func(padded))
+            if result.dtype.kind == "f":
+                kind = dtype if np.dtype(dtype).kind == "f" else result.dtype
+                result = nan_to_value(np.ascontiguousarray(result, kind),
+                                      np.dtype(kind).type(nodata))
+            return result.astype(dtype, copy=False)
 
         profile = raster_profile(shape, src.transform, crs, dtype, nodata)
         with atomic_output(dst_path) as tmp:
             with rasterio.open(tmp, "w", **profile) as dst:
                 def write(window, result):
-                    result = np.asarray(result)
-                    if result.dtype.kind == "f":
-                        kind = dtype if np.dtype(dtype).kind == "f" else result.dtype
-                        result = nan_to_value(np.ascontiguousarray(result, kind),
-                                              np.dtype(kind).type(nodata))
                     r0, c0, h, w = window
-                    dst.write(result.astype(dtype, copy=False), 1, window=Window(c0, r0, w, h))
+                    dst.write(result, 1, window=Window(c0, r0, w, h))
 
-                run_blocks(read_into, write, shape, func, halo=halo, windows=windows,
+                run_blocks(read_into, write, shape, compute, halo=halo, windows=windows,
                            dtype=input_dtype, progress=progress, cancelled=cancelled)
             if not valid[0]:
                 raise no_valid_cells(src_path)  # before the move: no output is left
 
 
 def _band_reader(src, dtype):
-    """``read(view, window)``: band 1 of the open ``src`` in ``window`` into the array ``view``
-    (any strides) as ``dtype``, NaN for nodata and ±inf in floats; returns whether a finite
-    cell was read. Straight into the caller's buffer, except for files that mask cells by a mask
-    band rather than a nodata value."""
+    """``(read, to_nan)``: ``read(view, window)`` reads band 1 of the open ``src`` in ``window``
+    into the array ``view`` (any strides) as ``dtype``, straight into the caller's buffer;
+    ``to_nan(padded)``, on the whole padded buffer (NaN beyond the raster) in the worker thread,
+    makes nodata and ±inf NaN in floats and returns whether a finite cell is in it. Files that
+    mask cells by a mask band rather than a nodata value are read masked (``io._read_band``)."""
     from rasterio.enums import MaskFlags
 
     from .io import _read_band
@@ -223,8 +230,10 @@ def _band_reader(src, dtype):
     if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags or np.dtype(dtype).kind != "f":
         def read(view, window):
             view[...] = _read_band(src, window, dtype)
-            return np.dtype(dtype).kind != "f" or bool(np.isfinite(view).any())
-        return read
+
+        def finite(padded):
+            return np.dtype(dtype).kind != "f" or bool(np.isfinite(padded).any())
+        return read, finite
     # the nodata value as the file stores it, then as the buffer holds it (io._read_band)
     missing = np.dtype(dtype).type(np.nan)
     if src.nodata is not None and np.isfinite(src.nodata):
@@ -236,8 +245,7 @@ def _band_reader(src, dtype):
 
     def read(view, window):
         src.read(1, window=window, out=view)
-        return missing_to_nan(view, missing)
-    return read
+    return read, lambda padded: missing_to_nan(padded, missing)
 
 
 def _kernel(name: str, dtype):

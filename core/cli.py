@@ -782,5 +782,29 @@ def main(argv=None) -> int:
     return 0
 
 
+# Steps that end with every file closed and no thread, child process or temporary left for the
+# interpreter's exit handlers to clean up: ``command`` skips the teardown after them.
+_QUICK_EXIT = ("slope", "breakpoints")
+
+
+def command() -> None:
+    """The ``floodmesh`` console command: ``main``, then the exit. After the quick raster steps
+    (``_QUICK_EXIT``) the process ends as soon as the output is in place and the streams are
+    flushed, without the interpreter's teardown of every module (0.03-0.06 s, 5 % of ``floodmesh
+    slope`` on a 6000² DEM); other commands exit normally, running their exit handlers."""
+    import os
+
+    argv = sys.argv[1:]
+    code = main(argv)
+    if not argv or argv[0] not in _QUICK_EXIT:
+        sys.exit(code)
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except (BrokenPipeError, ValueError):  # a closed stream: nothing more can reach it
+        code = code or 1
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    command()

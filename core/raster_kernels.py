@@ -132,6 +132,19 @@ def _filled_gradient(padded, i, j, d, method, diagonal):
     return _gradient(z1, z2, z3, z4, z5, z6, z7, z8, z9, d, method, diagonal)
 
 
+@numba.njit(inline="always", error_model="numpy")
+def _raw_gradient_row(r0, r1, r2, g, d, method, diagonal):
+    """``g[j]``: the gradient of cell j of row ``r1`` from its raw neighbours in rows ``r0``,
+    ``r1``, ``r2`` (NaN where any of the nine is missing). Inlined with ``method`` a literal,
+    so that the loop has no branch and vectorises (2-3x faster than a run-time ``method``)."""
+    for j in range(g.shape[0]):
+        a1, a2, a3 = np.float64(r0[j]), np.float64(r0[j + 1]), np.float64(r0[j + 2])
+        a8, a9, a4 = np.float64(r1[j]), np.float64(r1[j + 1]), np.float64(r1[j + 2])
+        a7, a6, a5 = np.float64(r2[j]), np.float64(r2[j + 1]), np.float64(r2[j + 2])
+        missing = (a1 + a2 + a3 + a4 + a5 + a6 + a7 + a8 + a9) * 0.0  # NaN if any is
+        g[j] = _gradient(a1, a2, a3, a4, a5, a6, a7, a8, a9, d, method, diagonal) + missing
+
+
 @numba.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def _slope_block(padded, out, d, method, diagonal):
     """Slope (degrees) of the interior of ``padded`` (float32 or float64) into ``out``; the
@@ -144,12 +157,18 @@ def _slope_block(padded, out, d, method, diagonal):
     for i in numba.prange(rows):
         g = np.empty(cols)
         r0, r1, r2 = padded[i], padded[i + 1], padded[i + 2]
-        for j in range(cols):
-            a1, a2, a3 = np.float64(r0[j]), np.float64(r0[j + 1]), np.float64(r0[j + 2])
-            a8, a9, a4 = np.float64(r1[j]), np.float64(r1[j + 1]), np.float64(r1[j + 2])
-            a7, a6, a5 = np.float64(r2[j]), np.float64(r2[j + 1]), np.float64(r2[j + 2])
-            missing = (a1 + a2 + a3 + a4 + a5 + a6 + a7 + a8 + a9) * 0.0  # NaN if any is
-            g[j] = _gradient(a1, a2, a3, a4, a5, a6, a7, a8, a9, d, method, diagonal) + missing
+        if method == 0:  # one loop per method (``_raw_gradient_row``)
+            _raw_gradient_row(r0, r1, r2, g, d, 0, diagonal)
+        elif method == 1:
+            _raw_gradient_row(r0, r1, r2, g, d, 1, diagonal)
+        elif method == 2:
+            _raw_gradient_row(r0, r1, r2, g, d, 2, diagonal)
+        elif method == 3:
+            _raw_gradient_row(r0, r1, r2, g, d, 3, diagonal)
+        elif method == 4:
+            _raw_gradient_row(r0, r1, r2, g, d, 4, diagonal)
+        else:
+            _raw_gradient_row(r0, r1, r2, g, d, 5, diagonal)
         for j in range(cols):
             out[i, j] = _atan(g[j]) * (180.0 / math.pi)
         for j in range(cols):

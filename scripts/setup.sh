@@ -107,6 +107,11 @@ fi
 
 # Compile the numba kernels now (about 2 minutes, once; seconds when cached), not in the first run.
 .venv/bin/python -m floodmesh.core.warmup
+# Byte-compile the package as pip does for a regular install (an editable one leaves it to the
+# first import, which cannot write where PYTHONDONTWRITEBYTECODE is set): compiling FloodMesh's
+# modules from source costs every `floodmesh` process about 0.1 s of CPU, 8 % of `floodmesh slope`
+# on a 6000² DEM.
+.venv/bin/python -m compileall -q __init__.py core algorithms provider >/dev/null
 
 # QGIS finds plugins by folder name: build/plugins/floodmesh is this repository.
 mkdir -p build/plugins

@@ -241,6 +241,26 @@ def test_atomic_output_failure_keeps_old_content(tmp_path):
     assert os.listdir(tmp_path) == ["out.txt"]
 
 
+def test_atomic_output_replaces_an_existing_file(tmp_path):
+    """A completed write replaces the previous file (deleted first, as gdaldem does, then the new
+    one moved in): a reader that has it open keeps reading the old content, the name gives the
+    new one, and no temporary is left; a folder in the way is refused and kept."""
+    target = tmp_path / "out.txt"
+    target.write_text("old")
+    with open(target) as reader:
+        with io.atomic_output(target) as tmp:
+            tmp.write_text("new")
+        assert reader.read() == "old"
+    assert target.read_text() == "new"
+    assert os.listdir(tmp_path) == ["out.txt"]
+    folder = tmp_path / "folder.txt"
+    folder.mkdir()
+    with pytest.raises(OSError):
+        with io.atomic_output(folder) as tmp:
+            tmp.write_text("new")
+    assert folder.is_dir() and sorted(os.listdir(tmp_path)) == ["folder.txt", "out.txt"]
+
+
 def test_failing_writer_keeps_old_mesh(tmp_path):
     """write_mesh_2dm failing half-way (bad triangle data) keeps the previous mesh file intact."""
     target = tmp_path / "mesh.2dm"

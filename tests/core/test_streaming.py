@@ -203,6 +203,41 @@ def test_streaming_commands_refuse_bad_rasters_in_one_line(tmp_path, capsys, com
         assert not (tmp_path / "out.tif").exists()
 
 
+@pytest.mark.parametrize("command", ["slope", "breakpoints"])
+def test_quick_exit_commands_flush_and_keep_exit_codes(dem_file, tmp_path, command):
+    """The ``floodmesh`` command ends the quick raster steps without the interpreter's teardown
+    (``cli.command``): what they print to a pipe still arrives, the output is complete, and
+    the exit codes are those of ``main`` (0 done, 2 a bad input)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    exe = str(Path(sys.executable).parent / "floodmesh")
+    source = dem_file
+    if command == "breakpoints":
+        source = tmp_path / "slope.tif"
+        slope_file(dem_file, source, "sharpnack-akin")
+    out = tmp_path / "out.tif"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # stdout buffered
+    done = subprocess.run([exe, command, str(source), "--out", str(out)], capture_output=True,
+                          text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr
+    assert f"written to {out}" in done.stdout
+    if command == "slope":
+        expected = slope(io.read_raster(dem_file), "one-over-distance").values
+        assert_array_equal(io.read_raster(out).values, expected.astype(np.float32))
+    else:
+        from floodmesh.core.options import RunOptions
+
+        breakpoints_file(source, tmp_path / "again.tif", s_crit=RunOptions().s_crit)
+        with rasterio.open(out) as a, rasterio.open(tmp_path / "again.tif") as b:
+            assert_array_equal(a.read(1), b.read(1))
+    bad = subprocess.run([exe, command, str(tmp_path / "missing.tif"), "--out", str(out)],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and "does not exist" in bad.stderr
+
+
 def _dem_in(path, crs):
     """A small nodata-tagged float32 DEM in ``crs`` (any GDAL user input)."""
     z = rough_dem(rows=40, cols=50).values.astype(np.float32)
