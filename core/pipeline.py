@@ -63,9 +63,12 @@ class _Steps:
         try:
             result = func(*args, **kwargs)
         except SystemError as exc:
-            # Ctrl-C during a compiled (numba) call reaches Python as a SystemError whose
-            # cause is the KeyboardInterrupt: it is the interrupt
-            if isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt):
+            # Ctrl-C during a compiled (numba) call reaches Python as a SystemError caused by
+            # the KeyboardInterrupt, at times through a second SystemError: it is the interrupt
+            cause = exc.__cause__ or exc.__context__
+            while cause is not None and not isinstance(cause, KeyboardInterrupt):
+                cause = cause.__cause__ or cause.__context__
+            if cause is not None:
                 raise KeyboardInterrupt from None
             raise
         self.seconds[name] = round(time.perf_counter() - start, 3)

@@ -222,3 +222,34 @@ def test_inputs_are_opened_read_only(runs, tmp_path):
         copy.chmod(0o644)
     assert (copy.read_bytes(), os.stat(copy).st_mtime_ns) == before
     assert sorted(p.name for p in folder.iterdir()) == [source.name]
+
+
+def test_ctrl_c_inside_a_compiled_call_is_an_interrupt():
+    """Ctrl-C while numba runs reaches Python as a SystemError caused by the KeyboardInterrupt,
+    at times through a second SystemError (the point index's query, seen in the full suite):
+    a step of the chain turns either back into KeyboardInterrupt; other SystemErrors pass."""
+    from floodmesh.core.pipeline import _Steps
+
+    steps = _Steps({"query": 1}, None, None, None)
+
+    def compiled_call(wrappings):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            error = exc
+            for _ in range(wrappings):  # what numba's dispatcher raises, one or two deep
+                try:
+                    raise SystemError("returned a result with an exception set") from error
+                except SystemError as wrapped:
+                    error = wrapped
+            raise error
+
+    for wrappings in (1, 2):
+        with pytest.raises(KeyboardInterrupt):
+            steps.run("query", compiled_call, wrappings)
+
+    def fails():
+        raise SystemError("not an interrupt")
+
+    with pytest.raises(SystemError, match="not an interrupt"):
+        steps.run("query", fails)
