@@ -15,7 +15,8 @@ from . import io
 from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import classify_breakpoints, log_breakpoints
-from .drainage import CHANNEL_AREA, flow_size, flow_spacing, height_above_drainage
+from .drainage import (CHANNEL_AREA, flow_area_for, flow_size, flow_spacing,
+                       height_above_drainage)
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
@@ -141,10 +142,10 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
         size = finer(size, far)
         max_area = options.far_field_area
-    hand = None
-    if options.flow_area is not None:  # resolution where water flows (see drainage)
+    hand, flow_area = None, flow_area_for(options.flow_area, dem.cell_size)
+    if flow_area is not None:  # resolution where water flows (see drainage)
         hand, _ = height_above_drainage(dem, channel_area=CHANNEL_AREA)
-        size = finer(size, flow_size(dem, flow_area=options.flow_area, hand=hand))
+        size = finer(size, flow_size(dem, flow_area=flow_area, hand=hand))
     node_counts = {}
 
     def elevations(mesh):
@@ -164,7 +165,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             "hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
             own_lines=front.own_lines, within=shapely.union_all(
                 io.read_boundary(options.flow_zone)) if options.flow_zone else None,
-            flow_spacing=None if hand is None else flow_spacing(dem, flow_area=options.flow_area,
+            flow_spacing=None if hand is None else flow_spacing(dem, flow_area=flow_area,
                                                                 hand=hand))
     mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
