@@ -37,25 +37,22 @@ def thin_vertices(coords: np.ndarray, spacing, *, firm: float | None = None,
     """``coords`` (k, 2+) without vertices closer than ``spacing`` (m, one value or one per
     vertex) to the previous kept one; both ends stay (the last kept inner vertex gives way to
     the end). With ``firm`` (m) and ``tolerance`` (plan m, height m), a vertex closer than its
-    spacing but not than ``firm`` gives way only if the chord from the previous kept vertex to
-    the next one holds it and every vertex dropped since within ``tolerance``."""
+    spacing but not than ``firm`` gives way only where the chord from the previous kept vertex
+    to the next one passes within ``tolerance`` of it."""
     coords = np.asarray(coords, float)
     if len(coords) <= 2:
         return coords
     spacing = np.broadcast_to(np.asarray(spacing, float), (len(coords),))
-
-    def stays(gap, wanted, a, b):  # a vertex gap from its neighbour: the chord a-b must hold it
-        return gap >= wanted or (tolerance is not None and gap >= firm
-                                 and not _holds(coords, a, b, tolerance))
-
-    keep, end = [0], len(coords) - 1
-    for i in range(1, end):
-        if stays(np.hypot(*(coords[i, :2] - coords[keep[-1], :2])), spacing[i], keep[-1], i + 1):
+    keep = [0]
+    for i in range(1, len(coords) - 1):
+        gap = np.hypot(*(coords[i, :2] - coords[keep[-1], :2]))
+        if gap >= spacing[i] or (tolerance is not None and gap >= firm and not _holds(
+                coords[[keep[-1], i, i + 1]], 0, 2, tolerance)):
             keep.append(i)
-    while len(keep) > 1 and not stays(np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])), max(
-            spacing[-1], spacing[keep[-1]]), keep[-2], end):
+    while len(keep) > 1 and np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])) < max(
+            spacing[-1], spacing[keep[-1]]):
         keep.pop()
-    keep.append(end)
+    keep.append(len(coords) - 1)
     return coords[keep]
 
 
