@@ -17,10 +17,11 @@ Where the mesh gets a flow size (``flow_spacing``: the side of the flow zone's t
 segment there is shorter than the triangles around it (a short segment in the wet zone would
 make the smallest wet triangle, which sets the flood model's time step), and a vertex where the
 thinned line turns sharply (an angle under 60°, where Triangle splits the segments into small triangles) is dropped there too.
-A vertex closer than the flow spacing gives way only where the chord past it holds it within
-``FLOW_PLAN_TOLERANCE`` cells in plan and ``FLOW_HEIGHT_TOLERANCE`` m in height: where the line
-runs straight and even, the terrain loses nothing; where it bends or its height changes (a
-levee's crest, a bank), the vertex is terrain the mesh needs and stays at the spacing s.
+A vertex closer than the flow spacing gives way only where the chord from the previous kept
+vertex to the next one passes within ``FLOW_PLAN_TOLERANCE`` cells in plan and
+``FLOW_HEIGHT_TOLERANCE`` m in height of it: where the line runs straight and even or bends
+smoothly, it thins; where it steps or turns at the vertex (a kerb, a corner), the vertex is
+terrain the mesh needs and stays, no closer than the spacing s.
 
 The modeller's own lines are kept as given.
 """
