@@ -103,12 +103,15 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             log(compile_note())
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
-               "breaklines": 1, "simplify": 0.5, "localise": 0.5, "hydraulic lines": 0.1,
+               "breaklines": 1, "simplify": 0.5, "localise": 0.5, "flow zone": 0.5,
+               "hydraulic lines": 0.1,
                "mesh": 2, "refine": 4,
                "node elevations": 0.5, "assess": 1, "write": 2}
     del weights["node elevations" if options.refine else "refine"]
     if not options.localise:
         del weights["localise"]
+    if flow_area_for(options.flow_area, 1.0) is None:
+        del weights["flow zone"]
     steps = _Steps(weights, progress, cancelled, log)
     front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
@@ -144,7 +147,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         max_area = options.far_field_area
     hand, flow_area = None, flow_area_for(options.flow_area, dem.cell_size)
     if flow_area is not None:  # resolution where water flows (see drainage)
-        hand, _ = height_above_drainage(dem, channel_area=CHANNEL_AREA)
+        hand, _ = steps.run("flow zone", height_above_drainage, dem, channel_area=CHANNEL_AREA)
         size = finer(size, flow_size(dem, flow_area=flow_area, hand=hand))
     node_counts = {}
 
