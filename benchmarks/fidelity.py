@@ -51,13 +51,14 @@ TERRAINS = {"demo geometry, seed 7": (demo.DEMO, 7), "oblique geometry, seed 11"
 # option sets of the chain: "landed" is the chain before issue 18's steps (no localisation, node
 # z from the DEM, conforming Delaunay), "default" today's
 CHAINS = {
-    "landed": dict(localise=False, node_elevation="dem", conforming=True, min_spacing=0),
-    "default": dict(),                        # with issue 16's line spacing for flood models
+    "landed": dict(localise=False, node_elevation="dem", conforming=True, min_spacing=0,
+                   flow_area=0),
+    "default": dict(),                        # with issue 16's line spacing and flow area
+    "no-flow-area": dict(flow_area=0),        # the default chain before the flow area
     "no-spacing": dict(min_spacing=0),        # the terrain fits alone
     "no-join": dict(join_gap=0),              # localised pieces left unjoined
     "conforming": dict(conforming=True),     # today's chain with Triangle's switch D
     "far-field": dict(far_field_area=400.0),  # today's chain, up to 400 m² where plane
-    "flow-area": dict(flow_area=25.0),        # smaller triangles where water flows (issue 16)
 }
 UNIFORM_AREAS = (50, 20, 10, 5, 2.5, 1.2, 0.6, 0.3)
 DELATIN_ERRORS = (0.6, 0.4, 0.25, 0.15, 0.1, 0.07, 0.05)

@@ -7,8 +7,8 @@ flooded by ANUGA and compared with a finer uniform reference and with the survey
 Data: ../shared/data/real/merewether_topography1.asc (1 m, UTM 56S) and merewether_validation/
 (scenario of ANUGA's own validation run: 19.7 m³/s into a 10 m circle in the south-west, south
 and west walls, east and north open, Manning 0.02 on the road, 0.04 elsewhere; bare earth).
-Meshes: FloodMesh's defaults, the same without --min-spacing, the defaults with --flow-area
-(smaller triangles on low ground by the drainage lines, from the terrain), FloodMesh's second mesh for this
+Meshes: FloodMesh's defaults, the same without --min-spacing, the defaults without the flow area
+(--flow-area 0: no smaller triangles on low ground by the drainage lines), FloodMesh's second mesh for this
 flood (size field and flow zone from the first mesh's flood: --size-field, --flow-zone), each
 with a uniform Triangle mesh of its node count, and a finer uniform reference. Prints one
 table: nodes, smallest inradius, ANUGA CPU, extent IoU, max-depth RMSE and bias against the
@@ -109,8 +109,8 @@ def main(argv=None):
                    help="floodmesh-flow: --min-spacing, m (default: the cell size)")
     p.add_argument("--reuse", action="store_true",
                    help="keep flood runs already in OUT (e.g. the reference)")
-    p.add_argument("--flow-area", type=float, default=25.0,
-                   help="floodmesh-flow-area: run --flow-area, m² (default 25)")
+    p.add_argument("--flow-area", type=float,
+                   help="FloodMesh's meshes: run --flow-area, m² (default: run's, 25 cells)")
     p.add_argument("--repeat", type=int, default=3,
                    help="ANUGA runs per mesh, the best CPU counts (default 3; the reference once)")
     p.add_argument("--max-area", type=float, default=100.0,
@@ -127,14 +127,15 @@ def main(argv=None):
     domain = user_domain(io.read_boundary(out / "domain.gpkg"), dem)
 
     meshes = {}
-    for label, spacing, flow_area in (("floodmesh", None, None),
-                                      ("floodmesh-no-spacing", 0.0, None),
-                                      ("floodmesh-flow-area", None, args.flow_area)):
+    for label, spacing, flow_area in (("floodmesh", None, args.flow_area),
+                                      ("floodmesh-no-spacing", 0.0, args.flow_area),
+                                      ("floodmesh-no-flow-area", None, 0.0)):
         report = run_pipeline(DEM, out / label, RunOptions(crs=CRS, boundary=str(
             out / "domain.gpkg"), min_spacing=spacing, max_area=args.max_area,
             flow_area=flow_area))
         meshes[label] = (out / label / "mesh.2dm", report["nodes"])
-    for label, wanted in (("uniform", "floodmesh"), ("uniform-flow-area", "floodmesh-flow-area")):
+    for label, wanted in (("uniform", "floodmesh"),
+                          ("uniform-no-flow-area", "floodmesh-no-flow-area")):
         uniform_mesh(dem, domain, meshes[wanted][1], out / f"{label}.2dm")
         meshes[label] = (out / f"{label}.2dm", None)
     uniform_mesh(dem, domain, None, out / "reference.2dm", max_area=args.reference_area)
@@ -166,17 +167,17 @@ def main(argv=None):
     report = run_pipeline(DEM, out / "floodmesh-flow", RunOptions(
         crs=CRS, boundary=str(out / "domain.gpkg"), max_area=args.max_area,
         size_field=str(out / "size_field.tif"), flow_zone=str(out / "wet_zone.gpkg"),
-        min_spacing=args.flow_spacing))
+        min_spacing=args.flow_spacing, flow_area=args.flow_area))
     meshes["floodmesh-flow"] = (out / "floodmesh-flow" / "mesh.2dm", report["nodes"])
     uniform_mesh(dem, domain, report["nodes"], out / "uniform-flow.2dm")
     meshes["uniform-flow"] = (out / "uniform-flow.2dm", None)
-    for label in ("reference", "floodmesh-no-spacing", "uniform", "floodmesh-flow-area",
-                  "uniform-flow-area", "floodmesh-flow", "uniform-flow"):
+    for label in ("reference", "floodmesh-no-spacing", "uniform", "floodmesh-no-flow-area",
+                  "uniform-no-flow-area", "floodmesh-flow", "uniform-flow"):
         flood(label)
     obs = observations()
     rows = []
-    labels = ("floodmesh", "floodmesh-no-spacing", "uniform", "floodmesh-flow-area",
-              "uniform-flow-area", "floodmesh-flow", "uniform-flow", "reference")
+    labels = ("floodmesh", "floodmesh-no-spacing", "uniform", "floodmesh-no-flow-area",
+              "uniform-no-flow-area", "floodmesh-flow", "uniform-flow", "reference")
     for label in labels:
         r = runs[label]
         c = (compare_floods(out / "runs" / label, out / "runs" / "reference",
@@ -209,20 +210,20 @@ def main(argv=None):
           f" reference: uniform {args.reference_area} m² ({runs['reference']['nodes']} nodes)")
     print(f"load average {os.getloadavg()[0]:.1f} ({os.cpu_count()} cores); CPU: best of "
           f"{args.repeat} runs, ms/step: that CPU per time step")
-    print(f"{'mesh':<22}{'nodes':>7}{'min r_in m':>11}{'CPU s':>8}{'steps':>7}{'ms/step':>8}{'IoU':>7}"
+    print(f"{'mesh':<24}{'nodes':>7}{'min r_in m':>11}{'CPU s':>8}{'steps':>7}{'ms/step':>8}{'IoU':>7}"
           f"{'RMSE m':>8}{'bias m':>8}{'stage RMSE m':>13}")
     for row in rows:
-        print(f"{row['mesh']:<22}{row['nodes']:>7}{row['min_inradius_m']:>11.3f}"
+        print(f"{row['mesh']:<24}{row['nodes']:>7}{row['min_inradius_m']:>11.3f}"
               f"{row['cpu_s']:>8.1f}{row['time_steps']:>7}{row['cpu_per_step_ms']:>8.2f}"
               f"{row['extent_iou']:>7.3f}"
               f"{row['max_depth_rmse_m']:>8.3f}{row['max_depth_bias_m']:>+8.3f}"
               f"{row['peak_stage_rmse_vs_observed_m']:>13.2f}")
-    print(f"{'TUFLOW (ARR report)':<22}{'':>7}{'':>11}{'':>8}{'':>7}{'':>8}{'':>7}{'':>8}{'':>8}"
+    print(f"{'TUFLOW (ARR report)':<24}{'':>7}{'':>11}{'':>8}{'':>7}{'':>8}{'':>7}{'':>8}{'':>8}"
           f"{summary['tuflow_peak_stage_rmse_vs_observed_m']:>13.2f}")
     print("peak stages (m) at " + ", ".join(o["name"] for o in obs) + ":")
     print(f"  observed {observed.tolist()}\n  TUFLOW   {tuflow.tolist()}")
     for row in rows:
-        print(f"  {row['mesh']:<21}{[round(v, 2) for v in row['peak_stages_m']]}")
+        print(f"  {row['mesh']:<23}{[round(v, 2) for v in row['peak_stages_m']]}")
     # the cheap checks of each mesh, for the table in the README
     for label in labels[:-1]:
         nodes, triangles = io.read_mesh_2dm(meshes[label][0])

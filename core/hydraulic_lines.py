@@ -17,6 +17,11 @@ Where the mesh gets a flow size (``flow_spacing``: the side of the flow zone's t
 segment there is shorter than the triangles around it (a short segment in the wet zone would
 make the smallest wet triangle, which sets the flood model's time step), and a vertex where the
 thinned line turns sharply (an angle under 60°, where Triangle splits the segments into small triangles) is dropped there too.
+A vertex closer than the flow spacing gives way only where the chord from the previous kept
+vertex to the next one passes within ``FLOW_PLAN_TOLERANCE`` cells in plan and
+``FLOW_HEIGHT_TOLERANCE`` m in height of it: where the line runs straight and even or bends
+smoothly, it thins; where it steps or turns at the vertex (a kerb, a corner), the vertex is
+terrain the mesh needs and stays, no closer than the spacing s.
 
 The modeller's own lines are kept as given.
 """
@@ -24,24 +29,44 @@ from __future__ import annotations
 
 import numpy as np
 
+FLOW_PLAN_TOLERANCE = 0.25   # cells: a vertex this close to the chord past it may give way
+FLOW_HEIGHT_TOLERANCE = 0.05  # m: ... if its height is this close too (a flood's wet depth)
 
-def thin_vertices(coords: np.ndarray, spacing) -> np.ndarray:
+
+def thin_vertices(coords: np.ndarray, spacing, *, firm: float | None = None,
+                  tolerance: tuple[float, float] | None = None) -> np.ndarray:
     """``coords`` (k, 2+) without vertices closer than ``spacing`` (m, one value or one per
     vertex) to the previous kept one; both ends stay (the last kept inner vertex gives way to
-    the end)."""
+    the end). With ``firm`` (m) and ``tolerance`` (plan m, height m), a vertex closer than its
+    spacing but not than ``firm`` gives way only where the chord from the previous kept vertex
+    to the next one passes within ``tolerance`` of it."""
     coords = np.asarray(coords, float)
     if len(coords) <= 2:
         return coords
     spacing = np.broadcast_to(np.asarray(spacing, float), (len(coords),))
     keep = [0]
     for i in range(1, len(coords) - 1):
-        if np.hypot(*(coords[i, :2] - coords[keep[-1], :2])) >= spacing[i]:
+        gap = np.hypot(*(coords[i, :2] - coords[keep[-1], :2]))
+        if gap >= spacing[i] or (tolerance is not None and gap >= firm and not _holds(
+                coords[[keep[-1], i, i + 1]], 0, 2, tolerance)):
             keep.append(i)
     while len(keep) > 1 and np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])) < max(
             spacing[-1], spacing[keep[-1]]):
         keep.pop()
     keep.append(len(coords) - 1)
     return coords[keep]
+
+
+def _holds(coords, a: int, b: int, tolerance) -> bool:
+    """Whether the chord from vertex a to vertex b passes within ``tolerance`` (plan m,
+    height m) of every vertex between them."""
+    inner = coords[a + 1:b]
+    ab = coords[b, :2] - coords[a, :2]
+    t = np.clip((inner[:, :2] - coords[a, :2]) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
+    plan = np.hypot(*(coords[a, :2] + t[:, None] * ab - inner[:, :2]).T)
+    height = (np.abs(coords[a, 2] + t * (coords[b, 2] - coords[a, 2]) - inner[:, 2])
+              if coords.shape[1] > 2 else np.zeros(len(inner)))
+    return bool((plan <= tolerance[0]).all() and (height <= tolerance[1]).all())
 
 
 def drop_spikes(coords: np.ndarray, where=None, min_angle: float = 60.0) -> np.ndarray:
@@ -74,6 +99,8 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     import shapely
 
     clearance = 2 * spacing if clearance is None else clearance
+    keep_terrain = (None if flow_spacing is None else dict(firm=spacing, tolerance=(
+        FLOW_PLAN_TOLERANCE * flow_spacing.cell_size, FLOW_HEIGHT_TOLERANCE)))
     inner = domain.buffer(-clearance) if domain is not None else None
     if within is not None:
         inner = within if inner is None else shapely.intersection(inner, within)
@@ -85,7 +112,8 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     for k in order:
         coords = np.asarray(lines[k], float)
         if flow_spacing is not None:  # thinned first, so the cuts below see the final chords
-            coords = thin_vertices(coords, _spacing_at(flow_spacing, coords, spacing))
+            coords = thin_vertices(coords, _spacing_at(flow_spacing, coords, spacing),
+                                   **keep_terrain)
             coords = drop_spikes(coords, _spacing_at(flow_spacing, coords, spacing) > spacing)
         line = shapely.LineString(coords)
         if inner is not None:
@@ -106,7 +134,7 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
             for piece in _parts(part):
                 coords = shapely.get_coordinates(piece, include_z=True)
                 local = _spacing_at(flow_spacing, coords, spacing)
-                coords = thin_vertices(coords, local)
+                coords = thin_vertices(coords, local, **(keep_terrain or {}))
                 if _length(coords) >= max(2 * spacing, local.max()) and len(coords) >= 2:
                     out.append(coords)
                     own_pieces.append(shapely.LineString(coords[:, :2]))

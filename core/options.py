@@ -250,7 +250,8 @@ class RunOptions:
     join_gap: float | None = None   # m: localised pieces joined across gaps; default 6 d, 0 off
     conforming: bool = False        # conforming Delaunay (Triangle's switch D)
     far_field_area: float | None = None  # m², larger triangles away from the break lines
-    flow_area: float | None = None  # m², smaller triangles on low ground by drainage lines (HAND)
+    flow_area: float | None = None  # m², smaller triangles on low ground by drainage lines
+    # (HAND); None: 25 cells (drainage.flow_area_for), 0: off
     workers: int | None = None      # point tiles: local Dask workers (default one per core)
     scheduler: str | None = None    # point tiles: a running dask.distributed scheduler's address
     processes: bool = True          # point tiles: local workers are processes (False: threads)
@@ -300,8 +301,10 @@ class RunOptions:
                                               and self.join_gap >= 0):
             raise FloodMeshError(f"the join gap must be 0 (off) or more metres, got "
                                  f"{self.join_gap}; six cell sizes is the default")
-        if self.flow_area is not None:
-            _positive(self.flow_area, "flow area", "m²")
+        if self.flow_area is not None and not (math.isfinite(self.flow_area)
+                                               and self.flow_area >= 0):
+            raise FloodMeshError(f"the flow area must be 0 (off) or more m², got "
+                                 f"{self.flow_area}; 25 cells is the default")
         if self.far_field_area is not None:
             far = _positive(self.far_field_area, "far-field area", "m²")
             if far < self.max_area:

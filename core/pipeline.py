@@ -16,7 +16,8 @@ from . import io
 from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
-from .drainage import CHANNEL_AREA, flow_size, flow_spacing, height_above_drainage
+from .drainage import (CHANNEL_AREA, flow_area_for, flow_size, flow_spacing,
+                       height_above_drainage)
 from .errors import Cancelled, FloodMeshError
 from .export import export_formats
 from .grid import check_grid, grid_points_linear
@@ -109,13 +110,15 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
                "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
-               "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
+               "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
                "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
     del weights["node elevations" if options.refine else "refine"]
     if not options.localise:
         del weights["localise"]
     if not (options.localise or options.node_elevation == "plane"):
         del weights["fit window"]
+    if flow_area_for(options.flow_area, 1.0) is None:
+        del weights["flow zone"]
     steps = _Steps(weights, progress, cancelled, log)
     front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
     dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
@@ -156,10 +159,10 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
         size = finer(size, far)
         max_area = options.far_field_area
-    hand = None
-    if options.flow_area is not None:  # resolution where water flows (see drainage)
-        hand, _ = height_above_drainage(dem, channel_area=CHANNEL_AREA)
-        size = finer(size, flow_size(dem, flow_area=options.flow_area, hand=hand))
+    hand, flow_area = None, flow_area_for(options.flow_area, dem.cell_size)
+    if flow_area is not None:  # resolution where water flows (see drainage)
+        hand, _ = steps.run("flow zone", height_above_drainage, dem, channel_area=CHANNEL_AREA)
+        size = finer(size, flow_size(dem, flow_area=flow_area, hand=hand))
     node_counts = {}
 
     def elevations(mesh):
@@ -180,7 +183,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             "hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
             own_lines=front.own_lines, within=shapely.union_all(
                 io.read_boundary(options.flow_zone)) if options.flow_zone else None,
-            flow_spacing=None if hand is None else flow_spacing(dem, flow_area=options.flow_area,
+            flow_spacing=None if hand is None else flow_spacing(dem, flow_area=flow_area,
                                                                 hand=hand))
     mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,

@@ -37,5 +37,16 @@ def far_field_size(dem: Grid, breakpoints: Grid, *, max_area: float, far_field_a
 
 def finer(size: Grid | None, other: Grid) -> Grid:
     """The smaller of two size fields (local maximum triangle areas, m²; NaN: no limit) cell by
-    cell on one grid; ``other`` alone where ``size`` is None."""
-    return other if size is None else other.with_values(np.fmin(other.values, size.values))
+    cell on ``other``'s grid (``size`` taken at its cell centres, nearest cell, if its grid
+    differs: a user's size-field raster); ``other`` alone where ``size`` is None."""
+    if size is None:
+        return other
+    values = np.asarray(size.values, float)
+    if size.shape != other.shape or size.transform != other.transform:
+        rows, cols = np.indices(other.shape)
+        r, c = size.fractional_index(*other.cell_centres(rows, cols))
+        r, c = np.rint(r).astype(int), np.rint(c).astype(int)
+        inside = (r >= 0) & (c >= 0) & (r < size.shape[0]) & (c < size.shape[1])
+        values = np.where(inside, values[np.clip(r, 0, size.shape[0] - 1),
+                                         np.clip(c, 0, size.shape[1] - 1)], np.nan)
+    return other.with_values(np.fmin(other.values, values))

@@ -179,8 +179,10 @@ def step_build_mesh(ch, *, dem, output, min_angle, max_area, max_triangles, brea
 
     grid, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines)
     size = size_from(size_field, grid, max_area=max_area) if size_field else None
+    from .drainage import flow_area_for, flow_size
+
+    flow_area = flow_area_for(flow_area, grid.cell_size)
     if flow_area is not None:  # smaller triangles where water flows (see drainage)
-        from .drainage import flow_size
         from .sizing import finer
 
         size = finer(size, flow_size(grid, flow_area=flow_area))

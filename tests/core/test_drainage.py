@@ -5,7 +5,8 @@ import pytest
 from affine import Affine
 from pyproj import CRS
 
-from floodmesh.core.drainage import flow_size, height_above_drainage
+from floodmesh.core.drainage import flow_area_for, flow_size, height_above_drainage
+from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.raster import Grid
 
 
@@ -55,6 +56,16 @@ def test_flow_size_is_the_flow_area_on_low_ground_only():
     assert np.isnan(v[rows >= 11]).all()    # 1.1 m or more
 
 
+def test_the_flow_area_is_25_cells_by_default_and_0_turns_it_off():
+    from floodmesh.core.options import RunOptions
+
+    assert flow_area_for(None, 1.0) == 25.0 and flow_area_for(None, 0.5) == 6.25
+    assert flow_area_for(30.0, 1.0) == 30.0 and flow_area_for(0.0, 1.0) is None
+    RunOptions(flow_area=0.0)
+    with pytest.raises(FloodMeshError, match="flow area must be 0"):
+        RunOptions(flow_area=-5.0)
+
+
 def test_run_flow_area_puts_triangles_of_that_size_on_the_low_ground(demo_points_file,
                                                                      tmp_path):
     from floodmesh.core import io
@@ -62,27 +73,31 @@ def test_run_flow_area_puts_triangles_of_that_size_on_the_low_ground(demo_points
     from floodmesh.core.options import RunOptions
     from floodmesh.core.pipeline import run_pipeline
 
-    base = run_pipeline(demo_points_file, tmp_path / "base", RunOptions())
-    flow = run_pipeline(demo_points_file, tmp_path / "flow", RunOptions(flow_area=20.0))
-    assert flow["nodes"] > base["nodes"]
-    nodes, tri = io.read_mesh_2dm(tmp_path / "flow" / "mesh.2dm")
-    dem = io.read_raster(tmp_path / "flow" / "dem.tif")
-    low = flow_size(dem, flow_area=20.0).values
-    centre = nodes[tri][:, :, :2].mean(axis=1)
-    rows, cols = ~dem.transform * (centre[:, 0], centre[:, 1])
-    zone = np.isfinite(low[cols.astype(int), rows.astype(int)])
-    assert zone.mean() > 0.2                  # the river and its low floodplain
-    assert np.abs(triangle_areas(nodes, tri))[zone].max() <= 20.0 * 1.05
+    largest = {}
+    for name, area in (("off", 0.0), ("default", None), ("flow", 20.0)):
+        run_pipeline(demo_points_file, tmp_path / name, RunOptions(flow_area=area))
+        nodes, tri = io.read_mesh_2dm(tmp_path / name / "mesh.2dm")
+        dem = io.read_raster(tmp_path / name / "dem.tif")
+        low = flow_size(dem, flow_area=20.0).values
+        centre = nodes[tri][:, :, :2].mean(axis=1)
+        rows, cols = ~dem.transform * (centre[:, 0], centre[:, 1])
+        zone = np.isfinite(low[cols.astype(int), rows.astype(int)])
+        assert zone.mean() > 0.2                  # the river and its low floodplain
+        largest[name] = np.abs(triangle_areas(nodes, tri))[zone].max()
+    # the default: 25 cells of the demo's 1 m grid
+    assert largest["flow"] <= 20.0 * 1.05 < largest["default"] <= 25.0 * 1.05 < largest["off"]
 
 
 
 def test_no_line_segment_where_water_flows_is_shorter_than_its_triangles(demo_points_file,
-                                                                        tmp_path):
+                                                                        tmp_path, monkeypatch):
     """A short break-line segment where water goes makes the smallest wet triangle, which sets
     the flood model's time step: with the flow spacing none is shorter than the flow zone's
-    triangle side, on the demo's detected lines."""
+    triangle side on the demo's detected lines, but where the terrain needs its vertex (the
+    chord past it misses the line by more than the tolerance; without the tolerance, none)."""
     from floodmesh.core import io
     from floodmesh.core.drainage import flow_spacing
+    from floodmesh.core import hydraulic_lines
     from floodmesh.core.hydraulic_lines import _spacing_at, lines_for_hydraulics
     from floodmesh.core.options import RunOptions
     from floodmesh.core.pipeline import run_pipeline
@@ -94,9 +109,26 @@ def test_no_line_segment_where_water_flows_is_shorter_than_its_triangles(demo_po
     assert np.nanmax(side.values) == pytest.approx(np.sqrt(4 / np.sqrt(3) * 20.0), rel=1e-6)
     plain, _ = lines_for_hydraulics(lines, None, spacing=1.0)
     out, _ = lines_for_hydraulics(lines, None, spacing=1.0, flow_spacing=side)
+    monkeypatch.setattr(hydraulic_lines, "FLOW_PLAN_TOLERANCE", np.inf)   # thinned regardless
+    monkeypatch.setattr(hydraulic_lines, "FLOW_HEIGHT_TOLERANCE", np.inf)
+    strict, _ = lines_for_hydraulics(lines, None, spacing=1.0, flow_spacing=side)
 
     def short(coords):   # segments shorter than the spacing at their end vertex
         return sum(int((np.hypot(*np.diff(c[:, :2], axis=0).T)
                         < _spacing_at(side, c, 1.0)[1:] - 1e-6).sum()) for c in coords)
 
-    assert short(plain) > 50 and short(out) == 0
+    assert short(plain) > 50 and short(strict) == 0 and 0 < short(out) < short(plain) / 2
+
+
+def test_a_size_field_on_another_grid_combines_with_the_flow_area():
+    """A user's size-field raster (here a 2 m grid with a 10 m² half) and the flow area on the
+    DEM's 1 m grid: the finer of the two on the DEM's cells (the chain failed on the shapes)."""
+    from floodmesh.core.sizing import finer
+
+    dem = grid(valley())
+    user = Grid(np.where(np.arange(50)[None, :] < 25, 10.0, np.nan) + np.zeros((51, 1)),
+                Affine(2.0, 0, 0, 0, -2.0, 100.0), dem.crs)
+    both = finer(user, flow_size(dem, flow_area=20.0, channel_area=500.0)).values
+    assert both.shape == dem.shape
+    assert (both[:, :50] == 10).all()                       # the user's 10 m² west half
+    assert (both[50, 50:99] == 20).all() and np.isnan(both[0, 50:]).all()   # the flow zone

@@ -39,6 +39,31 @@ def test_thin_vertices_keeps_the_ends_and_the_spacing():
     assert (np.diff(thinned[:, 0]) >= 1.0 - 1e-12).all()
 
 
+def test_thinning_to_the_flow_spacing_keeps_what_the_terrain_needs():
+    """Where water flows the lines thin to the flow spacing only where the chord past a vertex
+    holds it within the tolerance (plan 0.25 m, height 5 cm here): an even straight line thins
+    fully, a kerb (a 15 cm step in its height) keeps the vertices at the step and a corner its
+    corner; a smooth bend, each vertex within the tolerance of its chord, thins."""
+    x = np.arange(0, 41.0)
+    even = np.column_stack([x, np.zeros_like(x), 0.01 * x])      # a plane rising 1 %
+    args = dict(firm=1.0, tolerance=(0.25, 0.05))
+    assert thin_vertices(even, 8.0, **args)[:, 0].tolist() == [0, 8, 16, 24, 32, 40]
+    kerbed = even.copy()
+    kerbed[20:, 2] += 0.15
+    assert thin_vertices(kerbed, 8.0, **args)[:, 0].tolist() == [0, 8, 16, 19, 20, 28, 40]
+    assert thin_vertices(kerbed, 8.0)[:, 0].tolist() == [0, 8, 16, 24, 32, 40]  # without it
+    corner = np.vstack([np.column_stack([x[:21], np.zeros(21)]),
+                        np.column_stack([np.full(20, 20.0), x[1:21]])])
+    kept = thin_vertices(corner, 8.0, **args)[:, :2].tolist()
+    assert kept == [[0, 0], [8, 0], [16, 0], [20, 0], [20, 8], [20, 20]]
+    t = np.linspace(0, np.pi / 2, 81)
+    arc = np.column_stack([20 * np.cos(t), 20 * np.sin(t), np.zeros_like(t)])
+    assert len(thin_vertices(arc, 8.0, **args)) == len(thin_vertices(arc, 8.0))
+    # never closer than the firm spacing, whatever the terrain
+    zigzag = np.column_stack([x / 2, 0.3 * (np.arange(41) % 2), np.zeros_like(x)])
+    assert np.hypot(*np.diff(thin_vertices(zigzag, 8.0, **args)[:, :2], axis=0).T).min() >= 1.0
+
+
 def test_default_mesh_of_the_demo_affords_a_longer_time_step(demo_points_file, tmp_path):
     plain = run_pipeline(demo_points_file, tmp_path / "plain", RunOptions(min_spacing=0))
     default = run_pipeline(demo_points_file, tmp_path / "default", RunOptions())

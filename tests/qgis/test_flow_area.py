@@ -33,7 +33,8 @@ def test_flow_area_in_lidar_to_mesh_then_build_mesh_headless(processing, qgis_pr
 
     exe, env = qgis_process
     found = {}
-    for name, extra in (("plain", []), ("flow", ["FLOW_AREA=15"])):
+    for name, extra in (("plain", ["FLOW_AREA=0"]), ("default", []),
+                        ("flow", ["FLOW_AREA=15"])):
         run = subprocess.run(
             [exe, "run", "floodmesh:buildmesh", "--json", "--", f"DEM={run_dir / 'dem.tif'}",
              f"BREAKLINES={run_dir / 'breaklines.gpkg'}", *extra,
@@ -42,5 +43,8 @@ def test_flow_area_in_lidar_to_mesh_then_build_mesh_headless(processing, qgis_pr
         assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
         found[name] = _in_zone(tmp_path / f"{name}.2dm", dem, 15.0)
     (flow, inside), (plain, plain_inside) = found["flow"], found["plain"]
+    default, default_inside = found["default"]
     assert inside.mean() > 0.2
-    assert flow[inside].max() <= 15.0 * 1.05 < plain[plain_inside].max()
+    # empty: the default, 25 cells of the demo's 1 m grid, as in LiDAR to mesh and the CLI
+    assert (flow[inside].max() <= 15.0 * 1.05 < default[default_inside].max() <= 25.0 * 1.05
+            < plain[plain_inside].max())
