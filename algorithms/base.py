@@ -57,7 +57,7 @@ PARAMETER_HELP = {
     "MIN_ANGLE": "No triangle angle below this (degrees); at most 34. 25° is usual for solvers.",
     "MAX_AREA": "No triangle larger than this (m²).",
     "FLOW_AREA": "No triangle larger than this (m²) on ground less than 1 m above a "
-                 "drainage line, where a flood goes first (empty: 25 cells, 25 m² at 1 m; 0: "
+                 "drainage line, where a flood goes first (empty: 23 cells, 23 m² at 1 m; 0: "
                  "off).",
     "MAX_TRIANGLES": "Refuse, before meshing, a mesh estimated above this many triangles.",
     "HOLDOUT": "Share of the points kept out of the grid to measure the mesh's error (at "

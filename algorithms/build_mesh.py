@@ -21,7 +21,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             "keep their z; other nodes take z bilinearly from the DEM. A model domain polygon "
             "(with holes for buildings or islands) replaces the data's extent; your own lines "
             "are kept as mesh edges. A size field raster (m², nodata: no limit) sets a local "
-            "maximum area, and so does the flow area (m², default 25 cells; 0: off) on ground "
+            "maximum area, and so does the flow area (m², default 23 cells; 0: off) on ground "
             "less than 1 m above a drainage line (height above the nearest drainage), where a "
             "flood goes first. Writes SMS 2DM and, optionally, the triangles as PolygonZ.")
     DEM, BREAKLINES, MIN_ANGLE, MAX_AREA = "DEM", "BREAKLINES", "MIN_ANGLE", "MAX_AREA"
@@ -78,7 +78,7 @@ def flow_area_parameter(name, tr):
     """Optional: the triangle area (m²) where water flows, shared with LiDAR to mesh."""
     return QgsProcessingParameterNumber(
         name, tr("Triangle area where water flows: low ground by the drainage lines (m²; "
-                 "empty: 25 cells, 0: off)"), DOUBLE, optional=True, minValue=0.0)
+                 "empty: 23 cells, 0: off)"), DOUBLE, optional=True, minValue=0.0)
 
 
 def max_triangles_parameter(name, tr):

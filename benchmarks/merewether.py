@@ -110,7 +110,7 @@ def main(argv=None):
     p.add_argument("--reuse", action="store_true",
                    help="keep flood runs already in OUT (e.g. the reference)")
     p.add_argument("--flow-area", type=float,
-                   help="FloodMesh's meshes: run --flow-area, m² (default: run's, 25 cells)")
+                   help="FloodMesh's meshes: run --flow-area, m² (default: run's, 23 cells)")
     p.add_argument("--repeat", type=int, default=3,
                    help="ANUGA runs per mesh, the best CPU counts (default 3; the reference once)")
     p.add_argument("--max-area", type=float, default=100.0,

@@ -170,7 +170,7 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
                    help="smaller triangles, at most this many m², where water flows: ground "
                         "less than 1 m above a drainage line draining 5000 m²; break lines "
                         "where a flood may go thinned to that triangle's side where straight "
-                        "and even (default 25 cells: 25 m² at 1 m; 0: off)")
+                        "and even (default 23 cells: 23 m² at 1 m; 0: off)")
     _add_conforming(p)
 
 

@@ -18,12 +18,12 @@ import numpy as np
 from .raster import Grid
 
 CHANNEL_AREA = 5000.0  # m²: a cell draining this much is on a drainage line
-FLOW_AREA_CELLS = 25.0  # the default flow area, in cells: 25 m² at 1 m (see flow_area_for)
+FLOW_AREA_CELLS = 23.0  # the default flow area, in cells: 23 m² at 1 m (see flow_area_for)
 
 
 def flow_area_for(flow_area: float | None, cell_size: float) -> float | None:
-    """The flow zone's triangle area (m²) of an option: None gives the default, 25 cells
-    (25 m² on a 1 m grid, an equilateral side of 7.6 cells: a street or a valley floor gets a
+    """The flow zone's triangle area (m²) of an option: None gives the default, 23 cells
+    (23 m² on a 1 m grid, an equilateral side of 7.3 cells: a street or a valley floor gets a
     few triangles across it); 0 turns it off (returns None)."""
     if flow_area is None:
         return FLOW_AREA_CELLS * cell_size ** 2

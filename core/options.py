@@ -251,7 +251,7 @@ class RunOptions:
     conforming: bool = False        # conforming Delaunay (Triangle's switch D)
     far_field_area: float | None = None  # m², larger triangles away from the break lines
     flow_area: float | None = None  # m², smaller triangles on low ground by drainage lines
-    # (HAND); None: 25 cells (drainage.flow_area_for), 0: off
+    # (HAND); None: 23 cells (drainage.flow_area_for), 0: off
     workers: int | None = None      # point tiles: local Dask workers (default one per core)
     scheduler: str | None = None    # point tiles: a running dask.distributed scheduler's address
     processes: bool = True          # point tiles: local workers are processes (False: threads)
@@ -304,7 +304,7 @@ class RunOptions:
         if self.flow_area is not None and not (math.isfinite(self.flow_area)
                                                and self.flow_area >= 0):
             raise FloodMeshError(f"the flow area must be 0 (off) or more m², got "
-                                 f"{self.flow_area}; 25 cells is the default")
+                                 f"{self.flow_area}; 23 cells is the default")
         if self.far_field_area is not None:
             far = _positive(self.far_field_area, "far-field area", "m²")
             if far < self.max_area:

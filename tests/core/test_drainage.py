@@ -56,10 +56,10 @@ def test_flow_size_is_the_flow_area_on_low_ground_only():
     assert np.isnan(v[rows >= 11]).all()    # 1.1 m or more
 
 
-def test_the_flow_area_is_25_cells_by_default_and_0_turns_it_off():
+def test_the_flow_area_is_23_cells_by_default_and_0_turns_it_off():
     from floodmesh.core.options import RunOptions
 
-    assert flow_area_for(None, 1.0) == 25.0 and flow_area_for(None, 0.5) == 6.25
+    assert flow_area_for(None, 1.0) == 23.0 and flow_area_for(None, 0.5) == 5.75
     assert flow_area_for(30.0, 1.0) == 30.0 and flow_area_for(0.0, 1.0) is None
     RunOptions(flow_area=0.0)
     with pytest.raises(FloodMeshError, match="flow area must be 0"):
@@ -84,8 +84,8 @@ def test_run_flow_area_puts_triangles_of_that_size_on_the_low_ground(demo_points
         zone = np.isfinite(low[cols.astype(int), rows.astype(int)])
         assert zone.mean() > 0.2                  # the river and its low floodplain
         largest[name] = np.abs(triangle_areas(nodes, tri))[zone].max()
-    # the default: 25 cells of the demo's 1 m grid
-    assert largest["flow"] <= 20.0 * 1.05 < largest["default"] <= 25.0 * 1.05 < largest["off"]
+    # the default: 23 cells of the demo's 1 m grid
+    assert largest["flow"] <= 20.0 * 1.05 < largest["default"] <= 23.0 * 1.05 < largest["off"]
 
 
 
