@@ -16,7 +16,7 @@ from .errors import FloodMeshError
 from .limits import check_triangles
 from .options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles,
                       check_min_angle)
-from .raster import Grid, bilinear
+from .raster import Grid, bilinear, nearest_value
 
 # Triangle leaves skinny triangles in the concentric shells it builds around input corners
 # sharper than 60 degrees (Miller, Pav & Walkington 2003), so break lines may not form them.
@@ -478,7 +478,7 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
                                            conforming=conforming, points=points,
                                            local_areas=local_areas,
                                            size_field=None if size_field is None else
-                                           lambda x, y: _nearest_value(size_field, x, y),
+                                           lambda x, y: nearest_value(size_field, x, y),
                                            max_triangles=max_triangles, area=domain.area)
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
     if points is not None and len(points):
@@ -495,16 +495,6 @@ def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
                              "data; check the domain against the DEM's nodata")
     return Mesh(np.column_stack([vertices, z]), _counter_clockwise(vertices, triangles), dem.crs,
                 pslg.segments.astype(np.int64))
-
-
-def _nearest_value(grid: Grid, x, y) -> np.ndarray:
-    """The grid's value in the cell holding each point (NaN outside the grid)."""
-    r, c = grid.fractional_index(x, y)
-    r, c = np.rint(r).astype(np.int64), np.rint(c).astype(np.int64)
-    inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
-    out = np.full(np.shape(r), np.nan)
-    out[inside] = grid.values[r[inside], c[inside]]
-    return out
 
 
 def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float, *,

@@ -136,6 +136,16 @@ class Grid:
         return t.c, t.f + rows * t.e, t.c + cols * t.a, t.f
 
 
+def nearest_value(grid: Grid, x, y) -> np.ndarray:
+    """The grid's value in the cell holding each map point (NaN outside the grid)."""
+    r, c = grid.fractional_index(x, y)
+    r, c = np.rint(r).astype(np.int64), np.rint(c).astype(np.int64)
+    inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
+    out = np.full(np.shape(r), np.nan)
+    out[inside] = np.asarray(grid.values, float)[r[inside], c[inside]]
+    return out
+
+
 def bilinear(grid: Grid, x, y) -> np.ndarray:
     """Elevation at map points by bilinear interpolation between cell centres.
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .raster import Grid
+from .raster import Grid, nearest_value
 
 
 def far_field_size(dem: Grid, breakpoints: Grid, *, max_area: float, far_field_area: float,
@@ -43,10 +43,5 @@ def finer(size: Grid | None, other: Grid) -> Grid:
         return other
     values = np.asarray(size.values, float)
     if size.shape != other.shape or size.transform != other.transform:
-        rows, cols = np.indices(other.shape)
-        r, c = size.fractional_index(*other.cell_centres(rows, cols))
-        r, c = np.rint(r).astype(int), np.rint(c).astype(int)
-        inside = (r >= 0) & (c >= 0) & (r < size.shape[0]) & (c < size.shape[1])
-        values = np.where(inside, values[np.clip(r, 0, size.shape[0] - 1),
-                                         np.clip(c, 0, size.shape[1] - 1)], np.nan)
+        values = nearest_value(size, *other.cell_centres(*np.indices(other.shape)))
     return other.with_values(np.fmin(other.values, values))

@@ -281,7 +281,8 @@ def test_size_field_sets_the_local_maximum_area(plane_mesh):
     """A size raster asking for 2 m² on the western half and nothing (NaN) on the eastern: every
     triangle meets the field at its centroid and corners, the west is refined and the east keeps
     the global maximum; a slope-driven field is smallest where the slope is steepest."""
-    from floodmesh.core.mesh import _nearest_value, size_from_slope
+    from floodmesh.core.mesh import size_from_slope
+    from floodmesh.core.raster import nearest_value
     from floodmesh.core.slope import slope
 
     dem, lines, coarse = plane_mesh
@@ -292,7 +293,7 @@ def test_size_field_sets_the_local_maximum_area(plane_mesh):
     areas = triangle_areas(mesh.nodes, mesh.triangles)
     corners = mesh.nodes[mesh.triangles][:, :, :2]
     at = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)
-    wanted = np.nanmin(np.where(np.isnan(v := _nearest_value(size, at[..., 0].ravel(),
+    wanted = np.nanmin(np.where(np.isnan(v := nearest_value(size, at[..., 0].ravel(),
                                                             at[..., 1].ravel())), np.inf, v)
                        .reshape(-1, 4), axis=1)
     assert (areas <= np.minimum(wanted, 20) * (1 + 1e-9)).all()
