@@ -18,16 +18,10 @@ CLASS_NAMES = ("<10 cm", "10-25 cm", ">25 cm")
 
 def tin_elevation(mesh: Mesh, x, y) -> np.ndarray:
     """Linear interpolation of the mesh's node elevations at (x, y); NaN outside the mesh."""
-    from matplotlib.tri import LinearTriInterpolator, Triangulation
+    from .mesh_kernels import locate
 
-    if np.size(x) == 0:  # no check points (holdout 0): matplotlib's finder refuses empty input
-        return np.empty(0)
-    origin = mesh.nodes[:, :2].min(axis=0)
-    tri = Triangulation(mesh.nodes[:, 0] - origin[0], mesh.nodes[:, 1] - origin[1],
-                        mesh.triangles)
-    z = LinearTriInterpolator(tri, mesh.nodes[:, 2])(np.asarray(x) - origin[0],
-                                                     np.asarray(y) - origin[1])
-    return np.ma.filled(z.astype(float), np.nan)
+    points = np.column_stack([np.ravel(x), np.ravel(y)]).astype(float)
+    return locate(mesh.nodes, mesh.triangles, points, mesh.nodes[:, 2])[1]
 
 
 def residuals(mesh: Mesh, points_xyz: np.ndarray) -> np.ndarray:

@@ -446,11 +446,11 @@ def size_from_slope(slope: Grid, *, max_area: float, min_area: float, s_crit: fl
 
 
 def containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Index of the triangle holding each point, -1 outside the mesh."""
-    from matplotlib.tri import Triangulation
+    """Index of the triangle holding each point, -1 outside the mesh (on an edge or a node: the
+    lowest-index triangle holding it; see ``mesh_kernels``)."""
+    from .mesh_kernels import locate
 
-    return Triangulation(xy[:, 0], xy[:, 1], triangles).get_trifinder()(points[:, 0],
-                                                                        points[:, 1])
+    return locate(xy, triangles, points)[0]
 
 
 def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,

@@ -80,6 +80,45 @@ def test_residuals_on_a_paraboloid_match_brute_force_barycentric():
     assert stats["n_holdout"] == len(pts)
 
 
+def test_points_on_edges_and_nodes_are_never_lost_and_match_matplotlib():
+    """The compiled locator against matplotlib's trapezoid map (the independent reference) on
+    random Delaunay meshes in map coordinates: every node, every inner edge's midpoint and random
+    points inside are found (no point falls between two triangles sharing an edge), the same
+    points are outside, and the TIN elevations agree to round-off."""
+    from matplotlib.tri import LinearTriInterpolator, Triangulation
+
+    from floodmesh.core.mesh import containing_triangle
+
+    rng = np.random.default_rng(7)
+    for _ in range(6):
+        xy = rng.uniform(0, 100, (int(rng.integers(50, 2000)), 2))
+        z = rng.normal(20.0, 1.0, len(xy))
+        mesh = _delaunay_mesh(xy, z)
+        tri = mesh.triangles
+        pairs = np.sort(np.stack([tri, np.roll(tri, 1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+        shared, count = np.unique(pairs, axis=0, return_counts=True)
+        inner = shared[count == 2]  # a hull edge's midpoint may round to just outside
+        edges = 0.5 * (xy[inner[:, 0]] + xy[inner[:, 1]])
+        pts = np.vstack([xy, edges, rng.uniform(-10, 110, (3000, 2))])
+        found = containing_triangle(mesh.nodes[:, :2], tri, pts + ORIGIN)
+        assert (found[:len(xy) + len(edges)] >= 0).all()
+        # both in the same local coordinates: pts + ORIGIN has already rounded the points by
+        # some 1e-10 m, which the steep random surface turns into 1e-8 m of z
+        low = mesh.nodes[:, :2].min(axis=0)
+        local, at = mesh.nodes[:, :2] - low, pts + ORIGIN - low
+        reference = Triangulation(local[:, 0], local[:, 1], tri)
+        expected = np.ma.filled(LinearTriInterpolator(reference, z)(at[:, 0], at[:, 1])
+                                .astype(float), np.nan)
+        got = tin_elevation(mesh, *(pts + ORIGIN).T)
+        assert np.array_equal(np.isnan(got), np.isnan(expected))
+        assert np.array_equal(found < 0, np.isnan(expected))
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
+        # a point strictly inside one triangle is found in that one
+        centroids = xy[tri].mean(axis=1)
+        assert np.array_equal(containing_triangle(mesh.nodes[:, :2], tri, centroids + ORIGIN),
+                              np.arange(len(tri)))
+
+
 def test_points_in_a_mesh_hole_are_outside():
     """A mesh built around a NaN hole: points in the hole are NaN, points on the plane elsewhere 0."""
     n = 40
