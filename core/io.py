@@ -419,11 +419,24 @@ def _field_type(values) -> str:
     return {"i": "int", "u": "int", "b": "int", "f": "float"}.get(kind, "str")
 
 
+RECORD_CHUNK = 20_000  # features turned into Python objects at a time, for fiona to write
+
+
 def _records(geometries, attributes: dict):
-    columns = {name: np.asarray(v).tolist() for name, v in attributes.items()}
-    for i, geometry in enumerate(geometries):
-        yield {"geometry": geometry,
-               "properties": {name: values[i] for name, values in columns.items()}}
+    """fiona records of ``geometries`` (an iterable) with one value per feature from each
+    attribute column, converted a chunk at a time: as Python objects a feature takes some
+    1 kB, so a mesh of millions of triangles converted at once took gigabytes."""
+    arrays = {name: np.asarray(v) for name, v in attributes.items()}
+    geometries = iter(geometries)
+    if not arrays:
+        yield from ({"geometry": g, "properties": {}} for g in geometries)
+        return
+    n = len(next(iter(arrays.values())))
+    for start in range(0, n, RECORD_CHUNK):
+        columns = {name: a[start:start + RECORD_CHUNK].tolist() for name, a in arrays.items()}
+        for i in range(min(RECORD_CHUNK, n - start)):
+            yield {"geometry": next(geometries),
+                   "properties": {name: values[i] for name, values in columns.items()}}
 
 
 def write_lines_gpkg(path, lines, crs, *, layer="breaklines", attributes=None,
@@ -732,7 +745,8 @@ def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, laye
     columns = {"id": np.arange(1, len(triangles) + 1), "area_m2": areas,
                "min_angle_deg": min_angles, **(attributes or {})}
     geometries = ({"type": "Polygon", "coordinates": [[*map(tuple, c), tuple(c[0])]]}
-                  for c in nodes[triangles].tolist())
+                  for start in range(0, len(triangles), RECORD_CHUNK)
+                  for c in nodes[triangles[start:start + RECORD_CHUNK]].tolist())
     props = {name: _field_type(v) for name, v in columns.items()}
     _write_gpkg(path, layer, "3D Polygon", props, _records(geometries, columns), crs,
                 atomic=atomic)
