@@ -93,11 +93,16 @@ def mesh_edges(triangles: np.ndarray) -> np.ndarray:
     return unique_rows(np.sort(pairs, axis=1))
 
 
+# the most mesh edges the residual map draws: a collection holds some 300 B an edge, and
+# beyond this many the edges are denser than the map's 900 pixels anyway
+MAP_EDGES = 200_000
+
+
 def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray,
                        res: np.ndarray) -> Path:
-    """Map of the mesh's edges (faint grey) and the held-out points ``xyz`` (m) coloured by the
-    class of ``res`` (m): <10 cm green, 10–25 cm orange, >25 cm red, outside the mesh grey;
-    equal aspect, easting and northing in metres."""
+    """Map of the mesh's edges (faint grey, up to ``MAP_EDGES``) and the held-out points ``xyz``
+    (m) coloured by the class of ``res`` (m): <10 cm green, 10–25 cm orange, >25 cm red,
+    outside the mesh grey; equal aspect, easting and northing in metres."""
     from matplotlib.collections import LineCollection
 
     res = np.asarray(res, float)
@@ -107,9 +112,11 @@ def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.n
     scale = 9.0 / max(span)
     fig = new_figure(max(3.0, span[0] * scale) + 1.8, max(3.0, span[1] * scale) + 1.2)
     ax = fig.add_subplot()
-    segments = nodes[mesh_edges(np.asarray(triangles))][:, :, :2]
-    ax.add_collection(LineCollection(segments, colors="0.6", linewidths=0.3, alpha=0.6,
-                                     zorder=1))
+    edges = mesh_edges(np.asarray(triangles))
+    drawn = len(edges) <= MAP_EDGES
+    if drawn:
+        ax.add_collection(LineCollection(nodes[edges][:, :, :2], colors="0.6", linewidths=0.3,
+                                         alpha=0.6, zorder=1))
     size = float(np.clip(4000.0 / max(len(xyz), 1), 6.0, 25.0))
     classes = [(-1, "outside the mesh", OUTSIDE_MESH_COLOUR)] + [
         (k, label, colour) for k, (label, colour)
@@ -125,7 +132,8 @@ def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.n
     ax.ticklabel_format(useOffset=False, style="plain")
     ax.set_xlabel("easting (m)")
     ax.set_ylabel("northing (m)")
-    ax.set_title(f"holdout residuals on the mesh ({len(nodes)} nodes)")
+    ax.set_title(f"holdout residuals on the mesh ({len(nodes)} nodes"
+                 + (")" if drawn else f"; {len(edges):,} edges, too many to draw)"))
     if len(xyz):
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
                   title="|residual|")

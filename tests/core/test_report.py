@@ -102,6 +102,25 @@ def test_map_has_equal_aspect(tmp_path):
     assert image.shape[1] > 1.3 * image.shape[0]
 
 
+def test_map_draws_the_edges_up_to_its_limit(tmp_path, monkeypatch):
+    """The mesh's faint grey edges are drawn while there are at most MAP_EDGES of them; above,
+    none (the title says how many), so the map's memory does not grow with the mesh."""
+    nodes, triangles = hole_mesh()
+    xyz = check_points([0.0])
+
+    def grey_pixels(name):
+        image = imread(report.write_residual_map(tmp_path / name, nodes, triangles, xyz,
+                                                 np.array([0.0])))[:, :, :3]
+        return int(((image.max(axis=2) - image.min(axis=2) < 0.02)
+                    & (image.mean(axis=2) > 0.6) & (image.mean(axis=2) < 0.9)).sum())
+
+    edges = len(report.mesh_edges(triangles))
+    monkeypatch.setattr(report, "MAP_EDGES", edges)
+    drawn = grey_pixels("drawn.png")
+    monkeypatch.setattr(report, "MAP_EDGES", edges - 1)
+    assert drawn > 4 * grey_pixels("bare.png")  # text and frame are the rest
+
+
 def test_mesh_edges_are_unique():
     triangles = np.array([[0, 1, 2], [2, 1, 3]])
     assert report.mesh_edges(triangles).tolist() == [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
