@@ -185,6 +185,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                 io.read_boundary(options.flow_zone)) if options.flow_zone else None,
             flow_spacing=None if hand is None else flow_spacing(dem, flow_area=flow_area,
                                                                 hand=hand))
+    hand = None  # the flow zone's work is in the size field and the lines now
     mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
                      max_area=max_area, conforming=options.conforming, domain=front.domain,
@@ -200,6 +201,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                                  max_nodes=options.max_triangles, cancelled=cancelled)
     else:
         mesh = steps.run("node elevations", elevations, mesh)
+    # the terrain fits are done: their points and index go before the assessment and writing
+    size = index = front.measured = None
     if node_counts:
         terrain_fit["nodes"] = node_counts
     res = steps.run("assess", residuals, mesh, holdout.xyz)
