@@ -169,8 +169,8 @@ def crest_lowering(nodes, triangles, lines, dem, step: float = 0.5) -> dict:
     """The mesh's surface (linear on each triangle) against the DEM (bilinear) every ``step``
     m along ``lines``: the largest and the mean lowering (DEM − mesh, m); None without lines."""
     import shapely
-    from matplotlib.tri import LinearTriInterpolator, Triangulation
 
+    from .mesh_kernels import locate
     from .raster import bilinear
 
     points = [np.asarray(shapely.segmentize(shapely.LineString(np.asarray(c)[:, :2]),
@@ -178,9 +178,8 @@ def crest_lowering(nodes, triangles, lines, dem, step: float = 0.5) -> dict:
     if not points:
         return {"crest_max_lowering_m": None, "crest_mean_lowering_m": None}
     xy = np.vstack(points)
-    surface = LinearTriInterpolator(Triangulation(nodes[:, 0], nodes[:, 1], triangles),
-                                    nodes[:, 2])(xy[:, 0], xy[:, 1])
-    lowering = bilinear(dem, xy[:, 0], xy[:, 1]) - np.ma.filled(surface, np.nan)
+    surface = locate(nodes, triangles, xy, nodes[:, 2])[1]
+    lowering = bilinear(dem, xy[:, 0], xy[:, 1]) - surface
     lowering = lowering[np.isfinite(lowering)]
     return {"crest_max_lowering_m": float(lowering.max()) if lowering.size else None,
             "crest_mean_lowering_m": float(lowering.mean()) if lowering.size else None}
