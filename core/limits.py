@@ -60,19 +60,29 @@ def estimate_triangles(area: float, max_area: float, input_vertices: int = 0) ->
 
 
 def check_triangles(area: float, max_area: float, max_triangles: int, input_vertices: int = 0,
-                    *, memory: int | None = None) -> int:
+                    *, memory: int | None = None, local: str | None = None) -> int:
     """Refuse, before meshing, a mesh estimated above ``max_triangles`` triangles or above the
-    memory available (``memory`` bytes; by default what the system has free)."""
+    memory available (``memory`` bytes; by default what the system has free). ``local`` names
+    what asks for triangles below the maximum area (``max_area`` is then their mean area, as a
+    size field or refinement asks), for the advice."""
     estimate = estimate_triangles(area, max_area, input_vertices)
+    if local:
+        larger = {"the size field": "a larger --flow-area (0: none) or a coarser --size-field",
+                  "refinement": "looser refinement bounds (--lower, --upper)"}.get(local, "")
+        advice = (f"{local} asks for triangles of {max_area:.3g} m² on average over "
+                  f"{area:,.0f} m²: ask for larger ones ({larger}) or mesh the area in parts")
+    else:
+        advice = "give a larger maximum area or mesh the area in tiles"
     if estimate > max_triangles:
-        larger = max_area * estimate / max_triangles
+        if not local:
+            larger = max_area * estimate / max_triangles
+            advice = f"give a maximum area of at least {larger:.3g} m², mesh the area in tiles"
         raise FloodMeshError(
-            f"the mesh would have about {estimate:,} triangles ({area:,.0f} m² at a maximum area "
-            f"of {max_area:g} m²), more than the limit of {max_triangles:,}: give a maximum area "
-            f"of at least {larger:.3g} m², mesh the area in tiles, or raise the limit "
-            "(--max-triangles, 'Maximum number of triangles' in QGIS) if the machine can take it")
-    check_memory(triangles=estimate, memory=memory,
-                 advice="give a larger maximum area or mesh the area in tiles")
+            f"the mesh would have about {estimate:,} triangles ({area:,.0f} m² at a "
+            f"{'mean' if local else 'maximum'} area of {max_area:.3g} m²), more than the limit of "
+            f"{max_triangles:,}: {advice}, or raise the limit (--max-triangles, 'Maximum number "
+            "of triangles' in QGIS) if the machine can take it")
+    check_memory(triangles=estimate, memory=memory, advice=advice)
     return estimate
 
 

@@ -331,7 +331,8 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
             break
         # the refined mesh, as if every triangle were refined to its limit at once
         equivalent = float(areas.sum() / max(1, (areas / np.minimum(limit, areas)).sum()))
-        check_triangles(float(areas.sum()), equivalent, max_triangles)
+        check_triangles(float(areas.sum()), equivalent, max_triangles,
+                        local="the size field" if size_field is not None else "refinement")
         refine = {"vertices": xy, "triangles": tris, "segments": result["segments"],
                   "triangle_max_area": limit[:, None]}
         if len(pslg.holes):

@@ -89,6 +89,24 @@ def test_run_flow_area_puts_triangles_of_that_size_on_the_low_ground(demo_points
 
 
 
+def test_a_flow_area_mesh_over_the_limit_is_refused_naming_the_flow_area(demo_points_file,
+                                                                        tmp_path):
+    """The triangle and memory guard counts the flow area's triangles, not the maximum area's:
+    a limit that the estimate at the maximum area meets (about 5,100 triangles) but the flow
+    area's does not (about 5,700) is refused before Triangle refines, naming --flow-area, and
+    leaves no output folder; the same limit with --flow-area 0 meshes."""
+    from floodmesh.core.errors import FloodMeshError
+    from floodmesh.core.options import RunOptions
+    from floodmesh.core.pipeline import run_pipeline
+
+    with pytest.raises(FloodMeshError, match=r"size field asks for triangles .*--flow-area"):
+        run_pipeline(demo_points_file, tmp_path / "flow", RunOptions(max_triangles=5400))
+    assert not (tmp_path / "flow").exists()
+    report = run_pipeline(demo_points_file, tmp_path / "off",
+                          RunOptions(max_triangles=5400, flow_area=0.0))
+    assert report["triangles"] < 5400
+
+
 def test_no_line_segment_where_water_flows_is_shorter_than_its_triangles(demo_points_file,
                                                                         tmp_path, monkeypatch):
     """A short break-line segment where water goes makes the smallest wet triangle, which sets
