@@ -3,8 +3,9 @@ tiles (several GeoTIFFs) read as one grid.
 
 Point tiles are gridded in two rounds of Dask tasks. Round one reads each tile, draws its
 holdout points (seeded by the run's seed and the tile's file name, so the same tile always holds
-back the same points, whatever the other tiles) and keeps on the cluster the tile's edge band:
-its points within two halos of its outline. Round two grids the DEM in blocks of about one tile
+back the same points, whatever the other tiles) and keeps the tile's edge band: its points
+within two halos of its outline, in a scratch file on a local cluster (on a running scheduler's
+workers, in their memory). Round two grids the DEM in blocks of about one tile
 (``grid.grid_window``): each block re-reads the tile under it and takes its neighbours' edge
 bands, so every TIN triangle that can cover a block cell is formed as in one TIN of all the
 points, and the DEM equals gridding the whole cloud at once (to round-off) with no seam. A
@@ -21,6 +22,7 @@ import contextlib
 import glob
 import math
 import os
+import tempfile
 import time
 import zlib
 from dataclasses import dataclass
@@ -179,9 +181,11 @@ def _within(xyz: np.ndarray, box) -> np.ndarray:
             & (xyz[:, 1] <= ymax))
 
 
-def read_tile(path: str, crs_wkt: str, classes, holdout: float, seed: int, band: float) -> dict:
+def read_tile(path: str, crs_wkt: str, classes, holdout: float, seed: int, band: float,
+              spill: str | None = None) -> dict:
     """Round one: a tile's figures, held-out points and edge band (points within ``band`` m of
-    its outline)."""
+    its outline): the points, or with ``spill`` (a file path) the path of the ``.npy`` file
+    they were written to."""
     from .limits import footprint
 
     notes = []
@@ -190,10 +194,13 @@ def read_tile(path: str, crs_wkt: str, classes, holdout: float, seed: int, band:
     inner = (lo[0] + band, lo[1] + band, hi[0] - band, hi[1] - band)
     edge = ~_within(xyz, inner) if inner[0] < inner[2] and inner[1] < inner[3] else np.ones(
         len(xyz), bool)
+    edge = np.ascontiguousarray(xyz[edge])
+    if spill is not None:
+        np.save(spill, edge)
+        edge = spill
     return {"path": path, "bounds": (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
             "n_points": len(xyz) + len(held), "n_gridding": len(xyz),
-            "area": footprint(xyz[:, :2])[0], "holdout": held, "notes": notes,
-            "edge": np.ascontiguousarray(xyz[edge])}
+            "area": footprint(xyz[:, :2])[0], "holdout": held, "notes": notes, "edge": edge}
 
 
 def _figures(result: dict) -> dict:
@@ -207,11 +214,15 @@ def _edge(result: dict) -> np.ndarray:
 def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes, holdout: float,
                seed: int) -> np.ndarray:
     """Round two: the cells of one block, from the tiles under it (``full``: paths, re-read) and
-    its neighbours' edge bands (``edges``: arrays)."""
+    its neighbours' edge bands (``edges``: arrays, or ``.npy`` files read in place)."""
     from .grid import grid_window
 
     box = window["box"]
-    parts = [xyz[_within(xyz, box)] for xyz in edges]
+    parts = []
+    for edge in edges:
+        xyz = np.load(edge, mmap_mode="r") if isinstance(edge, str) else edge
+        parts.append(np.array(xyz[_within(xyz, box)]))
+        del xyz
     for path in full:
         xyz = _tile_points(path, crs_wkt, classes, holdout, seed, checked=True)[0]
         parts.append(xyz[_within(xyz, box)])
@@ -249,6 +260,18 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, *,
                       dashboard_address=None, memory_limit=0,
                       silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
         yield client
+
+
+@contextlib.contextmanager
+def _band_folder(scheduler: str | None):
+    """A scratch folder for round one's edge bands where the workers share this disk (a local
+    cluster), removed at the end; None for a running scheduler's workers, which may be on other
+    machines and keep the bands in their memory."""
+    if scheduler:
+        yield None
+        return
+    with tempfile.TemporaryDirectory(prefix="floodmesh-bands-") as folder:
+        yield folder
 
 
 def _as_completed(client, futures, *, progress, cancelled, base: float, weight: float):
@@ -317,12 +340,14 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
     halo = halo_width(cell_size, cell_size * 10 if max_gap is None else max_gap)
     band = 2 * halo
     largest = max(t.count for t in tiles)
-    with dask_client(workers, scheduler, processes=processes) as client:
+    with _band_folder(scheduler) as bands, \
+            dask_client(workers, scheduler, processes=processes) as client:
         parallel = 1 if scheduler else sum(client.nthreads().values()) or 1
         # A worker reads one tile (all classes) and grids a block of about its size.
         check_memory(points=largest * parallel, advice=f"the largest tile holds {largest:,} "
                      "points: give fewer --workers or cut the survey into smaller tiles")
         firsts = [client.submit(read_tile, t.path, crs_wkt, classes, holdout, seed, band,
+                                bands and os.path.join(bands, f"band-{i}.npy"),
                                 key=f"read-{i}-{Path(t.path).name}")
                   for i, t in enumerate(tiles)]
         figures = [client.submit(_figures, f) for f in firsts]
@@ -379,9 +404,10 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
                 windows.append((r0, c0))
                 tasks.append(client.submit(grid_block, window, full, near, crs_wkt, classes,
                                            holdout, seed, key=f"grid-{r0}-{c0}"))
-        # the blocks hold the edge bands they need: each band is dropped from the cluster when
-        # the last block taking it is done, not kept to the end of the round (some 17 MB a km²
-        # at 9 points/m² and 1 m cells: the one term of the gridding that grew with the area)
+        # the edge bands, some 17 MB a km² at 9 points/m² and 1 m cells, are the one term of the
+        # gridding that grows with the area: on a local cluster they wait in scratch files;
+        # a remote scheduler's workers hold them, each dropped from the cluster when the last
+        # block taking it is done
         edges = near = edge = None
         values = np.full((rows, cols), np.nan) if keep else None
         any_valid = False

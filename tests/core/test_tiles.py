@@ -68,6 +68,36 @@ def test_tiles_grid_to_the_dem_of_the_whole_cloud(survey, scheduler, tmp_path):
     assert not np.array_equal(again, holdout_mask(1000, 0.01, 5, tiles[1].name))
 
 
+def test_a_local_cluster_keeps_the_edge_bands_in_scratch_files(survey, scheduler, tmp_path,
+                                                               monkeypatch):
+    """On its own local cluster round one writes each tile's edge band to a scratch file instead
+    of keeping it in a worker's memory (the one term of the gridding that grows with the area):
+    the files are there before round two, hold the points within two halos of the tile's
+    outline, and are gone after; the DEM is the one of a running scheduler's workers, which
+    keep the bands in memory."""
+    import tempfile
+
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    seen = {}
+
+    def check(plan):
+        for band in sorted(scratch.glob("floodmesh-bands-*/*.npy")):
+            seen[band.name] = np.load(band)
+
+    local = grid_point_tiles(survey / "tiles", 0.5, workers=2, check=check)
+    assert sorted(seen) == [f"band-{i}.npy" for i in range(4)]
+    first = io.read_points(sorted((survey / "tiles").glob("*.laz"))[0]).xyz
+    lo, hi = first[:, :2].min(axis=0), first[:, :2].max(axis=0)
+    band = seen["band-0.npy"]
+    inner = ((band[:, :2] > lo + 1) & (band[:, :2] < hi - 1)).all(axis=1)
+    assert len(band) and inner.mean() < 1  # an edge band, not the tile
+    assert not list(scratch.glob("floodmesh-bands-*"))  # (dask keeps its own scratch there)
+    remote = grid_point_tiles(survey / "tiles", 0.5, scheduler=scheduler)
+    assert np.array_equal(local.dem.values, remote.dem.values, equal_nan=True)
+
+
 def _lines(path):
     return sorted(tuple(map(tuple, np.round(c, 6))) for c in io.read_lines_gpkg(path))
 
