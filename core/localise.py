@@ -71,9 +71,27 @@ def estimate_noise(points: np.ndarray, density: float, *, samples: int = 400,
     return float(np.median(rms[good])) if good.any() else 0.0
 
 
+# Centres fitted at a time: the vectorised fits hold some 130 B for each (centre, neighbour)
+# pair, 490 MB for the 130,000 nodes of a 4 km² mesh at once; a chunk holds a few tens of MB,
+# whatever the mesh (each centre's fit is its own: the same numbers).
+FIT_CHUNK = 20_000
+
+
+def _chunks(n: int):
+    return [(a, min(n, a + FIT_CHUNK)) for a in range(0, n, FIT_CHUNK)]
+
+
 def _plane_fits(index, points, centres, radius):
-    """Least-squares planes of the points within ``radius`` of each centre: (z at the centre,
-    RMS residual, point count); NaN where fewer than 4 points."""
+    """Least-squares planes of the points within ``radius`` (one per centre) of each centre:
+    (z at the centre, RMS residual, point count); NaN where fewer than 4 points."""
+    parts = [_plane_fits_chunk(index, points, centres[a:b], radius[a:b])
+             for a, b in _chunks(len(centres))]
+    if not parts:
+        return np.zeros(0), np.zeros(0), np.zeros(0, np.int64)
+    return tuple(np.concatenate(column) for column in zip(*parts))
+
+
+def _plane_fits_chunk(index, points, centres, radius):
     indptr, indices = index.neighbours(centres, radius)
     count = np.diff(indptr)
     z = np.full(len(centres), np.nan)
@@ -282,10 +300,11 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     reach = float(np.hypot(window.half_width, window.half_length))
     for _ in range(iterations):
         tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
-        indptr, indices = index.neighbours(coords[:, :2], reach)
-        fits = _hinge_fits(px, py, pz, indptr, indices, coords[:, 0].copy(), coords[:, 1].copy(),
-                           tangents[:, 0].copy(), tangents[:, 1].copy(), window.half_width,
-                           window.half_length)
+        fits = np.concatenate([_hinge_fits(px, py, pz, *index.neighbours(coords[a:b, :2], reach),
+                                           coords[a:b, 0].copy(), coords[a:b, 1].copy(),
+                                           tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
+                                           window.half_width, window.half_length)
+                               for a, b in _chunks(len(coords))])
         good = (np.isfinite(fits[:, 0]) & (np.abs(fits[:, 3]) >= min_kink)
                 & (fits[:, 4] >= min_f_ratio))
         normal = np.column_stack([-tangents[:, 1], tangents[:, 0]])

@@ -74,6 +74,28 @@ def test_node_elevations_take_the_noise_out_on_a_plane():
     assert np.sqrt(np.mean(error ** 2)) < 0.25 * noise
 
 
+def test_fits_in_chunks_give_the_same_numbers_as_all_at_once(monkeypatch):
+    """Node and hinge fits go FIT_CHUNK centres at a time so that their memory stays bounded
+    whatever the mesh: chunks of 7 give the same numbers, bit for bit, as one chunk of all."""
+    from floodmesh.core import localise
+
+    points = noisy_points(hinge, seed=4)
+    window = fit_window(points, 100 * 100, 1.0)
+    rng = np.random.default_rng(5)
+    nodes = np.column_stack([rng.uniform(5, 95, (200, 2)), np.zeros(200)])
+    line = 50.0 + np.arange(-25, 26, 2.0)[:, None] * TANGENT
+    line = np.column_stack([line, hinge(line)])
+    results = []
+    for chunk in (10**6, 7):
+        monkeypatch.setattr(localise, "FIT_CHUNK", chunk)
+        z, _ = fit_node_elevations(nodes, points, [line], 1.5, on_line=0.05)
+        [moved], [confidence], [kink] = localise_breaklines([line], points, window)
+        results.append((z, moved, confidence, kink))
+    for once, chunked in zip(*results):
+        assert np.array_equal(once, chunked, equal_nan=True)
+    assert np.isfinite(results[0][2]).sum() > 10 and np.isfinite(results[0][0]).all()
+
+
 def test_noise_estimate():
     points = noisy_points(hinge, noise=0.10, seed=3)
     assert estimate_noise(points, 9.0) == pytest.approx(0.10, rel=0.15)
