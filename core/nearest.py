@@ -1,5 +1,6 @@
 """Nearest-neighbour look-ups shared by the steps: the nearest line to each point, and the
-index of the measured points that every terrain fit of a run queries."""
+index of the measured points that every terrain fit of a run queries (LiDAR points, or a DEM's
+cell centres)."""
 from __future__ import annotations
 
 import numpy as np
@@ -73,6 +74,77 @@ class PointIndex:
                                                       (len(centres),)))
         return _ball_csr(self.xy, self.order, self.bounds, self.lo[0], self.lo[1], self.cell,
                          self.cols, self.rows, centres, radius)
+
+
+class CellIndex:
+    """The index of a DEM's cell centres taken as the measured points: point ``i`` is the centre
+    of flat cell ``cells[i]`` (row-major), at x = (col + 0.5)·a + c, y = (row + 0.5)·e + f of
+    the DEM's ``transform``, with the DEM's z (as ``pipeline``'s ``_cell_points`` builds
+    them).
+
+    It answers as ``PointIndex`` on those points does (the same points, by the same sum of
+    squares of the same coordinates, each centre's sorted by index), from each cell's point
+    number (4 B a cell) instead of a sorted copy of the points' x, y and their order (24 B a
+    point): the cells within a radius are found from the grid itself."""
+
+    def __init__(self, transform, shape: tuple[int, int], cells: np.ndarray):
+        self.rows, self.cols = int(shape[0]), int(shape[1])
+        self.rank = np.full(self.rows * self.cols, -1,
+                            np.int32 if len(cells) < 2 ** 31 else np.int64)
+        self.rank[cells] = np.arange(len(cells), dtype=self.rank.dtype)
+        self.a, self.c, self.e, self.f = (float(transform.a), float(transform.c),
+                                          float(transform.e), float(transform.f))
+
+    def neighbours(self, centres: np.ndarray, radius) -> tuple[np.ndarray, np.ndarray]:
+        """CSR (indptr, indices) of the points within ``radius`` (m, one or one per centre) of
+        each of ``centres`` (k, 2+), each centre's indices ascending."""
+        centres = np.ascontiguousarray(np.asarray(centres, float)[:, :2])
+        radius = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, float),
+                                                      (len(centres),)))
+        return _cells_csr(self.rank, self.rows, self.cols, self.a, self.c, self.e, self.f,
+                          centres, radius)
+
+
+@njit(cache=True, nogil=True)
+def _cells_csr(rank, rows, cols, a, c, e, f, centres, radius):
+    m = centres.shape[0]
+    indptr = np.zeros(m + 1, np.int64)
+    for stage in range(2):  # count, then fill
+        if stage == 1:
+            for i in range(m):
+                indptr[i + 1] += indptr[i]
+            indices = np.empty(indptr[m], np.int64)
+        else:
+            indices = np.empty(0, np.int64)
+        for i in range(m):
+            cx, cy, r = centres[i, 0], centres[i, 1], radius[i]
+            r2 = r * r
+            # the columns and rows whose centres can lie within r, a cell wider to each side
+            # against round-off (the distance test below decides), clipped to the grid
+            u0, u1 = (cx - r - c) / a - 0.5, (cx + r - c) / a - 0.5
+            v0, v1 = (cy - r - f) / e - 0.5, (cy + r - f) / e - 0.5
+            c0 = max(int(np.floor(min(u0, u1))) - 1, 0)
+            c1 = min(int(np.ceil(max(u0, u1))) + 1, cols - 1)
+            r0 = max(int(np.floor(min(v0, v1))) - 1, 0)
+            r1 = min(int(np.ceil(max(v0, v1))) + 1, rows - 1)
+            k = indptr[i] if stage == 1 else 0
+            for row in range(r0, r1 + 1):
+                y = (row + 0.5) * e + f
+                dy = y - cy
+                for col in range(c0, c1 + 1):
+                    q = rank[row * cols + col]
+                    if q < 0:
+                        continue
+                    dx = ((col + 0.5) * a + c) - cx
+                    if dx * dx + dy * dy <= r2:
+                        if stage == 1:
+                            indices[k] = q
+                        k += 1
+            if stage == 0:
+                indptr[i + 1] = k
+            else:
+                indices[indptr[i]:k].sort()
+    return indptr, indices
 
 
 @njit(cache=True, nogil=True)

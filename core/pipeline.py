@@ -25,7 +25,7 @@ from .hydraulic_lines import lines_for_hydraulics
 from .hydraulics import hydraulic_checks
 from .limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
 from .localise import fit_node_elevations, fit_window, localise_traced
-from .nearest import point_index
+from .nearest import CellIndex, point_index
 from .mesh import build_mesh, domain_from_dem, mesh_quality, size_from_slope, user_domain
 from .points import PointCloud, split_holdout
 from .raster import Grid
@@ -139,7 +139,8 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     if options.localise or options.node_elevation == "plane":
         area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
         index, window = steps.run("fit window", _fit_window, front.measured, area, dem.cell_size,
-                                 node_radius=options.node_radius, seed=options.seed)
+                                 node_radius=options.node_radius, seed=options.seed,
+                                 index=front.measured_index)
         terrain_fit.update(asdict(window))
     if options.localise:
         lines, confidence, counts = steps.run("localise", localise_traced, lines, front.measured,
@@ -202,7 +203,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     else:
         mesh = steps.run("node elevations", elevations, mesh)
     # the terrain fits are done: their points and index go before the assessment and writing
-    size = index = front.measured = None
+    size = index = front.measured = front.measured_index = None
     if node_counts:
         terrain_fit["nodes"] = node_counts
     res = steps.run("assess", residuals, mesh, holdout.xyz)
@@ -271,9 +272,10 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     return report
 
 
-def _fit_window(points, area, cell_size, *, node_radius, seed):
-    """(index of the points, ``FitWindow``): the index serves every later terrain fit."""
-    index = point_index(points)
+def _fit_window(points, area, cell_size, *, node_radius, seed, index=None):
+    """(index of the points, built if None, ``FitWindow``): the index serves every later
+    terrain fit."""
+    index = point_index(points) if index is None else index
     return index, fit_window(points, area, cell_size, node_radius=node_radius, seed=seed,
                              index=index)
 
@@ -305,6 +307,7 @@ class Front:
     domain: object = None    # the user's domain (Multi)Polygon, None: the DEM's data
     own_lines: list = field(default_factory=list)  # the modeller's own lines (k, 3) arrays
     measured: np.ndarray | None = None  # (n, 3) points gridded (or DEM cell centres): refinement
+    measured_index: object = None  # their index for the terrain fits, if built (cell centres)
     files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
 
 
@@ -342,12 +345,12 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         dem, holdout = data.dem, PointCloud(data.holdout, data.dem.crs)
         # the tiles' points are not kept: the terrain fits and --refine use the DEM's cell
         # centres; the per-tile held-out points stay the independent check
-        measured = _dem_check_points(dem, 1.0, options.seed).xyz
+        measured, measured_index = _dem_measured(dem, options.seed)
         holdout_source = "LiDAR points withheld from gridding, tile by tile"
         n_points = data.n_points
     elif isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
-        measured = gridding.xyz
+        measured, measured_index = gridding.xyz, None
         # refuse, before the work, a grid or mesh too large for the limit or the memory
         plan = check_grid(gridding, options.cell_size, options.max_gap)
         if options.slope_method == "log":
@@ -367,7 +370,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
                      advice="resample the DEM to larger cells or split it into tiles")
         holdout = _dem_check_points(dem, options.holdout, options.seed)
-        measured = _dem_check_points(dem, 1.0, options.seed).xyz
+        measured, measured_index = _dem_measured(dem, options.seed)
         holdout_source = "DEM cell centres (not independent of the DEM)"
         n_points = 0
     domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
@@ -390,7 +393,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
-                 domain, own_lines, measured, files)
+                 domain, own_lines, measured, measured_index, files)
 
 
 def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None, note=None,
@@ -458,13 +461,32 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None):
 
 def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
     """A seeded random ``fraction`` of the DEM's valid cells as points (cell centre, z), in the
-    draw's order. Built column by column into one (n, 3) array, Fortran-ordered so that each
-    coordinate is contiguous (the terrain fits read them so without copies), from the flat cell
-    indices: 8 B a cell of index beside the 24 B of the points, where row and column grids and
-    a stacked copy took some 80 B a cell more (the same numbers, as ``Grid.cell_centres``)."""
+    draw's order (``_cell_points``)."""
+    return PointCloud(_cell_points(dem, _dem_cells(dem, fraction, seed)), dem.crs)
+
+
+def _dem_measured(dem: Grid, seed: int) -> tuple[np.ndarray, CellIndex]:
+    """The DEM's valid cells as the terrain fits' points (all of them, in a seeded order) and
+    their index, which finds them from the grid (``nearest.CellIndex``, 4 B a cell, where an
+    index of the points themselves took 24 B a point)."""
+    cells = _dem_cells(dem, 1.0, seed)
+    return _cell_points(dem, cells), CellIndex(dem.transform, dem.shape, cells)
+
+
+def _dem_cells(dem: Grid, fraction: float, seed: int) -> np.ndarray:
+    """Flat indices of a seeded random ``fraction`` of the DEM's valid cells (at least 30), in
+    the draw's order."""
     cells = np.flatnonzero(np.isfinite(dem.values))
     n = max(int(round(fraction * cells.size)), min(cells.size, 30))
-    cells = cells[np.random.default_rng(seed).choice(cells.size, size=n, replace=False)]
+    return cells[np.random.default_rng(seed).choice(cells.size, size=n, replace=False)]
+
+
+def _cell_points(dem: Grid, cells: np.ndarray) -> np.ndarray:
+    """The centres and z of the DEM's flat ``cells`` as (n, 3) points. Built column by column,
+    Fortran-ordered so that each coordinate is contiguous (the terrain fits read them so without
+    copies), from the flat cell indices: where row and column grids and a stacked copy took some
+    80 B a cell more (the same numbers, as ``Grid.cell_centres`` and ``nearest.CellIndex``)."""
+    n = len(cells)
     xyz = np.empty((3, n)).T
     t, width = dem.transform, dem.shape[1]
     for axis, index, scale, offset in ((0, cells % width, t.a, t.c),
@@ -476,5 +498,5 @@ def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
         column *= scale
         column += offset
     np.take(dem.values, cells, out=xyz[:, 2])
-    return PointCloud(xyz, dem.crs)
+    return xyz
 

@@ -66,3 +66,36 @@ def test_point_index_of_points_on_one_line():
     x = np.linspace(0, 1000, 5000)
     points = np.column_stack([x, np.full_like(x, 7.0), x])
     _same_as_ckdtree(points, points[::50, :2], 3.0)
+
+
+def test_cell_index_finds_the_points_the_point_index_finds_on_a_dem():
+    """A DEM's cell centres as the fits' points (a seeded order, nodata cells left out) are
+    found from the grid as the point index finds them in a copy of their coordinates: the same
+    points, in the same order, at radii that put many centres exactly on the circle (whole
+    and half cells), with centres off the grid and on odd origins and cell sizes."""
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.nearest import CellIndex
+    from floodmesh.core.pipeline import _cell_points, _dem_cells
+    from floodmesh.core.raster import Grid
+
+    rng = np.random.default_rng(7)
+    for cell, x0, y0 in ((1.0, 600_000.0, 5_700_040.0), (0.37, 512_345.678, 5_432_109.87)):
+        values = rng.normal(10, 1, (40, 55))
+        values[rng.random(values.shape) < 0.2] = np.nan  # nodata cells hold no point
+        values[:5, :9] = np.nan
+        dem = Grid(values, Affine(cell, 0, x0, 0, -cell, y0), CRS.from_epsg(25832))
+        cells = _dem_cells(dem, 1.0, seed=3)
+        points = _cell_points(dem, cells)
+        by_cells = CellIndex(dem.transform, dem.shape, cells)
+        by_points = point_index(points)
+        corner = np.array([x0, y0 - 40 * cell])
+        centres = np.vstack([corner + rng.uniform(-3, 58, (300, 2)) * cell,  # some off the grid
+                             points[rng.choice(len(points), 100), :2]])  # some on a centre
+        for radius in (cell, 1.5 * cell, 2.5 * cell, 3 * cell,
+                       rng.uniform(0.2, 4, len(centres)) * cell):
+            a, b = by_cells.neighbours(centres, radius), by_points.neighbours(centres, radius)
+            assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+        assert by_cells.neighbours(centres, 1.0 * cell)[1].size > len(centres)
+        assert by_cells.rank.itemsize == 4  # 4 B a cell
