@@ -107,43 +107,50 @@ class CellIndex:
 
 @njit(cache=True, nogil=True)
 def _cells_csr(rank, rows, cols, a, c, e, f, centres, radius):
-    m = centres.shape[0]
-    indptr = np.zeros(m + 1, np.int64)
-    for stage in range(2):  # count, then fill
-        if stage == 1:
-            for i in range(m):
-                indptr[i + 1] += indptr[i]
-            indices = np.empty(indptr[m], np.int64)
-        else:
-            indices = np.empty(0, np.int64)
-        for i in range(m):
-            cx, cy, r = centres[i, 0], centres[i, 1], radius[i]
-            r2 = r * r
-            # the columns and rows whose centres can lie within r, a cell wider to each side
-            # against round-off (the distance test below decides), clipped to the grid
-            u0, u1 = (cx - r - c) / a - 0.5, (cx + r - c) / a - 0.5
-            v0, v1 = (cy - r - f) / e - 0.5, (cy + r - f) / e - 0.5
-            c0 = max(int(np.floor(min(u0, u1))) - 1, 0)
-            c1 = min(int(np.ceil(max(u0, u1))) + 1, cols - 1)
-            r0 = max(int(np.floor(min(v0, v1))) - 1, 0)
-            r1 = min(int(np.ceil(max(v0, v1))) + 1, rows - 1)
-            k = indptr[i] if stage == 1 else 0
-            for row in range(r0, r1 + 1):
-                y = (row + 0.5) * e + f
-                dy = y - cy
-                for col in range(c0, c1 + 1):
-                    q = rank[row * cols + col]
-                    if q < 0:
-                        continue
-                    dx = ((col + 0.5) * a + c) - cx
-                    if dx * dx + dy * dy <= r2:
-                        if stage == 1:
-                            indices[k] = q
-                        k += 1
-            if stage == 0:
-                indptr[i + 1] = k
-            else:
-                indices[indptr[i]:k].sort()
+    indptr, found, k = _csr_start(centres.shape[0])
+    for i in range(centres.shape[0]):
+        cx, cy, r = centres[i, 0], centres[i, 1], radius[i]
+        # the columns and rows whose centres can lie within r, a cell wider to each side
+        # against round-off (the distance test decides), clipped to the grid
+        u0, u1 = (cx - r - c) / a - 0.5, (cx + r - c) / a - 0.5
+        v0, v1 = (cy - r - f) / e - 0.5, (cy + r - f) / e - 0.5
+        c0 = max(int(np.floor(min(u0, u1))) - 1, 0)
+        c1 = min(int(np.ceil(max(u0, u1))) + 1, cols - 1)
+        for row in range(max(int(np.floor(min(v0, v1))) - 1, 0),
+                         min(int(np.ceil(max(v0, v1))) + 1, rows - 1) + 1):
+            dy = ((row + 0.5) * e + f) - cy
+            for col in range(c0, c1 + 1):
+                q = rank[row * cols + col]
+                dx = ((col + 0.5) * a + c) - cx
+                if q >= 0 and dx * dx + dy * dy <= r * r:
+                    found, k = _push(found, k, q)
+        indptr[i + 1] = k
+    return _sorted_csr(indptr, found)
+
+
+@njit(cache=True, nogil=True)
+def _csr_start(m):
+    """(indptr of ``m`` centres, room for the points found, the first free place)."""
+    return np.zeros(m + 1, np.int64), np.empty(max(16, 8 * m), np.int64), 0
+
+
+@njit(cache=True, nogil=True)
+def _push(found, k, value):
+    """``found`` with ``value`` at ``k`` (doubled when full), and the next free place."""
+    if k == found.shape[0]:
+        grown = np.empty(2 * k, found.dtype)
+        grown[:k] = found
+        found = grown
+    found[k] = value
+    return found, k + 1
+
+
+@njit(cache=True, nogil=True)
+def _sorted_csr(indptr, found):
+    """CSR (indptr, indices) of the centres' points in ``found``, each centre's ascending."""
+    indices = found[:indptr[-1]]
+    for i in range(indptr.shape[0] - 1):
+        indices[indptr[i]:indptr[i + 1]].sort()
     return indptr, indices
 
 
@@ -175,34 +182,18 @@ def _cell_sort(xy, x0, y0, cell, cols, rows):
 
 @njit(cache=True, nogil=True)
 def _ball_csr(xy, order, bounds, x0, y0, cell, cols, rows, centres, radius):
-    m = centres.shape[0]
-    indptr = np.zeros(m + 1, np.int64)
-    for stage in range(2):  # count, then fill
-        if stage == 1:
-            for i in range(m):
-                indptr[i + 1] += indptr[i]
-            indices = np.empty(indptr[m], np.int64)
-        else:
-            indices = np.empty(0, np.int64)
-        for i in range(m):
-            cx, cy, r = centres[i, 0], centres[i, 1], radius[i]
-            r2 = r * r
-            # clipped so that a centre off the points indexes no cell (an empty range)
-            c0 = min(max(int((cx - r - x0) // cell), 0), cols)
-            c1 = max(min(int((cx + r - x0) // cell), cols - 1), -1)
-            r0 = max(int((cy - r - y0) // cell), 0)
-            r1 = min(int((cy + r - y0) // cell), rows - 1)
-            k = indptr[i] if stage == 1 else 0
-            for row in range(r0, r1 + 1):
-                for q in range(bounds[row * cols + c0], bounds[row * cols + c1 + 1]):
-                    dx = xy[q, 0] - cx
-                    dy = xy[q, 1] - cy
-                    if dx * dx + dy * dy <= r2:
-                        if stage == 1:
-                            indices[k] = order[q]
-                        k += 1
-            if stage == 0:
-                indptr[i + 1] = k
-            else:
-                indices[indptr[i]:k].sort()
-    return indptr, indices
+    indptr, found, k = _csr_start(centres.shape[0])
+    for i in range(centres.shape[0]):
+        cx, cy, r = centres[i, 0], centres[i, 1], radius[i]
+        # clipped so that a centre off the points indexes no cell (an empty range)
+        c0 = min(max(int((cx - r - x0) // cell), 0), cols)
+        c1 = max(min(int((cx + r - x0) // cell), cols - 1), -1)
+        for row in range(max(int((cy - r - y0) // cell), 0),
+                         min(int((cy + r - y0) // cell), rows - 1) + 1):
+            for q in range(bounds[row * cols + c0], bounds[row * cols + c1 + 1]):
+                dx = xy[q, 0] - cx
+                dy = xy[q, 1] - cy
+                if dx * dx + dy * dy <= r * r:
+                    found, k = _push(found, k, order[q])
+        indptr[i + 1] = k
+    return _sorted_csr(indptr, found)
