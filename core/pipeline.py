@@ -151,6 +151,18 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                                                         is None else options.join_gap),
                                               join_lateral=dem.cell_size, index=index)
         terrain_fit.update(counts)
+    if front.measured_index is not None:
+        # the DEM's cell centres (28 B a cell) are rebuilt for the node fits after the mesh,
+        # not held over the flow zone and meshing, the steps of the command's peak
+        front.measured = front.measured_index = index = None
+
+    def measured():
+        """The fits' points and their index, rebuilt from the DEM if they were let go."""
+        nonlocal index
+        if front.measured is None:
+            front.measured, index = _dem_measured(dem, options.seed)
+        return front.measured, index
+
     size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
     max_area = options.max_area
@@ -170,9 +182,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         """Node z with the noise taken out, from the points gridded only (never the held-out)."""
         if options.node_elevation != "plane":
             return mesh
-        z, counts = fit_node_elevations(mesh.nodes, front.measured, mesh_lines,
-                                        window.node_radius, on_line=delta / 10,
-                                        index=index)
+        points, fit_index = measured()
+        z, counts = fit_node_elevations(mesh.nodes, points, mesh_lines, window.node_radius,
+                                        on_line=delta / 10, index=fit_index)
         node_counts.update(counts)
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 
@@ -194,7 +206,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     rounds = []
     if options.refine:
         # the points gridded drive the refinement; the held-out ones stay independent
-        mesh, rounds = steps.run("refine", refine_mesh, dem, mesh_lines, front.measured,
+        mesh, rounds = steps.run("refine", refine_mesh, dem, mesh_lines, measured()[0],
                                  check=holdout.xyz, domain=front.domain, size_field=size,
                                  min_angle=options.min_angle, max_area=max_area,
                                  conforming=options.conforming, elevations=elevations,
@@ -203,7 +215,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     else:
         mesh = steps.run("node elevations", elevations, mesh)
     # the terrain fits are done: their points and index go before the assessment and writing
-    size = index = front.measured = front.measured_index = None
+    size = index = front.measured = None
     if node_counts:
         terrain_fit["nodes"] = node_counts
     res = steps.run("assess", residuals, mesh, holdout.xyz)
