@@ -653,10 +653,20 @@ def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndar
 
     if not len(segments):
         return 0
+    # the edges as sorted keys (a Python set of them took some 600 B a triangle)
+    n = np.int64(len(nodes))
     edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
-                                    triangles[:, [2, 0]]]), axis=1)
-    edge_set = set(map(tuple, edges.tolist()))
-    split = [seg for seg in np.sort(segments, axis=1).tolist() if tuple(seg) not in edge_set]
+                                    triangles[:, [2, 0]]]), axis=1).astype(np.int64)
+    keys = np.unique(edges[:, 0] * n + edges[:, 1])
+    del edges
+
+    def are_edges(pairs):  # (k, 2) node pairs, lower index first
+        wanted = pairs[:, 0] * n + pairs[:, 1]
+        at = np.minimum(np.searchsorted(keys, wanted), len(keys) - 1)
+        return keys[at] == wanted
+
+    ordered = np.sort(np.asarray(segments, np.int64), axis=1)
+    split = ordered[~are_edges(ordered)].tolist()
     xy = nodes[:, :2]
     tree = cKDTree(xy) if split else None
     missing = 0
@@ -671,8 +681,7 @@ def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndar
         on = near[(off <= 1e-6 * max(1.0, length)) & (t >= -1e-9) & (t <= 1 + 1e-9)]
         chain = on[np.argsort(t[np.isin(near, on)], kind="stable")]
         pairs = np.sort(np.column_stack([chain[:-1], chain[1:]]), axis=1)
-        if chain[0] != a and chain[0] != b or not all(map(edge_set.__contains__,
-                                                          map(tuple, pairs.tolist()))):
+        if chain[0] != a and chain[0] != b or not are_edges(pairs).all():
             missing += 1
     return missing
 
