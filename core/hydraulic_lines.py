@@ -165,7 +165,8 @@ def _spacing_at(flow_spacing, coords, spacing: float) -> np.ndarray:
     ny, nx = flow_spacing.shape
     row = np.clip(np.rint(row).astype(int), 0, ny - 1)
     col = np.clip(np.rint(col).astype(int), 0, nx - 1)
-    return np.fmax(local, np.asarray(flow_spacing.values, float)[row, col])
+    # the vertices' cells only: converting the whole grid per line made the step quadratic
+    return np.fmax(local, np.asarray(flow_spacing.values[row, col], float))
 
 
 def _length(coords) -> float:
