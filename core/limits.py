@@ -20,8 +20,9 @@ from .errors import FloodMeshError
 BYTES_PER_POINT = 160       # read (laspy records + x, y, z), holdout split, bucket sort, tile TINs
 BYTES_PER_CELL = 64         # DEM, slope, breakpoints, tracing masks, GeoTIFF copies
 # The chain after gridding where the terrain fits take the DEM's cell centres (point tiles, a
-# DEM): the centres (24 B) and their search trees beside the DEM; measured with
-# benchmarks/tiles.py as the growth of the command's peak from 1 to 4 km² of tiles.
+# DEM): the DEM, the centres (24 B) and their index (4 B), the flow zone's grids. With
+# benchmarks/tiles.py the command's peak grew 65 MB per km² of 1 m cells from 1 to 36 km²,
+# its mesh at the flow area included: 100 B a cell, with the mesh term, is on the safe side.
 BYTES_PER_FITTED_CELL = 100
 BYTES_PER_TRIANGLE = 1600   # Triangle, nodes/triangles, quality, 2DM and GeoPackage records
 # Triangle's quality refinement leaves triangles of about 0.64 of the area bound on open ground
