@@ -79,3 +79,19 @@ def test_crest_lowering_along_own_lines_against_the_dem():
     cut = crest_lowering(*mesh([0.5, 5.0, 6.0, 9.5]), crest, dem)
     assert abs(kept["crest_max_lowering_m"]) < 1e-9
     assert cut["crest_max_lowering_m"] == pytest.approx(0.5, abs=0.01)
+
+
+def test_the_inner_node_nearest_the_domain_edge_is_found():
+    """On a 1 m lattice of 30 x 20 m, one inner node moved to 0.3 m off the left edge and one
+    0.45 m below the top edge: the report gives 0.3 m, the distance to the nearest boundary
+    edge, not to a boundary node (its neighbours on the edge are over 1 m away)."""
+    from scipy.spatial import Delaunay
+
+    yy, xx = np.mgrid[0:21, 0:31].astype(float)
+    xy = np.column_stack([xx.ravel(), yy.ravel()])
+    xy[5 * 31 + 1] = (0.3, 5.5)
+    xy[19 * 31 + 7] = (7.5, 19.55)
+    nodes = np.column_stack([xy, np.zeros(len(xy))])
+    triangles = Delaunay(xy).simplices
+    report = hydraulic_checks(nodes, triangles)
+    assert report["min_node_distance_to_edge_m"] == pytest.approx(0.3, abs=1e-12)
