@@ -136,11 +136,20 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     terrain_fit, confidence, window = {"localise": options.localise,
                                        "node_elevation": options.node_elevation}, None, None
     index = None  # of the measured points: one for every terrain fit of the run
+    cell_centres = front.measured is None  # the DEM's, drawn when a fit needs them
+
+    def measured():
+        """The fits' points and their index (None: not built yet); the DEM's cell centres and
+        their ``CellIndex`` drawn (the same seeded draw each time) if not held."""
+        nonlocal index
+        if front.measured is None:
+            front.measured, index = _dem_measured(dem, options.seed)
+        return front.measured, index
+
     if options.localise or options.node_elevation == "plane":
         area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
-        index, window = steps.run("fit window", _fit_window, front.measured, area, dem.cell_size,
-                                 node_radius=options.node_radius, seed=options.seed,
-                                 index=front.measured_index)
+        index, window = steps.run("fit window", _fit_window, *measured(), area, dem.cell_size,
+                                 node_radius=options.node_radius, seed=options.seed)
         terrain_fit.update(asdict(window))
     if options.localise:
         lines, confidence, counts = steps.run("localise", localise_traced, lines, front.measured,
@@ -151,17 +160,10 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                                                         is None else options.join_gap),
                                               join_lateral=dem.cell_size, index=index)
         terrain_fit.update(counts)
-    if front.measured_index is not None:
-        # the DEM's cell centres (28 B a cell) are rebuilt for the node fits after the mesh,
-        # not held over the flow zone and meshing, the steps of the command's peak
-        front.measured = front.measured_index = index = None
-
-    def measured():
-        """The fits' points and their index, rebuilt from the DEM if they were let go."""
-        nonlocal index
-        if front.measured is None:
-            front.measured, index = _dem_measured(dem, options.seed)
-        return front.measured, index
+    if cell_centres:
+        # the DEM's cell centres (28 B a cell) are drawn again for the node fits after the
+        # mesh, not held over the flow zone and meshing, the steps of the command's peak
+        front.measured = index = None
 
     size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
@@ -284,7 +286,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     return report
 
 
-def _fit_window(points, area, cell_size, *, node_radius, seed, index=None):
+def _fit_window(points, index, area, cell_size, *, node_radius, seed):
     """(index of the points, built if None, ``FitWindow``): the index serves every later
     terrain fit."""
     index = point_index(points) if index is None else index
@@ -318,8 +320,9 @@ class Front:
     traced: list             # BreakLine, before simplification
     domain: object = None    # the user's domain (Multi)Polygon, None: the DEM's data
     own_lines: list = field(default_factory=list)  # the modeller's own lines (k, 3) arrays
-    measured: np.ndarray | None = None  # (n, 3) points gridded (or DEM cell centres): refinement
-    measured_index: object = None  # their index for the terrain fits, if built (cell centres)
+    # (n, 3) points gridded, for the terrain fits and refinement; None: the DEM's cell centres
+    # (point tiles, a DEM), drawn from it when a fit needs them
+    measured: np.ndarray | None = None
     files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
 
 
@@ -357,12 +360,12 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         dem, holdout = data.dem, PointCloud(data.holdout, data.dem.crs)
         # the tiles' points are not kept: the terrain fits and --refine use the DEM's cell
         # centres; the per-tile held-out points stay the independent check
-        measured, measured_index = _dem_measured(dem, options.seed)
+        measured = None  # the DEM's cell centres, drawn when a fit needs them
         holdout_source = "LiDAR points withheld from gridding, tile by tile"
         n_points = data.n_points
     elif isinstance(data, PointCloud):
         gridding, holdout = split_holdout(data, options.holdout, options.seed)
-        measured, measured_index = gridding.xyz, None
+        measured = gridding.xyz
         # refuse, before the work, a grid or mesh too large for the limit or the memory
         plan = check_grid(gridding, options.cell_size, options.max_gap)
         if options.slope_method == "log":
@@ -382,7 +385,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
                      advice="resample the DEM to larger cells or split it into tiles")
         holdout = _dem_check_points(dem, options.holdout, options.seed)
-        measured, measured_index = _dem_measured(dem, options.seed)
+        measured = None
         holdout_source = "DEM cell centres (not independent of the DEM)"
         n_points = 0
     domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
@@ -405,7 +408,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
-                 domain, own_lines, measured, measured_index, files)
+                 domain, own_lines, measured, files)
 
 
 def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None, note=None,
