@@ -344,8 +344,8 @@ def cmd_grid(args):
     notes = []
     points = io.read_points(_input(args), crs=args.crs, classes=args.classes,
                             note=notes.append)
+    gridding, holdout = split_holdout(points, args.holdout, args.seed, note=notes.append)
     _print_notes(notes)
-    gridding, holdout = split_holdout(points, args.holdout, args.seed)
     dem = grid_points_linear(gridding, args.cell_size, max_gap=args.max_gap)
     io.write_raster(args.out, dem)
     if len(holdout):

@@ -364,7 +364,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         holdout_source = "LiDAR points withheld from gridding, tile by tile"
         n_points = data.n_points
     elif isinstance(data, PointCloud):
-        gridding, holdout = split_holdout(data, options.holdout, options.seed)
+        gridding, holdout = split_holdout(data, options.holdout, options.seed, note=note)
         measured = gridding.xyz
         # refuse, before the work, a grid or mesh too large for the limit or the memory
         plan = check_grid(gridding, options.cell_size, options.max_gap)

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import FloodMeshError
-from .options import check_holdout_count, check_seed
+from .options import check_seed, holdout_count
 from .raster import require_metric_crs
 
 if TYPE_CHECKING:  # pyproj is imported where a CRS is checked: it costs 0.1 s of start-up
@@ -88,13 +88,15 @@ def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
              "overlapping flight lines or tiles merged twice")
 
 
-def split_holdout(points: PointCloud, fraction: float, seed: int) -> tuple[PointCloud, PointCloud]:
-    """Split off a random ``fraction`` of the points for accuracy assessment.
+def split_holdout(points: PointCloud, fraction: float, seed: int,
+                  note=None) -> tuple[PointCloud, PointCloud]:
+    """Split off a random ``fraction`` of the points for accuracy assessment (at least the 20
+    check points of the FEMA/NSSDA test, ``options.holdout_count``, said through ``note``).
 
     Returns (points for gridding, held-out points); the same seed gives the same split.
     """
     n = len(points)
-    n_out = check_holdout_count(fraction, n)
+    n_out = holdout_count(fraction, n, note)
     check_seed(seed)
     rng = np.random.default_rng(seed)
     mask = np.zeros(n, dtype=bool)

@@ -109,7 +109,7 @@ def step_grid(ch, *, input, output, cell_size, crs=None, classes=None, max_gap=N
         from .points import split_holdout
 
         points = io.read_points(input, crs=crs, classes=classes, note=ch.note)
-        gridding, held = split_holdout(points, holdout, seed)
+        gridding, held = split_holdout(points, holdout, seed, note=ch.note)
         dem = grid_points_linear(gridding, cell_size, max_gap=max_gap, progress=ch.progress)
         io.write_raster(output, dem)
         held, points_crs = held.xyz, points.crs

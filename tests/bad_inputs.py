@@ -342,7 +342,6 @@ CASES = [
              *_mesh_step(["--min-angle", 35], {"MIN_ANGLE": 35.0})),
     _options_case("max-triangles-zero", "maximum number of triangles must be a whole number",
                   MAX_TRIANGLES=0),
-    _options_case("holdout-too-small", "needs at least 20 check points", HOLDOUT=0.0005),
     _options_case("holdout-one", "holdout fraction must be at least 0 and below 1",
                   HOLDOUT=1.0),
     BadInput("output-is-the-input", "FloodMesh never overwrites an input",

@@ -188,6 +188,23 @@ def test_holdout_fraction_and_partition(thousand):
                        thousand.xyz[np.lexsort(thousand.xyz.T)])
 
 
+def test_a_small_survey_holds_out_the_20_points_the_nssda_test_needs(thousand):
+    """The reference share (0.001) keeps 1 of 1,000 points: raised to 20, with a note, instead
+    of a refusal (Topography.laz's 8,159 points kept 8 and the default run stopped)."""
+    notes = []
+    kept, held = split_holdout(thousand, 0.001, seed=0, note=notes.append)
+    assert (len(held), len(kept)) == (20, 980)
+    assert len(notes) == 1 and "keeps 1 of 1,000" in notes[0] and "raised to 20" in notes[0]
+    notes.clear()
+    split_holdout(thousand, 0.05, seed=0, note=notes.append)  # 50 points: nothing to say
+    assert notes == []
+
+
+def test_too_few_points_to_spare_20_are_refused_with_the_fix():
+    with pytest.raises(FloodMeshError, match="too few points to hold 20 back; give holdout 0"):
+        split_holdout(cloud(plane_points(size=2.0, density=5.0)), 0.001, seed=0)
+
+
 def test_holdout_same_seed_same_split_other_seed_other_split(thousand):
     kept1, held1 = split_holdout(thousand, 0.1, seed=42)
     kept2, held2 = split_holdout(thousand, 0.1, seed=42)
