@@ -8,7 +8,7 @@ from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
                        QgsRasterLayer)
 
 from .base import FloodMeshAlgorithm, crs_or_none, layer_file
-from .styles import load_results
+from .styles import load_results, run_group_name
 
 RASTERS = (("MAX_DEPTH", "Maximum depth (m)", "max_depth"),
            ("MAX_LEVEL", "Maximum water level (m)", "max_stage"),
@@ -19,6 +19,7 @@ RASTERS = (("MAX_DEPTH", "Maximum depth (m)", "max_depth"),
 class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "floodonmesh"
     DISPLAY_NAME = "Flood on mesh (ANUGA)"
+    TAGS = ("flood", "anuga", "hydrodynamic", "inundation", "depth", "hydrograph", "simulation")
     GROUP, GROUP_ID = "5 · Flood", "flood"
     HELP = ("Runs a flood on a FloodMesh mesh (SMS 2DM) with ANUGA, Geoscience Australia's "
             "finite-volume shallow-water solver (flow algorithm DE0, one thread), in a child "
@@ -68,5 +69,5 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
         for name, label, key in RASTERS:
             results[name] = str(out / RESULT_RASTERS[key])
             layers.append((QgsRasterLayer(results[name], label), lambda layer: None, name))
-        load_results(context, crs, layers)
+        load_results(context, crs, layers, group=run_group_name(out, mesh_path))
         return results

@@ -18,7 +18,8 @@ from .base import (FloodMeshAlgorithm, add_domain_parameters, crs_or_none, dista
 from .build_mesh import flow_area_parameter, max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
 from .tiles import add_tile_parameters, dask_settings, input_or_tiles
-from .styles import load_results, style_breaklines, style_mesh, style_residuals
+from .styles import (load_results, run_group_name, style_breaklines, style_mesh,
+                     style_residuals)
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")
@@ -31,6 +32,9 @@ SIMPLIFY_OPTION = ("keep_every", "tolerance", "spline")  # RunOptions field per 
 class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "lidartomesh"
     DISPLAY_NAME = "LiDAR to mesh"
+    TAGS = ("point cloud", "lidar", "las", "laz", "dem", "break lines", "levee", "embankment",
+            "bank", "mesh", "triangle", "2dm", "telemac", "hec-ras", "adcirc", "schism",
+            "workflow")
     GROUP, GROUP_ID = "1 · Workflows", "workflows"
     HELP = ("Runs the whole FloodMesh chain on a LiDAR point file (LAS/LAZ ground class, XYZ/CSV) "
             "or a DEM: grid (cell size d, m), slope (degrees), breakpoints (slope ≥ S_crit), "
@@ -79,15 +83,14 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterString(
             self.CLASSES, self.tr("LAS classes to grid, e.g. 2,9 for ground and water (empty: 2 "
                                   "when classified)"), optional=True))
-        self.addParameter(distance(self, self.CELL_SIZE, "Grid cell size d", defaults.cell_size,
-                                   self.CRS))
+        self.addParameter(distance(self, self.CELL_SIZE, "Grid cell size d", defaults.cell_size))
         self.addParameter(distance(self, self.MAX_GAP, "Maximum gap bridged (empty: 10 cells)",
-                                   None, self.CRS, optional=True))
+                                   None, optional=True))
         self.addParameter(QgsProcessingParameterEnum(
             self.SLOPE_METHOD, self.tr("Slope method"), options=labels(METHODS),
             defaultValue=METHODS.index(defaults.slope_method)))
         for parameter in (
-                distance(self, self.SIGMA, "LoG: Gaussian sigma", defaults.sigma, self.CRS),
+                distance(self, self.SIGMA, "LoG: Gaussian sigma", defaults.sigma),
                 QgsProcessingParameterNumber(
                     self.SENSITIVITY, self.tr("LoG: sensitivity, |response| (m)"), DOUBLE,
                     defaults.sensitivity, minValue=0.0)):
@@ -111,7 +114,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.SIMPLIFY, self.tr("Break-line simplification"), options=list(SIMPLIFY_LABELS),
             defaultValue=0))
         self.addParameter(distance(self, self.TOLERANCE, "Tolerance for Douglas–Peucker or "
-                                   "spline", 0.9, self.CRS, minimum=0.001))
+                                   "spline", 0.9, minimum=0.001))
         add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),
@@ -218,7 +221,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             (QgsVectorLayer(str(out / "residuals.gpkg"), "Residuals", "ogr"), style_residuals,
              self.REPORT),
             (QgsVectorLayer(breaklines, "Break lines", "ogr"), style_breaklines,
-             self.BREAKLINES)))
+             self.BREAKLINES)), group=run_group_name(out, source))
         return {self.OUTPUT_FOLDER: str(out), self.BREAKLINES: breaklines, self.MESH: mesh,
                 self.REPORT: str(out / "report.json"), self.NODES: report["nodes"],
                 self.TRIANGLES: report["triangles"], self.RMSE: report["rmse_m"]}

@@ -66,8 +66,9 @@ def _rank(layer) -> int:
 
 
 class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):
-    """Styles a result as QGIS adds it; with ``run`` (the ids of one run's results) it also
-    stacks that run's layers in the readable order and zooms the map to them."""
+    """Styles a result as QGIS adds it; with ``run`` (one run's shared state: the name of its
+    group) it also moves the layer into that run's group, in the readable order, and zooms the
+    map to it."""
 
     def __init__(self, style, run=None):
         super().__init__()
@@ -77,27 +78,28 @@ class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):
         if self.style:
             self.style(layer)
         if self.run is not None:
-            self.run.append(layer.id())
-            _stack(context.project(), self.run)
+            _into_group(context.project(), layer, self.run)
             _zoom_to(layer, context.project())
         layer.triggerRepaint()
 
 
-def _stack(project, layer_ids) -> None:
-    """Move the tree nodes of ``layer_ids`` (one parent group) into rank order, where the
-    topmost of them is."""
+def _into_group(project, layer, run: dict) -> None:
+    """Move ``layer``'s tree node into the run's group (made where the run's first layer was
+    put), at its place in rank order. The node is cloned in before the original is taken out:
+    QGIS removes a layer from the project, in a queued call, when its last tree node goes."""
     root = project.layerTreeRoot()
-    nodes = [n for n in (root.findLayer(i) for i in layer_ids) if n is not None]
-    if len(nodes) < 2 or len({id(n.parent()) for n in nodes}) != 1:
+    node = root.findLayer(layer.id())
+    if node is None or not run.get("name"):
         return
-    parent = nodes[0].parent()
-    start = min(parent.children().index(n) for n in nodes)
-    ordered = sorted(nodes, key=lambda n: _rank(n.layer()))
-    clones = [n.clone() for n in ordered]
-    for node in nodes:
-        parent.removeChildNode(node)
-    for offset, clone in enumerate(clones):
-        parent.insertChildNode(start + offset, clone)
+    group = run.get("group")
+    if group is None or root.findGroup(run["name"]) is not group:
+        parent = node.parent()
+        group = run["group"] = parent.insertGroup(parent.children().index(node), run["name"])
+    rank = _rank(layer)
+    position = sum(1 for child in group.children()
+                   if child.layer() is not None and _rank(child.layer()) <= rank)
+    group.insertChildNode(position, node.clone())
+    node.parent().removeChildNode(node)
 
 
 def _zoom_to(layer, project) -> None:
@@ -130,12 +132,13 @@ def style_when_loaded(context, output_path: str, style) -> None:
         context.layerToLoadOnCompletionDetails(output_path).setPostProcessor(styler)
 
 
-def load_results(context, crs_wkt, layers) -> None:
+def load_results(context, crs_wkt, layers, group: str | None = None) -> None:
     """Hand one run's finished layers (``(layer, style, output name)``) to QGIS to add to the
     project when the algorithm ends: each in the run's CRS (an SMS 2DM carries none) and
-    styled, stacked lines above points above the mesh, the map zoomed to them."""
+    styled; with ``group``, in one layer group of that name, lines above points above rasters
+    above the mesh; the map zoomed to them."""
     crs = QgsCoordinateReferenceSystem.fromWkt(crs_wkt) if crs_wkt else None
-    run = []
+    run = {"name": group}
     for layer, style, output_name in layers:
         if not layer.isValid():
             raise QgsProcessingException(f"the output {layer.source()} could not be opened by "
@@ -150,6 +153,17 @@ def load_results(context, crs_wkt, layers) -> None:
         del _PENDING[:-16]
         details.setPostProcessor(styler)
         context.addLayerToLoadOnCompletion(layer.id(), details)
+
+
+def run_group_name(folder, source=None) -> str:
+    """A run's layer group: its output folder's name, or where QGIS chose a temporary folder
+    (named after the parameter, OUTPUT_FOLDER), the input's."""
+    from pathlib import Path
+
+    name = Path(folder).name
+    if name == "OUTPUT_FOLDER" and source and isinstance(source, str):
+        name = Path(source).stem or Path(source).name
+    return name
 
 
 def load_mesh(context, path: str, name: str, output_name: str, crs_wkt=None) -> None:

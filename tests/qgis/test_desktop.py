@@ -1,7 +1,10 @@
-"""The desktop QGIS itself (``qgis.bin`` under a virtual display): LiDAR to mesh on
-Topography.laz (where shapely's second GEOS crashed the desktop with the user's project), the
-results stacked lines above the mesh, the mesh in the run's CRS, the map zoomed to it, and none
-of FloodMesh's numerical packages in the QGIS process."""
+"""The desktop QGIS itself (``qgis.bin`` under a virtual display), as a modeller uses it: LiDAR to
+mesh on Topography.laz with only the input and the output folder set, and what the user then
+sees once Qt's events have run (queued layer removals happen there, so a tree read straight
+after the run can show layers that are already on their way out): one group named after the
+run, break lines above residuals above the mesh, all in the data's CRS, the map on them; the
+mesh opened by hand in its CRS; the dialog's distances in metres and its help; the shipped model
+valid as opened; none of FloodMesh's numerical packages in the QGIS process."""
 import json
 import os
 import shutil
@@ -11,30 +14,104 @@ import pytest
 
 from .conftest import REPO, write_ept
 
-SCRIPT = r"""
+SEARCHES = {  # what a modeller types into the toolbox's search, and what it should find
+    "point cloud": ["assessaccuracy", "gridpoints", "lidartomesh", "refinemesh"],
+    "levee": ["classifybreakpoints", "lidartomesh", "simplifybreaklines", "tracebreaklines"],
+    "2dm": ["buildmesh", "exportmesh", "floodonmesh", "lidartomesh", "refinemesh"],
+    "telemac": ["exportmesh", "lidartomesh"],
+    "hec-ras": ["exportmesh", "lidartomesh"],
+}
+SCRIPT = f"SEARCHES = {SEARCHES!r}\n" + r"""
 import json, os, sys, traceback
 from qgis.utils import iface
-from qgis.core import QgsProject
+from qgis.core import QgsApplication, QgsLayerTreeGroup, QgsProject
+from qgis.PyQt.QtCore import QCoreApplication
+from qgis.PyQt.QtTest import QTest
 out = {}
+
+
+def settle():
+    # let Qt run what QGIS queued (the layer tree bridge removes layers in a queued call)
+    for _ in range(5):
+        QCoreApplication.processEvents()
+        QTest.qWait(200)
+
+
+def tree(node):
+    rows = []
+    for child in node.children():
+        if isinstance(child, QgsLayerTreeGroup):
+            rows.append({"group": child.name(), "children": tree(child)})
+        else:
+            layer = child.layer()
+            rows.append({"layer": child.name(), "valid": bool(layer and layer.isValid()),
+                         "crs": layer.crs().authid() if layer else None})
+    return rows
+
+
 try:
     import processing
-    processing.runAndLoadResults("floodmesh:lidartomesh", {
-        "INPUT": os.environ["FM_INPUT"], "CLASSES": "2,9", "CELL_SIZE": 2.0, "HOLDOUT": 0.003,
-        "OUTPUT_FOLDER": os.environ["FM_OUTPUT"]})
     project = QgsProject.instance()
-    out["order"] = [n.layer().name() for n in project.layerTreeRoot().findLayers()]
-    mesh = project.mapLayersByName("Mesh")[0]
-    out["mesh_crs"] = mesh.crs().authid()
-    out["edges"] = mesh.rendererSettings().nativeMeshSettings().isEnabled()
-    out["scale"] = iface.mapCanvas().scale()
-    # what the dialog shows: the cell size's unit (the CRS parameter is empty: metres)
-    from qgis.PyQt.QtWidgets import QComboBox, QLabel
-    from qgis.core import QgsPointCloudLayer
+    processing.runAndLoadResults("floodmesh:lidartomesh", {
+        "INPUT": os.environ["FM_INPUT"], "OUTPUT_FOLDER": os.environ["FM_OUTPUT"]})
+    settle()
+    out["tree"] = tree(project.layerTreeRoot())
+    out["project_layers"] = sorted(l.name() for l in project.mapLayers().values())
+    mesh = project.mapLayersByName("Mesh")
+    out["edges"] = bool(mesh) and mesh[0].rendererSettings().nativeMeshSettings().isEnabled()
+    canvas = iface.mapCanvas()
+    out["scale"] = canvas.scale()
+    out["canvas_crs"] = canvas.mapSettings().destinationCrs().authid()
+    # the mesh opened by hand (Add Mesh Layer; the browser does the same)
+    by_hand = iface.addMeshLayer(os.path.join(os.environ["FM_OUTPUT"], "mesh.2dm"), "by hand",
+                                 "mdal")
+    settle()
+    out["by_hand_crs"] = by_hand.crs().authid() if by_hand else None
+    # what the dialog shows: the distances' units (no CRS chosen) and its Help button
+    from qgis.PyQt.QtWidgets import QComboBox, QDialogButtonBox, QLabel
     dialog = processing.createAlgorithmDialog("floodmesh:lidartomesh", {})
-    widget = dialog.mainWidget().wrappers["CELL_SIZE"].wrappedWidget()
-    out["cell_size_unit"] = ([l.text() for l in widget.findChildren(QLabel)]
-                             + [c.currentText() for c in widget.findChildren(QComboBox)])
+    dialog.show()
+    settle()
+    units = {}
+    for name in ("CELL_SIZE", "MAX_GAP", "TOLERANCE"):
+        widget = dialog.mainWidget().wrappers[name].wrappedWidget()
+        units[name] = ([l.text() for l in widget.findChildren(QLabel) if l.isVisible()]
+                       + [c.currentText() for c in widget.findChildren(QComboBox)
+                          if c.isVisible()])
+    out["units"] = units
+    help_button = dialog.findChild(QDialogButtonBox).button(QDialogButtonBox.Help)
+    out["help_button"] = help_button is not None and help_button.isVisible()
+    dialog.close()
+    registry = QgsApplication.processingRegistry()
+    algorithms = [a for a in registry.algorithms() if a.provider().id() == "floodmesh"]
+    out["help_urls"] = {a.id(): a.helpUrl() for a in algorithms}
+    out["help_texts"] = {a.id(): len(a.shortHelpString() or "") for a in algorithms}
+    # the toolbox's own search (QGIS's proxy model): what each word finds
+    from qgis.gui import QgsProcessingToolboxProxyModel
+    from qgis.PyQt.QtCore import QModelIndex
+    proxy = QgsProcessingToolboxProxyModel(None, registry)
+
+    def found(text):
+        proxy.setFilterString(text)
+        names = []
+
+        def walk(parent):
+            for row in range(proxy.rowCount(parent)):
+                index = proxy.index(row, 0, parent)
+                algorithm = proxy.toolboxModel().algorithmForIndex(proxy.mapToSource(index))
+                if algorithm is not None and algorithm.provider().id() == "floodmesh":
+                    names.append(algorithm.name())
+                walk(index)
+        walk(QModelIndex())
+        return sorted(set(names))
+    out["search"] = {text: found(text) for text in SEARCHES}
+    out["all"] = sorted(a.name() for a in algorithms)
+    # the shipped model as the Modeler opens it
+    model = registry.algorithmById("floodmesh:LiDAR to mesh step by step")
+    ok, issues = model.validate()
+    out["model_valid"], out["model_issues"] = ok, list(issues)
     # a point-cloud layer of the project as the LiDAR input
+    from qgis.core import QgsPointCloudLayer
     cloud = QgsPointCloudLayer(os.environ["FM_EPT"], "Topography", "ept")
     project.addMapLayer(cloud)
     grid = processing.run("floodmesh:gridpoints", {"POINT_CLOUD": cloud.id(), "CELL_SIZE": 2.0,
@@ -49,31 +126,91 @@ os._exit(0)
 """
 
 
-@pytest.mark.skipif(not shutil.which("xvfb-run"), reason="xvfb-run (package xvfb) is missing")
-def test_the_desktop_runs_lidar_to_mesh_and_shows_the_result(real_data, tmp_path):
+def run_desktop(script: str, tmp_path, **variables) -> dict:
+    """Run ``script`` in the desktop QGIS (qgis.bin, a fresh profile with the plugin enabled)
+    under a virtual display; returns what it wrote to ``FM_RESULT`` as JSON."""
     profile = tmp_path / "data" / "QGIS" / "QGIS3" / "profiles" / "default" / "QGIS"
     profile.mkdir(parents=True)
     (profile / "QGIS3.ini").write_text("[PythonPlugins]\nfloodmesh=true\nprocessing=true\n")
-    (tmp_path / "run.py").write_text(SCRIPT)
+    (tmp_path / "run.py").write_text(script)
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "QT_QPA_PLATFORM")}
     result = tmp_path / "result.json"
     env.update(HOME=str(tmp_path), XDG_DATA_HOME=str(tmp_path / "data"),
-               QGIS_PLUGINPATH=str(REPO / "build" / "plugins"),
-               FM_INPUT=str(real_data / "Topography.laz"), FM_OUTPUT=str(tmp_path / "run"),
-               FM_RESULT=str(result),
-               FM_EPT=str(write_ept(real_data / "Topography.laz", tmp_path / "ept")))  # the script's arguments (qgis.bin would open more)
+               QGIS_PLUGINPATH=str(REPO / "build" / "plugins"), FM_RESULT=str(result),
+               **{k: str(v) for k, v in variables.items()})
     run = subprocess.run(["xvfb-run", "-a", "qgis.bin", "--noversioncheck", "--nologo",
                           "--code", str(tmp_path / "run.py")],
-                         env=env, capture_output=True, text=True, timeout=300)
+                         env=env, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0 and result.exists(), run.stdout[-2000:] + run.stderr[-2000:]
     seen = json.loads(result.read_text())
     assert "error" not in seen, seen.get("error")
-    assert seen["order"] == ["Break lines", "Residuals", "Mesh"]
-    assert seen["mesh_crs"] == "EPSG:2949" and seen["edges"]
-    assert seen["scale"] < 100_000  # zoomed to the 286 m tile, not the whole world
-    assert any("meter" in text.lower() for text in seen["cell_size_unit"]), seen
-    assert seen["grid"] == str(tmp_path / "run.tif") and (tmp_path / "run.tif").exists()
+    return seen
+
+
+@pytest.fixture(scope="module")
+def desktop(tmp_path_factory):
+    if not shutil.which("xvfb-run"):
+        pytest.skip("xvfb-run (package xvfb) is missing")
+    real = REPO.parent / "shared" / "data" / "real"
+    if not (real / "Topography.laz").exists():
+        pytest.skip("../shared/data/real is not beside the checkout")
+    tmp_path = tmp_path_factory.mktemp("desktop")
+    return run_desktop(SCRIPT, tmp_path, FM_INPUT=real / "Topography.laz",
+                       FM_OUTPUT=tmp_path / "Topography run",
+                       FM_EPT=write_ept(real / "Topography.laz", tmp_path / "ept"))
+
+
+def test_lidar_to_mesh_results_stay_in_one_group_in_order(desktop):
+    """Defaults only (the holdout sized from the data): the run's layers are in the project
+    after Qt's events, in one group named after the run, lines above residuals above mesh."""
+    groups = [row for row in desktop["tree"] if "group" in row]
+    assert len(groups) == 1, desktop["tree"]
+    group = groups[0]
+    assert "Topography run" in group["group"]
+    assert [row["layer"] for row in group["children"]] == ["Break lines", "Residuals", "Mesh"]
+    assert all(row["valid"] and row["crs"] == "EPSG:2949" for row in group["children"]), group
+    assert {"Break lines", "Residuals", "Mesh"} <= set(desktop["project_layers"])
+    assert desktop["edges"]
+
+
+def test_the_map_shows_the_run(desktop):
+    assert desktop["scale"] < 100_000  # zoomed to the 286 m tile, not the whole world
+    assert desktop["canvas_crs"] == "EPSG:2949"
+
+
+def test_mesh_opened_by_hand_has_the_data_crs(desktop):
+    assert desktop["by_hand_crs"] == "EPSG:2949"
+
+
+def test_distances_say_metres_with_no_crs_chosen(desktop):
+    for name, texts in desktop["units"].items():
+        assert texts and all("meter" in t.lower() for t in texts), (name, texts)
+
+
+def test_help_is_no_file_url_and_is_there(desktop):
+    for algorithm, url in desktop["help_urls"].items():
+        assert not url.lower().startswith("file:"), (algorithm, url)
+        assert desktop["help_texts"][algorithm] > 200, algorithm
+    assert not desktop["help_button"]  # no button that opens nothing
+
+
+def test_toolbox_search_narrows_to_the_right_algorithms(desktop):
+    assert len(desktop["all"]) >= 11
+    for text, expected in SEARCHES.items():
+        assert desktop["search"][text] == expected, (text, desktop["search"][text])
+
+
+def test_shipped_model_is_valid_as_opened(desktop):
+    assert desktop["model_valid"], desktop["model_issues"]
+
+
+def test_a_point_cloud_layer_is_an_input(desktop):
+    assert desktop["grid"].endswith("Topography run.tif")
+
+
+def test_no_numerical_package_in_the_qgis_process(desktop):
     # QGIS 3.40's qgis.core imports shapely itself when Debian's is installed (Debian 13, where
     # make setup installs it: built against QGIS's own GEOS); nothing else, and never a wheel
-    shapely = seen["imported"].pop("shapely", "/usr/lib/python3/dist-packages/")
-    assert seen["imported"] == {} and shapely.startswith("/usr/lib/python3/dist-packages/")
+    imported = dict(desktop["imported"])
+    shapely = imported.pop("shapely", "/usr/lib/python3/dist-packages/")
+    assert imported == {} and shapely.startswith("/usr/lib/python3/dist-packages/")
