@@ -11,6 +11,8 @@ from .styles import style_residuals, style_when_loaded
 class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
     NAME = "assessaccuracy"
     DISPLAY_NAME = "Assess accuracy"
+    TAGS = ("accuracy", "rmse", "nssda", "fema", "residuals", "check points", "point cloud",
+            "lidar", "validation")
     GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Residual = check point z − mesh TIN z (linear in the triangle holding the point), "
             "for held-out LiDAR points. Reports RMSE, mean, standard deviation, skew, 1.96·RMSE, "

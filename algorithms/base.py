@@ -7,18 +7,15 @@ import html
 from pathlib import Path
 
 from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
-from qgis.PyQt.QtCore import QCoreApplication, QUrl
+from qgis.PyQt.QtCore import QCoreApplication
 
 from ..core.errors import FloodMeshError
 from .compat import METRES, VECTOR_LINE, VECTOR_POLYGON
 from .child import run_step
 
 
-README = Path(__file__).resolve().parent.parent / "README.md"
-# what toolbox searches find every FloodMesh algorithm by
-TAGS = ("floodmesh", "lidar", "las", "laz", "dem", "tin", "triangle", "mesh", "2dm", "telemac",
-        "selafin", "adcirc", "schism", "hec-ras", "basement", "tuflow", "d-flow", "ugrid",
-        "hydraulic", "flood", "breakline")
+# what toolbox searches find every FloodMesh algorithm by (each adds its own, ``TAGS``)
+TAGS = ("floodmesh",)
 GLOSSARY = ("<p><i>d</i>: the grid cell size (m); <i>Δ = d/2</i>: the scale of detail; "
             "<i>S_crit</i>: the critical slope (degrees) from which a cell is a breakpoint; "
             "<i>α</i>: the break-line simplification tolerance in units of Δ; a "
@@ -92,13 +89,15 @@ PARAMETER_HELP = {
 }
 
 
-def distance(algorithm, name, label, default, parent, *, optional=False, minimum=0.0):
-    """A horizontal distance in metres as QGIS's distance parameter: the dialog shows its unit
-    (the ``parent`` layer's or CRS parameter's, metres when that is not set) and converts from
-    others. Vertical amounts (residuals, offsets, LoG responses) stay numbers with (m)."""
+def distance(algorithm, name, label, default, *, optional=False, minimum=0.0):
+    """A horizontal distance in metres as QGIS's distance parameter: the dialog shows metres and
+    converts from other units. It has no parent layer or CRS parameter: FloodMesh's data are
+    in metres (core refuses any other unit), and QGIS 3.22 shows an unset parent's unit as
+    '<unknown>' (the optional CRS, an input file QGIS cannot open as a layer). Vertical amounts
+    (residuals, offsets, LoG responses) stay numbers with (m)."""
     from qgis.core import QgsProcessingParameterDistance
 
-    parameter = QgsProcessingParameterDistance(name, algorithm.tr(label), default, parent,
+    parameter = QgsProcessingParameterDistance(name, algorithm.tr(label), default, "",
                                                optional, minimum)
     parameter.setDefaultUnit(METRES)
     return parameter
@@ -115,7 +114,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
     core step in the worker process); they keep no state on ``self``."""
 
     NAME = DISPLAY_NAME = GROUP = GROUP_ID = HELP = ""
-    TAGS = ()  # the algorithm's own search words, beside TAGS
+    TAGS = ()  # the algorithm's own search words (what it reads, writes and finds), beside TAGS
 
     def name(self):
         return self.NAME
@@ -137,7 +136,14 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         return self.GROUP_ID
 
     def shortHelpString(self):  # noqa: N802
-        return f"<p>{html.escape(self.tr(self.HELP), quote=False)}</p>{GLOSSARY}"
+        """The help QGIS renders beside the dialog: what the step does, each parameter, the
+        method's terms."""
+        rows = "".join(
+            f"<dt><b>{html.escape(p.description(), quote=False)}</b></dt>"
+            f"<dd>{html.escape(p.help(), quote=False)}</dd>"
+            for p in self.parameterDefinitions() if p.help())
+        return (f"<p>{html.escape(self.tr(self.HELP), quote=False)}</p>"
+                f"{f'<dl>{rows}</dl>' if rows else ''}{GLOSSARY}")
 
     def shortDescription(self):  # noqa: N802
         return self.tr(self.HELP.split(". ")[0].split(": ")[0].rstrip(".") + ".")
@@ -146,7 +152,9 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         return [*TAGS, *self.TAGS]
 
     def helpUrl(self):  # noqa: N802
-        return QUrl.fromLocalFile(str(README)).toString() + "#in-qgis"
+        # the help is the rendered text beside the dialog (shortHelpString): the project has no
+        # public documentation address yet, and a file:// URL opens no browser on many desktops
+        return ""
 
     def checkParameterValues(self, parameters, context):  # noqa: N802
         try:

@@ -10,6 +10,7 @@ from .base import FloodMeshAlgorithm, layer_file
 class ClassifyBreakpointsAlgorithm(FloodMeshAlgorithm):
     NAME = "classifybreakpoints"
     DISPLAY_NAME = "Classify breakpoints"
+    TAGS = ("breakpoints", "critical slope", "levee", "bank", "embankment", "crest", "toe")
     GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Breakpoints (1) where slope ≥ the critical slope S_crit (degrees, default 10), "
             "thinned: breakpoints whose eight neighbours are all breakpoints are dropped. With a "

@@ -14,6 +14,8 @@ from .styles import load_mesh
 class BuildMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "buildmesh"
     DISPLAY_NAME = "Build mesh"
+    TAGS = ("mesh", "triangle", "triangulation", "pslg", "quality mesh", "2dm", "sms",
+            "finite element")
     GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Meshes the DEM's valid area with Triangle (conforming Delaunay refinement), "
             "honouring the break lines: no angle below the minimum (degrees, default 25, at most "

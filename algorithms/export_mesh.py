@@ -18,6 +18,9 @@ FILE_FILTER = ";;".join(f"{label} (*{EXTENSIONS[f]})"
 class ExportMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "exportmesh"
     DISPLAY_NAME = "Export mesh"
+    TAGS = ("export", "2dm", "telemac", "selafin", "slf", "adcirc", "fort.14", "schism", "gr3",
+            "ugrid", "netcdf", "hec-ras", "tuflow", "basement", "d-flow", "solver",
+            "boundary conditions")
     GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Writes a FloodMesh mesh (SMS 2DM) in a solver's format: SMS 2DM with material ids "
             "and node strings (BASEMENT, TUFLOW FV, SRH-2D), TELEMAC Selafin with its boundary "
@@ -43,7 +46,7 @@ class ExportMeshAlgorithm(FloodMeshAlgorithm):
             self.OPEN_BOUNDARIES, self.tr("Open boundary lines (inflow, outflow sections)"),
             [VECTOR_LINE], optional=True))
         self.addParameter(distance(self, self.SNAP, "Snapping distance to open boundary lines",
-                                   1.0, self.INPUT, minimum=0.001))
+                                   1.0, minimum=0.001))
         self.addParameter(QgsProcessingParameterFeatureSource(
             self.REGIONS, self.tr("Region polygons (material ids)"),
             [VECTOR_POLYGON], optional=True))

@@ -15,6 +15,8 @@ POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
 class GridPointsAlgorithm(FloodMeshAlgorithm):
     NAME = "gridpoints"
     DISPLAY_NAME = "Grid LiDAR points"
+    TAGS = ("point cloud", "lidar", "las", "laz", "xyz", "dem", "tin", "interpolation",
+            "gridding", "raster")
     GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Grids LiDAR ground points (LAS/LAZ class 2 when classified, or XYZ/CSV) to a DEM of "
             "cell size d (m) by linear interpolation on their Delaunay TIN; cells are aligned to "
@@ -35,9 +37,9 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterString(
             self.CLASSES, self.tr("LAS classes to grid, e.g. 2,9 (empty: 2 when classified)"),
             optional=True))
-        self.addParameter(distance(self, self.CELL_SIZE, "Cell size d", 1.0, self.CRS))
+        self.addParameter(distance(self, self.CELL_SIZE, "Cell size d", 1.0))
         self.addParameter(distance(self, self.MAX_GAP, "Maximum gap bridged (empty: 10 cells)",
-                                   None, self.CRS, optional=True))
+                                   None, optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.HOLDOUT, self.tr("Fraction of points held out"),
             DOUBLE, 0.0, minValue=0.0, maxValue=1.0))

@@ -15,6 +15,7 @@ from .styles import load_mesh
 class RefineMeshAlgorithm(FloodMeshAlgorithm):
     NAME = "refinemesh"
     DISPLAY_NAME = "Refine mesh"
+    TAGS = ("refine", "mesh", "2dm", "accuracy", "point cloud", "lidar", "residuals")
     GROUP, GROUP_ID = "4 · Mesh", "mesh"
     HELP = ("Meshes the DEM with its break lines as Build mesh does, then refines in rounds: "
             "measured points whose residual exceeds the upper bound (m, default 0.25) go into "

@@ -14,6 +14,7 @@ METHODS = ("keep every n-th point", "Douglas-Peucker", "cubic smoothing spline")
 class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
     NAME = "simplifybreaklines"
     DISPLAY_NAME = "Simplify break lines"
+    TAGS = ("break lines", "douglas-peucker", "spline", "generalise", "levee", "embankment")
     GROUP, GROUP_ID = "3 · Break lines", "breaklines"
     HELP = ("Thins break-line vertices within a tolerance α·Δ (Δ = d/2): keep every n-th point "
             "(default 4, both ends always kept); Douglas–Peucker, which keeps every dropped "
@@ -34,9 +35,9 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
             self.KEEP_EVERY, self.tr("Keep every n-th point"),
             INTEGER, 4, minValue=1))
         self.addParameter(distance(self, self.TOLERANCE, "Tolerance for Douglas–Peucker or "
-                                   "spline", 0.9, self.INPUT))
+                                   "spline", 0.9))
         self.addParameter(distance(self, self.MIN_DISTANCE, "Minimum distance between lines",
-                                   0.5, self.INPUT))
+                                   0.5))
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Simplified break lines"), VECTOR_LINE))
 

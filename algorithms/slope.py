@@ -9,7 +9,7 @@ from .base import FloodMeshAlgorithm, distance, labels, layer_file
 class SlopeAlgorithm(FloodMeshAlgorithm):
     NAME = "slope"
     DISPLAY_NAME = "Slope for break lines"
-    TAGS = ("slope", "gradient", "horn", "laplacian", "log", "curvature")
+    TAGS = ("slope", "gradient", "horn", "laplacian", "log", "curvature", "dem")
     GROUP, GROUP_ID = "2 · Terrain analysis", "terrain"
     HELP = ("Slope of a DEM in degrees from its 3x3 neighbourhood: maximum slope (Shanholtz), "
             "one-over-distance (NOAA, default), Sharpnack & Akin (= Horn), constrained quadratic "
@@ -24,7 +24,7 @@ class SlopeAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterEnum(
             self.METHOD, self.tr("Method"), options=labels(BREAKPOINT_METHODS),
             defaultValue=BREAKPOINT_METHODS.index("one-over-distance")))
-        self.addParameter(distance(self, self.SIGMA, "LoG: Gaussian sigma", 1.0, self.INPUT))
+        self.addParameter(distance(self, self.SIGMA, "LoG: Gaussian sigma", 1.0))
         self.addParameter(QgsProcessingParameterEnum(
             self.LOG_KERNEL, self.tr("LoG: Laplacian kernel"), options=labels(LOG_KERNELS),
             defaultValue=0))

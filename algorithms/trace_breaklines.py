@@ -13,6 +13,7 @@ from .styles import style_breaklines, style_when_loaded
 class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
     NAME = "tracebreaklines"
     DISPLAY_NAME = "Trace break lines"
+    TAGS = ("break lines", "levee", "bank", "embankment", "crest", "toe", "structure lines")
     GROUP, GROUP_ID = "3 · Break lines", "breaklines"
     HELP = ("Joins breakpoints into break lines: only breakpoints, only grid neighbours; slope "
             "changes by less than S_crit (degrees) between consecutive points; no turn over 90° "
@@ -41,7 +42,7 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_POINTS, self.tr("Minimum points per line"),
             INTEGER, 3, minValue=2))
-        self.addParameter(distance(self, self.MIN_LENGTH, "Minimum line length", 0.0, self.DEM))
+        self.addParameter(distance(self, self.MIN_LENGTH, "Minimum line length", 0.0))
         self.addParameter(QgsProcessingParameterBoolean(
             self.JOIN, self.tr("Join pieces cut at staircase corners"), defaultValue=True))
         seed = QgsProcessingParameterNumber(self.SEED, self.tr("Random seed for ties"),

@@ -1,5 +1,7 @@
 """Build models/lidar_to_mesh_steps.model3: the seven step algorithms chained in the Graphical
-Modeler (run with the QGIS Python: QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/...)."""
+Modeler (run with the QGIS Python: QT_QPA_PLATFORM=offscreen .venv/bin/python scripts/...).
+Every mandatory child parameter is bound, to a model input, another step's output or the
+step's own default, so that the Modeler opens the model valid and it runs with its inputs."""
 import os
 import sys
 from pathlib import Path
@@ -13,6 +15,14 @@ from qgis.PyQt.QtCore import QPointF  # noqa: E402
 
 app = QgsApplication([], False)
 app.initQgis()
+sys.path.append("/usr/share/qgis/python/plugins")  # the Processing framework
+from processing.core.Processing import Processing  # noqa: E402
+
+from floodmesh.provider.provider import FloodMeshProvider  # noqa: E402
+
+Processing.initialize()
+provider = FloodMeshProvider()  # the steps' parameters come from the algorithms themselves
+QgsApplication.processingRegistry().addProvider(provider)
 
 model = QgsProcessingModelAlgorithm("LiDAR to mesh step by step", "Models", "models")
 model.setHelpContent({"ALG_DESC": "The FloodMesh chain as separate steps: grid, slope, "
@@ -79,6 +89,10 @@ for row, (child_id, algorithm, sources, outputs) in enumerate(steps):
     child.setPosition(QPointF(420, 60 + 90 * row))
     for name, source in sources.items():
         child.addParameterSources(name, source)
+    for definition in child.algorithm().parameterDefinitions():  # the rest at their defaults
+        if not (definition.name() in sources or definition.isDestination()
+                or definition.flags() & definition.FlagOptional):
+            child.addParameterSources(definition.name(), static(definition.defaultValue()))
     model_outputs = {}
     for output_id, (description, child_output_name) in outputs.items():
         out = QgsProcessingModelOutput(output_id, description)
@@ -90,6 +104,9 @@ for row, (child_id, algorithm, sources, outputs) in enumerate(steps):
     model.addChildAlgorithm(child)
 
 model.updateDestinationParameters()
+valid, issues = model.validate()
+if not valid:
+    sys.exit("the model is not valid: " + "; ".join(issues))
 target = Path(__file__).resolve().parent.parent / "models" / "lidar_to_mesh_steps.model3"
 if not model.toFile(str(target)):
     sys.exit(f"could not write {target}")
