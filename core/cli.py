@@ -262,16 +262,19 @@ def _summary(report: dict, out: Path) -> str:
 
 
 def cmd_run(args):
+    from .compiles import is_compile_message
     from .pipeline import run_pipeline
-    from .warmup import compile_note
 
-    note = compile_note()
-    if note:  # never a silent two-minute pause
-        print(f"floodmesh: {note}", file=sys.stderr)
     bar = ProgressBar("run")
+
+    def log(message):  # numba's first-run compile is said whether or not a bar is drawn
+        if is_compile_message(message):
+            print(f"floodmesh: {message}", file=sys.stderr)
+        else:
+            bar.log(message)
+
     try:
-        report = run_pipeline(_input(args), args.out, _options(args), progress=bar,
-                              log=bar.log)
+        report = run_pipeline(_input(args), args.out, _options(args), progress=bar, log=log)
     finally:
         bar.close()
     _print_notes(report["notes"])

@@ -16,6 +16,7 @@ from . import io
 from .accuracy import accuracy_statistics, residuals
 from .breaklines import trace_breaklines
 from .breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
+from .compiles import CompileWatch
 from .drainage import (CHANNEL_AREA, flow_area_for, flow_size, flow_spacing,
                        height_above_drainage)
 from .errors import Cancelled, FloodMeshError
@@ -23,6 +24,7 @@ from .export import export_formats
 from .grid import check_grid, grid_points_linear
 from .hydraulic_lines import lines_for_hydraulics
 from .hydraulics import hydraulic_checks
+from .layer_definition import QLR_NAME, write_layer_definition
 from .limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
 from .localise import fit_node_elevations, fit_window, localise_traced
 from .nearest import CellIndex, point_index
@@ -33,14 +35,16 @@ from .simplify import max_deviation, simplify_breaklines
 from .options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_fits
 from .outputs import check_output_folder, staged_folder
 from .refine import refine_mesh
-from .report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
+from .report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_pngs
+from .report_html import HTML_NAME, write_report_html
 from .sizing import far_field_size, finer
 from .slope import laplacian_of_gaussian, slope
 from .tiles import (TiledDem, expand_tiles, grid_point_tiles, is_tile_set, read_back,
                     read_dem_tiles, slope_file64, tile_kind, write_front_rasters)
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
-                "mesh.prj", "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG, "report.json")
+                "mesh.prj", "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG,
+                BREAKLINES_PNG, "report.json", HTML_NAME, QLR_NAME)
 
 
 class _Steps:
@@ -50,6 +54,7 @@ class _Steps:
         self.weights, self.total = weights, float(sum(weights.values()))
         self.progress, self.cancelled, self.log = progress, cancelled, log
         self.done, self.seconds, self.cpu_seconds = 0.0, {}, {}
+        self.compiles = CompileWatch(log)  # numba's first-run compile, said when it happens
 
     def run(self, name: str, func: Callable, *args, **kwargs):
         if self.cancelled and self.cancelled():
@@ -62,7 +67,8 @@ class _Steps:
             base = self.done
             kwargs["progress"] = lambda f: self.progress((base + f * weight) / self.total)
         try:
-            result = func(*args, **kwargs)
+            with self.compiles.watching():
+                result = func(*args, **kwargs)
         except SystemError as exc:
             # Ctrl-C during a compiled (numba) call reaches Python as a SystemError caused by
             # the KeyboardInterrupt, at times through a second SystemError: it is the interrupt
@@ -92,6 +98,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     assumed or repaired on the user's behalf, also listed in the report). Returns the report.
     """
     options.validate()
+    started = time.perf_counter()
     notes = []
 
     def note(message: str):
@@ -102,11 +109,6 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out = Path(out_dir)
     inputs = run_inputs(input_path, options)
     check_output_folder(out, inputs, run_outputs(options.formats))
-    if log:
-        from .warmup import compile_note
-
-        if compile_note():
-            log(compile_note())
     method, amount = options.simplification()
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
                "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
@@ -246,15 +248,13 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         if "gpkg" not in options.formats:
             io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
         io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
-        write_report_pngs(out, mesh.nodes, mesh.triangles, holdout.xyz, res)
-        if options.formats:
-            return export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
-                                  crs=dem.crs, breaklines=[line.coords for line in lines])
-        return []
-
-    # the folder is replaced as a whole: an interrupt leaves the old run's files or these
-    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage:
-        exported = steps.run("write", write_all, stage)
+        write_layer_definition(out, group=Path(out_dir).name, crs_wkt=dem.crs.to_wkt(),
+                               elevation_range=(mesh.nodes[:, 2].min(), mesh.nodes[:, 2].max()))
+        write_report_pngs(out, mesh.nodes, mesh.triangles, holdout.xyz, res, dem=dem,
+                          lines=[line.coords for line in lines])
+        exported = (export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
+                                   crs=dem.crs, breaklines=[line.coords for line in lines])
+                    if options.formats else [])
         report = {
             "input": (str(input_path) if isinstance(input_path, (str, Path))
                       else [str(p) for p in input_path]),
@@ -267,6 +267,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             "n_breakpoints": n_breakpoints,
             "n_breaklines_traced": len(traced),
             "n_breaklines": len(lines),
+            "breakline_length_m": float(sum(line.length for line in lines)),
             "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
             "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
             "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
@@ -282,7 +283,17 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
             "seconds": steps.seconds,
             "cpu_seconds": steps.cpu_seconds,
         }
+        # the page of report.json, written inside the step: "write" is its last timing
+        write_report_html(out, report, elapsed_s=time.perf_counter() - started)
+        return report
+
+    # the folder is replaced as a whole: an interrupt leaves the old run's files or these
+    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage:
+        report = steps.run("write", write_all, stage)
         io.write_json(stage / "report.json", report)
+    compiled = steps.compiles.summary()
+    if compiled and log:
+        log(compiled)
     return report
 
 

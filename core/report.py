@@ -1,5 +1,6 @@
-"""The report's pictures: a histogram of the holdout residuals and a map of them over the mesh,
-as PNG, drawn by matplotlib's Agg renderer and written atomically (``io.atomic_output``)."""
+"""The report's pictures: a histogram of the holdout residuals, a map of them over the mesh and
+the break lines over a hillshade of the DEM, as PNG, drawn by matplotlib's Agg renderer and
+written atomically (``io.atomic_output``). ``report_html`` gathers them into report.html."""
 from __future__ import annotations
 
 import contextlib
@@ -17,7 +18,12 @@ from .options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS
 
 HISTOGRAM_PNG = "residual_histogram.png"
 MAP_PNG = "residual_map.png"
+BREAKLINES_PNG = "breaklines_map.png"
 CLASS_LABELS = ("< 10 cm", "10–25 cm", "> 25 cm")
+# the break lines' QGIS style (algorithms/styles.py): a magenta line on a white halo
+BREAKLINE_COLOUR, HALO_COLOUR = "#b0006e", "#ffffff"
+# the longest side, in cells, of the hillshade drawn: a larger DEM is sampled every k-th cell
+HILLSHADE_CELLS = 1500
 
 
 def new_figure(width_in: float, height_in: float):
@@ -141,6 +147,83 @@ def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.n
     return save_png(fig, path)
 
 
+def hillshade(values: np.ndarray, cell_size: float, *, azimuth: float = 315.0,
+              altitude: float = 45.0) -> np.ndarray:
+    """The standard (Lambertian) hillshade, 0–1, of a north-up grid ``values`` (rows from north
+    to south, ``cell_size`` m): the cosine of the angle between the surface normal, from the
+    central-difference gradients, and the sun ``azimuth`` degrees clockwise from north,
+    ``altitude`` degrees above the horizon; 0 in the shadow, NaN where the cell or a neighbour
+    is NaN."""
+    values = np.asarray(values, float)
+    if min(values.shape) < 2:  # no gradient: a flat, fully lit surface
+        return np.where(np.isfinite(values), math.sin(math.radians(altitude)), np.nan)
+    down, east = np.gradient(values, cell_size)  # dz per metre southwards, eastwards
+    az, alt = math.radians(azimuth), math.radians(altitude)
+    # normal (-dz/dx, -dz/dy, 1) with y north (dz/dy = -down), sun (east, north, up)
+    shade = -east * (math.cos(alt) * math.sin(az))
+    shade += down * (math.cos(alt) * math.cos(az))
+    shade += math.sin(alt)
+    east *= east
+    down *= down
+    east += down
+    east += 1.0
+    shade /= np.sqrt(east, out=east)
+    shade[np.isnan(values)] = np.nan  # nodata (central differences skip the cell itself)
+    return np.clip(shade, 0.0, 1.0, out=shade)
+
+
+def sampled_hillshade(dem, max_cells: int = HILLSHADE_CELLS):
+    """(hillshade, extent): the hillshade of ``dem`` (a ``raster.Grid``) sampled every k-th cell
+    so that its longer side is at most ``max_cells``, and its (left, right, bottom, top) in map
+    units, for ``imshow``. Only the sample is copied: a large DEM costs no more memory."""
+    rows, cols = dem.shape
+    step = max(1, math.ceil(max(rows, cols) / max_cells))
+    sample = dem.values[::step, ::step]
+    t = dem.transform
+    left, top = t.c, t.f
+    right = left + sample.shape[1] * step * t.a
+    bottom = top + sample.shape[0] * step * t.e
+    return hillshade(sample, dem.cell_size * step), (left, right, bottom, top)
+
+
+def write_breaklines_map(path, dem, lines) -> Path:
+    """Map of the break lines ``lines`` ((k, 2+) coordinate arrays, m) in magenta on a white
+    halo (their QGIS style) over a grey hillshade of ``dem`` (a ``raster.Grid``; sun from the
+    north-west, 315°, 45° high; nodata white); equal aspect, easting and northing in metres."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+
+    shade, (left, right, bottom, top) = sampled_hillshade(dem)
+    span = np.maximum([right - left, top - bottom], 1e-9)
+    scale = 9.0 / max(span)
+    fig = new_figure(max(3.0, span[0] * scale) + 1.8, max(3.0, span[1] * scale) + 1.2)
+    ax = fig.add_subplot()
+    ax.imshow(np.ma.masked_invalid(shade), cmap="gray", vmin=0.0, vmax=1.0,
+              extent=(left, right, bottom, top), origin="upper", interpolation="nearest",
+              zorder=0)
+    del shade
+    segments = [np.asarray(line, float)[:, :2] for line in lines if len(line) >= 2]
+    length = sum(float(np.hypot(*np.diff(s, axis=0).T).sum()) for s in segments)
+    if segments:
+        ax.add_collection(LineCollection(segments, colors=HALO_COLOUR, linewidths=2.6,
+                                         capstyle="round", joinstyle="round", zorder=2))
+        ax.add_collection(LineCollection(segments, colors=BREAKLINE_COLOUR, linewidths=1.2,
+                                         capstyle="round", joinstyle="round", zorder=3))
+        ax.legend(handles=[Line2D([], [], color=BREAKLINE_COLOUR, linewidth=1.2,
+                                  label=f"break lines ({len(segments)})")],
+                  loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    ax.set_xlim(left, right)
+    ax.set_ylim(bottom, top)
+    ax.set_aspect("equal")
+    ax.ticklabel_format(useOffset=False, style="plain")
+    ax.set_xlabel("easting (m)")
+    ax.set_ylabel("northing (m)")
+    ax.set_title(f"{len(segments)} break lines, {length:,.0f} m, over the DEM's hillshade "
+                 "(sun 315°, 45°)", fontsize="medium")
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
 # signals whose Python handlers raise (Ctrl-C's KeyboardInterrupt, a caller's own alarm or term)
 DEFERRED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGALRM, signal.SIGHUP)
 
@@ -172,10 +255,15 @@ def signals_deferred():
 
 
 def write_report_pngs(folder, nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray,
-                      res: np.ndarray) -> list[Path]:
-    """``residual_histogram.png`` and ``residual_map.png`` in ``folder``; returns their paths.
-    An interrupt waits until both are drawn (``signals_deferred``)."""
+                      res: np.ndarray, *, dem=None, lines=None) -> list[Path]:
+    """``residual_histogram.png`` and ``residual_map.png`` in ``folder``, and with the ``dem``
+    (a ``raster.Grid``) ``breaklines_map.png`` of ``lines`` (coordinate arrays) over its
+    hillshade; returns their paths. An interrupt waits until all are drawn
+    (``signals_deferred``)."""
     folder = Path(folder)
     with signals_deferred():
-        return [write_residual_histogram(folder / HISTOGRAM_PNG, res),
-                write_residual_map(folder / MAP_PNG, nodes, triangles, xyz, res)]
+        paths = [write_residual_histogram(folder / HISTOGRAM_PNG, res),
+                 write_residual_map(folder / MAP_PNG, nodes, triangles, xyz, res)]
+        if dem is not None:
+            paths.append(write_breaklines_map(folder / BREAKLINES_PNG, dem, lines or []))
+        return paths

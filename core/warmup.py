@@ -4,8 +4,10 @@ numba compiles each kernel on its first call (about 2 minutes for all of them on
 machine) and caches the machine code: in ``__pycache__`` beside the source when that folder is
 writable (a QGIS profile's plugin folder, a git checkout), else in the user's cache folder
 (``~/.cache/numba``-style, per user), or in ``NUMBA_CACHE_DIR`` when set. ``make setup`` runs
-``python -m floodmesh.core.warmup``, which fills the cache on a tiny input; a run that finds the
-cache empty (a fresh plugin install, another user) says so before it starts.
+``python -m floodmesh.core.warmup``, which fills the cache on a tiny input. A run that must
+compile (a fresh plugin install, another user) says so when numba really starts compiling, not
+when it merely loads a kernel from the cache, and ends with the time it took
+(``compiles.CompileWatch``).
 """
 from __future__ import annotations
 
@@ -14,8 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-COMPILE_NOTE = ("compiling FloodMesh's numba kernels: first run only, about 2 minutes; later "
-                "runs load them from {where}")
+from .compiles import COMPILE_NOTE
 
 
 # Kernels called from Python (the others compile into them and keep no cache of their own).

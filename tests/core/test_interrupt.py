@@ -5,6 +5,7 @@ a truncated file; what a killed run leaves beside it is removed by the next run;
 inputs and seed give byte-identical outputs, so 'complete' can be checked byte for byte."""
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -30,10 +31,16 @@ RNG = np.random.default_rng(20261123)
 
 
 def _contents(folder: Path) -> dict:
-    """Every file in the folder: name → bytes (report.json without its timings)."""
+    """Every file in the folder: name → bytes (report.json without its timings, report.html
+    without its lines of the clock, the run's date and duration, run.qlr without its group's
+    name, the folder's)."""
     out = {}
     for path in sorted(folder.iterdir()):
         data = path.read_bytes()
+        if path.name == "report.html":
+            data = re.sub(rb'(?m)^.*class="[^"]*\brun-time\b[^"]*".*\n', b"", data)
+        if path.name == "run.qlr":
+            data = re.sub(rb'(<layer-tree-group name=")[^"]+"', rb'\1RUN"', data)
         if path.name == "report.json":
             report = json.loads(data)
             report.pop("seconds")

@@ -54,9 +54,9 @@ def demo_run(demo_points_file, tmp_path_factory):
 
 
 def test_all_outputs_written(demo_run):
-    """All eleven OUTPUT_FILES exist and no temporary (.partial, hidden) file is left behind."""
+    """All fourteen OUTPUT_FILES exist and no temporary (.partial, hidden) file is left behind."""
     out, _, _, _ = demo_run
-    assert len(OUTPUT_FILES) == 11
+    assert len(OUTPUT_FILES) == 14
     names = os.listdir(out)
     assert set(OUTPUT_FILES) <= set(names)
     assert [n for n in names if "partial" in n or n.startswith(".")] == []

@@ -1,5 +1,10 @@
 """The report's pictures (floodmesh.core.report): valid PNGs, class colours where residuals of
-each class are, NaN residuals, atomic writing."""
+each class are, NaN residuals, atomic writing; the hillshade and the break lines over it, and
+report.html (floodmesh.core.report_html) of a run: its figures those of report.json, its images
+embedded PNGs, its text escaped, the case without a holdout."""
+import json
+from html.parser import HTMLParser
+
 import numpy as np
 import pytest
 from matplotlib import colors
@@ -174,3 +179,239 @@ def test_an_interrupt_while_drawing_waits_until_the_pictures_are_written(tmp_pat
         signal.signal(signal.SIGALRM, previous)
     assert raised == [signal.SIGALRM]
     assert all(imread(tmp_path / name).ndim == 3 for name in (report.HISTOGRAM_PNG, report.MAP_PNG))
+
+
+# --- the break lines over a hillshade, and report.html ---------------------------------------
+
+def test_hillshade_lights_the_slopes_facing_the_sun():
+    """Sun from the north-west (315°), 45° high: flat ground is lit sin 45°, a slope facing
+    north-west brighter, one facing south-east darker, a steep one facing away black. Rows run
+    from north to south, so z rising with the row index falls to the north."""
+    from floodmesh.core.report import hillshade
+
+    rows, cols = np.mgrid[0:20, 0:20].astype(float)
+    flat = hillshade(np.zeros((20, 20)), 1.0)
+    assert np.allclose(flat, np.sin(np.radians(45)))
+    # z rising to the south-east (east and down the rows): the slope faces north-west
+    facing_nw = hillshade(0.3 * (cols + rows), 1.0)
+    facing_se = hillshade(-0.3 * (cols + rows), 1.0)
+    assert facing_nw.min() > flat.max() + 0.1 and facing_se.max() < flat.min() - 0.1
+    assert hillshade(-5.0 * (cols + rows), 1.0).max() == 0.0
+    # the cell size scales the gradient: 2 m cells halve the slope
+    assert np.allclose(hillshade(0.6 * (cols + rows), 2.0), facing_nw)
+    # NaN stays NaN (and its neighbours, which have no gradient); tiny grids work
+    holed = 0.3 * (cols + rows)
+    holed[5, 5] = np.nan
+    shade = hillshade(holed, 1.0)
+    assert np.isnan(shade[4:7, 5]).all() and np.isnan(shade[5, 4:7]).all()
+    assert np.isfinite(shade[0, 0]) and np.isfinite(shade[4, 4])
+    assert hillshade(np.array([[1.0, 2.0]]), 1.0).shape == (1, 2)
+
+
+def test_hillshade_is_sampled_for_a_large_dem():
+    """A DEM of 4000 x 3000 cells is drawn from every 3rd cell (at most HILLSHADE_CELLS on the
+    long side) over the same extent."""
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.raster import Grid
+    from floodmesh.core.report import HILLSHADE_CELLS, sampled_hillshade
+
+    values = np.zeros((3000, 4000), np.float32)
+    dem = Grid(values, Affine(0.5, 0, 1000.0, 0, -0.5, 2000.0), CRS.from_epsg(25832))
+    shade, extent = sampled_hillshade(dem)
+    assert max(shade.shape) <= HILLSHADE_CELLS and shade.shape == (1000, 1334)
+    assert extent[0] == 1000.0 and extent[3] == 2000.0
+    assert extent[1] == pytest.approx(3001.0) and extent[2] == pytest.approx(500.0)
+
+
+class _Page(HTMLParser):
+    """What a test reads of report.html: the text of each element with an id, the cells of each
+    table row with an id, the images' sources, every tag and every URL attribute."""
+
+    def __init__(self, text):
+        super().__init__(convert_charrefs=True)
+        self.ids, self.cells, self.images, self.tags, self.urls = {}, {}, [], [], []
+        self._open = []  # (tag, id) of the elements open
+        self._row = None
+        self.feed(text)
+        self.close()
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        self.tags.append(tag)
+        for name in ("src", "href", "action", "background"):
+            if name in attrs:
+                self.urls.append(attrs[name])
+        if tag == "img":
+            self.images.append(attrs.get("src", ""))
+        if tag in ("img", "meta", "br", "hr", "link"):
+            return
+        if tag == "tr":
+            self._row = attrs.get("id")
+            if self._row:
+                self.cells[self._row] = []
+        if tag == "td" and self._row:
+            self.cells[self._row].append("")
+        if attrs.get("id"):
+            self.ids[attrs["id"]] = ""
+        self._open.append((tag, attrs.get("id")))
+
+    def handle_endtag(self, tag):
+        while self._open:
+            if self._open.pop()[0] == tag:
+                break
+        if tag == "tr":
+            self._row = None
+
+    def handle_data(self, data):
+        for _, element in self._open:
+            if element:
+                self.ids[element] += data
+        if self._row and self._open and self._open[-1][0] == "td":
+            self.cells[self._row][-1] += data
+
+
+def _png_images(page):
+    """The page's embedded images, decoded, checked as PNG: a list of (rows, cols, bands)
+    arrays."""
+    import base64
+    import io as stdio
+
+    images = []
+    for src in page.images:
+        prefix = "data:image/png;base64,"
+        assert src.startswith(prefix), src[:40]
+        data = base64.b64decode(src[len(prefix):], validate=True)
+        assert data[:8] == b"\x89PNG\r\n\x1a\n"
+        images.append(imread(stdio.BytesIO(data), format="png"))
+    return images
+
+
+@pytest.fixture(scope="module")
+def html_run(demo_points_file, tmp_path_factory):
+    """One run on the small demo floodplain (2 points/m², 1 % held out)."""
+    from floodmesh.core.pipeline import RunOptions, run_pipeline
+
+    out = tmp_path_factory.mktemp("html")
+    report_dict = run_pipeline(demo_points_file, out, RunOptions(holdout=0.01))
+    return out, report_dict
+
+
+def test_run_writes_report_html_listed_in_report_json(html_run):
+    out, report_dict = html_run
+    written = json.loads((out / "report.json").read_text())
+    for name in ("report.html", report.BREAKLINES_PNG):
+        assert name in written["files"] and name in report_dict["files"]
+        assert (out / name).stat().st_size > 0
+    assert written["breakline_length_m"] > 100 * written["n_breaklines"] > 0
+
+
+def test_report_html_figures_are_those_of_report_json(html_run):
+    """The accuracy table holds report.json's numbers, formatted; the FEMA/NSSDA verdict and
+    the bound it tested are there; mesh and break-line figures too."""
+    out, _ = html_run
+    written = json.loads((out / "report.json").read_text())
+    page = _Page((out / "report.html").read_text(encoding="utf-8"))
+    assert written["n_assessed"] > 100
+    assert page.cells["rmse"] == [f"{100 * written['rmse_m']:.2f} cm"]
+    assert page.cells["accuracy-95"] == [f"{100 * 1.96 * written['rmse_m']:.2f} cm"]
+    assert page.cells["max-abs"] == [f"{100 * written['max_abs_residual_m']:.2f} cm"]
+    assert page.cells["n-holdout"] == [f"{written['n_holdout']:,}"]
+    assert page.cells["skew"] == [f"{written['skew']:.2f}"]
+    assert page.cells["vertex-bound"][0].startswith(f"{written['vertex_error_bound_m']:.3f} m")
+    shares = [page.cells[f"class-{k}"] for k in range(3)]
+    assert sum(int(points.replace(",", "")) for points, _ in shares) == written["n_assessed"]
+    assert shares[0][1] == f"{100 * written['classes']['<10 cm']:.1f} %"
+    verdict = page.ids["nssda"]
+    assert ("PASS" if written["nssda_pass"] else "FAIL") in verdict
+    assert f"{100 * written['nssda_threshold_m']:.2f} cm" in verdict
+    assert f"n = {written['n_assessed']:,}" in verdict and "2.326" in verdict
+    assert page.cells["nodes"] == [f"{written['nodes']:,}"]
+    assert page.cells["min-angle"][0].startswith(f"{written['min_angle_deg']:.1f}°")
+    assert page.cells["cfl"][0].startswith(f"{written['hydraulics']['cfl_time_step_s']:.3g} s")
+    assert page.cells["n-breaklines"] == [str(written["n_breaklines"])]
+    assert page.cells["breakline-length"] == [f"{written['breakline_length_m']:,.1f} m"]
+    assert page.ids["title"] == "FloodMesh run: floodplain.laz"
+
+
+def test_report_html_embeds_the_three_pngs_and_nothing_external(html_run):
+    out, _ = html_run
+    text = (out / "report.html").read_text(encoding="utf-8")
+    page = _Page(text)
+    images = _png_images(page)
+    assert len(images) == 3 and all(i.ndim == 3 and i.shape[0] > 200 for i in images)
+    # the very files of the run folder
+    import base64
+
+    for name in (report.HISTOGRAM_PNG, report.MAP_PNG, report.BREAKLINES_PNG):
+        uri = "data:image/png;base64," + base64.b64encode((out / name).read_bytes()).decode()
+        assert uri in page.images, name
+    assert not {"script", "link", "iframe", "object", "embed"} & set(page.tags)
+    assert all(url.startswith("data:") for url in page.urls)
+    assert "<script" not in text.lower() and "javascript:" not in text.lower()
+    assert 'charset="utf-8"' in text
+
+
+def test_breaklines_map_draws_magenta_lines_on_a_hillshade(html_run):
+    out, _ = html_run
+    image = imread(out / report.BREAKLINES_PNG)
+    assert colour_pixels(image, report.BREAKLINE_COLOUR, tol=4 / 255) > 500
+    assert colour_pixels(image, report.HALO_COLOUR) > 500
+    grey = image[:, :, :3]
+    grey = grey[(grey.max(axis=2) - grey.min(axis=2) < 0.01)]
+    assert len(np.unique((grey * 255).round(), axis=0)) > 50  # the hillshade's shades
+
+
+def test_report_html_escapes_text(html_run):
+    """Notes, input names and options are text, never markup."""
+    from floodmesh.core.report_html import report_html
+
+    _, report_dict = html_run
+    hostile = dict(report_dict, input="/data/<b>reach</b> & co.laz",
+                   notes=['a note with <script>alert("x")</script> & <img src=x>'],
+                   options=dict(report_dict["options"], crs="<i>EPSG</i>"))
+    text = report_html(hostile, {})
+    page = _Page(text)
+    assert not {"script", "b", "i"} & set(page.tags) and page.images == []
+    assert "&lt;script&gt;" in text and "&lt;b&gt;reach&lt;/b&gt; &amp; co.laz" in text
+    assert '<script>alert("x")</script>' in page.ids["notes"]
+
+
+def test_report_html_verdicts(html_run):
+    """A failed test says FAIL, too few check points say the test was not made."""
+    from floodmesh.core.report_html import report_html
+
+    _, report_dict = html_run
+    failed = _Page(report_html(dict(report_dict, nssda_pass=False), {}))
+    assert "FAIL" in failed.ids["nssda"] and "PASS" not in failed.ids["nssda"]
+    few = _Page(report_html(dict(report_dict, n_assessed=5, nssda_pass=None,
+                                 nssda_threshold_m=None), {}))
+    assert "not tested" in few.ids["nssda"]
+
+
+def test_report_html_without_holdout(tmp_path):
+    """Holdout 0: a sentence instead of the accuracy figures; the mesh, break lines and their
+    map are still there, and the page is listed."""
+    from pyproj import CRS
+
+    from floodmesh.core import io
+    from floodmesh.core.pipeline import RunOptions, run_pipeline
+    from floodmesh.core.points import PointCloud
+
+    from ..conftest import plane_points
+
+    xyz = plane_points(size=60.0, density=3.0, seed=4)
+    xyz[:, 2] += np.where(xyz[:, 0] - xyz[:, 0].min() > 30, 2.0, 0.0)  # a 2 m bank
+    source = tmp_path / "points.laz"
+    io.write_points_las(source, PointCloud(xyz, CRS.from_epsg(25832)))
+    out = tmp_path / "run"
+    written = run_pipeline(source, out, RunOptions(holdout=0.0, cell_size=2.0, max_area=80.0))
+    assert written["n_holdout"] == 0 and written["rmse_m"] is None
+    assert "report.html" in json.loads((out / "report.json").read_text())["files"]
+    page = _Page((out / "report.html").read_text(encoding="utf-8"))
+    assert "not assessed" in page.ids["no-assessment"]
+    assert "rmse" not in page.cells and "nssda" not in page.ids
+    assert page.cells["nodes"] == [f"{written['nodes']:,}"]
+    assert len(_png_images(page)) == 2  # the mesh map and the break lines; no histogram
+    assert "breaklines_map" in page.ids and "residual_histogram" not in page.ids
