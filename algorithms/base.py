@@ -85,7 +85,8 @@ PARAMETER_HELP = {
     "REGIONS": "Polygons whose triangles (by centroid) get a material id.",
     "DATUM_OFFSET": "Added to every elevation before writing (m).",
     "OUTPUT_FOLDER": "Folder for dem.tif, slope.tif, breakpoints.tif, breaklines.gpkg, "
-                     "mesh.2dm (+ mesh.prj), mesh.gpkg, residuals.gpkg and report.json.",
+                     "mesh.2dm (+ mesh.prj), mesh.gpkg, residuals.gpkg, the report's "
+                     "pictures (PNG), report.json and report.html.",
 }
 
 

@@ -2,6 +2,7 @@
 from pathlib import Path
 
 from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingException, QgsProcessingOutputFile,
+                       QgsProcessingOutputHtml,
                        QgsProcessingParameterBoolean,
                        QgsProcessingOutputNumber, QgsProcessingOutputVectorLayer,
                        QgsProcessingParameterCrs, QgsProcessingParameterEnum,
@@ -42,8 +43,10 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             "angle (degrees) and maximum area (m²), and the residuals of held-out points. "
             "Defaults are the method's reference case: 1 m grid, one-over-distance slope, "
             "S_crit 10°, every 4th point, 25°, 100 m². Writes dem.tif, slope.tif, "
-            "breakpoints.tif, breaklines.gpkg, mesh.2dm, mesh.gpkg, residuals.gpkg and "
-            "report.json into the output folder, and loads the break lines and the mesh. "
+            "breakpoints.tif, breaklines.gpkg, mesh.2dm, mesh.gpkg, residuals.gpkg, "
+            "report.json, report.html (shown in the Results Viewer) and run.qlr (the run's "
+            "layers, styled, for QGIS without the plugin) into the output folder, and loads "
+            "the break lines, residuals and mesh in one group named after the folder. "
             "Solver formats chosen are written beside them as mesh.<ext> (the whole boundary "
             "a solid wall; Export mesh sets open boundaries and regions).")
     INPUT = "INPUT"
@@ -66,7 +69,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     OUTPUT_FOLDER = "OUTPUT_FOLDER"
     BREAKLINES = "BREAKLINES"
     MESH = "MESH"
-    REPORT = "REPORT"
+    REPORT, REPORT_HTML = "REPORT", "REPORT_HTML"
     NODES = "NODES"
     TRIANGLES = "TRIANGLES"
     RMSE = "RMSE"
@@ -157,6 +160,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.BREAKLINES, self.tr("Break lines"), VECTOR_LINE))
         self.addOutput(QgsProcessingOutputFile(self.MESH, self.tr("Mesh (SMS 2DM)")))
         self.addOutput(QgsProcessingOutputFile(self.REPORT, self.tr("Report (JSON)")))
+        # an HTML output is what QGIS's Results Viewer lists (as its statistics algorithms do)
+        self.addOutput(QgsProcessingOutputHtml(self.REPORT_HTML, self.tr("Report")))
         self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Mesh nodes")))
         self.addOutput(QgsProcessingOutputNumber(self.TRIANGLES, self.tr("Mesh triangles")))
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("Holdout RMSE (m)")))
@@ -223,5 +228,6 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             (QgsVectorLayer(breaklines, "Break lines", "ogr"), style_breaklines,
              self.BREAKLINES)), group=run_group_name(out, source))
         return {self.OUTPUT_FOLDER: str(out), self.BREAKLINES: breaklines, self.MESH: mesh,
-                self.REPORT: str(out / "report.json"), self.NODES: report["nodes"],
+                self.REPORT: str(out / "report.json"),
+                self.REPORT_HTML: str(out / "report.html"), self.NODES: report["nodes"],
                 self.TRIANGLES: report["triangles"], self.RMSE: report["rmse_m"]}

@@ -8,11 +8,12 @@ from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSyste
                        QgsSymbol)
 from qgis.PyQt.QtGui import QColor
 
-from ..core.options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS as COLOURS
+from ..core.options import (BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR,
+                            OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS, RESIDUAL_CLASS_LABELS)
 from .compat import LINE_GEOMETRY
 
-RESIDUAL_CLASSES = ((0, "< 10 cm", COLOURS[0]), (1, "10–25 cm", COLOURS[1]),
-                    (2, "> 25 cm", COLOURS[2]), (-1, "outside the mesh", OUTSIDE_MESH_COLOUR))
+RESIDUAL_CLASSES = tuple(zip((0, 1, 2, -1), RESIDUAL_CLASS_LABELS,
+                             (*RESIDUAL_CLASS_COLOURS, OUTSIDE_MESH_COLOUR)))
 
 
 def _categorised(layer, field, categories):
@@ -22,9 +23,6 @@ def _categorised(layer, field, categories):
         symbol.setColor(QColor(colour))
         renderer.addCategory(QgsRendererCategory(value, symbol, label))
     layer.setRenderer(renderer)
-
-
-BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR = "#b0006e", "#ffffff", "#404040"
 
 
 def style_breaklines(layer):
@@ -83,6 +81,9 @@ class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):
         layer.triggerRepaint()
 
 
+RUN_GROUP = "floodmesh/run"  # the custom property that marks a run's group
+
+
 def _into_group(project, layer, run: dict) -> None:
     """Move ``layer``'s tree node into the run's group (made where the run's first layer was
     put), at its place in rank order. The node is cloned in before the original is taken out:
@@ -93,8 +94,12 @@ def _into_group(project, layer, run: dict) -> None:
         return
     group = run.get("group")
     if group is None or root.findGroup(run["name"]) is not group:
-        parent = node.parent()
-        group = run["group"] = parent.insertGroup(parent.children().index(node), run["name"])
+        parent, below = node.parent(), node
+        # QGIS puts new layers into the selected group: not into an earlier run's group
+        while parent.customProperty(RUN_GROUP) and parent.parent() is not None:
+            parent, below = parent.parent(), parent
+        group = run["group"] = parent.insertGroup(parent.children().index(below), run["name"])
+        group.setCustomProperty(RUN_GROUP, True)
     rank = _rank(layer)
     position = sum(1 for child in group.children()
                    if child.layer() is not None and _rank(child.layer()) <= rank)

@@ -62,6 +62,22 @@ try:
     canvas = iface.mapCanvas()
     out["scale"] = canvas.scale()
     out["canvas_crs"] = canvas.mapSettings().destinationCrs().authid()
+    # the same from the algorithm's dialog, Run pressed: the layers, and the report in the
+    # Results Viewer
+    from processing.core.ProcessingResults import resultsList
+    dialog = processing.createAlgorithmDialog("floodmesh:lidartomesh", {
+        "INPUT": os.environ["FM_INPUT"], "OUTPUT_FOLDER": os.environ["FM_OUTPUT"] + " dialog"})
+    dialog.show()
+    settle()
+    dialog.runAlgorithm()
+    for _ in range(900):
+        if dialog.results():
+            break
+        QTest.qWait(200)
+    settle()
+    out["dialog_results"] = sorted(dialog.results() or {})
+    out["results_viewer"] = [r.filename for r in resultsList.getResults()]
+    out["tree_after_dialog"] = tree(project.layerTreeRoot())
     # the mesh opened by hand (Add Mesh Layer; the browser does the same)
     by_hand = iface.addMeshLayer(os.path.join(os.environ["FM_OUTPUT"], "mesh.2dm"), "by hand",
                                  "mdal")
@@ -171,6 +187,16 @@ def test_lidar_to_mesh_results_stay_in_one_group_in_order(desktop):
     assert all(row["valid"] and row["crs"] == "EPSG:2949" for row in group["children"]), group
     assert {"Break lines", "Residuals", "Mesh"} <= set(desktop["project_layers"])
     assert desktop["edges"]
+
+
+def test_the_dialog_loads_its_run_and_shows_the_report_in_the_results_viewer(desktop):
+    groups = {row["group"]: row["children"] for row in desktop["tree_after_dialog"]
+              if "group" in row}
+    assert set(groups) == {"Topography run", "Topography run dialog"}, desktop["tree_after_dialog"]
+    assert [row["layer"] for row in groups["Topography run dialog"]] == [
+        "Break lines", "Residuals", "Mesh"]
+    assert [path for path in desktop["results_viewer"]
+            if path.endswith("Topography run dialog/report.html")], desktop["results_viewer"]
 
 
 def test_the_map_shows_the_run(desktop):
