@@ -127,7 +127,7 @@ def synthetic_dem_file(path, size, *, noise=0.02, strip=500):
     strips in FloodMesh's own GeoTIFF format, as ``floodmesh grid`` writes it."""
     import rasterio
 
-    from floodmesh.core.blocks import raster_profile
+    from floodmesh.core.io import raster_profile
 
     rng = np.random.default_rng(0)
     transform = Affine(1.0, 0, 400000, 0, -1.0, 5600000 + size)
@@ -238,7 +238,7 @@ def bench_codec(size, repeat=3):
 
     import rasterio
 
-    from floodmesh.core.blocks import TILE
+    from floodmesh.core.io import TILE
     from floodmesh.core.breakpoints import classify_breakpoints
     from floodmesh.core.slope import slope
 

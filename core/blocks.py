@@ -20,21 +20,10 @@ import numpy as np
 DEFAULT_BLOCK_ROWS = 2048
 # File to file: strips of this many rows (a multiple of the tile size), the full width.
 STREAM_BLOCK_ROWS = 512
-TILE = 256
 # GDAL's block cache (MB) while streaming: a strip of tiles in and out, not 5 % of the RAM.
 GDAL_CACHE_MB = 128
 FLOAT_NODATA = -9999.0
 BYTE_NODATA = 255
-# Codecs chosen by measurement (benchmarks/run.py --only codec, and slope file to file on a
-# 6000² DEM): float rasters (DEM, slope, LoG) are written uncompressed, as gdaldem writes them:
-# on 16 M float32 cells ZSTD level 1 costs 0.19 s of CPU per 64 MB and saves only 17-20 % (the
-# cells' low bits are noise), 30 % more CPU for the whole slope step; its floating-point
-# predictor saves another 10 % at twice the CPU; LZW and DEFLATE are slower still. Integer
-# rasters (breakpoints: mostly 0) take ZSTD level 1, which shrinks them 8x and more for almost
-# nothing. GDAL's own worker threads (NUM_THREADS, GDAL_NUM_THREADS) are not used: GDAL 3.6's
-# multi-threaded decoding hung in RasterIO (CPLJobQueue) in the tests.
-CREATION_OPTIONS = dict(tiled=True, blockxsize=TILE, blockysize=TILE, bigtiff="if_safer")
-INTEGER_COMPRESSION = dict(compress="zstd", zstd_level=1)
 
 
 Window = tuple  # (row_off, col_off, height, width)
@@ -136,27 +125,13 @@ def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *,
     return out[0] if out else np.empty(values.shape, dtype=dtype or values.dtype)
 
 
-def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
-    """A tiled GeoTIFF profile, compressed for integer rasters (``CREATION_OPTIONS``; rasters
-    under a tile stay striped); ``crs`` a pyproj CRS or WKT."""
-    wkt = crs if isinstance(crs, str) else crs.to_wkt()
-    profile = dict(driver="GTiff", height=shape[0], width=shape[1], count=1, dtype=dtype,
-                   crs=wkt, transform=transform, nodata=nodata, **CREATION_OPTIONS)
-    if np.dtype(dtype).kind != "f":
-        profile.update(INTEGER_COMPRESSION)
-    if shape[0] < TILE or shape[1] < TILE:
-        for key in ("tiled", "blockxsize", "blockysize"):
-            profile.pop(key)
-    return profile
-
-
 def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, halo: int,
                dtype="float32", nodata=None, windows: Iterable[Window] | None = None,
                block_rows: int = STREAM_BLOCK_ROWS, input_dtype=np.float32, crs=None,
                progress: Callable[[float], None] | None = None,
                cancelled: Callable[[], bool] | None = None) -> None:
     """Stream ``func`` (a kernel as for ``map_overlap``) from band 1 of ``src_path`` to a tiled
-    GeoTIFF ``dst_path`` (``raster_profile``) on the same grid, window by window.
+    GeoTIFF ``dst_path`` (``io.raster_profile``) on the same grid, window by window.
 
     The kernel receives ``input_dtype`` (float32) blocks with NaN for nodata, ±inf and beyond the
     raster, and returns the interior in any dtype; NaN in a float result is written as
@@ -172,7 +147,7 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
     import rasterio
     from rasterio.windows import Window
 
-    from .io import _require_file, atomic_output, no_valid_cells, raster_crs_wkt
+    from .io import _require_file, atomic_output, no_valid_cells, raster_crs_wkt, raster_profile
 
     if nodata is None:
         nodata = FLOAT_NODATA if np.dtype(dtype).kind == "f" else BYTE_NODATA

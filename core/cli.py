@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+from .console import ProgressBar, print_note, print_notes
 from .errors import Cancelled, FloodMeshError
 from .options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
                       NODE_ELEVATIONS, RunOptions, parse_formats)
@@ -24,35 +25,6 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"floodmesh: error: {message} (see {self.prog} --help)\n")
-
-
-class ProgressBar:
-    """A one-line progress bar on stderr when it is a terminal; silent otherwise."""
-
-    def __init__(self, label: str, stream=None):
-        # sys.stderr when called, not when imported: it may have been replaced since
-        self.label, self.stream = label, stream or sys.stderr
-        self.enabled = self.stream.isatty()
-        self.last = -1
-
-    def __call__(self, fraction: float):
-        if not self.enabled:
-            return
-        percent = int(100 * min(max(fraction, 0.0), 1.0))
-        if percent != self.last:
-            self.last = percent
-            bar = "#" * (percent // 4)
-            self.stream.write(f"\r{self.label:<12} [{bar:<25}] {percent:3d}%")
-            self.stream.flush()
-
-    def log(self, message: str):
-        if self.enabled:
-            self.label = message.rstrip(".")
-            self(max(self.last, 0) / 100)
-
-    def close(self):
-        if self.enabled and self.last >= 0:
-            self.stream.write("\n")
 
 
 def _positive(kind):
@@ -262,22 +234,15 @@ def _summary(report: dict, out: Path) -> str:
 
 
 def cmd_run(args):
-    from .compiles import is_compile_message
     from .pipeline import run_pipeline
 
     bar = ProgressBar("run")
-
-    def log(message):  # numba's first-run compile is said whether or not a bar is drawn
-        if is_compile_message(message):
-            print(f"floodmesh: {message}", file=sys.stderr)
-        else:
-            bar.log(message)
-
     try:
-        report = run_pipeline(_input(args), args.out, _options(args), progress=bar, log=log)
+        report = run_pipeline(_input(args), args.out, _options(args), progress=bar,
+                              log=bar.log)
     finally:
         bar.close()
-    _print_notes(report["notes"])
+    print_notes(report["notes"])
     print(_summary(report, Path(args.out)))
 
 
@@ -303,16 +268,6 @@ def cmd_series(args):
               f"{100 * row['share_over_25cm']:>7.1f}%")
     print(f"series.csv, series.json, series.png and {len(result['rows'])} meshes written to "
           f"{args.out}/")
-
-
-def _print_notes(notes):
-    """What FloodMesh assumed or repaired on the user's behalf, one line each on stderr."""
-    for message in notes:
-        _print_note(message)
-
-
-def _print_note(message: str):
-    print(f"floodmesh: note: {message}", file=sys.stderr)
 
 
 def cmd_demo(args):
@@ -348,7 +303,7 @@ def cmd_grid(args):
     points = io.read_points(_input(args), crs=args.crs, classes=args.classes,
                             note=notes.append)
     gridding, holdout = split_holdout(points, args.holdout, args.seed, note=notes.append)
-    _print_notes(notes)
+    print_notes(notes)
     dem = grid_points_linear(gridding, args.cell_size, max_gap=args.max_gap)
     io.write_raster(args.out, dem)
     if len(holdout):
@@ -412,7 +367,7 @@ def _grid_tiles(args):
                                  workers=args.workers, scheduler=args.scheduler, progress=bar)
     finally:
         bar.close()
-    _print_notes(tiled.notes)
+    print_notes(tiled.notes)
     if len(tiled.holdout):
         target = args.holdout_out or str(Path(args.out).with_name("holdout.gpkg"))
         io.write_points_gpkg(target, tiled.holdout, tiled.crs,
@@ -427,7 +382,7 @@ def cmd_slope(args):
     bar = ProgressBar(args.method)
     try:
         slope_raster_file(args.dem, args.out, args.method, sigma=args.sigma,
-                          log_kernel=args.log_kernel, crs=args.crs, note=_print_note,
+                          log_kernel=args.log_kernel, crs=args.crs, note=print_note,
                           progress=bar)
     finally:
         bar.close()
@@ -489,7 +444,7 @@ def cmd_mesh(args):
     check_min_angle(args.min_angle)
     check_max_area(args.max_area)
     check_max_triangles(args.max_triangles)
-    dem = io.read_raster(args.dem, crs=args.crs, note=_print_note)
+    dem = io.read_raster(args.dem, crs=args.crs, note=print_note)
     lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
     domain, own_lines = mesh_constraints(dem, args.boundary, args.user_lines)
     size = size_field(args.size_field, dem, max_area=args.max_area, min_area=args.min_area)
@@ -497,7 +452,7 @@ def cmd_mesh(args):
     mesh = build_mesh(dem, lines + own_lines, min_angle=args.min_angle, max_area=args.max_area,
                       conforming=args.conforming, domain=domain, size_field=size,
                       max_triangles=args.max_triangles, note=notes.append)
-    _print_notes(notes)
+    print_notes(notes)
     io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles, crs=dem.crs)
     if args.gpkg:
         io.write_mesh_gpkg(args.gpkg, mesh.nodes, mesh.triangles, dem.crs)

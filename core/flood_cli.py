@@ -5,7 +5,7 @@ from pathlib import Path
 
 
 def cmd_flood(args):
-    from .cli import ProgressBar, _print_notes
+    from .console import ProgressBar, print_notes
     from .compare import compare_floods
     from .flood import load_scenario, run_flood
 
@@ -21,7 +21,7 @@ def cmd_flood(args):
                                      log=bar.log))
         finally:
             bar.close()
-        _print_notes(reports[-1]["notes"])
+        print_notes(reports[-1]["notes"])
         print(_summary(reports[-1], out))
         if args.size_field_area:
             print(_write_flow_fields(out, args.size_field_area, reports[-1]))

@@ -356,12 +356,37 @@ def _untagged_nodata(values: np.ndarray, name: str, note=None) -> None:
                  f"the file (gdal_edit.py -a_nodata {sentinel:g} {name}) to say so")
 
 
+TILE = 256  # GeoTIFF tile size (cells)
+# Codecs chosen by measurement (benchmarks/run.py --only codec, and slope file to file on a
+# 6000² DEM): float rasters (DEM, slope, LoG) are written uncompressed, as gdaldem writes them:
+# on 16 M float32 cells ZSTD level 1 costs 0.19 s of CPU per 64 MB and saves only 17-20 % (the
+# cells' low bits are noise), 30 % more CPU for the whole slope step; its floating-point
+# predictor saves another 10 % at twice the CPU; LZW and DEFLATE are slower still. Integer
+# rasters (breakpoints: mostly 0) take ZSTD level 1, which shrinks them 8x and more for almost
+# nothing. GDAL's own worker threads (NUM_THREADS, GDAL_NUM_THREADS) are not used: GDAL 3.6's
+# multi-threaded decoding hung in RasterIO (CPLJobQueue) in the tests.
+CREATION_OPTIONS = dict(tiled=True, blockxsize=TILE, blockysize=TILE, bigtiff="if_safer")
+INTEGER_COMPRESSION = dict(compress="zstd", zstd_level=1)
+
+
+def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
+    """A tiled GeoTIFF profile, compressed for integer rasters (``CREATION_OPTIONS``; rasters
+    under a tile stay striped); ``crs`` a pyproj CRS or WKT."""
+    wkt = crs if isinstance(crs, str) else crs.to_wkt()
+    profile = dict(driver="GTiff", height=shape[0], width=shape[1], count=1, dtype=dtype,
+                   crs=wkt, transform=transform, nodata=nodata, **CREATION_OPTIONS)
+    if np.dtype(dtype).kind != "f":
+        profile.update(INTEGER_COMPRESSION)
+    if shape[0] < TILE or shape[1] < TILE:
+        for key in ("tiled", "blockxsize", "blockysize"):
+            profile.pop(key)
+    return profile
+
+
 def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
-    """Write a Grid as a tiled, compressed GeoTIFF (``blocks.raster_profile``); float NaN (or
+    """Write a Grid as a tiled, compressed GeoTIFF (``raster_profile``); float NaN (or
     cells outside ``valid``) become nodata."""
     import rasterio
-
-    from .blocks import raster_profile
 
     values = grid.values
     if values.dtype == bool:

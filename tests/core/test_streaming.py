@@ -123,7 +123,7 @@ def test_output_is_tiled_georeferenced_and_compressed_when_integer(dem_file, tmp
             rasterio.open(tmp_path / "bp.tif") as bp:
         assert src.profile["tiled"] and src.block_shapes[0] == (256, 256)
         assert src.compression is None
-        assert bp.compression.name.lower() == blocks.INTEGER_COMPRESSION["compress"]
+        assert bp.compression.name.lower() == io.INTEGER_COMPRESSION["compress"]
         assert bp.profile["tiled"] and bp.block_shapes[0] == (256, 256)
         assert src.transform == dem.transform and src.nodata == blocks.FLOAT_NODATA
         assert src.crs.to_epsg() == 25833  # --crs overrides the file's
