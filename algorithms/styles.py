@@ -75,13 +75,44 @@ class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):
     def postProcessLayer(self, layer, context, feedback):  # noqa: N802
         if self.style:
             self.style(layer)
-        if self.run is not None:
+        if self.run is not None and self.run.get("name"):
             _into_group(context.project(), layer, self.run)
+        else:
+            _among_results(context.project(), layer)
+        if self.run is not None:
             _zoom_to(layer, context.project())
         layer.triggerRepaint()
 
 
 RUN_GROUP = "floodmesh/run"  # the custom property that marks a run's group
+RESULT = "floodmesh/result"  # ... and a result loaded on its own (a step, a model's outputs)
+
+
+def _move(node, parent, position: int) -> None:
+    """Move a layer tree node: its clone in first, then the original out (QGIS removes a layer
+    from the project, in a queued call, when its last tree node goes)."""
+    parent.insertChildNode(position, node.clone())
+    node.parent().removeChildNode(node)
+
+
+def _among_results(project, layer) -> None:
+    """A result loaded on its own (QGIS puts it on top) moves down past the FloodMesh results
+    right below it that rank above it: a model's or a batch's outputs end up lines above
+    points above rasters above meshes, whatever order QGIS loads them in."""
+    node = project.layerTreeRoot().findLayer(layer.id())
+    if node is None:
+        return
+    node.setCustomProperty(RESULT, True)
+    parent = node.parent()
+    siblings = parent.children()
+    position = end = siblings.index(node) + 1
+    while (end < len(siblings) and siblings[end].customProperty(RESULT)
+           and getattr(siblings[end], "layer", lambda: None)() is not None):
+        if _rank(siblings[end].layer()) < _rank(layer):
+            position = end + 1
+        end += 1
+    if position > siblings.index(node) + 1:
+        _move(node, parent, position)
 
 
 def _into_group(project, layer, run: dict) -> None:
@@ -103,8 +134,7 @@ def _into_group(project, layer, run: dict) -> None:
     rank = _rank(layer)
     position = sum(1 for child in group.children()
                    if child.layer() is not None and _rank(child.layer()) <= rank)
-    group.insertChildNode(position, node.clone())
-    node.parent().removeChildNode(node)
+    _move(node, group, position)
 
 
 def _zoom_to(layer, project) -> None:

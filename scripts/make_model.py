@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-from qgis.core import (QgsApplication, QgsProcessingModelAlgorithm,  # noqa: E402
+from qgis.core import (QgsApplication, QgsProcessing, QgsProcessingModelAlgorithm,  # noqa: E402
                        QgsProcessingModelChildAlgorithm, QgsProcessingModelChildParameterSource,
                        QgsProcessingModelOutput, QgsProcessingModelParameter,
                        QgsProcessingParameterFile, QgsProcessingParameterNumber)
@@ -98,6 +98,10 @@ for row, (child_id, algorithm, sources, outputs) in enumerate(steps):
         out = QgsProcessingModelOutput(output_id, description)
         out.setChildOutputName(child_output_name)
         out.setChildId(child_id)
+        # written to a temporary file unless the user names one: the model runs with only its
+        # inputs (QGIS 3.40 refuses an output with no value and no default)
+        out.setDefaultValue(QgsProcessing.TEMPORARY_OUTPUT)
+        out.setMandatory(True)
         out.setPosition(QPointF(720, 60 + 90 * row))
         model_outputs[output_id] = out
     child.setModelOutputs(model_outputs)

@@ -37,6 +37,13 @@ def settle():
         QTest.qWait(200)
 
 
+def kind(layer):
+    from qgis.core import QgsMapLayerType, QgsWkbTypes
+    if layer.type() == QgsMapLayerType.MeshLayer:
+        return "mesh"
+    return QgsWkbTypes.geometryDisplayString(layer.geometryType()).lower()
+
+
 def tree(node):
     rows = []
     for child in node.children():
@@ -78,6 +85,17 @@ try:
     out["dialog_results"] = sorted(dialog.results() or {})
     out["results_viewer"] = [r.filename for r in resultsList.getResults()]
     out["tree_after_dialog"] = tree(project.layerTreeRoot())
+    # the shipped model, run with only its input as its dialog does: every output left at its
+    # default, a temporary file
+    before = set(project.mapLayers())
+    model = QgsApplication.processingRegistry().algorithmById(
+        "floodmesh:LiDAR to mesh step by step")
+    processing.runAndLoadResults(model, {"points": os.environ["FM_INPUT"], **{
+        d.name(): d.defaultValue() for d in model.destinationParameterDefinitions()}})
+    settle()
+    added = [n for n in project.layerTreeRoot().findLayers() if n.layerId() not in before]
+    out["model_layers"] = [[kind(n.layer()), n.layer().isValid(), n.layer().crs().authid()]
+                           for n in added]
     # the mesh opened by hand (Add Mesh Layer; the browser does the same)
     by_hand = iface.addMeshLayer(os.path.join(os.environ["FM_OUTPUT"], "mesh.2dm"), "by hand",
                                  "mdal")
@@ -197,6 +215,14 @@ def test_the_dialog_loads_its_run_and_shows_the_report_in_the_results_viewer(des
         "Break lines", "Residuals", "Mesh"]
     assert [path for path in desktop["results_viewer"]
             if path.endswith("Topography run dialog/report.html")], desktop["results_viewer"]
+
+
+def test_the_model_loads_its_results_in_order(desktop):
+    """The model's three outputs, lines above residuals above the mesh, in the data's CRS."""
+    kinds = [kind for kind, valid, crs in desktop["model_layers"]]
+    assert all(valid and crs == "EPSG:2949" for _, valid, crs in desktop["model_layers"]), (
+        desktop["model_layers"])
+    assert kinds == ["line", "point", "mesh"], desktop["model_layers"]
 
 
 def test_the_map_shows_the_run(desktop):

@@ -40,3 +40,17 @@ def test_model_runs_headless(qgis_process, demo_points_file, tmp_path):
     results = json.loads(run.stdout[run.stdout.index("{"):])["results"]
     layer = QgsMeshLayer(results["mesh:mesh"], "mesh", "mdal")
     assert layer.isValid() and layer.dataProvider().vertexCount() > 500
+
+
+def test_model_runs_with_only_its_inputs(processing, demo_points_file):
+    """As the model's dialog runs it with only the points given: every output at its default, a
+    temporary file."""
+    model = QgsApplication.processingRegistry().algorithmById(MODEL_ID)
+    ok, issues = model.validate()
+    assert ok, issues
+    outputs = {d.name(): d.defaultValue() for d in model.destinationParameterDefinitions()}
+    assert set(outputs.values()) == {"TEMPORARY_OUTPUT"}
+    result = processing.run(MODEL_ID, {"points": str(demo_points_file), **outputs})
+    mesh = QgsMeshLayer(result["mesh:mesh"], "mesh", "mdal")
+    assert mesh.isValid() and mesh.dataProvider().faceCount() > 1000
+    assert QgsVectorLayer(result["assess:residuals"], "r", "ogr").featureCount() > 20
