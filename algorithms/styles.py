@@ -96,23 +96,31 @@ def _move(node, parent, position: int) -> None:
 
 
 def _among_results(project, layer) -> None:
-    """A result loaded on its own (QGIS puts it on top) moves down past the FloodMesh results
-    right below it that rank above it: a model's or a batch's outputs end up lines above
-    points above rasters above meshes, whatever order QGIS loads them in."""
+    """A result loaded on its own (a step, a model's output, a batch) takes its place in the
+    run of FloodMesh results around it, which is kept lines above points above rasters above
+    meshes, whatever order QGIS adds them and calls this in (3.22: one by one on top; 3.40:
+    all added first)."""
     node = project.layerTreeRoot().findLayer(layer.id())
     if node is None:
         return
     node.setCustomProperty(RESULT, True)
     parent = node.parent()
     siblings = parent.children()
-    position = end = siblings.index(node) + 1
-    while (end < len(siblings) and siblings[end].customProperty(RESULT)
-           and getattr(siblings[end], "layer", lambda: None)() is not None):
-        if _rank(siblings[end].layer()) < _rank(layer):
-            position = end + 1
+    start = end = siblings.index(node)
+
+    def result(k):
+        return (0 <= k < len(siblings) and siblings[k].customProperty(RESULT)
+                and getattr(siblings[k], "layer", lambda: None)() is not None)
+
+    while result(start - 1):
+        start -= 1
+    while result(end + 1):
         end += 1
-    if position > siblings.index(node) + 1:
-        _move(node, parent, position)
+    ranked = sorted(siblings[start:end + 1], key=lambda n: _rank(n.layer()))  # stable
+    for offset, layer_id in enumerate([n.layerId() for n in ranked]):
+        moving = parent.findLayer(layer_id)
+        if parent.children().index(moving) != start + offset:
+            _move(moving, parent, start + offset)
 
 
 def _into_group(project, layer, run: dict) -> None:
