@@ -30,6 +30,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
+from .compiles import CompileWatch
 from .errors import Cancelled, FloodMeshError
 
 PARTIAL_GLOB = ".*.partial*"  # the temporary names io.atomic_output writes under
@@ -316,14 +317,6 @@ STEPS = {"grid": step_grid, "slope": step_slope, "breakpoints": step_breakpoints
          "run": step_run, "flood": step_flood}
 
 
-NUMBA_STEPS = {step_grid, step_trace, step_run, step_slope}
-
-
-def _kernels_cached() -> bool:
-    """Whether numba's cache (``cache=True``) beside the core modules holds compiled kernels."""
-    return any((Path(__file__).parent / "__pycache__").glob("*.nbi"))
-
-
 def run_job(job: dict, ch: Channel) -> int:
     """Run one job, answering on ``ch``; the exit code (0 done, 2 bad input, 130 cancelled)."""
     from .dependencies import install_hint, missing_dependencies
@@ -333,15 +326,18 @@ def run_job(job: dict, ch: Channel) -> int:
         ch.send(error=install_hint(missing))
         return 2
     step = STEPS.get(job.get("step"))
-    if step is not None and step in NUMBA_STEPS and not _kernels_cached():
-        ch.info("First run in this Python environment: numba compiles FloodMesh's kernels "
-                "(about 2 minutes, once; later runs start at once)")
     if step is None:
         ch.send(error=f"unknown FloodMesh worker step {job.get('step')!r}; one of "
                       f"{', '.join(STEPS)}")
         return 2
+    # numba's first-run compile said when it really happens (run_pipeline says its own)
+    compiles = CompileWatch(ch.info if step is not step_run else None)
     try:
-        ch.send(result=step(ch, **job.get("args", {})))
+        with compiles.watching():
+            result = step(ch, **job.get("args", {}))
+        if compiles.summary():
+            ch.info(compiles.summary())
+        ch.send(result=result)
     except FloodMeshError as exc:
         ch.send(error=str(exc))
         return 2

@@ -51,3 +51,31 @@ def test_bad_input_with_an_empty_cache_is_answered_by_the_error_alone(tmp_path):
     lines = [line for line in run.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and "missing.laz" in lines[0], run.stderr
     assert "compil" not in run.stderr and not (tmp_path / "out").exists()
+
+
+def test_a_worker_step_on_a_warm_cache_says_nothing_of_compiling(tmp_path):
+    """QGIS's worker said 'First run ... numba compiles' on every run where numba's cache was
+    not core/__pycache__ (a plugin installed from its ZIP): it now says only what happens."""
+    import io as stdio
+    import json
+
+    import numpy as np
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core import io
+    from floodmesh.core.raster import Grid
+    from floodmesh.core.worker import Channel, run_job
+
+    dem = Grid(np.add.outer(np.arange(40.0), np.arange(50.0)) * 0.2,
+               Affine(1.0, 0, 500000.0, 0, -1.0, 6000040.0), CRS.from_epsg(25832))
+    io.write_raster(tmp_path / "dem.tif", dem)
+    job = {"step": "slope", "args": {"input": str(tmp_path / "dem.tif"),
+                                     "output": str(tmp_path / "slope.tif"),
+                                     "method": "one-over-distance"}}
+    for _ in range(2):  # the first may compile where the cache is cold; the second never
+        stream = stdio.StringIO()
+        assert run_job(job, Channel(stream)) == 0
+    messages = [json.loads(line) for line in stream.getvalue().splitlines()]
+    assert "result" in messages[-1]
+    assert not [m for m in messages if "compil" in json.dumps(m).lower()], messages
