@@ -286,31 +286,24 @@ def cmd_demo(args):
     cmd_run(args)
 
 
-def cmd_grid(args):
-    from . import io
-    from .grid import grid_points_linear
-    from .options import check_cell_size, check_holdout, check_max_gap, check_seed
-    from .points import split_holdout
-    from .tiles import is_tile_set
+def _step(label: str, func, *args, **options) -> dict:
+    """Run one of ``steps`` with a progress bar and the notes on stderr; print its summary."""
+    bar = ProgressBar(label)
+    try:
+        result = func(*args, progress=bar, note=print_note, **options)
+    finally:
+        bar.close()
+    print(result["summary"])
+    return result
 
-    check_cell_size(args.cell_size)
-    check_max_gap(args.max_gap)
-    check_holdout(args.holdout)
-    check_seed(args.seed)
-    if is_tile_set(_input(args)):
-        return _grid_tiles(args)
-    notes = []
-    points = io.read_points(_input(args), crs=args.crs, classes=args.classes,
-                            note=notes.append)
-    gridding, holdout = split_holdout(points, args.holdout, args.seed, note=notes.append)
-    print_notes(notes)
-    dem = grid_points_linear(gridding, args.cell_size, max_gap=args.max_gap)
-    io.write_raster(args.out, dem)
-    if len(holdout):
-        target = _holdout_target(args)
-        io.write_points_gpkg(target, holdout.xyz, points.crs, layer="holdout")
-        print(f"{len(holdout)} held-out points written to {target}")
-    print(f"DEM {dem.shape[1]} x {dem.shape[0]} cells of {dem.cell_size} m written to {args.out}")
+
+def cmd_grid(args):
+    from . import steps
+
+    _step("grid", steps.grid, _input(args), args.out, cell_size=args.cell_size, crs=args.crs,
+          classes=args.classes, max_gap=args.max_gap, holdout=args.holdout, seed=args.seed,
+          holdout_output=_holdout_target(args) if args.holdout else None,
+          workers=args.workers, scheduler=args.scheduler)
 
 
 def _holdout_target(args) -> str:
@@ -355,202 +348,73 @@ def _check_files(args) -> None:
         require_suffix(args.out, RASTER_OUTPUTS, "a GeoTIFF")
 
 
-def _grid_tiles(args):
-    from . import io
-    from .tiles import grid_point_tiles
-
-    bar = ProgressBar("grid tiles")
-    try:
-        tiled = grid_point_tiles(_input(args), args.cell_size, max_gap=args.max_gap,
-                                 crs=args.crs, classes=args.classes, holdout=args.holdout,
-                                 seed=args.seed, out_path=args.out, keep=False,
-                                 workers=args.workers, scheduler=args.scheduler, progress=bar)
-    finally:
-        bar.close()
-    print_notes(tiled.notes)
-    if len(tiled.holdout):
-        target = args.holdout_out or str(Path(args.out).with_name("holdout.gpkg"))
-        io.write_points_gpkg(target, tiled.holdout, tiled.crs,
-                             layer="holdout")
-        print(f"{len(tiled.holdout)} held-out points written to {target}")
-    print(f"DEM of {tiled.n_tiles} tiles ({tiled.n_points:,} points) written to {args.out}")
-
-
 def cmd_slope(args):
-    from .slope import slope_raster_file
+    from . import steps
 
-    bar = ProgressBar(args.method)
-    try:
-        slope_raster_file(args.dem, args.out, args.method, sigma=args.sigma,
-                          log_kernel=args.log_kernel, crs=args.crs, note=print_note,
-                          progress=bar)
-    finally:
-        bar.close()
-    if args.method == "log":
-        print(f"Laplacian-of-Gaussian response (sigma {args.sigma} m, m) written to {args.out}")
-    else:
-        print(f"slope ({args.method}, degrees) written to {args.out}")
+    _step(args.method, steps.slope, args.dem, args.out, method=args.method, sigma=args.sigma,
+          log_kernel=args.log_kernel, crs=args.crs)
 
 
 def cmd_breakpoints(args):
-    from .breakpoints import breakpoints_file
+    from . import steps
 
-    bar = ProgressBar("breakpoints")
-    try:  # file to file, block by block
-        count = breakpoints_file(args.slope, args.out, s_crit=args.s_crit,
-                                 sensitivity=args.sensitivity,
-                                 zero_crossings=args.zero_crossings, crs=args.crs, progress=bar)
-    finally:
-        bar.close()
-    print(f"{count} breakpoints written to {args.out}")
+    _step("breakpoints", steps.breakpoints, args.slope, args.out, s_crit=args.s_crit,
+          sensitivity=args.sensitivity, zero_crossings=args.zero_crossings, crs=args.crs)
 
 
 def cmd_breaklines(args):
-    from . import io
-    from .breaklines import trace_breaklines
+    from . import steps
 
-    bp = io.read_raster(args.breakpoints, crs=args.crs)
-    bp = bp.with_values((bp.values == 1).astype("uint8"))
-    slope_grid = io.read_raster(args.slope, crs=args.crs)
-    dem = io.read_raster(args.dem, crs=args.crs)
-    lines = trace_breaklines(bp, slope_grid, dem, args.s_crit, mode=args.mode,
-                             min_points=args.min_points, min_length=args.min_length,
-                             join=not args.no_join, seed=args.seed)
-    io.write_breaklines(args.out, lines, dem.crs)
-    print(f"{len(lines)} break lines written to {args.out}")
+    _step("breaklines", steps.trace, args.breakpoints, args.slope, args.dem, args.out,
+          s_crit=args.s_crit, mode=args.mode, min_points=args.min_points,
+          min_length=args.min_length, join=not args.no_join, seed=args.seed, crs=args.crs)
 
 
 def cmd_simplify(args):
-    from . import io
-    from .raster import require_metric_crs
-    from .simplify import simplify_breaklines
+    from . import steps
 
-    lines = io.read_breaklines(args.breaklines)
-    crs = require_metric_crs(args.crs or io.vector_crs(args.breaklines), Path(args.breaklines).name)
     method, amount = RunOptions(keep_every=args.keep_every, tolerance=args.tolerance,
                                 spline=args.spline).simplification()
-    out = simplify_breaklines(lines, method, amount, min_distance=args.min_distance)
-    io.write_breaklines(args.out, out, crs)
-    before, after = sum(len(x.coords) for x in lines), sum(len(x.coords) for x in out)
-    print(f"{len(out)} break lines, {before} → {after} points, written to {args.out}")
+    _step("simplify", steps.simplify, args.breaklines, args.out, method=method, amount=amount,
+          min_distance=args.min_distance, crs=args.crs)
 
 
 def cmd_mesh(args):
-    from . import io
-    from .mesh import build_mesh, mesh_quality
-    from .options import check_max_area, check_max_triangles, check_min_angle
-    from .pipeline import mesh_constraints, size_field
+    from . import steps
 
-    check_min_angle(args.min_angle)
-    check_max_area(args.max_area)
-    check_max_triangles(args.max_triangles)
-    dem = io.read_raster(args.dem, crs=args.crs, note=print_note)
-    lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
-    domain, own_lines = mesh_constraints(dem, args.boundary, args.user_lines)
-    size = size_field(args.size_field, dem, max_area=args.max_area, min_area=args.min_area)
-    notes = []
-    mesh = build_mesh(dem, lines + own_lines, min_angle=args.min_angle, max_area=args.max_area,
-                      conforming=args.conforming, domain=domain, size_field=size,
-                      max_triangles=args.max_triangles, note=notes.append)
-    print_notes(notes)
-    io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles, crs=dem.crs)
-    if args.gpkg:
-        io.write_mesh_gpkg(args.gpkg, mesh.nodes, mesh.triangles, dem.crs)
-    q = mesh_quality(mesh, min_angle=args.min_angle, max_area=args.max_area)
-    print(f"{q['nodes']} nodes, {q['triangles']} triangles (min angle {q['min_angle_deg']:.2f}°, "
-          f"max area {q['max_area_m2']:.1f} m²) written to {args.out}")
+    _step("mesh", steps.mesh, args.dem, args.out, breaklines=args.breaklines,
+          boundary=args.boundary, user_lines=args.user_lines, size_field=args.size_field,
+          min_area=args.min_area, flow_area=0.0, conforming=args.conforming,
+          min_angle=args.min_angle, max_area=args.max_area, max_triangles=args.max_triangles,
+          triangles=args.gpkg, crs=args.crs)
 
 
 def cmd_assess(args):
-    import json
+    from . import steps
 
-    from . import io
-    from .accuracy import accuracy_statistics, residuals
-    from .mesh import Mesh
-
-    nodes, triangles = io.read_mesh_2dm(args.mesh)
-    xyz, crs = _measured_points(args.points, args.crs)
-    res = residuals(Mesh(nodes, triangles, crs), xyz)
-    io.write_residuals(args.out, xyz, res, crs)
-    stats = accuracy_statistics(res)
-    if args.report:
-        io.write_json(args.report, stats)
-    if args.png:
-        from .report import write_report_pngs
-
-        Path(args.png).mkdir(parents=True, exist_ok=True)
-        for path in write_report_pngs(args.png, nodes, triangles, xyz, res):
-            print(f"{path.name} written to {args.png}", file=sys.stderr)
-    print(json.dumps(stats, indent=2))
+    result = _step("assess", steps.assess, args.mesh, args.points, args.out,
+                   report=args.report, png=args.png, crs=args.crs)
+    for path in result.get("figures", ()):
+        print(f"{Path(path).name} written to {args.png}", file=sys.stderr)
 
 
 def cmd_export(args):
-    from . import io
-    from .export import export_mesh, format_of, layers_crs
+    from . import steps
 
-    fmt = format_of(args.output, args.format)
-    mesh = io.read_2dm(args.mesh)
-    crs = layers_crs(args.crs or mesh.crs, {"open boundary": args.open_boundaries, "region": args.regions,
-                                "break line": args.breaklines})
-    written = export_mesh(
-        args.output, mesh.nodes, mesh.triangles, fmt=fmt, crs=crs,
-        open_lines=io.read_lines_gpkg(args.open_boundaries) if args.open_boundaries else (),
-        snap=args.snap, materials=mesh.materials,
-        regions=io.read_regions(args.regions, field=args.material_field) if args.regions else (),
-        datum_offset=args.datum_offset, element_elevations=args.element_elevations,
-        breaklines=io.read_lines_gpkg(args.breaklines) if args.breaklines else ())
-    print(f"{len(mesh.nodes)} nodes, {len(mesh.triangles)} triangles written as {fmt} to "
-          f"{', '.join(str(p) for p in written)}")
-
-
-def _measured_points(path, crs=None):
-    """(xyz, CRS) of measured points: a GeoPackage/Shapefile/GeoJSON of points or a point file."""
-    from . import io
-    from .raster import require_metric_crs
-
-    if Path(path).suffix.lower() in (".gpkg", ".shp", ".geojson"):
-        xyz = io.read_points_vector(path)
-        crs = crs or io.vector_crs(path)
-    else:
-        cloud = io.read_points(path, crs=crs)
-        xyz, crs = cloud.xyz, cloud.crs
-    return xyz, require_metric_crs(crs, Path(path).name)
+    _step("export", steps.export, args.mesh, args.output, fmt=args.format, crs=args.crs,
+          open_boundaries=args.open_boundaries, snap=args.snap, regions=args.regions,
+          material_field=args.material_field, datum_offset=args.datum_offset,
+          element_elevations=args.element_elevations, breaklines=args.breaklines)
 
 
 def cmd_refine(args):
-    from dataclasses import asdict
+    from . import steps
 
-    from . import io
-    from .mesh import mesh_quality
-    from .pipeline import mesh_constraints
-    from .refine import refine_mesh
-
-    dem = io.read_raster(args.dem, crs=args.crs)
-    lines = io.read_lines_gpkg(args.breaklines) if args.breaklines else []
-    domain, own_lines = mesh_constraints(dem, args.boundary, args.user_lines)
-    points, _ = _measured_points(args.points, args.crs)
-    check = _measured_points(args.check, args.crs)[0] if args.check else None
-    bar = ProgressBar("refine")
-    try:
-        mesh, rounds = refine_mesh(dem, lines + own_lines, points, check=check, domain=domain,
-                                   min_angle=args.min_angle,
-                                   max_area=args.max_area, lower=args.lower, upper=args.upper,
-                                   target_rmse=args.target_rmse, target_max=args.target_max,
-                                   max_nodes=args.max_nodes, max_rounds=args.max_rounds,
-                                   progress=bar)
-    finally:
-        bar.close()
-    io.write_mesh_2dm(args.out, mesh.nodes, mesh.triangles, crs=dem.crs)
-    if args.report:
-        io.write_json(args.report, {"rounds": [asdict(r) for r in rounds],
-                                    **mesh_quality(mesh, min_angle=args.min_angle,
-                                                   max_area=args.max_area)})
-    print(f"{'round':>5}{'nodes':>9}{'RMSE cm':>9}{'max cm':>8}{'check RMSE':>12}"
-          f"{'inserted':>10}{'refined':>9}")
-    for k, r in enumerate(rounds, 1):
-        print(f"{k:>5}{r.nodes:>9}{100 * r.rmse_m:>9.1f}{100 * r.max_abs_m:>8.1f}"
-              f"{100 * r.check_rmse_m:>12.1f}{r.inserted:>10}{r.refined:>9}")
-    print(f"{len(mesh.nodes)} nodes written to {args.out}")
+    _step("refine", steps.refine, args.dem, args.points, args.out, breaklines=args.breaklines,
+          boundary=args.boundary, user_lines=args.user_lines, check=args.check,
+          min_angle=args.min_angle, max_area=args.max_area, lower=args.lower, upper=args.upper,
+          target_rmse=args.target_rmse, target_max=args.target_max, max_nodes=args.max_nodes,
+          max_rounds=args.max_rounds, report=args.report, crs=args.crs)
 
 
 def build_parser() -> argparse.ArgumentParser:

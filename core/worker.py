@@ -27,9 +27,8 @@ import json
 import os
 import sys
 import time
-from dataclasses import asdict
-from pathlib import Path
 
+from . import steps
 from .compiles import CompileWatch
 from .errors import Cancelled, FloodMeshError
 
@@ -67,210 +66,15 @@ class Channel:
 
 
 # ---------------------------------------------------------------------------------------------
-# the steps: one per Processing algorithm, each a few lines around the core calls
-def _points_xyz(path, crs=None):
-    """(xyz, CRS) of measured points from a point layer (GeoPackage, Shapefile, GeoJSON) or a
-    LiDAR point file (LAS/LAZ ground, XYZ/CSV)."""
-    from . import io
-    from .raster import require_metric_crs
-
-    if io.is_point_source(path):
-        cloud = io.read_points(path, crs=crs)
-        return cloud.xyz, cloud.crs
-    return io.read_points_vector(path), require_metric_crs(crs or io.vector_crs(path),
-                                                            Path(path).name)
-
-
-def _mesh_inputs(dem, breaklines=None, boundary=None, user_lines=None):
-    from . import io
-    from .pipeline import mesh_constraints
-
-    grid = io.read_raster(dem)
-    lines = io.read_lines_gpkg(breaklines) if breaklines else []
-    domain, own = mesh_constraints(grid, boundary, user_lines)
-    return grid, lines + own, domain
-
-
-def step_grid(ch, *, input, output, cell_size, crs=None, classes=None, max_gap=None,
-              holdout=0.0, seed=0, holdout_output=None, workers=None, scheduler=None):
-    from . import io
-    from .tiles import grid_point_tiles, is_tile_set
-
-    classes = tuple(classes) if classes else None
-    if is_tile_set(input):  # several tiles: gridded tile by tile on Dask, written block by block
-        tiled = grid_point_tiles(input, cell_size, max_gap=max_gap, crs=crs, classes=classes,
-                                 holdout=holdout, seed=seed, out_path=output, keep=False,
-                                 workers=workers, scheduler=scheduler, progress=ch.progress,
-                                 cancelled=ch.cancelled)
-        for message in tiled.notes:
-            ch.note(message)
-        held, points_crs = tiled.holdout, tiled.crs
-    else:
-        from .grid import grid_points_linear
-        from .points import split_holdout
-
-        points = io.read_points(input, crs=crs, classes=classes, note=ch.note)
-        gridding, held = split_holdout(points, holdout, seed, note=ch.note)
-        dem = grid_points_linear(gridding, cell_size, max_gap=max_gap, progress=ch.progress)
-        io.write_raster(output, dem)
-        held, points_crs = held.xyz, points.crs
-    result = {"OUTPUT": output, "crs": points_crs.to_wkt()}
-    if holdout_output and len(held):
-        io.write_points_gpkg(holdout_output, held, points_crs, layer="holdout")
-        result["HOLDOUT_OUTPUT"] = holdout_output
-    return result
-
-
-def step_slope(ch, *, input, output, method, sigma=1.0, log_kernel="pratt"):
-    from .slope import slope_raster_file
-
-    slope_raster_file(input, output, method, sigma=sigma, log_kernel=log_kernel, note=ch.note,
-                      progress=ch.progress, cancelled=ch.cancelled)
-    return {"OUTPUT": output}
-
-
-def step_breakpoints(ch, *, input, output, s_crit=10.0, sensitivity=None, zero_crossings=False):
-    import numpy as np
-
-    from . import io
-    from .breakpoints import classify_breakpoints, log_breakpoints
-
-    grid = io.read_raster(input)
-    if sensitivity is not None:
-        points = log_breakpoints(grid, sensitivity, zero_crossings=zero_crossings)
-    else:
-        points = classify_breakpoints(grid, s_crit)
-    io.write_raster(output, points, valid=np.isfinite(grid.values))
-    return {"OUTPUT": output}
-
-
-def step_trace(ch, *, breakpoints, slope, dem, output, s_crit, mode="auto", min_points=3,
-               min_length=0.0, join=True, seed=0):
-    from . import io
-    from .breaklines import trace_breaklines
-
-    points = io.read_raster(breakpoints)
-    points = points.with_values((points.values == 1).astype("uint8"))
-    grid = io.read_raster(dem)
-    lines = trace_breaklines(points, io.read_raster(slope), grid, s_crit, mode=mode,
-                             min_points=min_points, min_length=min_length, join=join, seed=seed)
-    io.write_breaklines(output, lines, grid.crs)
-    ch.info(f"{len(lines)} break lines")
-    return {"OUTPUT": output, "crs": grid.crs.to_wkt()}
-
-
-def step_simplify(ch, *, input, output, crs, method, amount, min_distance):
-    from . import io
-    from .raster import require_metric_crs
-    from .simplify import simplify_breaklines
-
-    crs = require_metric_crs(crs or io.vector_crs(input), Path(input).name)
-    lines = simplify_breaklines(io.read_breaklines(input), method, amount,
-                                min_distance=min_distance)
-    io.write_breaklines(output, lines, crs)
-    return {"OUTPUT": output, "crs": crs.to_wkt()}
-
-
-def step_build_mesh(ch, *, dem, output, min_angle, max_area, max_triangles, breaklines=None,
-                    boundary=None, user_lines=None, size_field=None, triangles=None,
-                    flow_area=None):
-    from . import io
-    from .mesh import build_mesh, mesh_quality
-    from .pipeline import size_field as size_from
-
-    grid, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines)
-    size = size_from(size_field, grid, max_area=max_area) if size_field else None
-    from .drainage import flow_area_for, flow_size
-
-    flow_area = flow_area_for(flow_area, grid.cell_size)
-    if flow_area is not None:  # smaller triangles where water flows (see drainage)
-        from .sizing import finer
-
-        size = finer(size, flow_size(grid, flow_area=flow_area))
-    mesh = build_mesh(grid, lines, min_angle=min_angle, max_area=max_area, domain=domain,
-                      size_field=size, max_triangles=max_triangles, note=ch.note)
-    quality = mesh_quality(mesh, min_angle=min_angle, max_area=max_area)
-    ch.info(f"{quality['nodes']} nodes, {quality['triangles']} triangles, smallest angle "
-            f"{quality['min_angle_deg']:.2f}°, largest area {quality['max_area_m2']:.1f} m²")
-    io.write_mesh_2dm(output, mesh.nodes, mesh.triangles, crs=grid.crs)
-    result = {"OUTPUT": output, "NODES": quality["nodes"], "TRIANGLE_COUNT": quality["triangles"],
-              "crs": grid.crs.to_wkt()}
-    if triangles:
-        io.write_mesh_gpkg(triangles, mesh.nodes, mesh.triangles, grid.crs)
-        result["TRIANGLES"] = triangles
-    return result
-
-
-def step_refine_mesh(ch, *, dem, points, output, min_angle, max_area, lower, upper, max_nodes,
-                     max_rounds, breaklines=None, boundary=None, user_lines=None, check=None,
-                     target_rmse=None, target_max=None, report=None):
-    from . import io
-    from .refine import refine_mesh
-
-    grid, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines)
-    measured = _points_xyz(points, grid.crs)[0]
-    check_xyz = _points_xyz(check, grid.crs)[0] if check else None
-    mesh, rounds = refine_mesh(grid, lines, measured, check=check_xyz, domain=domain,
-                               min_angle=min_angle, max_area=max_area, lower=lower, upper=upper,
-                               target_rmse=target_rmse, target_max=target_max,
-                               max_nodes=max_nodes, max_rounds=max_rounds, progress=ch.progress,
-                               cancelled=ch.cancelled)
-    for k, r in enumerate(rounds, 1):
-        checked = (f", check RMSE {100 * r.check_rmse_m:.1f} cm" if check_xyz is not None
-                   else "")
-        ch.info(f"round {k}: {r.nodes} nodes, RMSE {100 * r.rmse_m:.1f} cm, max "
-                f"{100 * r.max_abs_m:.1f} cm{checked}; {r.inserted} points inserted, "
-                f"{r.refined} triangles refined")
-    io.write_mesh_2dm(output, mesh.nodes, mesh.triangles, crs=grid.crs)
-    result = {"OUTPUT": output, "NODES": len(mesh.nodes), "RMSE": rounds[-1].rmse_m,
-              "crs": grid.crs.to_wkt()}
-    if report:
-        io.write_json(report, {"rounds": [asdict(r) for r in rounds]})
-        result["REPORT"] = report
-    return result
-
-
-def step_assess(ch, *, mesh, points, output, crs=None, report=None):
-    from . import io
-    from .accuracy import accuracy_statistics, residuals
-    from .mesh import Mesh
-
-    read = io.read_2dm(mesh)
-    xyz, crs = _points_xyz(points, crs or read.crs)
-    res = residuals(Mesh(read.nodes, read.triangles, crs), xyz)
-    io.write_residuals(output, xyz, res, crs)
-    stats = accuracy_statistics(res)
-    ch.info(json.dumps(stats, indent=1))
-    result = {"OUTPUT": output, "RMSE": stats["rmse_m"]}
-    if report:
-        io.write_json(report, stats)
-        result["REPORT"] = report
-    return result
-
-
-def step_export(ch, *, mesh, output, fmt, crs=None, open_boundaries=None, snap=1.0, regions=None,
-                material_field=None, datum_offset=0.0, element_elevations=False,
-                breaklines=None):
-    from . import io
-    from .export import export_mesh, layers_crs
-
-    read = io.read_2dm(mesh)
-    crs = layers_crs(crs or read.crs, {"open boundary": open_boundaries, "region": regions,
-                                       "break line": breaklines})
-    written = export_mesh(
-        output, read.nodes, read.triangles, fmt=fmt, crs=crs,
-        open_lines=io.read_lines_gpkg(open_boundaries) if open_boundaries else (),
-        snap=snap, regions=io.read_regions(regions, field=material_field) if regions else (),
-        materials=read.materials, datum_offset=datum_offset,
-        element_elevations=element_elevations,
-        breaklines=io.read_lines_gpkg(breaklines) if breaklines else ())
-    ch.info(f"{len(read.nodes)} nodes, {len(read.triangles)} triangles written to "
-            f"{', '.join(str(p) for p in written)}")
-    result = {"OUTPUT": output, "files": [str(p) for p in written],
-              "crs": crs.to_wkt() if crs is not None else None}
-    if fmt == "slf":
-        result["CLI"] = str(written[1])
-    return result
+# the steps: core.steps' file-level functions, with the worker's progress and notes
+def _file_step(func):
+    """``func`` (one of ``core.steps``) with the worker's progress and notes; its summary goes
+    to QGIS's log."""
+    def run(ch, **args):
+        result = func(**args, progress=ch.progress, cancelled=ch.cancelled, note=ch.note)
+        ch.info(result.pop("summary"))
+        return result
+    return run
 
 
 def step_run(ch, *, input, output_folder, options):
@@ -311,10 +115,11 @@ def _pipeline_log(ch):
     return log
 
 
-STEPS = {"grid": step_grid, "slope": step_slope, "breakpoints": step_breakpoints,
-         "trace": step_trace, "simplify": step_simplify, "build_mesh": step_build_mesh,
-         "refine_mesh": step_refine_mesh, "assess": step_assess, "export": step_export,
-         "run": step_run, "flood": step_flood}
+STEPS = {"grid": _file_step(steps.grid), "slope": _file_step(steps.slope),
+         "breakpoints": _file_step(steps.breakpoints), "trace": _file_step(steps.trace),
+         "simplify": _file_step(steps.simplify), "build_mesh": _file_step(steps.mesh),
+         "refine_mesh": _file_step(steps.refine), "assess": _file_step(steps.assess),
+         "export": _file_step(steps.export), "run": step_run, "flood": step_flood}
 
 
 def run_job(job: dict, ch: Channel) -> int:
