@@ -123,8 +123,8 @@ def create_managed_venv(venv: Path, feedback) -> None:
                     f"FloodMesh could not set up its Python packages ({' '.join(command[:4])}…: "
                     f"{tail[0]}); on Debian/Ubuntu install python3-venv (apt install "
                     f"python3-venv) and check the internet connection, or set {ENV_VARIABLE} to "
-                    f"a Python with triangle, laspy[lazrs], numba and shapely 2 (see the "
-                    f"README's 'In QGIS')")
+                    f"a Python with triangle, laspy[lazrs], numba and shapely 2 (see "
+                    f"docs/qgis.md, Which Python the worker uses)")
         proj = venv / "share" / "proj"
         if not proj.exists() and Path("/usr/share/proj").is_dir():
             proj.parent.mkdir(parents=True, exist_ok=True)

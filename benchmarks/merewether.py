@@ -224,7 +224,7 @@ def main(argv=None):
     print(f"  observed {observed.tolist()}\n  TUFLOW   {tuflow.tolist()}")
     for row in rows:
         print(f"  {row['mesh']:<23}{[round(v, 2) for v in row['peak_stages_m']]}")
-    # the cheap checks of each mesh, for the table in the README
+    # the cheap checks of each mesh, for the table in benchmarks/RESULTS.md
     for label in labels[:-1]:
         nodes, triangles = io.read_mesh_2dm(meshes[label][0])
         h = hydraulic_checks(nodes, triangles)

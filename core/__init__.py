@@ -1,11 +1,55 @@
 """FloodMesh core: LiDAR points to break lines, quality meshes and their error, without QGIS.
 
-The pipeline, one module per step: ``io`` (reading points and rasters, writing outputs) →
-``grid`` → ``slope`` → ``breakpoints`` → ``breaklines`` → ``simplify`` → ``mesh`` →
-``accuracy``; ``pipeline`` chains them and ``cli`` is the command line.
+The library, one function per step of the method, each taking what the one before returns::
+
+    from floodmesh import core
+
+    points = core.read_points("reach.laz")                  # PointCloud (ground class)
+    dem = core.grid_points(points, 1.0)                     # Grid, linear (TIN), d = 1 m
+    slope = core.terrain_slope(dem, "one-over-distance")    # Grid, degrees
+    breakpoints = core.classify_breakpoints(slope, 10.0)    # Grid, S_crit = 10°
+    lines = core.trace_breaklines(breakpoints, slope, dem, 10.0)          # [BreakLine]
+    lines = core.simplify_breaklines(lines, "keep-every", 4)              # [BreakLine]
+    mesh = core.build_mesh(dem, lines, min_angle=25, max_area=100)        # Mesh
+    residuals, stats = core.assess(mesh, held_out.xyz)      # m; RMSE, NSSDA, classes
+
+or the whole chain with the command line's defaults: ``core.run_pipeline(path, out,
+core.RunOptions())``. Names are imported on first use, so ``import floodmesh.core`` stays
+light (no numba, rasterio or Triangle until a step needs them).
 """
 
 import os as _os
+
+# public name → the module that defines it (or (module, its name there)); never a submodule's
+# name, which the import system sets on the package once that submodule is imported
+_API = {
+    "read_points": "io", "read_raster": "io", "read_input": "io", "write_raster": "io",
+    "write_breaklines": "io", "write_mesh_2dm": "io",
+    "grid_points": ("grid", "grid_points_linear"), "terrain_slope": ("slope", "slope"),
+    "laplacian_of_gaussian": "slope", "classify_breakpoints": "breakpoints",
+    "log_breakpoints": "breakpoints", "trace_breaklines": "breaklines",
+    "simplify_breaklines": "simplify", "localise_traced": "localise",
+    "build_mesh": "mesh", "assess": "accuracy", "refine_mesh": "refine",
+    "export_mesh": "export", "run_pipeline": "pipeline", "run_series": "series",
+    "RunOptions": "options", "Grid": "raster", "PointCloud": "points", "BreakLine": "breaklines",
+    "Mesh": "mesh", "FloodMeshError": "errors", "Cancelled": "errors",
+}
+__all__ = sorted(_API)
+
+
+def __getattr__(name):
+    if name not in _API:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+
+    module, attribute = (_API[name] if isinstance(_API[name], tuple) else (_API[name], name))
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), attribute)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
 
 
 def _numba_cache() -> None:

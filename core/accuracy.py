@@ -31,6 +31,14 @@ def residuals(mesh: Mesh, points_xyz: np.ndarray) -> np.ndarray:
     return points_xyz[:, 2] - tin_elevation(mesh, points_xyz[:, 0], points_xyz[:, 1])
 
 
+def assess(mesh: Mesh, points_xyz: np.ndarray, *, alpha: float | None = None,
+           delta: float | None = None) -> tuple[np.ndarray, dict]:
+    """Step 8: the residuals of held-out points against the mesh's TIN (m, NaN outside it) and
+    their statistics (``accuracy_statistics``: RMSE, NSSDA test, classes, E = RMSE + α·Δ)."""
+    res = residuals(mesh, points_xyz)
+    return res, accuracy_statistics(res, alpha=alpha, delta=delta)
+
+
 def residual_class(res: np.ndarray) -> np.ndarray:
     """0, 1, 2 for |residual| <10 cm, 10–25 cm, >25 cm; -1 where the residual is NaN."""
     a = np.abs(res)

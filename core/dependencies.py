@@ -47,4 +47,4 @@ def install_hint(missing: list[str]) -> str:
                "FLOODMESH_PYTHON unset the plugin sets one up itself)")
             + f", or set "
             f"FLOODMESH_PYTHON to a Python that has them (a checkout's .venv after `make "
-            f"setup`; see the README's 'In QGIS'), then run again.")
+            f"setup`; see docs/qgis.md, Which Python the worker uses), then run again.")

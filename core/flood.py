@@ -179,7 +179,7 @@ def _region(spec, base: Path) -> tuple:
 
 
 def scenario_from_dict(data: dict, base=".") -> Scenario:
-    """A Scenario from its JSON form (see the README's *Flood on the mesh*); file names are
+    """A Scenario from its JSON form (see docs/user-guide.md, The scenario); file names are
     relative to ``base``."""
     base = Path(base)
     try:
@@ -221,8 +221,8 @@ def scenario_from_dict(data: dict, base=".") -> Scenario:
                         wet_depth_m=float(data.get("wet_depth_m", 0.05)),
                         observation_points=points, cell_size_m=data.get("cell_size_m"))
     except KeyError as exc:
-        raise FloodMeshError(f"the scenario lacks {exc}: see the README's scenario "
-                             "example") from None
+        raise FloodMeshError(f"the scenario lacks {exc}: see the scenario example "
+                             "in docs/user-guide.md") from None
     except (TypeError, ValueError) as exc:
         if isinstance(exc, FloodMeshError):
             raise

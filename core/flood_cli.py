@@ -92,7 +92,7 @@ def add_flood_commands(sub) -> None:
                                      "and arrival rasters, outflow hydrograph, mass balance")
     p.add_argument("mesh", help="SMS 2DM mesh (e.g. mesh.2dm of floodmesh run)")
     p.add_argument("--scenario", required=True, help="scenario JSON: inflows, boundaries, "
-                   "roughness, buildings, duration (see the README)")
+                   "roughness, buildings, duration (see docs/user-guide.md, The scenario)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--crs", help="CRS of the mesh (default: that of mesh.gpkg or dem.tif "
                                  "beside it)")

@@ -454,20 +454,21 @@ def containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarra
     return locate(xy, triangles, points)[0]
 
 
-def build_mesh(dem: Grid, lines: list[np.ndarray], *, min_angle: float = 25.0,
+def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
                max_area: float = 100.0, conforming: bool = True, snap: float | None = None,
                domain=None, points: np.ndarray | None = None,
                local_areas: np.ndarray | None = None, size_field: Grid | None = None,
                max_triangles: int = DEFAULT_MAX_TRIANGLES, note=None) -> Mesh:
-    """Mesh the DEM's valid area honouring the break lines; node z from the lines where a node is
-    a break-line vertex, from ``points`` (k, 3: measurements put into the TIN) at theirs, else
-    bilinear from the DEM. ``local_areas`` (x, y, m²) refine locally; ``size_field`` is a grid of
-    local maximum areas (m², NaN: no limit; see ``size_from_slope``). A mesh estimated above
-    ``max_triangles`` triangles is refused before any work; ``note`` receives the repairs made
-    to the lines."""
+    """Mesh the DEM's valid area honouring the break lines (``BreakLine``s or (n, 2|3) arrays);
+    node z from the lines where a node is a break-line vertex, from ``points`` (k, 3:
+    measurements put into the TIN) at theirs, else bilinear from the DEM. ``local_areas`` (x, y,
+    m²) refine locally; ``size_field`` is a grid of local maximum areas (m², NaN: no limit; see
+    ``size_from_slope``). A mesh estimated above ``max_triangles`` triangles is refused before
+    any work; ``note`` receives the repairs made to the lines."""
     min_angle = check_min_angle(min_angle)
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
+    lines = [getattr(line, "coords", line) for line in lines]  # BreakLines as the tracer gives
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
     check_triangles(domain.area, max_area, max_triangles)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 PLUGIN_PARTS = ("metadata.txt", "__init__.py", "LICENSE", "README.md", "provider/",
-                "algorithms/", "core/", "icons/", "models/")
+                "algorithms/", "core/", "icons/", "models/", "docs/")
 
 
 def build(out_dir: Path = ROOT / "dist") -> Path:
