@@ -30,9 +30,11 @@ PLUGIN_DIR = Path(__file__).resolve().parent.parent
 PACKAGE = __name__.split(".")[0]  # "floodmesh" as QGIS and pip install it
 ENV_VARIABLE, SETTING = "FLOODMESH_PYTHON", "floodmesh/python"
 SYSTEM_PYTHON = "/usr/bin/python3"
-# what Debian/Ubuntu's QGIS lacks; numpy stays the system's (pinned), so its GDAL still loads
-MANAGED_PACKAGES = ("triangle", "laspy[lazrs]", "numba", "shapely>=2", "scipy", "rasterio",
-                    "fiona", "pyproj", "matplotlib")
+# what Debian/Ubuntu's QGIS lacks: core/requirements.txt (the one list of dependencies) but
+# numpy, which stays the system's (pinned), so that its GDAL still loads
+_REQUIREMENTS = (PLUGIN_DIR / "core" / "requirements.txt").read_text(encoding="utf-8")
+MANAGED_PACKAGES = tuple(line.split("#")[0].strip() for line in _REQUIREMENTS.splitlines()
+                         if line.split("#")[0].strip() not in ("", "numpy"))
 PARTIAL_GLOB = ".*.partial*"  # core.worker.PARTIAL_GLOB (not imported: core stays out of QGIS)
 LOG_TAG = "FloodMesh"
 READY = ".floodmesh-ready"  # written into the managed environment once pip has succeeded

@@ -6,19 +6,34 @@ plugin never imports them: its worker (``core.worker``) checks them and says wha
 from __future__ import annotations
 
 import importlib
+import re
+from pathlib import Path
 
-# module → what pip installs it as
-REQUIRED = {
-    "numpy": "numpy", "scipy": "scipy", "shapely": "shapely>=2", "rasterio": "rasterio",
-    "fiona": "fiona", "pyproj": "pyproj", "matplotlib": "matplotlib", "triangle": "triangle",
-    "laspy": "laspy[lazrs]", "lazrs": "laspy[lazrs]", "numba": "numba",
-}
+REQUIREMENTS = Path(__file__).with_name("requirements.txt")  # the one list (pyproject reads it)
+# modules a requirement's extras bring, beside its own
+EXTRA_MODULES = {"laspy[lazrs]": ("lazrs",)}
+
+
+def requirements() -> list[str]:
+    """FloodMesh's pip requirements (``requirements.txt``)."""
+    lines = REQUIREMENTS.read_text(encoding="utf-8").splitlines()
+    return [line.split("#")[0].strip() for line in lines if line.split("#")[0].strip()]
+
+
+def required_modules() -> dict:
+    """Module → the requirement that installs it."""
+    modules = {}
+    for requirement in requirements():
+        name = re.split(r"[\[<>=!~; ]", requirement, maxsplit=1)[0]
+        for module in (name, *EXTRA_MODULES.get(requirement, ())):
+            modules[module] = requirement
+    return modules
 
 
 def missing_dependencies() -> list[str]:
     """pip requirements of the packages that do not import (shapely 1.x counts as missing)."""
     missing = []
-    for module, requirement in REQUIRED.items():
+    for module, requirement in required_modules().items():
         try:
             imported = importlib.import_module(module)
         except Exception:

@@ -72,7 +72,7 @@ if grep -q '^shapely==' .venv/constraints.txt.new \
     .venv/bin/pip uninstall -q -y shapely
 fi
 stamp=.venv/.floodmesh-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] \
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ core/requirements.txt -nt "$stamp" ] \
         || ! cmp -s .venv/constraints.txt.new .venv/constraints.txt; then
     echo "setup: installing Python dependencies into .venv ($(grep '^numpy' .venv/constraints.txt.new))"
     # the build backend is Debian's setuptools (python3-setuptools), not one that pip would fetch
