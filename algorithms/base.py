@@ -169,54 +169,12 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         subclasses override it. Core checks them again when it runs, with the same message."""
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
-        from ..core.outputs import check_outputs  # plain Python, like core.options
-
+        # core's step (core.steps) checks its files before any work: no output is or replaces
+        # an input, each output folder is writable
         try:
-            check_outputs(*self.files(parameters, context))
             return self.process(parameters, context, feedback)
         except FloodMeshError as exc:
             raise QgsProcessingException(str(exc)) from None
-
-    def files(self, parameters, context) -> tuple[list, list]:
-        """(files read, files written) by the parameters, for core's check that no output is
-        or replaces an input (a folder output is checked by the core call it goes to)."""
-        from qgis.core import (QgsProcessing, QgsProcessingOutputLayerDefinition,
-                               QgsProcessingParameterFeatureSource, QgsProcessingParameterFile,
-                               QgsProcessingParameterFolderDestination,
-                               QgsProcessingParameterMeshLayer,
-                               QgsProcessingParameterMultipleLayers,
-                               QgsProcessingParameterRasterLayer,
-                               QgsProcessingParameterVectorLayer)
-
-        inputs, outputs = [], []
-        for p in self.parameterDefinitions():
-            name = p.name()
-            if p.isDestination():
-                # the value as given (parameterAsOutputLayer would add a layer to load)
-                value = parameters.get(name)
-                if isinstance(value, QgsProcessingOutputLayerDefinition):
-                    value = value.sink.staticValue()
-                if (isinstance(value, str) and value != QgsProcessing.TEMPORARY_OUTPUT
-                        and not isinstance(p, QgsProcessingParameterFolderDestination)):
-                    outputs.append(value)
-            elif isinstance(p, QgsProcessingParameterFile):
-                inputs.append(self.parameterAsFile(parameters, name, context))
-            elif isinstance(p, QgsProcessingParameterMultipleLayers):
-                inputs += self.parameterAsFileList(parameters, name, context)
-            elif isinstance(p, QgsProcessingParameterRasterLayer):
-                layer = self.parameterAsRasterLayer(parameters, name, context)
-                inputs.append(layer.source() if layer else None)
-            elif p.name() == POINT_CLOUD:
-                layer = self.parameterAsPointCloudLayer(parameters, name, context)
-                inputs.append(layer.source() if layer else None)
-            elif isinstance(p, QgsProcessingParameterMeshLayer):
-                layer = self.parameterAsMeshLayer(parameters, name, context)
-                inputs.append(layer.source() if layer else None)
-            elif isinstance(p, (QgsProcessingParameterFeatureSource,
-                                QgsProcessingParameterVectorLayer)):
-                layer = self.parameterAsVectorLayer(parameters, name, context)
-                inputs.append(layer.source().split("|")[0] if layer else None)
-        return inputs, [o for o in outputs if o and not o.startswith(("memory:", "ogr:"))]
 
     def run_step(self, step, args, feedback, *outputs):
         """Core's ``step`` on ``args`` in the worker process (see ``child.run_step``); the

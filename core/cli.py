@@ -310,44 +310,6 @@ def _holdout_target(args) -> str:
     return args.holdout_out or str(Path(args.out).with_name("holdout.gpkg"))
 
 
-# per command: the arguments naming files it reads, and those naming files it writes
-_FILES = {
-    "grid": (("input",), ("out",)),
-    "slope": (("dem",), ("out",)),
-    "breakpoints": (("slope",), ("out",)),
-    "breaklines": (("breakpoints", "slope", "dem"), ("out",)),
-    "simplify": (("breaklines",), ("out",)),
-    "mesh": (("dem", "breaklines", "boundary", "user_lines", "size_field"), ("out", "gpkg")),
-    "assess": (("mesh", "points"), ("out", "report")),
-    "refine": (("dem", "points", "check", "breaklines", "boundary", "user_lines"),
-               ("out", "report")),
-    "export": (("mesh", "open_boundaries", "regions", "breaklines"), ("output",)),
-}
-RASTER_OUTPUTS = (".tif", ".tiff")
-
-
-def _check_files(args) -> None:
-    """Before any work: no output may be (or replace) an input, each output's folder must be
-    writable, and the rasters written are GeoTIFFs (run and series check their folder in
-    core)."""
-    from .outputs import check_outputs, require_suffix
-
-    reads, writes = _FILES.get(args.command, ((), ()))
-    inputs = [getattr(args, name) for name in reads if getattr(args, name) != "slope"]
-    if args.command == "grid":  # tiles (NumPy, pyproj) only here: the other steps start faster
-        from .tiles import expand_tiles, is_tile_set
-
-        inputs = expand_tiles(_input(args)) if is_tile_set(_input(args)) else [_input(args)]
-    outputs = [getattr(args, name) for name in writes]
-    if args.command == "grid" and args.holdout:
-        outputs.append(_holdout_target(args))
-    if args.command == "export" and Path(args.output).suffix.lower() == ".slf":
-        outputs.append(Path(args.output).with_suffix(".cli"))
-    check_outputs(inputs, outputs)
-    if args.command in ("grid", "slope", "breakpoints"):
-        require_suffix(args.out, RASTER_OUTPUTS, "a GeoTIFF")
-
-
 def cmd_slope(args):
     from . import steps
 
@@ -589,7 +551,6 @@ def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     start = time.perf_counter()
     try:
-        _check_files(args)
         args.func(args)
     except FloodMeshError as exc:
         print(f"floodmesh: error: {exc}", file=sys.stderr)

@@ -15,6 +15,18 @@ from pathlib import Path
 
 from .options import DEFAULT_MAX_TRIANGLES
 
+GEOTIFF = (".tif", ".tiff")
+
+
+def _files(reads, writes, *, geotiff=()) -> None:
+    """Before any work: no output may be (or replace) an input, each output's folder must be
+    writable, and the rasters written are GeoTIFFs."""
+    from .outputs import check_outputs, require_suffix
+
+    check_outputs([r for r in reads if r], [w for w in writes if w])
+    for path in geotiff:
+        require_suffix(path, GEOTIFF, "a GeoTIFF")
+
 
 def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=None,
          holdout: float = 0.0, seed: int = 0, holdout_output=None, workers=None,
@@ -24,8 +36,10 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     written to ``holdout_output`` (GeoPackage)."""
     from . import io
     from .options import check_cell_size, check_holdout, check_max_gap, check_seed
-    from .tiles import grid_point_tiles, is_tile_set
+    from .tiles import expand_tiles, grid_point_tiles, is_tile_set
 
+    _files(expand_tiles(input) if is_tile_set(input) else [input], [output, holdout_output],
+           geotiff=[output])
     check_cell_size(cell_size)
     check_max_gap(max_gap)
     check_holdout(holdout)
@@ -68,6 +82,7 @@ def slope(input, output, *, method: str = "one-over-distance", sigma: float = 1.
     ``method="log"``, σ ``sigma`` m), file to file block by block."""
     from .slope import slope_raster_file
 
+    _files([input], [output], geotiff=[output])
     slope_raster_file(input, output, method, sigma=sigma, log_kernel=log_kernel, crs=crs,
                       note=note, progress=progress, cancelled=cancelled)
     written = (f"Laplacian-of-Gaussian response (sigma {sigma} m, m) written to {output}"
@@ -82,6 +97,7 @@ def breakpoints(input, output, *, s_crit: float = 10.0, sensitivity=None,
     reaches ``sensitivity`` m), file to file block by block."""
     from .breakpoints import breakpoints_file
 
+    _files([input], [output], geotiff=[output])
     count = breakpoints_file(input, output, s_crit=s_crit, sensitivity=sensitivity,
                              zero_crossings=zero_crossings, crs=crs, progress=progress,
                              cancelled=cancelled)
@@ -95,6 +111,7 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
     from . import io
     from .breaklines import trace_breaklines
 
+    _files([breakpoints, slope, dem], [output])
     points = io.read_raster(breakpoints, crs=crs)
     points = points.with_values((points.values == 1).astype("uint8"))
     terrain = io.read_raster(dem, crs=crs)
@@ -113,6 +130,7 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
     from .raster import require_metric_crs
     from .simplify import simplify_breaklines
 
+    _files([input], [output])
     crs = require_metric_crs(crs or io.vector_crs(input), Path(input).name)
     lines = io.read_breaklines(input)
     simple = simplify_breaklines(lines, method, amount, min_distance=min_distance)
@@ -150,6 +168,8 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     from .pipeline import size_field as size_from
     from .sizing import finer
 
+    _files([dem, breaklines, boundary, user_lines, size_field if size_field != "slope" else None],
+           [output, triangles])
     check_min_angle(min_angle)
     check_max_area(max_area)
     check_max_triangles(max_triangles)
@@ -199,6 +219,7 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
     from .mesh import mesh_quality
     from .refine import refine_mesh
 
+    _files([dem, points, check, breaklines, boundary, user_lines], [output, report])
     terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
     measured = measured_points(points, crs, terrain.crs)[0]
     check_xyz = measured_points(check, crs, terrain.crs)[0] if check else None
@@ -232,6 +253,7 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
     from .accuracy import accuracy_statistics, residuals
     from .mesh import Mesh
 
+    _files([mesh, points], [output, report])
     read = io.read_2dm(mesh)
     xyz, points_crs = measured_points(points, crs, read.crs)
     res = residuals(Mesh(read.nodes, read.triangles, points_crs), xyz)
@@ -260,6 +282,8 @@ def export(mesh, output, *, fmt=None, crs=None, open_boundaries=None, snap: floa
     from .export import export_mesh, format_of, layers_crs
 
     fmt = format_of(output, fmt)
+    _files([mesh, open_boundaries, regions, breaklines],
+           [output, Path(output).with_suffix(".cli") if fmt == "slf" else None])
     read = io.read_2dm(mesh)
     crs = layers_crs(crs or read.crs, {"open boundary": open_boundaries, "region": regions,
                                        "break line": breaklines})
