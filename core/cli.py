@@ -209,9 +209,16 @@ def _options(args) -> RunOptions:
 
 
 def _input(args):
-    """One input file, or the list of tile inputs (folders, globs, files)."""
+    """One input file, or the list of tile inputs (folders, globs, files); with
+    --skip-unreadable-tiles, the tiles (``tiles.TileSet``) that leave unreadable ones out."""
     items = args.input if isinstance(args.input, list) else [args.input]
-    return items[0] if len(items) == 1 else items
+    inputs = items[0] if len(items) == 1 else items
+    if getattr(args, "skip_unreadable_tiles", False):
+        from .tiles import expand_tiles, is_tile_set
+
+        if is_tile_set(inputs):
+            return expand_tiles(inputs, skip_unreadable=True)
+    return inputs
 
 
 def _add_dask_options(p: argparse.ArgumentParser):
@@ -220,6 +227,9 @@ def _add_dask_options(p: argparse.ArgumentParser):
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="point tiles: send the per-tile work to this running dask.distributed "
                         "scheduler (tcp://HOST:8786) instead of a local cluster")
+    p.add_argument("--skip-unreadable-tiles", action="store_true",
+                   help="point tiles: leave out a tile that cannot be read (a truncated or "
+                        "corrupt file), with a note naming it, instead of stopping")
 
 
 def _summary(report: dict, out: Path) -> str:

@@ -194,26 +194,78 @@ def _read_xyz(path: Path) -> np.ndarray:
                                            "by one")
     with open(path, "r", errors="replace") as fh:
         head = [fh.readline() for _ in range(5)]
-    delimiter = "," if any("," in line for line in head) else (";" if any(";" in line for line in head) else None)
-    first = head[0].replace(",", " ").replace(";", " ").split()
-    columns = (0, 1, 2)
+    delimiter, skip, columns = _xyz_layout(head)
     try:
-        [float(v) for v in first[:3]]
-        skip = 0
-    except ValueError:
-        skip = 1  # a header line such as "x,y,z": take the columns it names
-        names = [name.strip("\"'").lower() for name in first]
-        for aliases in (("x", "y", "z"), ("easting", "northing", "elevation"),
-                        ("east", "north", "height"), ("lon", "lat", "z")):
-            if all(a in names for a in aliases):
-                columns = tuple(names.index(a) for a in aliases)
-                break
-    try:
-        data = np.loadtxt(path, delimiter=delimiter, skiprows=skip, usecols=columns, ndmin=2)
+        data = np.loadtxt(path, delimiter=delimiter, skiprows=skip, usecols=columns or (0, 1, 2),
+                          ndmin=2)
     except (ValueError, IndexError) as exc:
         raise FloodMeshError(f"{path.name} is not an XYZ text file with x, y, z in the first "
                              f"three columns ({exc})") from None
     return data
+
+
+XYZ_HEADERS = (("x", "y", "z"), ("easting", "northing", "elevation"), ("east", "north", "height"),
+               ("lon", "lat", "z"))  # column names a header line of XYZ text may give
+
+
+def _fields(line: str) -> list[str]:
+    return line.replace(",", " ").replace(";", " ").split()
+
+
+def _xyz_layout(head: list[str]):
+    """(delimiter, header lines to skip, x, y, z columns) of XYZ text from its first lines; a
+    first line that is not numbers is a header, and the columns are those it names (None when it
+    names none of ``XYZ_HEADERS``)."""
+    delimiter = "," if any("," in line for line in head) else (";" if any(";" in line for line in head) else None)
+    first = _fields(head[0])
+    try:
+        [float(v) for v in first[:3]]
+        return delimiter, 0, (0, 1, 2)
+    except ValueError:  # a header line such as "x,y,z": take the columns it names
+        names = [name.strip("\"'").lower() for name in first]
+        for aliases in XYZ_HEADERS:
+            if all(a in names for a in aliases):
+                return delimiter, 1, tuple(names.index(a) for a in aliases)
+        return delimiter, 1, None
+
+
+TIFF_SIGNATURES = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # TIFF and BigTIFF
+RASTER_SIGNATURES = {".vrt": (b"<vrtdataset",), ".img": (b"ehfa_header_tag",),
+                     ".asc": (b"ncols", b"nrows", b"xll", b"yll", b"cellsize")}
+
+
+def file_format(path) -> str | None:
+    """What a file holds, by its content: "las" (LAS/LAZ, 'LASF'), "tiff" (a TIFF header),
+    "raster" (a VRT, Erdas Imagine or ESRI ASCII grid by its first bytes and extension), "xyz"
+    (an .xyz/.txt/.csv/.pts file whose first lines are numbers, x, y, z, after at most a header
+    naming them); None for anything else or an unreadable file."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return None
+    if head[:4] == b"LASF":
+        return "las"
+    if head[:4] in TIFF_SIGNATURES:
+        return "tiff"
+    ext = path.suffix.lower()
+    if head.lstrip()[:16].lower().startswith(RASTER_SIGNATURES.get(ext, ())):
+        return "raster"
+    if ext not in POINT_EXTENSIONS or b"\x00" in head:
+        return None
+    lines = head.decode("utf-8", "replace").splitlines()
+    lines = [line for line in lines[:-1 if len(head) == 4096 else None] if line.strip()][:5]
+    if not lines:
+        return None
+    _, skip, columns = _xyz_layout(lines)
+    rows = [_fields(line) for line in lines[skip:]]
+    try:
+        ok = bool(rows) and columns is not None and all(
+            [float(row[c]) for c in columns] for row in rows)
+    except (ValueError, IndexError):
+        return None
+    return "xyz" if ok else None
 
 
 def write_points_las(path, points: PointCloud, *, classes=GROUND_CLASS) -> None:
