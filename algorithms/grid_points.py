@@ -7,7 +7,7 @@ from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
 from ..core.options import check_cell_size, check_holdout, check_max_gap
 from .compat import DOUBLE, INTEGER
 from .base import FloodMeshAlgorithm, crs_or_none, distance, point_cloud_parameter
-from .tiles import add_tile_parameters, dask_settings, input_or_tiles
+from .tiles import add_tile_parameters, dask_settings, input_or_tiles, skip_unreadable
 
 POINT_FILTER = "Point clouds (*.las *.laz *.xyz *.txt *.csv);;All files (*.*)"
 
@@ -71,6 +71,7 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
         result = self.run_step("grid", {
             "input": input_or_tiles(self, parameters, context, self.INPUT),
             **dask_settings(self, parameters, context),
+            **skip_unreadable(self, parameters, context),
             "crs": crs_or_none(self, parameters, self.CRS, context), "classes": classes,
             "cell_size": self.parameterAsDouble(parameters, self.CELL_SIZE, context),
             "max_gap": self.max_gap(parameters, context),

@@ -18,7 +18,7 @@ from .base import (FloodMeshAlgorithm, add_domain_parameters, crs_or_none, dista
                    domain_files, labels, point_cloud_parameter)
 from .build_mesh import flow_area_parameter, max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
-from .tiles import add_tile_parameters, dask_settings, input_or_tiles
+from .tiles import add_tile_parameters, dask_settings, input_or_tiles, skip_unreadable
 from .styles import (load_results, run_group_name, style_breaklines, style_mesh,
                      style_residuals)
 
@@ -219,7 +219,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         source = input_or_tiles(self, parameters, context, self.INPUT)
         out = Path(self.parameterAsString(parameters, self.OUTPUT_FOLDER, context))
         report = self.run_step("run", {"input": source, "output_folder": str(out),
-                                       "options": asdict(options)}, feedback, out)
+                                       "options": asdict(options),
+                                       **skip_unreadable(self, parameters, context)},
+                               feedback, out)
         breaklines, mesh = str(out / "breaklines.gpkg"), str(out / "mesh.2dm")
         load_results(context, report["crs"], (
             (QgsMeshLayer(mesh, "Mesh", "mdal"), style_mesh, self.MESH),

@@ -1,17 +1,19 @@
 """The tile parameters LiDAR to mesh and Grid LiDAR points share: several point (or DEM) tiles
 instead of one file, and the Dask workers or scheduler that grid them."""
-from qgis.core import (QgsProcessingException, QgsProcessingParameterDefinition,
+from qgis.core import (QgsProcessingException, QgsProcessingParameterBoolean,
+                       QgsProcessingParameterDefinition,
                        QgsProcessingParameterFile, QgsProcessingParameterMultipleLayers,
                        QgsProcessingParameterNumber, QgsProcessingParameterString)
 
 from .compat import FILE_SOURCE, FOLDER, INTEGER
 
 TILES, TILE_FOLDER, WORKERS, SCHEDULER = "TILES", "TILE_FOLDER", "WORKERS", "SCHEDULER"
+SKIP_UNREADABLE = "SKIP_UNREADABLE"
 
 
 def add_tile_parameters(algorithm, what: str):
-    """Add TILES (files; ``what`` they are), TILE_FOLDER (a folder of them), WORKERS and
-    SCHEDULER (advanced) to ``algorithm``."""
+    """Add TILES (files; ``what`` they are), TILE_FOLDER (a folder of them), SKIP_UNREADABLE,
+    WORKERS and SCHEDULER (advanced) to ``algorithm``."""
     tr = algorithm.tr
     algorithm.addParameter(QgsProcessingParameterMultipleLayers(
         TILES, tr(f"Tiles instead of one file: {what}"), layerType=FILE_SOURCE,
@@ -20,6 +22,9 @@ def add_tile_parameters(algorithm, what: str):
         TILE_FOLDER, tr("… or a folder of tiles (its point or DEM files)"), behavior=FOLDER,
         optional=True))
     for parameter in (
+            QgsProcessingParameterBoolean(
+                SKIP_UNREADABLE, tr("Tiles: leave out unreadable tiles (a truncated or corrupt "
+                                    "file), with a note naming them"), defaultValue=False),
             QgsProcessingParameterNumber(
                 WORKERS, tr("Tiles: parallel Dask workers (empty: one per core)"),
                 INTEGER, None, optional=True, minValue=1),
@@ -48,6 +53,11 @@ def input_or_tiles(algorithm, parameters, context, input_name: str):
         raise QgsProcessingException("give a point cloud layer, an input file, or tiles "
                                      "(several files or a folder)")
     return given[0]
+
+
+def skip_unreadable(algorithm, parameters, context) -> dict:
+    """The worker's ``skip_unreadable`` argument (leave out tiles that cannot be read)."""
+    return {"skip_unreadable": algorithm.parameterAsBool(parameters, SKIP_UNREADABLE, context)}
 
 
 def dask_settings(algorithm, parameters, context) -> dict:

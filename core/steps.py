@@ -30,16 +30,19 @@ def _files(reads, writes, *, geotiff=()) -> None:
 
 def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=None,
          holdout: float = 0.0, seed: int = 0, holdout_output=None, workers=None,
-         scheduler=None, progress=None, cancelled=None, note=None) -> dict:
-    """Step 2: LiDAR points (a file, or tiles: gridded on Dask block by block) to a DEM GeoTIFF
-    at ``cell_size`` m by linear (TIN) interpolation; ``holdout`` of the points held back and
-    written to ``holdout_output`` (GeoPackage)."""
+         scheduler=None, skip_unreadable: bool = False, progress=None, cancelled=None,
+         note=None) -> dict:
+    """Step 2: LiDAR points (a file, or tiles: gridded on Dask block by block, unreadable ones
+    left out with ``skip_unreadable``) to a DEM GeoTIFF at ``cell_size`` m by linear (TIN)
+    interpolation; ``holdout`` of the points held back and written to ``holdout_output``
+    (GeoPackage)."""
     from . import io
     from .options import check_cell_size, check_holdout, check_max_gap, check_seed
     from .tiles import expand_tiles, grid_point_tiles, is_tile_set
 
-    _files(expand_tiles(input) if is_tile_set(input) else [input], [output, holdout_output],
-           geotiff=[output])
+    if is_tile_set(input):
+        input = expand_tiles(input, skip_unreadable=skip_unreadable)
+    _files(input if is_tile_set(input) else [input], [output, holdout_output], geotiff=[output])
     check_cell_size(cell_size)
     check_max_gap(max_gap)
     check_holdout(holdout)

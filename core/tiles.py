@@ -168,7 +168,8 @@ class PointTile:
     count: int          # points in the file (all classes; for text an estimate from its size)
 
 
-SKIP_UNREADABLE = "--skip-unreadable-tiles"  # the option that leaves unreadable tiles out
+# the option that leaves unreadable tiles out, on the command line and in QGIS
+SKIP_UNREADABLE = "--skip-unreadable-tiles; in QGIS: Tiles: leave out unreadable tiles"
 
 
 class _Unreadable(FloodMeshError):

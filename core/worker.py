@@ -77,9 +77,13 @@ def _file_step(func):
     return run
 
 
-def step_run(ch, *, input, output_folder, options):
+def step_run(ch, *, input, output_folder, options, skip_unreadable=False):
     from .options import RunOptions
     from .pipeline import run_pipeline
+    from .tiles import expand_tiles, is_tile_set
+
+    if skip_unreadable and is_tile_set(input):
+        input = expand_tiles(input, skip_unreadable=True)
 
     options = dict(options)
     for key in ("formats", "classes"):

@@ -56,3 +56,25 @@ def test_qgis_process_meshes_tiles(qgis_process, survey, tmp_path):
     assert results["NODES"] == report["nodes"] > 100
     assert report["holdout_source"].endswith("tile by tile")
     assert len(report["input"]) == len(tiles)
+
+
+def test_an_unreadable_tile_is_named_or_left_out_in_qgis(processing, survey, tmp_path):
+    """A truncated LAZ in a tile folder: refused naming it and the option; with "Tiles: leave
+    out unreadable tiles" the grid is made from the others, with a note naming it."""
+    import shutil
+
+    folder = tmp_path / "delivery"
+    shutil.copytree(survey / "tiles", folder)
+    broken = sorted(folder.glob("*.laz"))[0]
+    broken.write_bytes(broken.read_bytes()[:len(broken.read_bytes()) // 2])
+    parameters = {"TILE_FOLDER": str(folder), "CELL_SIZE": 1.0, "WORKERS": 1,
+                  "OUTPUT": str(tmp_path / "dem.tif")}
+    with pytest.raises(Exception, match=f"{broken.name}.*leave out unreadable tiles"):
+        processing.run("floodmesh:gridpoints", parameters, context=QgsProcessingContext(),
+                       feedback=QgsProcessingFeedback())
+    assert not (tmp_path / "dem.tif").exists()
+    feedback = QgsProcessingFeedback()
+    result = processing.run("floodmesh:gridpoints", {**parameters, "SKIP_UNREADABLE": True},
+                            context=QgsProcessingContext(), feedback=feedback)
+    assert io.read_raster(result["OUTPUT"]).values.size > 0
+    assert broken.name in feedback.textLog()
