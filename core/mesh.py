@@ -15,7 +15,7 @@ from .arrays import unique_rows
 from .errors import FloodMeshError
 from .limits import check_triangles
 from .options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles,
-                      check_min_angle)
+                      check_min_angle, check_tolerance)
 from .raster import Grid, bilinear, nearest_value
 
 # Triangle leaves skinny triangles in the concentric shells it builds around input corners
@@ -48,33 +48,47 @@ class PSLG:
     holes: np.ndarray
 
 
-def domain_from_dem(dem: Grid, *, min_area: float = 0.0):
+def domain_from_dem(dem: Grid, *, min_area: float = 0.0, tolerance: float | None = None):
     """The area of valid DEM cells as a (Multi)Polygon through the outer cell centres.
 
-    Parts smaller than ``min_area`` (m²) are dropped; the staircase outline is simplified within
-    half a cell.
+    Parts smaller than ``min_area`` (m²) are dropped. The staircase of cell edges the outline
+    follows is straightened within ``tolerance`` m of it (the run's break-line tolerance α·Δ;
+    default and at most Δ = d/2, d the cell size: farther out, a node on the edge could lie
+    more than a cell from every valid cell centre); see ``outline``.
     """
     from rasterio.features import shapes
+
+    from .outline import smooth_outline
 
     valid = np.isfinite(dem.values).astype(np.uint8)
     parts = [shapely.geometry.shape(geom) for geom, value in
              shapes(valid, mask=valid.astype(bool), transform=dem.transform, connectivity=4)
              if value == 1]
     d = dem.cell_size
-    domain = shapely.unary_union(parts).buffer(-d / 2, join_style="mitre")
-    domain = domain.simplify(d / 2, preserve_topology=True)
-    polygons = [p for p in getattr(domain, "geoms", [domain])
+    tolerance = d / 2 if tolerance is None else min(check_tolerance(tolerance), d / 2)
+    outline = shapely.unary_union(parts).buffer(-d / 2, join_style="mitre")
+    polygons = [p for p in getattr(outline, "geoms", [outline])
                 if p.geom_type == "Polygon" and p.area > max(min_area, 4 * d * d)]
     if not polygons:
         raise FloodMeshError("the DEM has no area of valid cells large enough to mesh; check its "
                              "nodata and the cell size")
+    polygons = smooth_outline(polygons, tolerance, d, sharpest=SHARP_CORNER)
     return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 
-def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon"):
+def edge_tolerance(method: str, amount: float, cell_size: float) -> float:
+    """The tolerance (m) a run straightens its domain edge within (``domain_from_dem``): its
+    break lines' simplification tolerance α·Δ where it gives one ("douglas-peucker", "spline":
+    ``amount`` m), else Δ = d/2 (α = 1; "keep-every" states none before it runs), d the
+    ``cell_size`` in m."""
+    return cell_size / 2 if method == "keep-every" else float(amount)
+
+
+def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon",
+                tolerance: float | None = None):
     """The mesh domain inside a user's boundary polygons (their union), holes (buildings,
-    islands) included, clipped to the DEM's valid area; refuses invalid or non-overlapping
-    ones."""
+    islands) included, clipped to the DEM's valid area (``domain_from_dem``, its edge
+    straightened within ``tolerance`` m); refuses invalid or non-overlapping ones."""
     from shapely.validation import explain_validity
 
     polygons = [polygons] if isinstance(polygons, shapely.Geometry) else list(polygons)
@@ -87,7 +101,7 @@ def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon"):
                                  "repair it (QGIS: Fix geometries; GDAL: ogr2ogr -makevalid) "
                                  "and check that its rings do not cross themselves")
     boundary = shapely.union_all(polygons)
-    data = domain_from_dem(dem)
+    data = domain_from_dem(dem, tolerance=tolerance)
     domain = shapely.intersection(boundary, data)
     polygons = [p for p in getattr(domain, "geoms", [domain])
                 if p.geom_type == "Polygon" and p.area > 4 * dem.cell_size ** 2]
@@ -172,9 +186,14 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     renumber = np.full(len(vertices), -1)
     renumber[used] = np.arange(len(used))
     vertices, segments = vertices[used], renumber[segments]
-    # a point of each hole that lies outside the domain (not on an island inside the hole)
-    holes = [shapely.Polygon(ring).difference(domain).representative_point().coords[0]
-             for poly in getattr(domain, "geoms", [domain]) for ring in poly.interiors]
+    # a point of each area inside the domain's hull that it leaves out and Triangle does not
+    # reach from the hull: its holes (not an island inside a hole), and areas that parts
+    # touching at corners enclose (a gap between cells at a diagonal)
+    hull = shapely.convex_hull(domain)
+    gaps = shapely.get_parts(hull.difference(domain))
+    gaps = gaps[(shapely.area(gaps) > (snap / 5) ** 2) & (shapely.length(
+        shapely.intersection(shapely.boundary(gaps), hull.exterior)) < snap / 5)]
+    holes = shapely.get_coordinates(shapely.point_on_surface(gaps))
     return PSLG(vertices.astype(float), segments.astype(np.int32),
                 np.asarray(holes, float).reshape(-1, 2))
 

@@ -28,7 +28,8 @@ from .layer_definition import QLR_NAME, write_layer_definition
 from .limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
 from .localise import fit_node_elevations, fit_window, localise_traced
 from .nearest import CellIndex, point_index
-from .mesh import build_mesh, domain_from_dem, mesh_quality, size_from_slope, user_domain
+from .mesh import (build_mesh, domain_from_dem, edge_tolerance, mesh_quality, size_from_slope,
+                   user_domain)
 from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
@@ -193,9 +194,10 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 
     detected, line_stats = [line.coords for line in lines], None
+    domain = (front.domain if front.domain is not None else
+              domain_from_dem(dem, tolerance=edge_tolerance(method, amount, dem.cell_size)))
     spacing = dem.cell_size if options.min_spacing is None else options.min_spacing
     if spacing > 0:  # lines a flood model can afford: see hydraulic_lines
-        domain = front.domain if front.domain is not None else domain_from_dem(dem)
         detected, line_stats = steps.run(
             "hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
             own_lines=front.own_lines, within=shapely.union_all(
@@ -205,13 +207,13 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     hand = None  # the flow zone's work is in the size field and the lines now
     mesh_lines = detected + front.own_lines
     mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
-                     max_area=max_area, conforming=options.conforming, domain=front.domain,
+                     max_area=max_area, conforming=options.conforming, domain=domain,
                      size_field=size, max_triangles=options.max_triangles, note=note)
     rounds = []
     if options.refine:
         # the points gridded drive the refinement; the held-out ones stay independent
         mesh, rounds = steps.run("refine", refine_mesh, dem, mesh_lines, measured()[0],
-                                 check=holdout.xyz, domain=front.domain, size_field=size,
+                                 check=holdout.xyz, domain=domain, size_field=size,
                                  min_angle=options.min_angle, max_area=max_area,
                                  conforming=options.conforming, elevations=elevations,
                                  lower=options.refine_lower, upper=options.refine_upper,
@@ -400,7 +402,9 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         holdout_source = "DEM cell centres (not independent of the DEM)"
         n_points = 0
     domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
-                                  options.user_lines)
+                                  options.user_lines,
+                                  tolerance=edge_tolerance(*options.simplification(),
+                                                           dem.cell_size))
     if files:
         slope_grid = read_back(files["slope"], dem.crs)
         breakpoints = read_back(files["breakpoints"], dem.crs)
@@ -467,10 +471,11 @@ def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: f
     return field
 
 
-def mesh_constraints(dem: Grid, boundary=None, user_lines=None):
+def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
+                     tolerance: float | None = None):
     """(domain, lines) from a user's boundary polygon file (None: the DEM's data) and a file of
     their own break or structure lines (2-D lines take z from the DEM), both checked against the
-    DEM's CRS."""
+    DEM's CRS; ``tolerance`` (m) as ``user_domain``'s."""
     for path, what in ((boundary, "boundary polygon"), (user_lines, "user line")):
         if path is not None:
             crs = io.vector_crs(path)
@@ -479,8 +484,8 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None):
                 raise FloodMeshError(f"the {what} file {Path(path).name} is in "
                                      f"{CRS.from_user_input(crs).name}, the DEM in "
                                      f"{dem.crs.name}; reproject it to the DEM's CRS")
-    domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name)
-              if boundary is not None else None)
+    domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name,
+                          tolerance=tolerance) if boundary is not None else None)
     lines = io.read_lines_gpkg(user_lines) if user_lines is not None else []
     return domain, lines
 

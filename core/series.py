@@ -16,7 +16,7 @@ from . import io
 from .accuracy import accuracy_statistics, residuals
 from .errors import FloodMeshError
 from .hydraulic_lines import lines_for_hydraulics
-from .mesh import Mesh, build_mesh, domain_from_dem
+from .mesh import Mesh, build_mesh, domain_from_dem, edge_tolerance
 from .options import RunOptions
 from .outputs import check_output_folder, staged_folder
 from .simplify import simplify_breaklines
@@ -77,21 +77,23 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
     and the meshes, in the order of ``settings``."""
     min_distance = dem.cell_size / 2 if min_distance is None else min_distance
     spacing = dem.cell_size if min_spacing is None else min_spacing
-    simplified = {}
+    simplified, domains = {}, {}
     rows, meshes = [], []
     for setting in settings:
         if log:
             log(f"mesh {setting.label}...")
         key = (setting.method, setting.amount)
         if key not in simplified:
+            # the DEM's data, its edge within the setting's tolerance (a user's domain as given)
+            domains[key] = domain if domain is not None else domain_from_dem(
+                dem, tolerance=edge_tolerance(setting.method, setting.amount, dem.cell_size))
             simplified[key] = [line.coords for line in simplify_breaklines(
                 traced, setting.method, setting.amount, min_distance=min_distance)]
             if spacing > 0:
                 simplified[key], _ = lines_for_hydraulics(
-                    simplified[key], domain_from_dem(dem) if domain is None else domain,
-                    spacing=spacing, own_lines=own_lines)
+                    simplified[key], domains[key], spacing=spacing, own_lines=own_lines)
         mesh = build_mesh(dem, simplified[key] + list(own_lines), min_angle=min_angle,
-                          max_area=setting.max_area, domain=domain)
+                          max_area=setting.max_area, domain=domains[key])
         stats = accuracy_statistics(residuals(mesh, check_xyz))
         rows.append({"label": setting.label, "max_area_m2": setting.max_area,
                      "simplification": setting.method, "amount": setting.amount,

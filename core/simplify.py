@@ -41,8 +41,14 @@ def simplify_douglas_peucker(lines: list[BreakLine], tolerance: float) -> list[B
     return out
 
 
-def douglas_peucker_mask(coords: np.ndarray, tolerance: float) -> np.ndarray:
-    """Boolean mask of the vertices Douglas–Peucker keeps (horizontal and vertical deviation)."""
+def douglas_peucker_mask(coords: np.ndarray, tolerance: float,
+                         rank: np.ndarray | None = None) -> np.ndarray:
+    """Boolean mask of the vertices Douglas–Peucker keeps (horizontal and vertical deviation).
+
+    With ``rank`` (an integer per vertex, lower preferred), a stretch with a vertex farther
+    than ``tolerance`` (m) from its chord is split at the farthest of its vertices of the lowest
+    rank it holds rather than at its farthest vertex: the kept line bends at preferred vertices
+    where it can, and every dropped vertex still lies within ``tolerance`` of it."""
     n = len(coords)
     keep = np.zeros(n, bool)
     keep[0] = keep[-1] = True
@@ -55,6 +61,9 @@ def douglas_peucker_mask(coords: np.ndarray, tolerance: float) -> np.ndarray:
         worst = np.maximum(horizontal, vertical)
         k = int(np.argmax(worst))
         if worst[k] > tolerance:
+            if rank is not None:
+                inner = rank[i + 1:j]
+                k = int(np.argmax(np.where(inner == inner.min(), worst, -1.0)))
             m = i + 1 + k
             keep[m] = True
             stack.append((i, m))
