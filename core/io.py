@@ -578,20 +578,34 @@ def read_breaklines(path) -> list:
             for coords, properties in _line_parts(path)]
 
 
-def read_lines_gpkg(path) -> list[np.ndarray]:
-    """Read the line features of a vector file as (k, 3) arrays (z = NaN where 2-D)."""
-    return [coords for coords, _ in _line_parts(path)]
+def read_lines_gpkg(path, note=None) -> list[np.ndarray]:
+    """Read the line features of a vector file as (k, 3) arrays (z = NaN where 2-D); parts that
+    are no line (non-finite, or fewer than two distinct vertices) are left out, said to
+    ``note``."""
+    return [coords for coords, _ in _line_parts(path, note)]
 
 
-def _line_parts(path) -> list[tuple[np.ndarray, dict]]:
+def _line_part(part, z_missing=np.nan) -> np.ndarray | None:
+    """A line part as (k, 3) coordinates without repeated vertices, or None where it is no line:
+    a coordinate not finite, or fewer than two distinct vertices (zero length)."""
+    arr = np.array([tuple(p[:3]) + (z_missing,) * (3 - len(p[:3])) for p in part], float)
+    if len(arr) == 0 or not np.isfinite(arr[:, :2]).all():
+        return None
+    keep = np.ones(len(arr), bool)
+    keep[1:] = np.any(arr[1:, :2] != arr[:-1, :2], axis=1)
+    arr = arr[keep]
+    return arr if len(arr) >= 2 else None
+
+
+def _line_parts(path, note=None) -> list[tuple[np.ndarray, dict]]:
     """Each part of each line feature as ((k, 3) coordinates, the feature's attributes)."""
     import fiona
 
     path = _require_file(path, "line file")
-    parts_out = []
+    parts_out, dropped = [], []
     try:
         with fiona.open(path) as src:
-            for feat in src:
+            for number, feat in enumerate(src, 1):
                 geom = feat["geometry"]
                 if geom is None:
                     continue
@@ -602,10 +616,17 @@ def _line_parts(path) -> list[tuple[np.ndarray, dict]]:
                                          "break lines must be lines")
                 properties = dict(feat["properties"])
                 for part in parts:
-                    arr = np.array([tuple(p) + (np.nan,) * (3 - len(p)) for p in part], float)
-                    parts_out.append((arr[:, :3], properties))
+                    arr = _line_part(part)
+                    if arr is None:
+                        dropped.append(number)
+                    else:
+                        parts_out.append((arr, properties))
     except fiona.errors.FionaError as exc:
         raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
+    if dropped and note:
+        note(f"{path.name}: {len(dropped)} line part(s) of feature(s) "
+             f"{', '.join(map(str, sorted(set(dropped))[:10]))} left out: zero length (fewer "
+             "than two distinct vertices) or coordinates that are not numbers")
     return parts_out
 
 

@@ -85,10 +85,11 @@ def edge_tolerance(method: str, amount: float, cell_size: float) -> float:
 
 
 def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon",
-                tolerance: float | None = None):
+                tolerance: float | None = None, note=None):
     """The mesh domain inside a user's boundary polygons (their union), holes (buildings,
     islands) included, clipped to the DEM's valid area (``domain_from_dem``, its edge
-    straightened within ``tolerance`` m); refuses invalid or non-overlapping ones."""
+    straightened within ``tolerance`` m; the area clipped off said to ``note``); refuses
+    invalid or non-overlapping ones."""
     from shapely.validation import explain_validity
 
     polygons = [polygons] if isinstance(polygons, shapely.Geometry) else list(polygons)
@@ -108,6 +109,11 @@ def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon",
     if not polygons:
         raise FloodMeshError(f"{name} does not overlap the DEM's data (the data cover "
                              f"{data.bounds}); check that both are in the same CRS")
+    clipped = boundary.area - sum(p.area for p in polygons)
+    if note and clipped > max(0.01 * boundary.area, 4 * dem.cell_size ** 2):
+        note(f"{clipped:,.0f} m² ({100 * clipped / boundary.area:.0f} %) of the model domain "
+             f"{name} has no data (outside the survey, or in its gaps) and is left out of the "
+             "mesh: extend the survey there, or draw the domain within the data")
     return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 

@@ -404,7 +404,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
     domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
                                   options.user_lines,
                                   tolerance=edge_tolerance(*options.simplification(),
-                                                           dem.cell_size))
+                                                           dem.cell_size), note=note)
     if files:
         slope_grid = read_back(files["slope"], dem.crs)
         breakpoints = read_back(files["breakpoints"], dem.crs)
@@ -472,10 +472,11 @@ def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: f
 
 
 def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
-                     tolerance: float | None = None):
+                     tolerance: float | None = None, note=None):
     """(domain, lines) from a user's boundary polygon file (None: the DEM's data) and a file of
     their own break or structure lines (2-D lines take z from the DEM), both checked against the
-    DEM's CRS; ``tolerance`` (m) as ``user_domain``'s."""
+    DEM's CRS; ``tolerance`` (m) as ``user_domain``'s; ``note`` hears of line parts left out
+    (zero length, not numbers) and of domain left without data."""
     for path, what in ((boundary, "boundary polygon"), (user_lines, "user line")):
         if path is not None:
             crs = io.vector_crs(path)
@@ -485,8 +486,8 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
                                      f"{CRS.from_user_input(crs).name}, the DEM in "
                                      f"{dem.crs.name}; reproject it to the DEM's CRS")
     domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name,
-                          tolerance=tolerance) if boundary is not None else None)
-    lines = io.read_lines_gpkg(user_lines) if user_lines is not None else []
+                          tolerance=tolerance, note=note) if boundary is not None else None)
+    lines = io.read_lines_gpkg(user_lines, note) if user_lines is not None else []
     return domain, lines
 
 

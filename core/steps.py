@@ -151,7 +151,7 @@ def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
 
     terrain = io.read_raster(dem, crs=crs, note=note)
     lines = io.read_lines_gpkg(breaklines) if breaklines else []
-    domain, own = mesh_constraints(terrain, boundary, user_lines)
+    domain, own = mesh_constraints(terrain, boundary, user_lines, note=note)
     return terrain, lines + own, domain
 
 
