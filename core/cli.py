@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -557,20 +558,41 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP (a scheduler's time limit, a closed terminal, QGIS ending a stuck
+    worker) taken as Ctrl-C is: every step unwinds, removing its temporaries and scratch."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _terminate(signum, frame):
+    raise Terminated(signum)
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     start = time.perf_counter()
+    if threading.current_thread() is threading.main_thread():
+        for signum in (signal.SIGTERM, signal.SIGHUP):
+            signal.signal(signum, _terminate)
     try:
         args.func(args)
     except FloodMeshError as exc:
         print(f"floodmesh: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated as exc:
+        print(f"floodmesh: stopped by {exc}; no partial file was left behind", file=sys.stderr)
+        return 128 + exc.signum
     except (KeyboardInterrupt, Cancelled):
         print("floodmesh: interrupted; no partial file was left behind", file=sys.stderr)
         return 130
     # Every file is in place: a Ctrl-C now, during interpreter teardown, would otherwise kill
     # the process with SIGINT and report a finished run as failed.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signum, signal.SIG_IGN)
     if sys.stderr.isatty():
         print(f"done in {time.perf_counter() - start:.1f} s", file=sys.stderr)
     return 0

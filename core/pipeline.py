@@ -76,8 +76,8 @@ class _Steps:
             cause = exc.__cause__ or exc.__context__
             while cause is not None and not isinstance(cause, KeyboardInterrupt):
                 cause = cause.__cause__ or cause.__context__
-            if cause is not None:
-                raise KeyboardInterrupt from None
+            if cause is not None:  # Ctrl-C, or SIGTERM taken as it (cli.Terminated)
+                raise cause.with_traceback(None) from None
             raise
         self.seconds[name] = round(time.perf_counter() - start, 3)
         self.cpu_seconds[name] = round(time.process_time() - cpu, 3)  # all threads
