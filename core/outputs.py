@@ -133,7 +133,7 @@ def temp_name(path) -> Path:
                           f"{path.suffix}")
 
 
-def _dead(pid: str | None) -> bool:
+def process_gone(pid: str | None) -> bool:
     """Whether the process ``pid`` has ended (None: a name from before pids were recorded)."""
     if pid is None:
         return True
@@ -149,6 +149,17 @@ def _dead(pid: str | None) -> bool:
     return False
 
 
+def scratch_folder(kind: str) -> tempfile.TemporaryDirectory:
+    """A scratch folder ``floodmesh-KIND-PID-…`` in the system's temporary folder, removed when
+    the returned TemporaryDirectory is cleaned up (a ``with`` block's end, an error, Ctrl-C,
+    SIGTERM); scratch folders that killed runs left (their process gone) are removed first."""
+    for path in Path(tempfile.gettempdir()).glob("floodmesh-*-*-*"):
+        match = re.fullmatch(r"floodmesh-(bands|tiles|dask)-(?P<pid>\d+)-.*", path.name)
+        if match and path.is_dir() and not path.is_symlink() and process_gone(match["pid"]):
+            shutil.rmtree(path, ignore_errors=True)
+    return tempfile.TemporaryDirectory(prefix=f"floodmesh-{kind}-{os.getpid()}-")
+
+
 def remove_stale_temporaries(folder) -> list[str]:
     """Remove FloodMesh's own temporary files in ``folder`` left by processes that have ended
     (killed mid-write); return their names. Nothing else is touched."""
@@ -156,7 +167,7 @@ def remove_stale_temporaries(folder) -> list[str]:
     with contextlib.suppress(OSError):
         for entry in os.scandir(folder):
             match = _TEMP_FILE.match(entry.name)
-            if match and entry.is_file(follow_symlinks=False) and _dead(match["pid"]):
+            if match and entry.is_file(follow_symlinks=False) and process_gone(match["pid"]):
                 with contextlib.suppress(OSError):
                     os.unlink(entry.path)
                     removed.append(entry.name)
@@ -177,7 +188,7 @@ def _clean_run_leftovers(out: Path) -> None:
         for entry in entries:
             match = _TEMP_FOLDER.match(entry.name)
             if not (match and match["name"] == out.name and entry.is_dir(follow_symlinks=False)
-                    and (_dead(match["pid"]) or int(match["pid"]) == os.getpid())
+                    and (process_gone(match["pid"]) or int(match["pid"]) == os.getpid())
                     and os.path.abspath(entry.path) not in _ACTIVE):
                 continue
             if match["kind"] == "old" and not out.exists():

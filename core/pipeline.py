@@ -2,7 +2,6 @@
 with every intermediate written to an output folder and a report of figures and timings."""
 from __future__ import annotations
 
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -34,7 +33,7 @@ from .points import PointCloud, split_holdout
 from .raster import Grid
 from .simplify import max_deviation, simplify_breaklines
 from .options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_fits
-from .outputs import check_output_folder, staged_folder
+from .outputs import check_output_folder, scratch_folder, staged_folder
 from .refine import refine_mesh
 from .report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .report_html import HTML_NAME, write_report_html
@@ -352,7 +351,7 @@ def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, 
         paths = expand_tiles(input_path)  # point tiles are read and gridded in one step
         if tile_kind(paths[0]) == "points" and options.slope_method != "log":
             # the DEM, slope and breakpoints go file to file, block by block (see tiles)
-            files = {"folder": tempfile.TemporaryDirectory(prefix="floodmesh-tiles-")}
+            files = {"folder": scratch_folder("tiles")}
             files["dem"] = Path(files["folder"].name) / "dem.tif"
         data = steps.run("grid" if tile_kind(paths[0]) == "points" else "read", read_tile_set,
                          paths, options, cancelled=cancelled, note=note, progress=None,

@@ -31,7 +31,6 @@ import contextlib
 import glob
 import math
 import os
-import tempfile
 import time
 import zlib
 from dataclasses import dataclass
@@ -43,6 +42,7 @@ from affine import Affine
 from pyproj import CRS
 
 from .errors import Cancelled, FloodMeshError
+from .outputs import scratch_folder
 from .raster import Grid, require_metric_crs
 
 LAS_EXTENSIONS = (".las", ".laz")
@@ -448,6 +448,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, *,
     (``processes=False``: threads, for hosts such as QGIS that cannot start Python processes)."""
     import logging
 
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -468,9 +469,13 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, *,
     # or a cancel mid-round otherwise logs the workers' closed connections as they stop); no
     # dashboard, and the scheduler's HTTP server on a free local port, not 8787, which may be
     # taken (distributed then warns).
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=processes,
-                      dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
-                      memory_limit=0, silence_logs=logging.CRITICAL) as cluster, \
+    # the workers' scratch (dask-scratch-space) in a folder of ours, removed with it
+    with scratch_folder("dask") as scratch, \
+            dask.config.set({"temporary-directory": scratch}), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=processes,
+                         dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
+                         memory_limit=0, silence_logs=logging.CRITICAL,
+                         local_directory=scratch) as cluster, \
             Client(cluster) as client:
         yield client
 
@@ -483,7 +488,7 @@ def _band_folder(scheduler: str | None):
     if scheduler:
         yield None
         return
-    with tempfile.TemporaryDirectory(prefix="floodmesh-bands-") as folder:
+    with scratch_folder("bands") as folder:
         yield folder
 
 

@@ -196,3 +196,28 @@ def test_a_file_is_a_tile_by_its_content(tmp_path):
             p.unlink()
     with pytest.raises(FloodMeshError, match="holds no LAS/LAZ/XYZ point tiles"):
         expand_tiles(tmp_path)
+
+
+def test_a_tiled_run_leaves_no_scratch_and_removes_a_killed_runs(tmp_path):
+    """Scratch lives in floodmesh-KIND-PID-… folders of the temporary folder, Dask's workers'
+    too (no dask-scratch-space of their own): gone after the run, and what a killed run left
+    (its process gone) is removed by the next."""
+    import os
+    import subprocess
+    import sys
+
+    from ..conftest import survey_tiles
+
+    survey = survey_tiles(tmp_path, density=1.0)
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    stale = scratch / "floodmesh-bands-999999999-x1y2"  # no such process
+    (stale / "band-0.npy").parent.mkdir()
+    (stale / "band-0.npy").write_bytes(b"0")
+    run = subprocess.run([sys.executable, "-m", "floodmesh.core.cli", "run",
+                          str(survey / "tiles"), "--out", str(tmp_path / "out"),
+                          "--max-area", "400", "--workers", "2"],
+                         env={**os.environ, "TMPDIR": str(scratch)}, capture_output=True,
+                         text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert sorted(p.name for p in scratch.iterdir()) == []
