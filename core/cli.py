@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from .console import ProgressBar, print_note, print_notes
-from .errors import Cancelled, FloodMeshError
+from .errors import Cancelled, FloodMeshError, Terminated, terminate_as_interrupt
 from .options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
                       NODE_ELEVATIONS, RunOptions, parse_formats)
 
@@ -558,25 +558,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM or SIGHUP (a scheduler's time limit, a closed terminal, QGIS ending a stuck
-    worker) taken as Ctrl-C is: every step unwinds, removing its temporaries and scratch."""
-
-    def __init__(self, signum: int):
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
-def _terminate(signum, frame):
-    raise Terminated(signum)
-
-
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     start = time.perf_counter()
-    if threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGTERM, signal.SIGHUP):
-            signal.signal(signum, _terminate)
+    terminate_as_interrupt()
     try:
         args.func(args)
     except FloodMeshError as exc:

@@ -30,7 +30,7 @@ import time
 
 from . import steps
 from .compiles import CompileWatch
-from .errors import Cancelled, FloodMeshError
+from .errors import Cancelled, FloodMeshError, Terminated, terminate_as_interrupt
 
 PARTIAL_GLOB = ".*.partial*"  # the temporary names io.atomic_output writes under
 
@@ -150,6 +150,9 @@ def run_job(job: dict, ch: Channel) -> int:
     except FloodMeshError as exc:
         ch.send(error=str(exc))
         return 2
+    except Terminated as exc:  # QGIS ending the worker with SIGTERM: unwound, nothing left
+        ch.send(error=f"stopped by {exc}; no partial output was written")
+        return 128 + exc.signum
     except Cancelled:
         ch.send(error="Cancelled; no partial output was written")
         return 130
@@ -162,6 +165,7 @@ def main() -> int:
     os.dup2(2, 1)
     sys.stdout = sys.stderr
     faulthandler.enable()  # a crash in GEOS, Triangle or numba leaves its trace on stderr
+    terminate_as_interrupt()  # SIGTERM/SIGHUP unwind as Ctrl-C: temporaries and scratch go
     try:
         job = json.loads(sys.stdin.read())
     except ValueError as exc:

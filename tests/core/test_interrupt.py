@@ -262,3 +262,31 @@ def test_ctrl_c_inside_a_compiled_call_is_an_interrupt():
 
     with pytest.raises(SystemError, match="not an interrupt"):
         steps.run("query", fails)
+
+
+def test_worker_given_sigterm_unwinds_and_says_so(runs, tmp_path):
+    """QGIS's worker (python -m floodmesh.core.worker) ended with SIGTERM mid-run: one error
+    line on its protocol, exit code 143, the previous folder intact, nothing left beside it."""
+    import json
+    import sys
+
+    source, root, done = runs
+    target = tmp_path / "out"
+    _start_from_previous(root, target)
+    job = {"step": "run", "args": {"input": str(source), "output_folder": str(target),
+                                   "options": {"holdout": 0.05, "cell_size": 1.0,
+                                               "max_area": 30.0}}}
+    proc = subprocess.Popen([sys.executable, "-m", "floodmesh.core.worker"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    proc.stdin.write(json.dumps(job))
+    proc.stdin.close()
+    time.sleep(2.5)
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=120)
+    stdout, stderr = proc.stdout.read(), proc.stderr.read()
+    last = json.loads(stdout.strip().splitlines()[-1])
+    if proc.returncode != 0:  # (it may have finished first)
+        assert proc.returncode == 143 and "stopped by SIGTERM" in last["error"], stderr
+    assert _leftovers(target) == []
+    _assert_each_file_old_or_new(target, done)
