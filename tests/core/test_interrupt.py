@@ -281,10 +281,11 @@ def test_worker_given_sigterm_unwinds_and_says_so(runs, tmp_path):
                             stderr=subprocess.PIPE, text=True)
     proc.stdin.write(json.dumps(job))
     proc.stdin.close()
-    time.sleep(2.5)
+    lines = [proc.stdout.readline()]  # the run has started (its first message), then SIGTERM
+    time.sleep(0.5)
     proc.send_signal(signal.SIGTERM)
     proc.wait(timeout=120)
-    stdout, stderr = proc.stdout.read(), proc.stderr.read()
+    stdout, stderr = "".join(lines) + proc.stdout.read(), proc.stderr.read()
     last = json.loads(stdout.strip().splitlines()[-1])
     if proc.returncode != 0:  # (it may have finished first)
         assert proc.returncode == 143 and "stopped by SIGTERM" in last["error"], stderr
