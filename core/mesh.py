@@ -480,7 +480,7 @@ def containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarra
 
 
 def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
-               max_area: float = 100.0, conforming: bool = True, snap: float | None = None,
+               max_area: float = 100.0, conforming: bool = False, snap: float | None = None,
                domain=None, points: np.ndarray | None = None,
                local_areas: np.ndarray | None = None, size_field: Grid | None = None,
                max_triangles: int = DEFAULT_MAX_TRIANGLES, note=None) -> Mesh:

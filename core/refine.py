@@ -41,7 +41,7 @@ class RefineRound:
 
 def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                 check: np.ndarray | None = None, domain=None, size_field=None,
-                min_angle: float = 25.0, conforming: bool = True, elevations=None,
+                min_angle: float = 25.0, conforming: bool = False, elevations=None,
                 max_area: float = 100.0, lower: float = 0.10, upper: float = 0.25,
                 target_rmse: float | None = None, target_max: float | None = None,
                 max_nodes: int = 1_000_000, max_rounds: int = 8,
