@@ -596,7 +596,11 @@ def command() -> None:
     import os
 
     argv = sys.argv[1:]
-    code = main(argv)
+    try:
+        code = main(argv)
+    except BrokenPipeError:  # `floodmesh assess … | head`: the reader is gone, so are we
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        sys.exit(141)
     if not argv or argv[0] not in _QUICK_EXIT:
         sys.exit(code)
     try:
