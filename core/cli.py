@@ -396,6 +396,16 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=_Parser)
 
+    _add_chain_commands(sub)
+    _add_step_commands(sub)
+    _add_mesh_commands(sub)
+    from .flood_cli import add_flood_commands
+    add_flood_commands(sub)
+    return parser
+
+
+def _add_chain_commands(sub) -> None:
+    """run, series and demo: the whole chain."""
     p = sub.add_parser("run", help="the whole chain: points or DEM to mesh and report")
     p.add_argument("input", nargs="+", help="LAS/LAZ/XYZ point file or GeoTIFF DEM, or tiles: "
                                             "a folder, a quoted glob or several files")
@@ -418,6 +428,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_chain_options(p)
     p.set_defaults(func=cmd_demo)
 
+
+def _add_step_commands(sub) -> None:
+    """grid, slope, breakpoints, breaklines and simplify: steps 2 to 6 one by one."""
     p = sub.add_parser("grid", help="grid points to a DEM by linear (TIN) interpolation")
     p.add_argument("input", nargs="+", help="LAS/LAZ/XYZ point file, or tiles: a folder, a "
                                             "quoted glob or several files")
@@ -483,6 +496,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--crs")
     p.set_defaults(func=cmd_simplify)
 
+
+def _add_mesh_commands(sub) -> None:
+    """mesh, assess, refine and export: the mesh, its error and its solver formats."""
     p = sub.add_parser("mesh", help="quality triangular mesh of a DEM honouring break lines")
     p.add_argument("dem")
     p.add_argument("--breaklines")
@@ -553,9 +569,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--breaklines", help="line layer written as the breaklines layer (gpkg)")
     p.set_defaults(func=cmd_export)
 
-    from .flood_cli import add_flood_commands
-    add_flood_commands(sub)
-    return parser
 
 
 def main(argv=None) -> int:
