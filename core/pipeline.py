@@ -69,9 +69,10 @@ class _Steps:
         try:
             with self.compiles.watching():
                 result = func(*args, **kwargs)
-        except SystemError as exc:
-            # Ctrl-C during a compiled (numba) call reaches Python as a SystemError caused by
-            # the KeyboardInterrupt, at times through a second SystemError: it is the interrupt
+        except Exception as exc:
+            # Ctrl-C inside an extension can reach Python as another error raised while handling
+            # it: a SystemError from a compiled (numba) call, at times through a second one; a
+            # ValueError from shapely's Cython buffer code. It is the interrupt all the same
             cause = exc.__cause__ or exc.__context__
             while cause is not None and not isinstance(cause, KeyboardInterrupt):
                 cause = cause.__cause__ or cause.__context__
