@@ -147,11 +147,11 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
     import rasterio
     from rasterio.windows import Window
 
-    from .io import _require_file, atomic_output, no_valid_cells, raster_crs_wkt, raster_profile
+    from .io import require_file, atomic_output, no_valid_cells, raster_crs_wkt, raster_profile
 
     if nodata is None:
         nodata = FLOAT_NODATA if np.dtype(dtype).kind == "f" else BYTE_NODATA
-    src_path = _require_file(src_path, "raster")
+    src_path = require_file(src_path, "raster")
     valid = [np.dtype(input_dtype).kind != "f"]  # whether a finite cell has been read
     # GDAL sizes its block cache when first used: the environment comes before the first open
     with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB), \
@@ -196,20 +196,20 @@ def _band_reader(src, dtype):
     into the array ``view`` (any strides) as ``dtype``, straight into the caller's buffer;
     ``to_nan(padded)``, on the whole padded buffer (NaN beyond the raster) in the worker thread,
     makes nodata and ±inf NaN in floats and returns whether a finite cell is in it. Files that
-    mask cells by a mask band rather than a nodata value are read masked (``io._read_band``)."""
+    mask cells by a mask band rather than a nodata value are read masked (``io.read_band``)."""
     from rasterio.enums import MaskFlags
 
-    from .io import _read_band
+    from .io import read_band
 
     flags = src.mask_flag_enums[0]
     if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags or np.dtype(dtype).kind != "f":
         def read(view, window):
-            view[...] = _read_band(src, window, dtype)
+            view[...] = read_band(src, window, dtype)
 
         def finite(padded):
             return np.dtype(dtype).kind != "f" or bool(np.isfinite(padded).any())
         return read, finite
-    # the nodata value as the file stores it, then as the buffer holds it (io._read_band)
+    # the nodata value as the file stores it, then as the buffer holds it (io.read_band)
     missing = np.dtype(dtype).type(np.nan)
     if src.nodata is not None and np.isfinite(src.nodata):
         native = np.dtype(src.dtypes[0])
@@ -249,7 +249,7 @@ def cell_size(path) -> float:
     """The cell size d (m) of a raster file, for kernels that need it."""
     import rasterio
 
-    from .io import _require_file
+    from .io import require_file
 
-    with rasterio.open(_require_file(path, "raster")) as src:
+    with rasterio.open(require_file(path, "raster")) as src:
         return float(src.transform.a)

@@ -52,7 +52,7 @@ def write_zone(path, zone, crs) -> None:
     from . import io
 
     parts = list(getattr(zone, "geoms", [zone]))
-    io._write_gpkg(path, "wet_zone", "Polygon", {"id": "int"},
+    io.write_gpkg(path, "wet_zone", "Polygon", {"id": "int"},
                    ({"geometry": shapely.geometry.mapping(g), "properties": {"id": k + 1}}
                     for k, g in enumerate(parts)), crs)
 

@@ -50,7 +50,7 @@ def atomic_output(path):
                 leftover.unlink()
 
 
-def _require_file(path, what: str) -> Path:
+def require_file(path, what: str) -> Path:
     path = Path(path)
     if not path.exists():
         raise FloodMeshError(f"{what} {path} does not exist: check the path")
@@ -68,7 +68,7 @@ def read_points(path, *, crs=None, classes=None, note=None) -> PointCloud:
     ``crs`` overrides the file's own CRS (needed for text files, which carry none). ``note``
     receives what was assumed on the user's behalf (e.g. an unclassified file used whole).
     """
-    path = _require_file(path, "point file")
+    path = require_file(path, "point file")
     xyz, file_crs = read_point_file(path, classes, note)
     return clean_points(xyz, crs if crs is not None else file_crs, f"point file {path.name}",
                         kind="points", note=note)
@@ -83,7 +83,7 @@ def read_point_file(path: Path, classes=None, note=None):
     if ext in (".las", ".laz"):
         return _read_las(path, classes, note)
     if ext in (".xyz", ".txt", ".csv", ".pts"):
-        return _read_xyz(path), None
+        return read_xyz(path), None
     raise FloodMeshError(f"{path.name}: unknown point file type '{ext}'; use LAS/LAZ or "
                          "XYZ/CSV text (x y z per line), or a GeoTIFF DEM")
 
@@ -109,10 +109,10 @@ def _read_las(path: Path, classes, note=None):
     except Exception:
         file_crs = None
     xyz = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
-    return _classes_kept(xyz, np.asarray(las.classification), classes, path.name, note), file_crs
+    return classes_kept(xyz, np.asarray(las.classification), classes, path.name, note), file_crs
 
 
-def _classes_kept(xyz, cls, classes, name: str, note=None):
+def classes_kept(xyz, cls, classes, name: str, note=None):
     """The points of ``classes``, or of the ground class (2) when classified, or all of an
     unclassified cloud (with a note)."""
     def present() -> str:  # for the messages alone: np.unique sorts every point's class
@@ -182,10 +182,10 @@ def _read_ept(path: Path, classes, note=None):
     file_crs = srs.get("wkt") or (f"{srs['authority']}:{srs['horizontal']}"
                                   if srs.get("authority") and srs.get("horizontal") else None)
     name = f"{path.parent.name}/{EPT_NAME}"
-    return _classes_kept(np.vstack(parts), np.concatenate(cls), classes, name, note), file_crs
+    return classes_kept(np.vstack(parts), np.concatenate(cls), classes, name, note), file_crs
 
 
-def _read_xyz(path: Path) -> np.ndarray:
+def read_xyz(path: Path) -> np.ndarray:
     size = path.stat().st_size
     if size == 0:
         raise FloodMeshError(f"{path.name} is empty: it holds no points")
@@ -325,7 +325,7 @@ def no_valid_cells(path) -> FloodMeshError:
                           "check its nodata value and that it is the right file")
 
 
-def _read_band(src, window=None, dtype=np.float64) -> np.ndarray:
+def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
     """Band 1 (or a window of it) as ``dtype`` with NaN for nodata and ±inf, in one buffer (no
     masked array) unless the file masks cells by a mask band rather than a nodata value."""
     from rasterio.enums import MaskFlags
@@ -351,7 +351,7 @@ def nodata_tagged(path) -> bool:
     from rasterio.enums import MaskFlags
 
     try:
-        with rasterio.open(_require_file(path, "raster")) as src:
+        with rasterio.open(require_file(path, "raster")) as src:
             return src.nodata is not None or MaskFlags.all_valid not in src.mask_flag_enums[0]
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{Path(path).name} is not a readable raster ({exc})") from None
@@ -366,13 +366,13 @@ def read_raster(path, *, crs=None, note=None) -> Grid:
     """
     import rasterio
 
-    path = _require_file(path, "raster")
+    path = require_file(path, "raster")
     try:
         with rasterio.open(path) as src:
             transform, crs = src.transform, raster_crs(src, path, crs)
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
-            values = _read_band(src)
+            values = read_band(src)
             tagged, count, dtype = src.nodata is not None, src.count, src.dtypes[0]
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
@@ -465,7 +465,7 @@ def read_input(path, *, crs=None, classes=None, note=None):
         return read_raster(path, crs=crs, note=note)
     if is_point_source(path):
         return read_points(path, crs=crs, classes=classes, note=note)
-    _require_file(path, "input")
+    require_file(path, "input")
     raise FloodMeshError(f"{Path(path).name}: unknown input type '{ext}'; give a LAS/LAZ or XYZ/CSV "
                          "point file, or a GeoTIFF/ASCII-grid DEM")
 
@@ -477,7 +477,7 @@ def read_input(path, *, crs=None, classes=None, note=None):
 GPKG_TIMESTAMP = "2000-01-01T00:00:00.000Z"
 
 
-def _write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, crs, *,
+def write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, crs, *,
                 atomic: bool = True) -> None:
     """Write one layer; ``atomic=False`` adds it to ``path`` as it is (a GeoPackage being
     assembled under a temporary name, see ``atomic_output``)."""
@@ -524,7 +524,7 @@ def write_lines_gpkg(path, lines, crs, *, layer="breaklines", attributes=None,
     geometries = ({"type": "LineString", "coordinates": [tuple(p) for p in line.tolist()]}
                   for line in lines)
     props = {name: _field_type(v) for name, v in attributes.items()}
-    _write_gpkg(path, layer, "3D LineString", props, _records(geometries, attributes), crs,
+    write_gpkg(path, layer, "3D LineString", props, _records(geometries, attributes), crs,
                 atomic=atomic)
 
 
@@ -554,7 +554,7 @@ def write_points_gpkg(path, xyz: np.ndarray, crs, *, layer="points", attributes=
     attributes = attributes or {}
     geometries = ({"type": "Point", "coordinates": tuple(p)} for p in xyz.tolist())
     props = {name: _field_type(v) for name, v in attributes.items()}
-    _write_gpkg(path, layer, "3D Point", props, _records(geometries, attributes), crs,
+    write_gpkg(path, layer, "3D Point", props, _records(geometries, attributes), crs,
                 atomic=atomic)
 
 
@@ -601,7 +601,7 @@ def _line_parts(path, note=None) -> list[tuple[np.ndarray, dict]]:
     """Each part of each line feature as ((k, 3) coordinates, the feature's attributes)."""
     import fiona
 
-    path = _require_file(path, "line file")
+    path = require_file(path, "line file")
     parts_out, dropped = [], []
     try:
         with fiona.open(path) as src:
@@ -636,7 +636,7 @@ def read_regions(path, *, field: str | None = None, what: str = "regions") -> li
     import fiona
     import shapely.geometry
 
-    path = _require_file(path, "region layer")
+    path = require_file(path, "region layer")
     regions = []
     try:
         with fiona.open(path) as src:
@@ -672,7 +672,7 @@ def read_points_vector(path) -> np.ndarray:
     """Read the PointZ features of a vector file (e.g. holdout points) as an (N, 3) array."""
     import fiona
 
-    path = _require_file(path, "point layer")
+    path = require_file(path, "point layer")
     with fiona.open(path) as src:
         xyz = [feat["geometry"]["coordinates"] for feat in src if feat["geometry"]]
     if not xyz or len(xyz[0]) < 3:
@@ -689,7 +689,7 @@ def vector_crs(path):
     """The CRS (WKT) of a vector file, or None where it has none."""
     import fiona
 
-    path = _require_file(path, "vector layer")
+    path = require_file(path, "vector layer")
     try:
         with fiona.open(path) as src:
             return src.crs_wkt or None
@@ -770,7 +770,7 @@ class Mesh2DM:
 
 def read_2dm(path) -> Mesh2DM:
     """Read an SMS 2DM mesh of triangles (E3T) with its materials and node strings."""
-    path = _require_file(path, "mesh file")
+    path = require_file(path, "mesh file")
     nodes, tris, extra, strings, current = {}, [], [], [], []
     n_materials = None
     try:
@@ -846,7 +846,7 @@ def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, laye
                   for start in range(0, len(triangles), RECORD_CHUNK)
                   for c in nodes[triangles[start:start + RECORD_CHUNK]].tolist())
     props = {name: _field_type(v) for name, v in columns.items()}
-    _write_gpkg(path, layer, "3D Polygon", props, _records(geometries, columns), crs,
+    write_gpkg(path, layer, "3D Polygon", props, _records(geometries, columns), crs,
                 atomic=atomic)
 
 

@@ -137,9 +137,9 @@ def laplacian_of_gaussian_file(dem_path, out_path, sigma: float, *, kernel: str 
     (``blocks.map_raster``); the same values as in memory."""
     import rasterio
 
-    from .io import _require_file
+    from .io import require_file
 
-    with rasterio.open(_require_file(dem_path, "raster")) as src:
+    with rasterio.open(require_file(dem_path, "raster")) as src:
         d, shape = float(src.transform.a), (src.height, src.width)
     block, halo = _log_block(sigma, d, kernel, shape)
     map_raster(dem_path, out_path, block, halo=halo, crs=crs, windows=windows,

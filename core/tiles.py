@@ -258,11 +258,11 @@ def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     be read raises ``_Unreadable`` naming it."""
     import laspy
 
-    from .io import _read_xyz
+    from .io import read_xyz
 
     if path.suffix.lower() not in LAS_EXTENSIONS:
         try:
-            return _read_xyz(path), None
+            return read_xyz(path), None
         except FloodMeshError as exc:  # not XYZ text (its message begins with the file's name)
             if not str(exc).startswith(path.name):
                 raise
@@ -280,16 +280,16 @@ def _which(classes) -> str:
 
 
 def _kept(xyz: np.ndarray, cls, classes, name: str, notes=None) -> tuple[np.ndarray, str]:
-    """(the tile's points of ``classes``, or as one file keeps them (``io._classes_kept``: the
+    """(the tile's points of ``classes``, or as one file keeps them (``io.classes_kept``: the
     ground, or all of an unclassified tile), what was kept: "given", "ground", "whole" (an
     unclassified tile), "text" (XYZ) or "none" (a tile over water or without ground, with a
     note: its neighbours' points grid its ground))."""
-    from .io import GROUND_CLASS, _classes_kept
+    from .io import GROUND_CLASS, classes_kept
 
     if cls is None:
         return xyz, "text"
     try:
-        kept = _classes_kept(xyz, cls, classes, name, notes.append if notes is not None else None)
+        kept = classes_kept(xyz, cls, classes, name, notes.append if notes is not None else None)
     except FloodMeshError:
         if notes is not None:
             present = ", ".join(str(c) for c in np.unique(cls))
@@ -757,14 +757,14 @@ def read_back(path, crs: CRS) -> Grid:
     Grid the steps in memory give: float64 with NaN, breakpoints 0 or 1."""
     import rasterio
 
-    from .io import _read_band
+    from .io import read_band
 
     with rasterio.open(path) as src:
         if np.dtype(src.dtypes[0]) == np.uint8:
             values = src.read(1)
             values[values == src.nodata] = 0
         else:
-            values = _read_band(src)
+            values = read_band(src)
         return Grid(values, src.transform, crs)
 
 
