@@ -210,16 +210,13 @@ def _options(args) -> RunOptions:
 
 
 def _input(args):
-    """One input file, or the list of tile inputs (folders, globs, files); with
-    --skip-unreadable-tiles, the tiles (``tiles.TileSet``) that leave unreadable ones out."""
-    items = args.input if isinstance(args.input, list) else [args.input]
-    inputs = items[0] if len(items) == 1 else items
-    if getattr(args, "skip_unreadable_tiles", False):
-        from .tiles import expand_tiles, is_tile_set
+    """The run's ``source.Source``, decided here once: one file, or the tiles of the folders,
+    patterns and files given; with --skip-unreadable-tiles, unreadable tiles left out."""
+    from .source import open_source
 
-        if is_tile_set(inputs):
-            return expand_tiles(inputs, skip_unreadable=True)
-    return inputs
+    items = args.input if isinstance(args.input, list) else [args.input]
+    return open_source(items[0] if len(items) == 1 else items,
+                       skip_unreadable=getattr(args, "skip_unreadable_tiles", False))
 
 
 def _add_dask_options(p: argparse.ArgumentParser):

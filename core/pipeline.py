@@ -39,8 +39,9 @@ from .report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from .report_html import HTML_NAME, write_report_html
 from .sizing import far_field_size, finer
 from .slope import laplacian_of_gaussian, slope
-from .tiles import (TiledDem, expand_tiles, grid_point_tiles, is_tile_set, read_back,
-                    read_dem_tiles, slope_file64, tile_kind, write_front_rasters)
+from .source import DEM, DEM_TILES, POINT_TILES, POINTS, Source, open_source
+from .tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles, slope_file64,
+                    write_front_rasters)
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
                 "mesh.prj", "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG,
@@ -91,8 +92,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                  progress: Callable[[float], None] | None = None,
                  cancelled: Callable[[], bool] | None = None,
                  log: Callable[[str], None] | None = None) -> dict:
-    """Run the whole chain on a point file or DEM and write ``OUTPUT_FILES`` into ``out_dir``,
-    and ``mesh.<ext>`` for each of ``options.formats`` (see ``export``).
+    """Run the whole chain on a point file or DEM, or their tiles (a path, folder, pattern, list
+    or ``source.Source``), and write ``OUTPUT_FILES`` into ``out_dir``, and ``mesh.<ext>`` for
+    each of ``options.formats`` (see ``export``).
 
     ``progress`` receives the overall fraction done (0–1), ``cancelled`` is polled between and
     inside long steps (raising ``Cancelled``), ``log`` receives step names and notes (what was
@@ -107,186 +109,47 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         if log:
             log(f"note: {message}")
 
-    out = Path(out_dir)
-    inputs = run_inputs(input_path, options)
+    out, source = Path(out_dir), open_source(input_path)
+    inputs = run_inputs(source, options)
     check_output_folder(out, inputs, run_outputs(options.formats))
-    method, amount = options.simplification()
-    weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
-               "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
-               "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
-               "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
-    del weights["node elevations" if options.refine else "refine"]
-    if not options.localise:
-        del weights["localise"]
-    if not (options.localise or options.node_elevation == "plane"):
-        del weights["fit window"]
-    if flow_area_for(options.flow_area, 1.0) is None:
-        del weights["flow zone"]
-    steps = _Steps(weights, progress, cancelled, log)
-    front = trace_front(input_path, options, steps, cancelled=cancelled, note=note)
-    dem, holdout, slope_grid, breakpoints, traced = (front.dem, front.holdout, front.slope_grid,
-                                                     front.breakpoints, front.traced)
-    n_breakpoints = int(breakpoints.values.sum())
+    steps = _Steps(_step_weights(options), progress, cancelled, log)
+    front = trace_front(source, options, steps, cancelled=cancelled, note=note)
+    n_breakpoints = int(front.breakpoints.values.sum())
     if front.files:  # traced, and on disk for the output: only the size fields may read them
         if options.size_field != "slope":
-            front.slope_grid = slope_grid = None
+            front.slope_grid = None
         if options.far_field_area is None:
-            front.breakpoints = breakpoints = None
-    delta = dem.cell_size / 2
-    min_distance = delta if options.min_distance is None else options.min_distance
-    simplified = lines = steps.run("simplify", simplify_breaklines, traced, method, amount,
-                                   min_distance=min_distance)
-    terrain_fit, confidence, window = {"localise": options.localise,
-                                       "node_elevation": options.node_elevation}, None, None
-    index = None  # of the measured points: one for every terrain fit of the run
-    cell_centres = front.measured is None  # the DEM's, drawn when a fit needs them
-
-    def measured():
-        """The fits' points and their index (None: not built yet); the DEM's cell centres and
-        their ``CellIndex`` drawn (the same seeded draw each time) if not held."""
-        nonlocal index
-        if front.measured is None:
-            front.measured, index = _dem_measured(dem, options.seed)
-        return front.measured, index
-
-    if options.localise or options.node_elevation == "plane":
-        area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
-        index, window = steps.run("fit window", _fit_window, *measured(), area, dem.cell_size,
-                                 node_radius=options.node_radius, seed=options.seed)
-        terrain_fit.update(asdict(window))
-    if options.localise:
-        lines, confidence, counts = steps.run("localise", localise_traced, lines, front.measured,
-                                              window, s_crit=options.s_crit,
-                                              tolerance=dem.cell_size / 10,
-                                              max_gap=20 * dem.cell_size,
-                                              join_gap=(6 * dem.cell_size if options.join_gap
-                                                        is None else options.join_gap),
-                                              join_lateral=dem.cell_size, index=index)
-        terrain_fit.update(counts)
-    if cell_centres:
-        # the DEM's cell centres (28 B a cell) are drawn again for the node fits after the
-        # mesh, not held over the flow zone and meshing, the steps of the command's peak
-        front.measured = index = None
-
-    size = size_field(options.size_field, dem, slope_grid, max_area=options.max_area,
-                      min_area=options.min_area, s_crit=options.s_crit)
-    max_area = options.max_area
-    if options.far_field_area is not None:  # grows off the lines, where the terrain is plane
-        far = far_field_size(dem, breakpoints, max_area=max_area,
-                             far_field_area=options.far_field_area,
-                             tolerance=max(0.01, window.noise / 2) if window else 0.02)
-        size = finer(size, far)
-        max_area = options.far_field_area
-    hand, flow_area = None, flow_area_for(options.flow_area, dem.cell_size)
-    if flow_area is not None:  # resolution where water flows (see drainage)
-        hand, _ = steps.run("flow zone", height_above_drainage, dem, channel_area=CHANNEL_AREA)
-        size = finer(size, flow_size(dem, flow_area=flow_area, hand=hand))
-    node_counts = {}
-
-    def elevations(mesh):
-        """Node z with the noise taken out, from the points gridded only (never the held-out)."""
-        if options.node_elevation != "plane":
-            return mesh
-        points, fit_index = measured()
-        z, counts = fit_node_elevations(mesh.nodes, points, mesh_lines, window.node_radius,
-                                        on_line=delta / 10, index=fit_index)
-        node_counts.update(counts)
-        return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
-
-    detected, line_stats = [line.coords for line in lines], None
-    domain = (front.domain if front.domain is not None else
-              domain_from_dem(dem, tolerance=edge_tolerance(method, amount, dem.cell_size)))
-    spacing = dem.cell_size if options.min_spacing is None else options.min_spacing
-    if spacing > 0:  # lines a flood model can afford: see hydraulic_lines
-        detected, line_stats = steps.run(
-            "hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
-            own_lines=front.own_lines, within=shapely.union_all(
-                io.read_boundary(options.flow_zone)) if options.flow_zone else None,
-            flow_spacing=None if hand is None else flow_spacing(dem, flow_area=flow_area,
-                                                                hand=hand))
+            front.breakpoints = None
+    fits = _TerrainFits(front, options)
+    simplified, lines, confidence = _break_lines(front, options, steps, fits)
+    size, max_area, hand, flow_area = _size_fields(front, options, steps, fits.window)
+    domain = (front.domain if front.domain is not None else domain_from_dem(
+        front.dem, tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size)))
+    detected, line_stats = _lines_for_flood(front, options, steps, lines, domain, hand,
+                                            flow_area)
     hand = None  # the flow zone's work is in the size field and the lines now
     mesh_lines = detected + front.own_lines
-    mesh = steps.run("mesh", build_mesh, dem, mesh_lines, min_angle=options.min_angle,
+    mesh = steps.run("mesh", build_mesh, front.dem, mesh_lines, min_angle=options.min_angle,
                      max_area=max_area, conforming=options.conforming, domain=domain,
                      size_field=size, max_triangles=options.max_triangles, note=note)
-    rounds = []
-    if options.refine:
-        # the points gridded drive the refinement; the held-out ones stay independent
-        mesh, rounds = steps.run("refine", refine_mesh, dem, mesh_lines, measured()[0],
-                                 check=holdout.xyz, domain=domain, size_field=size,
-                                 min_angle=options.min_angle, max_area=max_area,
-                                 conforming=options.conforming, elevations=elevations,
-                                 lower=options.refine_lower, upper=options.refine_upper,
-                                 max_nodes=options.max_triangles, cancelled=cancelled)
-    else:
-        mesh = steps.run("node elevations", elevations, mesh)
+    mesh, rounds = _terrain_z(mesh, front, options, steps, fits, mesh_lines, domain, size,
+                              max_area, cancelled)
     # the terrain fits are done: their points and index go before the assessment and writing
-    size = index = front.measured = None
-    if node_counts:
-        terrain_fit["nodes"] = node_counts
-    res = steps.run("assess", residuals, mesh, holdout.xyz)
+    size = fits.index = front.measured = None
+    res = steps.run("assess", residuals, mesh, front.holdout.xyz)
+    deviation, quality, stats, hydraulics = steps.run(
+        "figures", _figures, front, options, simplified, mesh, res, detected, max_area)
+    figures = {"n_breakpoints": n_breakpoints, "deviation": deviation, "quality": quality,
+               "stats": stats, "rounds": rounds, "terrain_fit": fits.record(),
+               "line_stats": line_stats, "hydraulics": hydraulics, "notes": notes}
 
-    def figures():
-        deviation = max_deviation(traced, simplified)
-        alpha = deviation / delta if method == "keep-every" else amount / delta
-        return (deviation, mesh_quality(mesh, min_angle=options.min_angle, max_area=max_area),
-                accuracy_statistics(res, alpha=alpha, delta=delta),
-                hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
-                                 detected_lines=detected, dem=dem))
-
-    deviation, quality, stats, hydraulics = steps.run("figures", figures)
-
-    def write_all(out):
-        io.write_raster(out / "dem.tif", dem)
-        if front.files:
-            write_front_rasters(front.files, out)
-        else:
-            io.write_raster(out / "slope.tif", slope_grid)
-            io.write_raster(out / "breakpoints.tif", breakpoints, valid=np.isfinite(dem.values))
-        io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs, fit_rms=confidence)
-        # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
-        if "2dm" not in options.formats:
-            io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles, crs=dem.crs)
-        if "gpkg" not in options.formats:
-            io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
-        io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
-        write_layer_definition(out, group=Path(out_dir).name, crs_wkt=dem.crs.to_wkt(),
-                               elevation_range=(mesh.nodes[:, 2].min(), mesh.nodes[:, 2].max()))
-        write_report_pngs(out, mesh.nodes, mesh.triangles, holdout.xyz, res, dem=dem,
-                          lines=[line.coords for line in lines])
-        exported = (export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
-                                   crs=dem.crs, breaklines=[line.coords for line in lines])
-                    if options.formats else [])
-        report = {
-            "input": (str(input_path) if isinstance(input_path, (str, Path))
-                      else [str(p) for p in input_path]),
-            "crs": dem.crs.to_string(),
-            "options": {k: v for k, v in asdict(options).items()},
-            "n_points": front.n_points,
-            "holdout_source": front.holdout_source,
-            "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
-                     "valid_cells": int(np.isfinite(dem.values).sum())},
-            "n_breakpoints": n_breakpoints,
-            "n_breaklines_traced": len(traced),
-            "n_breaklines": len(lines),
-            "breakline_length_m": float(sum(line.length for line in lines)),
-            "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
-            "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
-            "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
-                               "max_deviation_m": deviation},
-            **quality,
-            **stats,
-            "refinement": [asdict(r) for r in rounds],
-            "terrain_fit": terrain_fit,
-            "hydraulic_lines": line_stats,
-            "hydraulics": hydraulics,
-            "notes": notes,
-            "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
-            "seconds": steps.seconds,
-            "cpu_seconds": steps.cpu_seconds,
-        }
+    def write_all(stage):
+        exported = _write_outputs(stage, front, options, mesh, lines, res, confidence,
+                                  group=out.name)
+        report = _report(source, front, options, simplified, lines, exported, figures,
+                         steps)
         # the page of report.json, written inside the step: "write" is its last timing
-        write_report_html(out, report, elapsed_s=time.perf_counter() - started)
+        write_report_html(stage, report, elapsed_s=time.perf_counter() - started)
         return report
 
     # the folder is replaced as a whole: an interrupt leaves the old run's files or these
@@ -299,6 +162,212 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     return report
 
 
+def _step_weights(options: RunOptions) -> dict:
+    """The steps a run with ``options`` takes, each with its share of the progress bar."""
+    weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
+               "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
+               "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
+               "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
+    del weights["node elevations" if options.refine else "refine"]
+    if not options.localise:
+        del weights["localise"]
+    if not (options.localise or options.node_elevation == "plane"):
+        del weights["fit window"]
+    if flow_area_for(options.flow_area, 1.0) is None:
+        del weights["flow zone"]
+    return weights
+
+
+class _TerrainFits:
+    """The points of every terrain fit of a run (localisation, node z, refinement) and their one
+    index: the points gridded, or the DEM's cell centres drawn (the same seeded draw each time)
+    when a fit needs them, as ``Front.measured`` says; the fits' window and what they did."""
+
+    def __init__(self, front: Front, options: RunOptions):
+        self.front, self.seed = front, options.seed
+        self.cell_centres = front.measured is None  # the DEM's, drawn when a fit needs them
+        self.index = self.window = None
+        self.counts = {"localise": options.localise, "node_elevation": options.node_elevation}
+        self.node_counts = {}
+
+    def measured(self) -> tuple[np.ndarray, object]:
+        """The fits' points and their index (None: not built yet)."""
+        if self.front.measured is None:
+            self.front.measured, self.index = _dem_measured(self.front.dem, self.seed)
+        return self.front.measured, self.index
+
+    def let_go(self) -> None:
+        """The DEM's cell centres (28 B a cell) are drawn again for the node fits after the
+        mesh, not held over the flow zone and meshing, the steps of the command's peak."""
+        if self.cell_centres:
+            self.front.measured = self.index = None
+
+    def record(self) -> dict:
+        """The report's ``terrain_fit``: options, window, localisation and node-fit counts."""
+        return {**self.counts, **({"nodes": self.node_counts} if self.node_counts else {})}
+
+
+def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits):
+    """(simplified, final lines, their fit RMS or None): the traced lines simplified, then moved
+    onto the terrain's kinks by the hinge fits (``localise``) where asked."""
+    dem, (method, amount) = front.dem, options.simplification()
+    min_distance = dem.cell_size / 2 if options.min_distance is None else options.min_distance
+    simplified = lines = steps.run("simplify", simplify_breaklines, front.traced, method, amount,
+                                   min_distance=min_distance)
+    confidence = None
+    if options.localise or options.node_elevation == "plane":
+        area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+        fits.index, fits.window = steps.run(
+            "fit window", _fit_window, *fits.measured(), area, dem.cell_size,
+            node_radius=options.node_radius, seed=options.seed)
+        fits.counts.update(asdict(fits.window))
+    if options.localise:
+        join_gap = 6 * dem.cell_size if options.join_gap is None else options.join_gap
+        lines, confidence, counts = steps.run(
+            "localise", localise_traced, lines, front.measured, fits.window,
+            s_crit=options.s_crit, tolerance=dem.cell_size / 10, max_gap=20 * dem.cell_size,
+            join_gap=join_gap, join_lateral=dem.cell_size, index=fits.index)
+        fits.counts.update(counts)
+    fits.let_go()
+    return simplified, lines, confidence
+
+
+def _size_fields(front: Front, options: RunOptions, steps: _Steps, window):
+    """(size field or None, the largest area, height above drainage or None, flow area or
+    None): the user's size field, finer off the lines where asked (far field) and where water
+    flows (flow zone)."""
+    dem, max_area = front.dem, options.max_area
+    size = size_field(options.size_field, dem, front.slope_grid, max_area=max_area,
+                      min_area=options.min_area, s_crit=options.s_crit)
+    if options.far_field_area is not None:  # grows off the lines, where the terrain is plane
+        far = far_field_size(dem, front.breakpoints, max_area=max_area,
+                             far_field_area=options.far_field_area,
+                             tolerance=max(0.01, window.noise / 2) if window else 0.02)
+        size = finer(size, far)
+        max_area = options.far_field_area
+    hand, flow_area = None, flow_area_for(options.flow_area, dem.cell_size)
+    if flow_area is not None:  # resolution where water flows (see drainage)
+        hand, _ = steps.run("flow zone", height_above_drainage, dem, channel_area=CHANNEL_AREA)
+        size = finer(size, flow_size(dem, flow_area=flow_area, hand=hand))
+    return size, max_area, hand, flow_area
+
+
+def _lines_for_flood(front: Front, options: RunOptions, steps: _Steps, lines, domain, hand,
+                     flow_area):
+    """(the detected lines' coordinates, their statistics or None): lines a flood model can
+    afford (see hydraulic_lines), unless ``options.min_spacing`` is 0."""
+    detected, dem = [line.coords for line in lines], front.dem
+    spacing = dem.cell_size if options.min_spacing is None else options.min_spacing
+    if spacing <= 0:
+        return detected, None
+    within = (shapely.union_all(io.read_boundary(options.flow_zone)) if options.flow_zone
+              else None)
+    return steps.run("hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
+                     own_lines=front.own_lines, within=within,
+                     flow_spacing=None if hand is None else flow_spacing(
+                         dem, flow_area=flow_area, hand=hand))
+
+
+def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits,
+               mesh_lines, domain, size, max_area, cancelled):
+    """(mesh, refinement rounds): refined on the points gridded until the bounds hold, or its
+    node z fitted on them (``node_elevation="plane"``); the held-out points stay independent."""
+    delta = front.dem.cell_size / 2
+
+    def elevations(mesh):
+        """Node z with the noise taken out, from the points gridded only (never the held-out)."""
+        if options.node_elevation != "plane":
+            return mesh
+        points, fit_index = fits.measured()
+        z, counts = fit_node_elevations(mesh.nodes, points, mesh_lines, fits.window.node_radius,
+                                        on_line=delta / 10, index=fit_index)
+        fits.node_counts.update(counts)
+        return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
+
+    if not options.refine:
+        return steps.run("node elevations", elevations, mesh), []
+    return steps.run("refine", refine_mesh, front.dem, mesh_lines, fits.measured()[0],
+                     check=front.holdout.xyz, domain=domain, size_field=size,
+                     min_angle=options.min_angle, max_area=max_area,
+                     conforming=options.conforming, elevations=elevations,
+                     lower=options.refine_lower, upper=options.refine_upper,
+                     max_nodes=options.max_triangles, cancelled=cancelled)
+
+
+def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected, max_area):
+    """(largest simplification deviation, mesh quality, accuracy statistics, hydraulic checks)."""
+    method, amount = options.simplification()
+    delta = front.dem.cell_size / 2
+    deviation = max_deviation(front.traced, simplified)
+    alpha = deviation / delta if method == "keep-every" else amount / delta
+    return (deviation, mesh_quality(mesh, min_angle=options.min_angle, max_area=max_area),
+            accuracy_statistics(res, alpha=alpha, delta=delta),
+            hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
+                             detected_lines=detected, dem=front.dem))
+
+
+def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, res, confidence,
+                   *, group: str) -> list:
+    """The run's files into ``out`` (``OUTPUT_FILES`` but the report's two); returns the solver
+    exports written."""
+    dem, holdout = front.dem, front.holdout
+    io.write_raster(out / "dem.tif", dem)
+    if front.files:
+        write_front_rasters(front.files, out)
+    else:
+        io.write_raster(out / "slope.tif", front.slope_grid)
+        io.write_raster(out / "breakpoints.tif", front.breakpoints, valid=np.isfinite(dem.values))
+    io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs, fit_rms=confidence)
+    # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
+    if "2dm" not in options.formats:
+        io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles, crs=dem.crs)
+    if "gpkg" not in options.formats:
+        io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
+    io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
+    write_layer_definition(out, group=group, crs_wkt=dem.crs.to_wkt(),
+                           elevation_range=(mesh.nodes[:, 2].min(), mesh.nodes[:, 2].max()))
+    write_report_pngs(out, mesh.nodes, mesh.triangles, holdout.xyz, res, dem=dem,
+                      lines=[line.coords for line in lines])
+    return (export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
+                           crs=dem.crs, breaklines=[line.coords for line in lines])
+            if options.formats else [])
+
+
+def _report(source: Source, front: Front, options: RunOptions, simplified, lines, exported,
+            figures: dict, steps: _Steps) -> dict:
+    """report.json: the input, grid, lines, mesh quality, accuracy, terrain fits, notes, files
+    and the steps' timings."""
+    dem, traced, (method, amount) = front.dem, front.traced, options.simplification()
+    min_distance = dem.cell_size / 2 if options.min_distance is None else options.min_distance
+    return {
+        "input": source.named,
+        "crs": dem.crs.to_string(),
+        "options": {k: v for k, v in asdict(options).items()},
+        "n_points": front.n_points,
+        "holdout_source": front.holdout_source,
+        "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
+                 "valid_cells": int(np.isfinite(dem.values).sum())},
+        "n_breakpoints": figures["n_breakpoints"],
+        "n_breaklines_traced": len(traced),
+        "n_breaklines": len(lines),
+        "breakline_length_m": float(sum(line.length for line in lines)),
+        "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
+        "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
+        "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
+                           "max_deviation_m": figures["deviation"]},
+        **figures["quality"],
+        **figures["stats"],
+        "refinement": [asdict(r) for r in figures["rounds"]],
+        "terrain_fit": figures["terrain_fit"],
+        "hydraulic_lines": figures["line_stats"],
+        "hydraulics": figures["hydraulics"],
+        "notes": figures["notes"],
+        "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
+        "seconds": steps.seconds,
+        "cpu_seconds": steps.cpu_seconds,
+    }
+
+
 def _fit_window(points, index, area, cell_size, *, node_radius, seed):
     """(index of the points, built if None, ``FitWindow``): the index serves every later
     terrain fit."""
@@ -307,11 +376,10 @@ def _fit_window(points, index, area, cell_size, *, node_radius, seed):
                              index=index)
 
 
-def run_inputs(input_path, options: RunOptions) -> list:
+def run_inputs(source: Source, options: RunOptions) -> list:
     """The files a run reads: never to be replaced by its outputs."""
     size = options.size_field if options.size_field != "slope" else None
-    sources = expand_tiles(input_path) if is_tile_set(input_path) else [input_path]
-    return [*sources, options.boundary, options.user_lines, size]
+    return [*source.paths, options.boundary, options.user_lines, size]
 
 
 def run_outputs(formats) -> list:
@@ -339,100 +407,131 @@ class Front:
     files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
 
 
-def trace_front(input_path, options: RunOptions, steps: "_Steps | None" = None, *,
+@dataclass
+class _Terrain:
+    """What reading a source gives the front: the DEM and the points held out."""
+
+    dem: Grid
+    holdout: PointCloud
+    holdout_source: str
+    n_points: int
+    measured: np.ndarray | None = None  # the points gridded (None: the DEM's cell centres)
+    files: dict | None = None           # point tiles: the DEM, slope and breakpoints files
+
+
+def trace_front(source, options: RunOptions, steps: "_Steps | None" = None, *,
                 cancelled: Callable[[], bool] | None = None,
                 note: Callable[[str], None] | None = None) -> Front:
-    """Read, grid (holding points out), slope, breakpoints and trace, as ``options`` say; each
-    step timed through ``steps`` (a silent one if None); ``note`` receives what was assumed or
-    repaired on the user's behalf. Grids and meshes too large for the triangle limit or the
-    memory are refused before the work."""
+    """Read, grid (holding points out), slope, breakpoints and trace ``source`` (a
+    ``source.Source``, or what ``open_source`` takes), as ``options`` say; each step timed
+    through ``steps`` (a silent one if None); ``note`` receives what was assumed or repaired on
+    the user's behalf. Grids and meshes too large for the triangle limit or the memory are
+    refused before the work."""
     steps = steps or _Steps({}, None, cancelled, None)
-    files = None
-    if is_tile_set(input_path):
-        paths = expand_tiles(input_path)  # point tiles are read and gridded in one step
-        if tile_kind(paths[0]) == "points" and options.slope_method != "log":
-            # the DEM, slope and breakpoints go file to file, block by block (see tiles)
-            files = {"folder": scratch_folder("tiles")}
-            files["dem"] = Path(files["folder"].name) / "dem.tif"
-        data = steps.run("grid" if tile_kind(paths[0]) == "points" else "read", read_tile_set,
-                         paths, options, cancelled=cancelled, note=note, progress=None,
-                         dem_path=files and files["dem"])
-    else:
-        data = steps.run("read", io.read_input, input_path, crs=options.crs,
-                         classes=options.classes, note=note)
-    if isinstance(data, TiledDem):
-        if files:
-            folder, crs_wkt = files["dem"].parent, data.crs.to_wkt()
-            files["slope"] = steps.run("slope", slope_file64, files["dem"], folder / "slope.tif",
-                                       options.slope_method, crs=crs_wkt, cancelled=cancelled)
-            files["breakpoints"] = folder / "breakpoints.tif"
-            steps.run("breakpoints", breakpoints_file, files["slope"], files["breakpoints"],
-                      s_crit=options.s_crit, input_dtype=np.float64, crs=crs_wkt,
-                      cancelled=cancelled)
-            data.dem = read_back(files["dem"], data.crs)
-        dem, holdout = data.dem, PointCloud(data.holdout, data.dem.crs)
-        # the tiles' points are not kept: the terrain fits and --refine use the DEM's cell
-        # centres; the per-tile held-out points stay the independent check
-        measured = None  # the DEM's cell centres, drawn when a fit needs them
-        holdout_source = "LiDAR points withheld from gridding, tile by tile"
-        n_points = data.n_points
-    elif isinstance(data, PointCloud):
-        gridding, holdout = split_holdout(data, options.holdout, options.seed, note=note)
-        measured = gridding.xyz
-        # refuse, before the work, a grid or mesh too large for the limit or the memory
-        plan = check_grid(gridding, options.cell_size, options.max_gap)
-        if options.slope_method == "log":
-            check_sigma_fits(options.sigma, plan["rows"], plan["cols"], options.cell_size)
-        triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
-        check_memory(points=len(gridding), cells=plan["rows"] * plan["cols"],
-                     triangles=triangles, advice="give a larger cell size or maximum area, or "
-                                                 "split the data into tiles")
-        dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
-                        max_gap=options.max_gap, progress=None, cancelled=cancelled, plan=plan)
-        holdout_source = "LiDAR points withheld from gridding"
-        n_points = len(data)
-    else:
-        dem = data  # a DEM keeps its own cell size
-        valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
-        triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
-        check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
-                     advice="resample the DEM to larger cells or split it into tiles")
-        holdout = _dem_check_points(dem, options.holdout, options.seed)
-        measured = None
-        holdout_source = "DEM cell centres (not independent of the DEM)"
-        n_points = 0
+    source = open_source(source)
+    terrain = _READERS[source.kind](source, options, steps, cancelled=cancelled, note=note)
+    dem = terrain.dem
     domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
                                   options.user_lines,
                                   tolerance=edge_tolerance(*options.simplification(),
                                                            dem.cell_size), note=note)
-    if files:
-        slope_grid = read_back(files["slope"], dem.crs)
-        breakpoints = read_back(files["breakpoints"], dem.crs)
-    elif options.slope_method == "log":
-        # second order: breakpoints from the LoG; the tracer still follows first-order slope
-        response = steps.run("slope", laplacian_of_gaussian, dem, options.sigma,
-                             kernel=options.log_kernel, cancelled=cancelled)
-        breakpoints = steps.run("breakpoints", log_breakpoints, response, options.sensitivity,
-                                zero_crossings=options.zero_crossings)
-        slope_grid = steps.run("tracing slope", slope, dem, "one-over-distance",
-                               cancelled=cancelled)
+    if terrain.files:
+        slope_grid = read_back(terrain.files["slope"], dem.crs)
+        breakpoints = read_back(terrain.files["breakpoints"], dem.crs)
     else:
-        slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
-        breakpoints = steps.run("breakpoints", classify_breakpoints, slope_grid, options.s_crit)
+        slope_grid, breakpoints = _slope_and_breakpoints(dem, options, steps, cancelled)
     traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
                        min_length=options.min_length, seed=options.seed)
-    return Front(dem, holdout, holdout_source, n_points, slope_grid, breakpoints, traced,
-                 domain, own_lines, measured, files)
+    return Front(dem, terrain.holdout, terrain.holdout_source, terrain.n_points, slope_grid,
+                 breakpoints, traced, domain, own_lines, terrain.measured, terrain.files)
 
 
-def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None, note=None,
-                  dem_path=None):
-    """Point tiles gridded on Dask (``tiles.TiledDem``), or DEM tiles as one ``Grid``; with
-    ``dem_path`` the DEM goes there (float64) instead of into memory."""
-    paths = expand_tiles(inputs)
-    if tile_kind(paths[0]) == "dem":
-        return read_dem_tiles(paths, crs=options.crs)
+def _slope_and_breakpoints(dem: Grid, options: RunOptions, steps: _Steps, cancelled):
+    """(first-order slope, breakpoints) of a DEM in memory: by the slope method and S_crit, or
+    by the Laplacian of Gaussian (the tracer still follows first-order slope)."""
+    if options.slope_method != "log":
+        slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
+        return slope_grid, steps.run("breakpoints", classify_breakpoints, slope_grid,
+                                     options.s_crit)
+    response = steps.run("slope", laplacian_of_gaussian, dem, options.sigma,
+                         kernel=options.log_kernel, cancelled=cancelled)
+    breakpoints = steps.run("breakpoints", log_breakpoints, response, options.sensitivity,
+                            zero_crossings=options.zero_crossings)
+    return steps.run("tracing slope", slope, dem, "one-over-distance",
+                     cancelled=cancelled), breakpoints
+
+
+def _read_points(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
+                 note) -> _Terrain:
+    """One point file, gridded in memory with ``options.holdout`` of its points held out."""
+    data = steps.run("read", io.read_points, source.path, crs=options.crs,
+                     classes=options.classes, note=note)
+    gridding, holdout = split_holdout(data, options.holdout, options.seed, note=note)
+    # refuse, before the work, a grid or mesh too large for the limit or the memory
+    plan = check_grid(gridding, options.cell_size, options.max_gap)
+    if options.slope_method == "log":
+        check_sigma_fits(options.sigma, plan["rows"], plan["cols"], options.cell_size)
+    triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
+    check_memory(points=len(gridding), cells=plan["rows"] * plan["cols"],
+                 triangles=triangles, advice="give a larger cell size or maximum area, or "
+                                             "split the data into tiles")
+    dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
+                    max_gap=options.max_gap, progress=None, cancelled=cancelled, plan=plan)
+    return _Terrain(dem, holdout, "LiDAR points withheld from gridding", len(data),
+                    measured=gridding.xyz)
+
+
+def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
+              note) -> _Terrain:
+    """A DEM (one raster, or DEM tiles mosaicked), its own cell size kept; check points are a
+    seeded draw of its cells."""
+    if source.tiled:
+        dem = steps.run("read", read_dem_tiles, source.paths, crs=options.crs)
+    else:
+        dem = steps.run("read", io.read_raster, source.path, crs=options.crs, note=note)
+    valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+    triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
+    check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
+                 advice="resample the DEM to larger cells or split it into tiles")
+    return _Terrain(dem, _dem_check_points(dem, options.holdout, options.seed),
+                    "DEM cell centres (not independent of the DEM)", 0)
+
+
+def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
+                      note) -> _Terrain:
+    """Point tiles gridded on Dask; the DEM, slope and breakpoints go file to file, block by
+    block (see tiles), unless the Laplacian of Gaussian needs the DEM in memory. The tiles'
+    points are not kept: the terrain fits and --refine use the DEM's cell centres; the per-tile
+    held-out points stay the independent check."""
+    files = None
+    if options.slope_method != "log":
+        files = {"folder": scratch_folder("tiles")}
+        files["dem"] = Path(files["folder"].name) / "dem.tif"
+    data = steps.run("grid", _grid_tiles, source, options, cancelled=cancelled, note=note,
+                     dem_path=files and files["dem"])
+    if files:
+        folder, crs_wkt = files["dem"].parent, data.crs.to_wkt()
+        files["slope"] = steps.run("slope", slope_file64, files["dem"], folder / "slope.tif",
+                                   options.slope_method, crs=crs_wkt, cancelled=cancelled)
+        files["breakpoints"] = folder / "breakpoints.tif"
+        steps.run("breakpoints", breakpoints_file, files["slope"], files["breakpoints"],
+                  s_crit=options.s_crit, input_dtype=np.float64, crs=crs_wkt,
+                  cancelled=cancelled)
+        data.dem = read_back(files["dem"], data.crs)
+    return _Terrain(data.dem, PointCloud(data.holdout, data.dem.crs),
+                    "LiDAR points withheld from gridding, tile by tile", data.n_points,
+                    files=files)
+
+
+_READERS = {POINTS: _read_points, DEM: _read_dem, DEM_TILES: _read_dem,
+            POINT_TILES: _read_point_tiles}
+
+
+def _grid_tiles(source: Source, options: RunOptions, *, cancelled=None, note=None,
+                dem_path=None) -> TiledDem:
+    """Point tiles gridded on Dask (``tiles.TiledDem``); with ``dem_path`` the DEM goes there
+    (float64) instead of into memory."""
     def check(plan):  # before round two: the chain after gridding, which holds the whole DEM
         triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
         check_memory(cells=plan["rows"] * plan["cols"], triangles=triangles,
@@ -440,12 +539,12 @@ def read_tile_set(inputs, options: RunOptions, *, progress=None, cancelled=None,
                      advice="give a larger cell size or maximum area, or grid the tiles alone "
                             "(floodmesh grid TILES --out dem.tif) and mesh it in parts")
 
-    tiled = grid_point_tiles(paths, options.cell_size, max_gap=options.max_gap, crs=options.crs,
-                             classes=options.classes, holdout=options.holdout, seed=options.seed,
-                             out_path=dem_path, keep=dem_path is None,
+    tiled = grid_point_tiles(source.paths, options.cell_size, max_gap=options.max_gap,
+                             crs=options.crs, classes=options.classes, holdout=options.holdout,
+                             seed=options.seed, out_path=dem_path, keep=dem_path is None,
                              dtype="float32" if dem_path is None else "float64",
                              workers=options.workers, scheduler=options.scheduler,
-                             processes=options.processes, progress=progress,
+                             processes=options.processes, progress=None,
                              cancelled=cancelled, check=check)
     for message in tiled.notes:
         if note:

@@ -13,13 +13,15 @@ from typing import Callable
 import numpy as np
 
 from . import io
-from .accuracy import accuracy_statistics, residuals
+from .accuracy import accuracy_statistics, nssda_threshold_m, residuals
 from .errors import FloodMeshError
 from .hydraulic_lines import lines_for_hydraulics
 from .mesh import Mesh, build_mesh, domain_from_dem, edge_tolerance
 from .options import RunOptions
 from .outputs import check_output_folder, staged_folder
+from .pipeline import run_inputs, trace_front
 from .simplify import simplify_breaklines
+from .source import open_source
 
 _OWN_MESH = re.compile(r"^mesh_.+\.2dm$")
 SERIES_FILES = ("series.csv", "series.json", "series.png")
@@ -155,13 +157,10 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
     """Read, grid, slope, breakpoints and trace ``input_path`` once (as ``options`` say), then
     mesh and assess once per setting; write ``SERIES_FILES`` and ``mesh_<label>.2dm`` per row
     into ``out_dir``. Returns the series.json content."""
-    from .accuracy import nssda_threshold_m
-    from .pipeline import run_inputs, trace_front
-
-    out = Path(out_dir)
-    inputs = run_inputs(input_path, options)
+    out, source = Path(out_dir), open_source(input_path)
+    inputs = run_inputs(source, options)
     check_output_folder(out, inputs, [*SERIES_FILES, *(f"mesh_{s.label}.2dm" for s in settings)])
-    front = trace_front(input_path, options, cancelled=cancelled)
+    front = trace_front(source, options, cancelled=cancelled)
     rows, meshes = scale_series(front.dem, front.traced, front.holdout.xyz, settings,
                                 min_angle=options.min_angle,
                                 min_distance=options.min_distance, domain=front.domain,
@@ -176,7 +175,7 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
         write_series_csv(stage / "series.csv", rows)
         write_series_png(stage / "series.png", rows,
                          nssda_threshold_m=None if np.isnan(threshold) else threshold)
-        result = {"input": str(input_path), "crs": front.dem.crs.to_string(),
+        result = {"input": source.named, "crs": front.dem.crs.to_string(),
                   "cell_size_m": front.dem.cell_size, "min_angle_deg": options.min_angle,
                   "n_holdout": len(front.holdout), "holdout_source": front.holdout_source,
                   "n_breaklines_traced": len(front.traced), "rows": rows,

@@ -38,21 +38,22 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     (GeoPackage)."""
     from . import io
     from .options import check_cell_size, check_holdout, check_max_gap, check_seed
-    from .tiles import expand_tiles, grid_point_tiles, is_tile_set
+    from .source import open_source
 
-    if is_tile_set(input):
-        input = expand_tiles(input, skip_unreadable=skip_unreadable)
-    _files(input if is_tile_set(input) else [input], [output, holdout_output], geotiff=[output])
+    source = open_source(input, skip_unreadable=skip_unreadable)
+    _files(source.paths, [output, holdout_output], geotiff=[output])
     check_cell_size(cell_size)
     check_max_gap(max_gap)
     check_holdout(holdout)
     check_seed(seed)
     classes = tuple(classes) if classes else None
-    if is_tile_set(input):
-        tiled = grid_point_tiles(input, cell_size, max_gap=max_gap, crs=crs, classes=classes,
-                                 holdout=holdout, seed=seed, out_path=output, keep=False,
-                                 workers=workers, scheduler=scheduler, progress=progress,
-                                 cancelled=cancelled)
+    if source.tiled:
+        from .tiles import grid_point_tiles
+
+        tiled = grid_point_tiles(source.paths, cell_size, max_gap=max_gap, crs=crs,
+                                 classes=classes, holdout=holdout, seed=seed, out_path=output,
+                                 keep=False, workers=workers, scheduler=scheduler,
+                                 progress=progress, cancelled=cancelled)
         for message in tiled.notes if note else ():
             note(message)
         held, points_crs = tiled.holdout, tiled.crs
@@ -61,7 +62,7 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
         from .grid import grid_points_linear
         from .points import split_holdout
 
-        points = io.read_points(input, crs=crs, classes=classes, note=note)
+        points = io.read_points(source.path, crs=crs, classes=classes, note=note)
         gridding, kept_back = split_holdout(points, holdout, seed, note=note)
         dem = grid_points_linear(gridding, cell_size, max_gap=max_gap, progress=progress,
                                  cancelled=cancelled)

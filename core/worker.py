@@ -80,11 +80,9 @@ def _file_step(func):
 def step_run(ch, *, input, output_folder, options, skip_unreadable=False):
     from .options import RunOptions
     from .pipeline import run_pipeline
-    from .tiles import expand_tiles, is_tile_set
+    from .source import open_source
 
-    if skip_unreadable and is_tile_set(input):
-        input = expand_tiles(input, skip_unreadable=True)
-
+    input = open_source(input, skip_unreadable=skip_unreadable)
     options = dict(options)
     for key in ("formats", "classes"):
         if options.get(key) is not None:
