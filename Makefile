@@ -23,7 +23,7 @@ fuzz: setup
 
 bench: setup
 	.venv/bin/pip install -q --disable-pip-version-check -c .venv/constraints.txt -e ".[test,bench]"
-	.venv/bin/python benchmarks/run.py $(if $(ONLY),--only $(ONLY))
+	.venv/bin/python benchmarks/run.py $(if $(ONLY),--only $(ONLY)) --write benchmarks/latest.md
 
 plugin-zip: setup
 	.venv/bin/python scripts/build_plugin_zip.py

@@ -24,6 +24,7 @@ the best of 3 counts; CPU seconds (user + system, all threads) are printed besid
 from __future__ import annotations
 
 import argparse
+import contextlib
 import resource
 import sys
 import tempfile
@@ -541,6 +542,9 @@ def main():
     parser.add_argument("--size", type=int, default=4000, help="raster side for slope")
     parser.add_argument("--breakpoints", type=int, default=1_000_000,
                         help="breakpoints to trace")
+    parser.add_argument("--write", metavar="FILE.md",
+                        help="also write the figures, with the date, machine and versions, to "
+                             "this Markdown file (make bench: benchmarks/latest.md)")
     args = parser.parse_args()
     benches = {
         "slopefile": lambda: bench_slope_file([int(n) for n in args.file_sizes.split(",")]),
@@ -552,15 +556,60 @@ def main():
     }
     import os
 
-    print(f"machine: {os.cpu_count()} cores shared with other work, load average "
-          f"{os.getloadavg()[0]:.1f} at the start")
     chosen = [name for name in args.only.split(",") if name]
     unknown = sorted(set(chosen) - set(benches))
     if unknown:
         parser.error(f"unknown benchmark {', '.join(unknown)}; choose from {', '.join(benches)}")
-    for name in chosen:
-        benches[name]()
-    print(f"\nload average {os.getloadavg()[0]:.1f} at the end")
+    with _written(args.write, chosen):
+        print(f"machine: {os.cpu_count()} cores shared with other work, load average "
+              f"{os.getloadavg()[0]:.1f} at the start")
+        for name in chosen:
+            benches[name]()
+        print(f"\nload average {os.getloadavg()[0]:.1f} at the end")
+
+
+class _Tee:
+    """Standard output also into a file."""
+
+    def __init__(self, *streams):
+        self.streams = streams
+
+    def write(self, text):
+        for stream in self.streams:
+            stream.write(text)
+
+    def flush(self):
+        for stream in self.streams:
+            stream.flush()
+
+
+@contextlib.contextmanager
+def _written(path, chosen):
+    """With ``path``, what the benchmarks print goes into it too, under a header that says when,
+    on what and with which versions they ran; written whole at the end (an interrupted run
+    leaves the last complete figures)."""
+    if not path:
+        yield
+        return
+    import datetime
+    import io
+    import platform
+
+    import numpy
+    import scipy
+
+    buffer, stdout = io.StringIO(), sys.stdout
+    sys.stdout = _Tee(stdout, buffer)
+    try:
+        yield
+    finally:
+        sys.stdout = stdout
+    header = (f"# Benchmark figures: `make bench`\n\nWritten by `benchmarks/run.py --only "
+              f"{','.join(chosen)}` on {datetime.date.today()}: {platform.machine()}, "
+              f"{platform.python_implementation()} {platform.python_version()}, numpy "
+              f"{numpy.__version__}, scipy {scipy.__version__}. Each figure is against a peer "
+              f"measured in the same run; what they mean is in [RESULTS.md](RESULTS.md).\n\n")
+    Path(path).write_text(header + buffer.getvalue(), encoding="utf-8")
 
 if __name__ == "__main__":
     main()
