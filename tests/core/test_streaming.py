@@ -166,25 +166,6 @@ def test_unlisted_windows_are_nodata(dem_file, tmp_path):
     assert np.isnan(ours[40:]).all() and np.isnan(ours[:, 50:]).all()
 
 
-def test_a_fresh_numba_cache_is_announced(tmp_path):
-    """Another user or profile (an empty NUMBA_CACHE_DIR) is told of the compile ahead; this
-    checkout, warmed by setup, is not."""
-    import os
-    import subprocess
-    import sys
-
-    code = "from floodmesh.core.warmup import compile_note; print(compile_note())"
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
-    fresh = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                           text=True, check=True).stdout
-    assert "first run only" in fresh and str(tmp_path) in fresh
-    from floodmesh.core import warmup
-
-    if not warmup.kernels_cached():
-        warmup.compile_kernels(None)
-    assert warmup.compile_note() is None
-
-
 @pytest.mark.parametrize("command", ["slope", "breakpoints"])
 def test_streaming_commands_refuse_bad_rasters_in_one_line(tmp_path, capsys, command):
     """The file-to-file commands check a raster as reading it whole did: a rotated grid and a
