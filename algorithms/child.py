@@ -244,6 +244,25 @@ def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> 
     errors.start()
     child.stdin.write(json.dumps({"step": step, "args": args}))
     child.stdin.close()
+    result, error, cancelled = _relay(child, lines, stderr, feedback, what)
+    code = child.wait()
+    errors.join(timeout=2)
+    child.stdout.close()
+    child.stderr.close()
+    if cancelled:
+        _remove_partials(outputs)
+        raise QgsProcessingException("Cancelled; no partial output was written")
+    if error is not None:
+        raise QgsProcessingException(error)
+    if code != 0 or result is None:
+        _remove_partials(outputs)
+        raise QgsProcessingException(_failure(code, stderr, what))
+    return result
+
+
+def _relay(child, lines: queue.Queue, stderr: list, feedback, what: str):
+    """(result, error, cancelled): the worker's messages passed on to ``feedback`` until its
+    output ends; Cancel kills it and whatever it started."""
     result = error = None
     cancelled = False
     polled = time.monotonic()
@@ -262,7 +281,7 @@ def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> 
         except queue.Empty:
             continue
         if line is None:
-            break
+            return result, error, cancelled
         try:
             message = json.loads(line)
         except ValueError:
@@ -279,28 +298,21 @@ def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> 
             result = message["result"]
         elif "error" in message:
             error = message["error"]
-    code = child.wait()
-    errors.join(timeout=2)
-    child.stdout.close()
-    child.stderr.close()
-    if cancelled:
-        _remove_partials(outputs)
-        raise QgsProcessingException("Cancelled; no partial output was written")
-    if error is not None:
-        raise QgsProcessingException(error)
-    if code != 0 or result is None:
-        _remove_partials(outputs)
-        trace = "".join(stderr[-40:]).strip()
-        if trace:
-            QgsMessageLog.logMessage(f"{what}: the worker's last output:\n{trace}", LOG_TAG)
-        if code in (-9, -15):
-            how = (f"was killed ({_signal_name(code)}; by the system when memory runs out: then "
-                   f"try a larger cell size or maximum area)")
-        elif code < 0:
-            how = f"crashed ({_signal_name(code)}; the log has its trace)"
-        else:
-            last = next((s.strip() for s in reversed(stderr) if s.strip()), "")
-            how = f"stopped with exit code {code} ({last or 'no message'})"
-        raise QgsProcessingException(f"{what}: FloodMesh's worker process {how}; QGIS is "
-                                     f"unaffected and no partial output was written")
-    return result
+
+
+def _failure(code: int, stderr: list, what: str) -> str:
+    """The one message for a worker that crashed, was killed or stopped without a result; its
+    last output goes to the QGIS log."""
+    trace = "".join(stderr[-40:]).strip()
+    if trace:
+        QgsMessageLog.logMessage(f"{what}: the worker's last output:\n{trace}", LOG_TAG)
+    if code in (-9, -15):
+        how = (f"was killed ({_signal_name(code)}; by the system when memory runs out: then "
+               f"try a larger cell size or maximum area)")
+    elif code < 0:
+        how = f"crashed ({_signal_name(code)}; the log has its trace)"
+    else:
+        last = next((s.strip() for s in reversed(stderr) if s.strip()), "")
+        how = f"stopped with exit code {code} ({last or 'no message'})"
+    return (f"{what}: FloodMesh's worker process {how}; QGIS is unaffected and no partial "
+            f"output was written")

@@ -76,6 +76,13 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
 
     def initAlgorithm(self, config=None):  # noqa: N802
         defaults = RunOptions()
+        self._add_input_parameters(defaults)
+        self._add_breakline_parameters(defaults)
+        self._add_mesh_parameters(defaults)
+        self._add_outputs()
+
+    def _add_input_parameters(self, defaults: RunOptions):
+        """The LiDAR or DEM: a layer, a file or tiles; its CRS, classes, cell size and gaps."""
         self.addParameter(point_cloud_parameter(self, "LiDAR point cloud layer"))
         self.addParameter(QgsProcessingParameterFile(
             self.INPUT, self.tr("… or LiDAR points or a DEM from a file"),
@@ -89,6 +96,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         self.addParameter(distance(self, self.CELL_SIZE, "Grid cell size d", defaults.cell_size))
         self.addParameter(distance(self, self.MAX_GAP, "Maximum gap bridged (empty: 10 cells)",
                                    None, optional=True))
+
+    def _add_breakline_parameters(self, defaults: RunOptions):
+        """Steps 3 to 6: slope (or the LoG), S_crit and the simplification."""
         self.addParameter(QgsProcessingParameterEnum(
             self.SLOPE_METHOD, self.tr("Slope method"), options=labels(METHODS),
             defaultValue=METHODS.index(defaults.slope_method)))
@@ -118,6 +128,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             defaultValue=0))
         self.addParameter(distance(self, self.TOLERANCE, "Tolerance for Douglas–Peucker or "
                                    "spline", 0.9, minimum=0.001))
+
+    def _add_mesh_parameters(self, defaults: RunOptions):
+        """Steps 7 to 9: domain, angle and area bounds, holdout, exports, terrain fits, sizes."""
         add_domain_parameters(self)
         self.addParameter(QgsProcessingParameterNumber(
             self.MIN_ANGLE, self.tr("Minimum triangle angle (degrees)"),
@@ -154,6 +167,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
                                          "(m²)"), DOUBLE, optional=True, minValue=0.0))
         self.addParameter(flow_area_parameter(self.FLOW_AREA, self.tr))
         self.addParameter(max_triangles_parameter(self.MAX_TRIANGLES, self.tr))
+
+    def _add_outputs(self):
+        """The run folder and what QGIS loads and lists from it."""
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT_FOLDER, self.tr("Output folder")))
         self.addOutput(QgsProcessingOutputVectorLayer(
