@@ -1,5 +1,5 @@
-"""Every FloodMesh algorithm's core work runs in a child process (``core/worker.py``), as QGIS's
-GRASS, SAGA and point-cloud algorithms run theirs: the QGIS process never imports shapely,
+"""Every FloodMesh algorithm's core work runs in a child process (``core/frontends/worker.py``),
+as QGIS's GRASS, SAGA and point-cloud algorithms run theirs: the QGIS process never imports shapely,
 Triangle, numba or laspy, so a second GEOS, a segfault or an out-of-memory kill cannot take QGIS
 down; Cancel ends the child at once and its memory goes back to the system.
 
@@ -35,7 +35,8 @@ SYSTEM_PYTHON = "/usr/bin/python3"
 _REQUIREMENTS = (PLUGIN_DIR / "core" / "requirements.txt").read_text(encoding="utf-8")
 MANAGED_PACKAGES = tuple(line.split("#")[0].strip() for line in _REQUIREMENTS.splitlines()
                          if line.split("#")[0].strip() not in ("", "numpy"))
-PARTIAL_GLOB = ".*.partial*"  # core.worker.PARTIAL_GLOB (not imported: core stays out of QGIS)
+# core.frontends.worker.PARTIAL_GLOB (not imported: core stays out of QGIS)
+PARTIAL_GLOB = ".*.partial*"
 LOG_TAG = "FloodMesh"
 READY = ".floodmesh-ready"  # written into the managed environment once pip has succeeded
 FIRST_RUN_MESSAGE = (
@@ -229,9 +230,10 @@ def run_step(step: str, args: dict, feedback, *, outputs=(), what: str = "") -> 
     python = ensure_python(feedback)
     what = what or step
     try:
-        child = subprocess.Popen([python, "-m", f"{PACKAGE}.core.worker"], stdin=subprocess.PIPE,
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                 encoding="utf-8", errors="replace", env=_child_env(),
+        child = subprocess.Popen([python, "-m", f"{PACKAGE}.core.frontends.worker"],
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True, encoding="utf-8",
+                                 errors="replace", env=_child_env(),
                                  start_new_session=True)  # its own children (ANUGA) go with it
     except OSError as exc:
         raise QgsProcessingException(

@@ -1,4 +1,4 @@
-"""Flood on mesh: ANUGA run on a FloodMesh mesh with a scenario (core.flood), in a child
+"""Flood on mesh: ANUGA run on a FloodMesh mesh with a scenario (core.flood.model), in a child
 process; its maxima load as rasters."""
 from pathlib import Path
 
@@ -48,7 +48,7 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputFile(self.REPORT, self.tr("Report")))
 
     def process(self, parameters, context, feedback):
-        from ..core.flood import RESULT_RASTERS  # plain names; ANUGA runs in its own child
+        from ..core.flood.model import RESULT_RASTERS  # plain names; ANUGA runs in its own child
 
         mesh_layer = self.parameterAsMeshLayer(parameters, self.MESH, context)
         mesh_path = layer_file(mesh_layer, "Mesh")

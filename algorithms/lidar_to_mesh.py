@@ -11,16 +11,15 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingException, QgsP
                        QgsProcessingParameterString, QgsVectorLayer)
 
 from ..core.errors import FloodMeshError
-from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS,
-                            LOG_KERNELS, MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions)
+from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS, LOG_KERNELS,
+                            MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions)
 from .compat import DOUBLE, INTEGER, VECTOR_LINE
-from .base import (FloodMeshAlgorithm, add_domain_parameters, crs_or_none, distance,
-                   domain_files, labels, point_cloud_parameter)
+from .base import (FloodMeshAlgorithm, add_domain_parameters, crs_or_none, distance, domain_files,
+                   labels, point_cloud_parameter)
 from .build_mesh import flow_area_parameter, max_triangles_parameter
 from .simplify_breaklines import METHODS as SIMPLIFY_LABELS
 from .tiles import add_tile_parameters, dask_settings, input_or_tiles, skip_unreadable
-from .styles import (load_results, run_group_name, style_breaklines, style_mesh,
-                     style_residuals)
+from .styles import load_results, run_group_name, style_breaklines, style_mesh, style_residuals
 
 INPUT_FILTER = ("Point clouds and DEMs (*.las *.laz *.xyz *.txt *.csv *.tif *.tiff *.asc);;"
                 "All files (*.*)")

@@ -8,8 +8,8 @@ from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSyste
                        QgsSymbol)
 from qgis.PyQt.QtGui import QColor
 
-from ..core.options import (BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR,
-                            OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS, RESIDUAL_CLASS_LABELS)
+from ..core.options import (BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR, OUTSIDE_MESH_COLOUR,
+                            RESIDUAL_CLASS_COLOURS, RESIDUAL_CLASS_LABELS)
 from .compat import LINE_GEOMETRY
 
 RESIDUAL_CLASSES = tuple(zip((0, 1, 2, -1), RESIDUAL_CLASS_LABELS,

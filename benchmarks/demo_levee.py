@@ -14,11 +14,12 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from floodmesh.core import demo, io
-from floodmesh.core.flood import run_flood, scenario_from_dict
-from floodmesh.core.mesh import build_mesh, triangle_areas
+from floodmesh.core.frontends import demo
+from floodmesh.core import io
+from floodmesh.core.flood.model import run_flood, scenario_from_dict
+from floodmesh.core.steps.mesh import build_mesh, triangle_areas
 from floodmesh.core.options import RunOptions
-from floodmesh.core.pipeline import run_pipeline
+from floodmesh.core.chain.pipeline import run_pipeline
 
 X0, Y0 = demo.DEMO_ORIGIN
 

@@ -32,12 +32,13 @@ import shapely
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent.parent))
 
-from floodmesh.core import demo, io  # noqa: E402
-from floodmesh.core.accuracy import tin_elevation  # noqa: E402
-from floodmesh.core.mesh import Mesh, build_mesh  # noqa: E402
+from floodmesh.core.frontends import demo
+from floodmesh.core import io  # noqa: E402
+from floodmesh.core.steps.accuracy import tin_elevation  # noqa: E402
+from floodmesh.core.steps.mesh import Mesh, build_mesh  # noqa: E402
 from floodmesh.core.options import RunOptions  # noqa: E402
-from floodmesh.core.pipeline import run_pipeline  # noqa: E402
-from floodmesh.core.validation import score_breaklines  # noqa: E402
+from floodmesh.core.chain.pipeline import run_pipeline  # noqa: E402
+from floodmesh.core.steps.validation import score_breaklines  # noqa: E402
 
 _river = shapely.LineString([(-20, 28), (320, 238)])
 OBLIQUE = demo.Floodplain({

@@ -27,14 +27,14 @@ from pathlib import Path
 import numpy as np
 
 from floodmesh.core import io
-from floodmesh.core.compare import compare_floods
-from floodmesh.core.flood import load_scenario, run_flood
-from floodmesh.core.flood_cli import write_zone
-from floodmesh.core.hydraulic_lines import flood_size_field, wet_zone
-from floodmesh.core.hydraulics import hydraulic_checks
-from floodmesh.core.mesh import build_mesh, user_domain
+from floodmesh.core.flood.compare import compare_floods
+from floodmesh.core.flood.model import load_scenario, run_flood
+from floodmesh.core.frontends.flood_cli import write_zone
+from floodmesh.core.steps.hydraulic_lines import flood_size_field, wet_zone
+from floodmesh.core.steps.hydraulics import hydraulic_checks
+from floodmesh.core.steps.mesh import build_mesh, user_domain
 from floodmesh.core.options import RunOptions
-from floodmesh.core.pipeline import run_pipeline
+from floodmesh.core.chain.pipeline import run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "real"

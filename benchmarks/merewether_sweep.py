@@ -21,11 +21,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from merewether import CRS, DEM, scenario, uniform_mesh, write_domain  # noqa: E402
 
 from floodmesh.core import io  # noqa: E402
-from floodmesh.core.compare import compare_floods  # noqa: E402
-from floodmesh.core.flood import load_scenario, run_flood  # noqa: E402
-from floodmesh.core.mesh import build_mesh, user_domain  # noqa: E402
+from floodmesh.core.flood.compare import compare_floods  # noqa: E402
+from floodmesh.core.flood.model import load_scenario, run_flood  # noqa: E402
+from floodmesh.core.steps.mesh import build_mesh, user_domain  # noqa: E402
 from floodmesh.core.options import RunOptions  # noqa: E402
-from floodmesh.core.pipeline import run_pipeline  # noqa: E402
+from floodmesh.core.chain.pipeline import run_pipeline  # noqa: E402
 
 
 def matched_area(dem, domain, nodes_wanted):

@@ -58,8 +58,8 @@ def peak_rss_mb():
 def bench_grid(n_points):
     from scipy.interpolate import griddata
 
-    from floodmesh.core.demo import ground_elevation
-    from floodmesh.core.grid import grid_points_linear
+    from floodmesh.core.frontends.demo import ground_elevation
+    from floodmesh.core.steps.grid import grid_points_linear
     from floodmesh.core.points import PointCloud
 
     side = np.sqrt(n_points / 9.0)
@@ -94,7 +94,7 @@ def bench_slope(size):
     from osgeo import gdal
 
     from floodmesh.core import io
-    from floodmesh.core.slope import SLOPE_METHODS, slope
+    from floodmesh.core.steps.slope import SLOPE_METHODS, slope
 
     gdal.UseExceptions()
     rng = np.random.default_rng(0)
@@ -185,7 +185,7 @@ def print_difference(ours, peer):
 
 def floodmesh_command():
     exe = Path(sys.executable).with_name("floodmesh")
-    return [exe] if exe.exists() else [sys.executable, "-m", "floodmesh.core.cli"]
+    return [exe] if exe.exists() else [sys.executable, "-m", "floodmesh.core.frontends.cli"]
 
 
 def bench_slope_file(sizes, repeat=3):
@@ -240,8 +240,8 @@ def bench_codec(size, repeat=3):
     import rasterio
 
     from floodmesh.core.io import TILE
-    from floodmesh.core.breakpoints import classify_breakpoints
-    from floodmesh.core.slope import slope
+    from floodmesh.core.steps.breakpoints import classify_breakpoints
+    from floodmesh.core.steps.slope import slope
 
     with tempfile.TemporaryDirectory(dir=Path.cwd()) as tmp:
         synthetic_dem_file(Path(tmp) / "dem.tif", size)
@@ -281,7 +281,7 @@ def bench_codec(size, repeat=3):
 
 def synthetic_points(n_points, seed=0):
     """(n, 3) points at 9 per m² over a square, on the demo floodplain's terrain repeated."""
-    from floodmesh.core.demo import ground_elevation
+    from floodmesh.core.frontends.demo import ground_elevation
 
     side = np.sqrt(n_points / 9.0)
     rng = np.random.default_rng(seed)
@@ -379,9 +379,9 @@ def bench_trace(n_breakpoints):
     component labelling of the same breakpoints (one pass over the same cells: a floor)."""
     from scipy import ndimage
 
-    from floodmesh.core.breaklines import trace_breaklines
-    from floodmesh.core.breakpoints import classify_breakpoints
-    from floodmesh.core.slope import slope
+    from floodmesh.core.steps.breaklines import trace_breaklines
+    from floodmesh.core.steps.breakpoints import classify_breakpoints
+    from floodmesh.core.steps.slope import slope
 
     def ridges(size):
         yy, xx = np.mgrid[0:size, 0:size].astype(float)
@@ -409,12 +409,12 @@ def bench_lines(seeds=3):
     """Recall, precision and pieces per true line on the demo floodplain with 5 cm noise."""
     import shapely
 
-    from floodmesh.core import demo
-    from floodmesh.core.breaklines import trace_breaklines
-    from floodmesh.core.breakpoints import classify_breakpoints
-    from floodmesh.core.grid import grid_points_linear
-    from floodmesh.core.slope import SLOPE_METHODS, slope
-    from floodmesh.core.validation import score_breaklines
+    from floodmesh.core.frontends import demo
+    from floodmesh.core.steps.breaklines import trace_breaklines
+    from floodmesh.core.steps.breakpoints import classify_breakpoints
+    from floodmesh.core.steps.grid import grid_points_linear
+    from floodmesh.core.steps.slope import SLOPE_METHODS, slope
+    from floodmesh.core.steps.validation import score_breaklines
 
     truth = [shapely.affinity.translate(g, *demo.DEMO_ORIGIN) for g in demo.true_breaklines()]
     print(f"\n## Break lines against the truth: demo floodplain, 9 points/m², 5 cm noise, 1 m grid,"
@@ -439,15 +439,15 @@ def bench_lines(seeds=3):
 
 
 def bench_mesh():
-    from floodmesh.core.accuracy import residuals
-    from floodmesh.core.breaklines import trace_breaklines
-    from floodmesh.core.breakpoints import classify_breakpoints
-    from floodmesh.core.demo import synthetic_floodplain
-    from floodmesh.core.grid import grid_points_linear
-    from floodmesh.core.mesh import build_mesh
+    from floodmesh.core.steps.accuracy import residuals
+    from floodmesh.core.steps.breaklines import trace_breaklines
+    from floodmesh.core.steps.breakpoints import classify_breakpoints
+    from floodmesh.core.frontends.demo import synthetic_floodplain
+    from floodmesh.core.steps.grid import grid_points_linear
+    from floodmesh.core.steps.mesh import build_mesh
     from floodmesh.core.points import PointCloud, split_holdout
-    from floodmesh.core.simplify import simplify_keep_every
-    from floodmesh.core.slope import slope
+    from floodmesh.core.steps.simplify import simplify_keep_every
+    from floodmesh.core.steps.slope import slope
 
     points, classes = synthetic_floodplain()
     ground = PointCloud(points.xyz[classes == 2], points.crs)
@@ -482,8 +482,8 @@ def bench_mesh():
 def bench_delatin(dem, coords, holdout):
     """The break-line mesh against a pure terrain-approximation TIN (pydelatin: greedy point
     insertion, no angle bound) allowed the same maximum vertical error against the DEM."""
-    from floodmesh.core.accuracy import residuals
-    from floodmesh.core.mesh import Mesh, build_mesh, triangle_angles
+    from floodmesh.core.steps.accuracy import residuals
+    from floodmesh.core.steps.mesh import Mesh, build_mesh, triangle_angles
 
     try:
         from pydelatin import Delatin

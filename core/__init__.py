@@ -24,15 +24,17 @@ import os as _os
 # name, which the import system sets on the package once that submodule is imported
 _API = {
     "read_points": "io", "read_raster": "io", "read_input": "io", "write_raster": "io",
-    "write_breaklines": "io", "write_mesh_2dm": "io",
-    "grid_points": ("grid", "grid_points_linear"), "terrain_slope": ("slope", "slope"),
-    "laplacian_of_gaussian": "slope", "classify_breakpoints": "breakpoints",
-    "log_breakpoints": "breakpoints", "trace_breaklines": "breaklines",
-    "simplify_breaklines": "simplify", "localise_traced": "localise",
-    "build_mesh": "mesh", "assess": "accuracy", "refine_mesh": "refine",
-    "export_mesh": "export", "run_pipeline": "pipeline", "run_series": "series",
-    "RunOptions": "options", "Grid": "raster", "PointCloud": "points", "BreakLine": "breaklines",
-    "Mesh": "mesh", "FloodMeshError": "errors", "Cancelled": "errors",
+    "write_breaklines": "io", "write_mesh_2dm": "io", "open_source": "chain.source",
+    "Source": "chain.source",
+    "grid_points": ("steps.grid", "grid_points_linear"), "terrain_slope": ("steps.slope", "slope"),
+    "laplacian_of_gaussian": "steps.slope", "classify_breakpoints": "steps.breakpoints",
+    "log_breakpoints": "steps.breakpoints", "trace_breaklines": "steps.breaklines",
+    "simplify_breaklines": "steps.simplify", "localise_traced": "steps.localise",
+    "build_mesh": "steps.mesh", "assess": "steps.accuracy", "refine_mesh": "steps.refine",
+    "export_mesh": "steps.export", "run_pipeline": "chain.pipeline",
+    "run_series": "chain.series", "RunOptions": "options", "Grid": "raster",
+    "PointCloud": "points", "BreakLine": "steps.breaklines", "Mesh": "steps.mesh",
+    "FloodMeshError": "errors", "Cancelled": "errors",
 }
 __all__ = sorted(_API)
 

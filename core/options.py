@@ -22,13 +22,13 @@ SIMPLIFY_METHODS = ("keep-every", "douglas-peucker", "spline")
 # node elevations: a local least-squares plane of the measured points, or bilinear from the DEM
 NODE_ELEVATIONS = ("plane", "dem")
 # colours of the residual classes <10 cm, 10–25 cm, >25 cm and of points outside the mesh, in
-# the QGIS style (algorithms/styles.py) and the report's pictures (core/report.py)
+# the QGIS style (algorithms/styles.py) and the report's pictures (core/io/report.py)
 RESIDUAL_CLASS_COLOURS = ("#1a9641", "#fdae61", "#d7191c")
 OUTSIDE_MESH_COLOUR = "#9e9e9e"
 # break lines: a magenta line on a white halo, readable on the mesh's colour ramp; mesh edges
 BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR = "#b0006e", "#ffffff", "#404040"
 RESIDUAL_CLASS_LABELS = ("< 10 cm", "10–25 cm", "> 25 cm", "outside the mesh")  # classes 0-2, -1
-# solver export formats (core.export), named by the extension each writes
+# solver export formats (core.steps.export), named by the extension each writes
 EXPORT_FORMATS = ("2dm", "slf", "14", "gr3", "nc", "gpkg")
 EXPORT_EXTENSIONS = {f: f".{f}" for f in EXPORT_FORMATS}
 EXPORT_FORMAT_LABELS = ("SMS 2DM: BASEMENT, TUFLOW FV, SRH-2D (.2dm)",

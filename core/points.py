@@ -52,7 +52,7 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
 
 def _check_area(xy: np.ndarray, source: str) -> None:
     """Refuse points that all lie at one place or on one straight line (in any direction)."""
-    from .point_kernels import spread  # loads numba: only where points are read
+    from ._kernels.points import spread  # loads numba: only where points are read
 
     span, across, along = spread(xy[:, 0], xy[:, 1])
     if span <= 0:
@@ -67,7 +67,7 @@ def _check_area(xy: np.ndarray, source: str) -> None:
 def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
     """Say how many points repeat another's x, y (to 0.1 mm) with a different z, and by how
     much. One integer key per point, sorted: a few seconds for 10 million points."""
-    from .point_kernels import position_keys
+    from ._kernels.points import position_keys
 
     key = position_keys(xyz[:, 0], xyz[:, 1], 1e-4)
     if len(key) < len(xyz):  # over ~400 km across: not checked

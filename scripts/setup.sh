@@ -14,7 +14,7 @@ DEB_PACKAGES=(qgis python3-qgis qgis-providers python3-venv python3-numpy python
 # against them): the environment is pinned to the versions installed.
 SYSTEM_PINS=(numpy scipy rasterio fiona pyproj matplotlib)
 DEB_PACKAGES+=(xvfb xauth)  # a virtual display for the desktop QGIS test (tests/qgis/test_desktop.py)
-DEB_PACKAGES+=(gcc python3-dev)  # numba's ahead-of-time build of the raster kernels (core/compiled.py)
+DEB_PACKAGES+=(gcc python3-dev)  # numba's ahead-of-time build of the raster kernels (core/_kernels/aot.py)
 # shapely: Debian's own where it is shapely 2 (Debian 13: 2.1, built against the GEOS that QGIS
 # links). QGIS 3.40's qgis.core imports shapely itself, so a PyQGIS script run from .venv would
 # otherwise load PyPI's wheel, with a GEOS of its own, into a process that has QGIS's. Debian 12's
@@ -106,7 +106,7 @@ if ! OMP_NUM_THREADS=1 .venv-flood/bin/python -c "import anuga" >/dev/null 2>&1;
 fi
 
 # Compile the numba kernels now (about 2 minutes, once; seconds when cached), not in the first run.
-.venv/bin/python -m floodmesh.core.warmup
+.venv/bin/python -m floodmesh.core.frontends.warmup
 # Byte-compile the package as pip does for a regular install (an editable one leaves it to the
 # first import, which cannot write where PYTHONDONTWRITEBYTECODE is set): compiling FloodMesh's
 # modules from source costs every `floodmesh` process about 0.1 s of CPU, 8 % of `floodmesh slope`

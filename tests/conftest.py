@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from floodmesh.core import io
-from floodmesh.core.demo import synthetic_floodplain
+from floodmesh.core.frontends.demo import synthetic_floodplain
 
 REPO = Path(__file__).resolve().parent.parent
 REAL_DATA = REPO.parent / "shared" / "data" / "real"
@@ -23,7 +23,7 @@ def demo_points_file(tmp_path_factory):
 def survey_tiles(root, density=4.0):
     """The demo floodplain (ground points, ``density`` per m²) as 4 LAZ tiles of 150 x 120 m in
     ``root``/tiles and as one LAZ file of the same points, ``root``/single.laz; returns root."""
-    from floodmesh.core.demo import DEMO_ORIGIN
+    from floodmesh.core.frontends.demo import DEMO_ORIGIN
     from floodmesh.core.points import PointCloud
 
     points, classes = synthetic_floodplain(density=density, seed=2)
@@ -63,7 +63,7 @@ UTM_ORIGIN = (412_000.0, 5_652_000.0)
 def hole_mesh(max_area=40.0):
     """A 100 x 60 m rectangle with a 20 x 20 m square hole (x 40–60, y 20–40, local metres),
     meshed by Triangle, at UTM coordinates, z = 10 + 0.01·x + 0.02·y: (nodes (n, 3), triangles)."""
-    from floodmesh.core.mesh import PSLG, triangulate_pslg
+    from floodmesh.core.steps.mesh import PSLG, triangulate_pslg
 
     corners = np.array([[0, 0], [100, 0], [100, 60], [0, 60],
                         [40, 20], [60, 20], [60, 40], [40, 40]], float) + UTM_ORIGIN

@@ -1,4 +1,4 @@
-"""Accuracy assessment (floodmesh.core.accuracy): TIN residuals and their statistics."""
+"""Accuracy assessment (floodmesh.core.steps.accuracy): TIN residuals and their statistics."""
 import math
 
 import numpy as np
@@ -7,9 +7,9 @@ from affine import Affine
 from pyproj import CRS
 from scipy.spatial import Delaunay
 
-from floodmesh.core.accuracy import (CLASS_NAMES, accuracy_statistics, nssda_threshold_m,
-                                     residual_class, residuals, tin_elevation)
-from floodmesh.core.mesh import Mesh, build_mesh
+from floodmesh.core.steps.accuracy import (CLASS_NAMES, accuracy_statistics, nssda_threshold_m,
+                                           residual_class, residuals, tin_elevation)
+from floodmesh.core.steps.mesh import Mesh, build_mesh
 from floodmesh.core.raster import Grid
 
 from ..conftest import plane_points
@@ -87,7 +87,7 @@ def test_points_on_edges_and_nodes_are_never_lost_and_match_matplotlib():
     points are outside, and the TIN elevations agree to round-off."""
     from matplotlib.tri import LinearTriInterpolator, Triangulation
 
-    from floodmesh.core.mesh import containing_triangle
+    from floodmesh.core.steps.mesh import containing_triangle
 
     rng = np.random.default_rng(7)
     for _ in range(6):

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from floodmesh.core.arrays import unique_rows
+from floodmesh.core.engine.arrays import unique_rows
 
 
 @pytest.mark.parametrize("seed", range(5))

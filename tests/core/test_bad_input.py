@@ -2,7 +2,7 @@
 the problem, no traceback, and no output file (the cases are in tests/bad_inputs.py)."""
 import pytest
 
-from floodmesh.core.cli import main
+from floodmesh.core.frontends.cli import main
 
 from ..bad_inputs import CASES
 

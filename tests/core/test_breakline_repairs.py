@@ -7,8 +7,8 @@ from affine import Affine
 from pyproj import CRS
 
 from floodmesh.core import io
-from floodmesh.core.cli import main
-from floodmesh.core.mesh import build_mesh, mesh_quality, triangle_angles, triangle_areas
+from floodmesh.core.frontends.cli import main
+from floodmesh.core.steps.mesh import build_mesh, mesh_quality, triangle_angles, triangle_areas
 from floodmesh.core.raster import Grid
 
 from .test_mesh import ORIGIN, _covered_length, _edges, _line, _plane, _plane_dem

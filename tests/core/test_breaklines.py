@@ -1,4 +1,4 @@
-"""Break-line tracing (floodmesh.core.breaklines.trace_breaklines) on hand-made and synthetic DEMs."""
+"""Break-line tracing (core.steps.breaklines.trace_breaklines) on hand-made and synthetic DEMs."""
 from collections import Counter
 
 import numpy as np
@@ -8,12 +8,12 @@ from affine import Affine
 from pyproj import CRS
 from scipy import ndimage
 
-from floodmesh.core import demo
-from floodmesh.core.breaklines import trace_breaklines
-from floodmesh.core.breakpoints import classify_breakpoints
+from floodmesh.core.frontends import demo
+from floodmesh.core.steps.breaklines import trace_breaklines
+from floodmesh.core.steps.breakpoints import classify_breakpoints
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.raster import Grid
-from floodmesh.core.slope import slope
+from floodmesh.core.steps.slope import slope
 
 ORIGIN = (412_000.0, 5_652_000.0)
 S_CRIT = 10.0
@@ -320,7 +320,7 @@ def test_touching_lines_share_a_component_and_it_survives_simplification(tmp_pat
     """Two separate steep bands give two break-line systems; a line's component id is written
     to the GeoPackage, read back, and kept by simplification."""
     from floodmesh.core import io
-    from floodmesh.core.simplify import simplify_keep_every
+    from floodmesh.core.steps.simplify import simplify_keep_every
 
     x, y = _centres(60, 60)
     z = np.clip((x - 10) / 3, 0, 1) * 2 + np.clip((x - 40) / 3, 0, 1) * 2
@@ -344,7 +344,7 @@ def test_touching_lines_share_a_component_and_it_survives_simplification(tmp_pat
 def _noisy_dem(ground, width, seed, noise=0.05, density=9.0):
     """A 1 m DEM gridded from points scattered at ``density`` per m² over a ``width`` square,
     z = ground(x, y) plus Gaussian noise (m)."""
-    from floodmesh.core.grid import grid_points_linear
+    from floodmesh.core.steps.grid import grid_points_linear
     from floodmesh.core.points import PointCloud
 
     rng = np.random.default_rng(seed)
@@ -365,8 +365,8 @@ def test_levee_with_noise_scores(course, angle):
     """A levee (1.8 m high, 4 m crest, 1:3 sides) at an angle to the grid, straight or
     meandering, from 9 points/m² with 5 cm noise on a 1 m grid: recall and precision within
     2 cells at least 0.9, and fewer than 3 traced pieces for each of its four break lines."""
-    from floodmesh.core.demo import Profile
-    from floodmesh.core.validation import score_breaklines
+    from floodmesh.core.frontends.demo import Profile
+    from floodmesh.core.steps.validation import score_breaklines
 
     width, t = 120.0, np.radians(angle)
     if course == "straight":
@@ -398,8 +398,8 @@ def test_noisy_floodplain_scores():
     case (1 m grid, one-over-distance, S_crit 10°): recall and precision within 2 cells at least
     0.9, fewer than 3 traced pieces per true line on average; without joining, the lines along
     the road (6° to the grid) would be cut at every step of its staircase."""
-    from floodmesh.core.grid import grid_points_linear
-    from floodmesh.core.validation import score_breaklines
+    from floodmesh.core.steps.grid import grid_points_linear
+    from floodmesh.core.steps.validation import score_breaklines
 
     points, classes = demo.synthetic_floodplain(noise=0.05, vegetation=0.0, seed=3)
     dem = grid_points_linear(points, 1.0)
@@ -423,7 +423,7 @@ def test_joins_are_concatenations_of_traced_pieces(seed):
     """Every joined line is a chain of whole traced paths (each used once, forward or reversed);
     at each joint the two end cells are grid neighbours and the chords over the six steps before
     and after the joint point the same way within 45°."""
-    from floodmesh.core import breaklines as bl
+    from floodmesh.core.steps import breaklines as bl
 
     rng = np.random.default_rng(seed)
     x, y = _centres(90, 90)

@@ -8,7 +8,7 @@ from affine import Affine
 from numpy.testing import assert_array_equal
 from pyproj import CRS
 
-from floodmesh.core.breakpoints import classify_breakpoints, thin_breakpoints
+from floodmesh.core.steps.breakpoints import classify_breakpoints, thin_breakpoints
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.raster import Grid
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from floodmesh.core import io
-from floodmesh.core.pipeline import OUTPUT_FILES
+from floodmesh.core.chain.pipeline import OUTPUT_FILES
 
 FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
 
@@ -60,7 +60,7 @@ def test_each_step_as_its_own_command(demo_points_file, tmp_path):
     assert len(traced) == len(simple) > 10
     assert sum(map(len, simple)) < sum(map(len, traced))
     nodes, triangles = io.read_mesh_2dm(t / "mesh.2dm")
-    from floodmesh.core.mesh import triangle_angles, triangle_areas
+    from floodmesh.core.steps.mesh import triangle_angles, triangle_areas
     assert triangle_angles(nodes, triangles).min() >= 28 - 1e-6
     assert triangle_areas(nodes, triangles).max() <= 50
     assert stats["n_holdout"] == round(0.01 * 2 * 300 * 240)
@@ -154,7 +154,7 @@ def test_tracing_and_simplification_options(demo_points_file, tmp_path):
 def test_mesh_and_run_with_a_size_field(demo_points_file, tmp_path):
     """mesh --size-field slope refines steep ground (more nodes, smaller triangles where the
     slope is steep); a size-field raster is honoured; run --size-field slope reports it."""
-    from floodmesh.core.mesh import triangle_areas
+    from floodmesh.core.steps.mesh import triangle_areas
 
     t = tmp_path
     floodmesh("grid", demo_points_file, "--cell-size", 1, "--out", t / "dem.tif")

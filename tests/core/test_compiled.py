@@ -1,4 +1,4 @@
-"""The ahead-of-time raster kernels (``core.compiled``): the same values as numba's kernels of
+"""The ahead-of-time raster kernels (``core._kernels.aot``): the same values as numba's kernels of
 the same source, and a ``floodmesh slope`` process that never imports numba."""
 import shutil
 import subprocess
@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from floodmesh.core import compiled, io, raster_kernels
-from floodmesh.core.slope import SLOPE_METHODS
+from floodmesh.core._kernels import aot as compiled, raster as raster_kernels
+from floodmesh.core import io
+from floodmesh.core.steps.slope import SLOPE_METHODS
 
 from .test_streaming import rough_dem
 
@@ -66,7 +67,7 @@ def test_ahead_of_time_nodata_conversions_equal_numba(aot):
 def test_slope_command_starts_without_numba(aot, tmp_path):
     """Importing numba and loading its cache would cost 0.6 s of CPU per run, pyproj 0.1 s."""
     io.write_raster(tmp_path / "dem.tif", rough_dem())
-    script = ("import sys; from floodmesh.core import cli; "
+    script = ("import sys; from floodmesh.core.frontends import cli; "
               f"code = cli.main(['slope', {str(tmp_path / 'dem.tif')!r}, '--out', "
               f"{str(tmp_path / 's.tif')!r}]); print(code, 'numba' in sys.modules, 'pyproj' in sys.modules)")
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,

@@ -7,7 +7,7 @@ import sys
 
 import numba
 
-from floodmesh.core.compiles import CompileWatch, is_compile_message
+from floodmesh.core.engine.compiles import CompileWatch, is_compile_message
 
 
 def test_a_real_compile_is_said_once_with_its_duration(tmp_path):
@@ -44,7 +44,7 @@ def test_nothing_compiled_nothing_said():
 
 def test_bad_input_with_an_empty_cache_is_answered_by_the_error_alone(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "empty-cache"))
-    run = subprocess.run([sys.executable, "-m", "floodmesh.core.cli", "run",
+    run = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "run",
                           str(tmp_path / "missing.laz"), "--out", str(tmp_path / "out")],
                          env=env, capture_output=True, text=True, timeout=120)
     assert run.returncode != 0
@@ -65,7 +65,7 @@ def test_a_worker_step_on_a_warm_cache_says_nothing_of_compiling(tmp_path):
 
     from floodmesh.core import io
     from floodmesh.core.raster import Grid
-    from floodmesh.core.worker import Channel, run_job
+    from floodmesh.core.frontends.worker import Channel, run_job
 
     dem = Grid(np.add.outer(np.arange(40.0), np.arange(50.0)) * 0.2,
                Affine(1.0, 0, 500000.0, 0, -1.0, 6000040.0), CRS.from_epsg(25832))

@@ -3,7 +3,7 @@ definition (every pair of segments at a node) on random planar graphs."""
 import numpy as np
 import pytest
 
-from floodmesh.core.mesh import input_corner_angles
+from floodmesh.core.steps.mesh import input_corner_angles
 
 
 def _every_pair(nodes, segments):

@@ -66,7 +66,7 @@ def survey(tmp_path_factory):
 
 
 def _run(tiles, out, *options):
-    return subprocess.run([sys.executable, "-m", "floodmesh.core.cli", "run", str(tiles),
+    return subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "run", str(tiles),
                            "--out", str(out), "--max-area", "400", *options],
                           capture_output=True, text=True, timeout=900)
 
@@ -88,7 +88,7 @@ def test_a_worker_killed_mid_run_leaves_a_finished_run_or_one_clean_error(cluste
                                                                          tmp_path):
     address, workers = cluster
     out = tmp_path / "out"
-    run = subprocess.Popen([sys.executable, "-m", "floodmesh.core.cli", "run",
+    run = subprocess.Popen([sys.executable, "-m", "floodmesh.core.frontends.cli", "run",
                             str(survey / "tiles"), "--out", str(out), "--max-area", "400",
                             "--scheduler", address],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

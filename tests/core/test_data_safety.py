@@ -15,9 +15,9 @@ from affine import Affine
 from pyproj import CRS
 
 from floodmesh.core import io
-from floodmesh.core.cli import main
+from floodmesh.core.frontends.cli import main
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.export import export_mesh, mesh_boundary
+from floodmesh.core.steps.export import export_mesh, mesh_boundary
 from floodmesh.core.points import PointCloud
 
 from ..bad_inputs import ORIGIN, UTM, plane_xyz, slope_dem, write_tif, write_xyz
@@ -102,7 +102,7 @@ def test_run_into_the_folder_of_its_dem_and_export_onto_its_mesh_are_refused(dem
 def test_run_keeps_the_users_files_in_its_folder_and_drops_its_own_stale_ones(tmp_path):
     """An input and a file of the user's in the output folder stay; a solver export of an
     earlier run that this run does not write goes (the folder holds one run)."""
-    from floodmesh.core.pipeline import RunOptions, run_pipeline
+    from floodmesh.core.chain.pipeline import RunOptions, run_pipeline
 
     out = tmp_path / "out"
     out.mkdir()
@@ -123,7 +123,7 @@ def test_run_keeps_the_users_files_in_its_folder_and_drops_its_own_stale_ones(tm
 def test_a_kill_between_moving_the_old_folder_aside_and_the_new_in_is_undone(tmp_path):
     """Where the folder cannot be exchanged in one step, it is moved aside, then the new one in:
     a kill between the two leaves the old one hidden, and the next run puts it back first."""
-    from floodmesh.core.outputs import _clean_run_leftovers
+    from floodmesh.core.io.outputs import _clean_run_leftovers
 
     aside = tmp_path / ".out.floodmesh-99999999-0123abcd.old"
     aside.mkdir()
@@ -138,7 +138,7 @@ def test_a_kill_between_moving_the_old_folder_aside_and_the_new_in_is_undone(tmp
 def test_a_folder_with_folders_of_the_users_is_replaced_file_by_file(tmp_path, monkeypatch):
     """The working folder, holding a folder of the user's: no swap, the user's things stay,
     the earlier run's files this run does not write go."""
-    from floodmesh.core.outputs import staged_folder
+    from floodmesh.core.io.outputs import staged_folder
 
     (tmp_path / "data").mkdir()
     (tmp_path / "mesh.slf").write_text("earlier")

@@ -1,12 +1,12 @@
-"""The numba Delaunay triangulation (``core.delaunay``) against scipy (Qhull) and brute force."""
+"""The numba Delaunay triangulation (``core._kernels.delaunay``) against scipy (Qhull) and brute force."""
 from fractions import Fraction
 
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull, Delaunay
 
-from floodmesh.core import delaunay as dl
-from floodmesh.core.delaunay import delaunay
+from floodmesh.core._kernels import delaunay as dl
+from floodmesh.core._kernels.delaunay import delaunay
 
 pytestmark = pytest.mark.filterwarnings("error")  # no point may be left out
 

@@ -1,4 +1,4 @@
-"""The domain edge around data gaps (floodmesh.core.mesh.domain_from_dem, core.outline): straight
+"""The domain edge around data gaps (core.steps.mesh.domain_from_dem, core.outline): straight
 runs within the tolerance of the cell-centre outline instead of a staircase of cell edges, and a
 mesh that keeps its angle bound along it."""
 import numpy as np
@@ -7,8 +7,8 @@ import shapely
 from affine import Affine
 from pyproj import CRS
 
-from floodmesh.core.mesh import (boundary_loops, build_mesh, domain_from_dem, edge_tolerance,
-                                 mesh_quality, triangle_areas, user_domain)
+from floodmesh.core.steps.mesh import (boundary_loops, build_mesh, domain_from_dem, edge_tolerance,
+                                       mesh_quality, triangle_areas, user_domain)
 from floodmesh.core.raster import Grid
 
 ORIGIN = (500_000.0, 6_000_000.0)

@@ -1,11 +1,11 @@
-"""Where water flows (floodmesh.core.drainage): height above the nearest drainage on surfaces
+"""Where water flows (floodmesh.core.steps.drainage): height above the nearest drainage on surfaces
 whose drainage is known, and the flow size field in the chain."""
 import numpy as np
 import pytest
 from affine import Affine
 from pyproj import CRS
 
-from floodmesh.core.drainage import flow_area_for, flow_size, height_above_drainage
+from floodmesh.core.steps.drainage import flow_area_for, flow_size, height_above_drainage
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.raster import Grid
 
@@ -69,9 +69,9 @@ def test_the_flow_area_is_23_cells_by_default_and_0_turns_it_off():
 def test_run_flow_area_puts_triangles_of_that_size_on_the_low_ground(demo_points_file,
                                                                      tmp_path):
     from floodmesh.core import io
-    from floodmesh.core.mesh import triangle_areas
+    from floodmesh.core.steps.mesh import triangle_areas
     from floodmesh.core.options import RunOptions
-    from floodmesh.core.pipeline import run_pipeline
+    from floodmesh.core.chain.pipeline import run_pipeline
 
     largest = {}
     for name, area in (("off", 0.0), ("default", None), ("flow", 20.0)):
@@ -97,7 +97,7 @@ def test_a_flow_area_mesh_over_the_limit_is_refused_naming_the_flow_area(demo_po
     leaves no output folder; the same limit with --flow-area 0 meshes."""
     from floodmesh.core.errors import FloodMeshError
     from floodmesh.core.options import RunOptions
-    from floodmesh.core.pipeline import run_pipeline
+    from floodmesh.core.chain.pipeline import run_pipeline
 
     with pytest.raises(FloodMeshError, match=r"size field asks for triangles .*--flow-area"):
         run_pipeline(demo_points_file, tmp_path / "flow", RunOptions(max_triangles=5400))
@@ -114,11 +114,11 @@ def test_no_line_segment_where_water_flows_is_shorter_than_its_triangles(demo_po
     triangle side on the demo's detected lines, but where the terrain needs its vertex (the
     chord past it misses the line by more than the tolerance; without the tolerance, none)."""
     from floodmesh.core import io
-    from floodmesh.core.drainage import flow_spacing
-    from floodmesh.core import hydraulic_lines
-    from floodmesh.core.hydraulic_lines import _spacing_at, lines_for_hydraulics
+    from floodmesh.core.steps.drainage import flow_spacing
+    from floodmesh.core.steps import hydraulic_lines
+    from floodmesh.core.steps.hydraulic_lines import _spacing_at, lines_for_hydraulics
     from floodmesh.core.options import RunOptions
-    from floodmesh.core.pipeline import run_pipeline
+    from floodmesh.core.chain.pipeline import run_pipeline
 
     run_pipeline(demo_points_file, tmp_path, RunOptions(min_spacing=0.0))
     dem = io.read_raster(tmp_path / "dem.tif")
@@ -141,7 +141,7 @@ def test_no_line_segment_where_water_flows_is_shorter_than_its_triangles(demo_po
 def test_a_size_field_on_another_grid_combines_with_the_flow_area():
     """A user's size-field raster (here a 2 m grid with a 10 m² half) and the flow area on the
     DEM's 1 m grid: the finer of the two on the DEM's cells (the chain failed on the shapes)."""
-    from floodmesh.core.sizing import finer
+    from floodmesh.core.steps.sizing import finer
 
     dem = grid(valley())
     user = Grid(np.where(np.arange(50)[None, :] < 25, 10.0, np.nan) + np.zeros((51, 1)),

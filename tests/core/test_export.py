@@ -1,4 +1,4 @@
-"""Solver exports (floodmesh.core.export): boundaries, open sections, materials, and every file
+"""Solver exports (core.steps.export): boundaries, open sections, materials, and every file
 read back by a reader written here from the format's published description (ADCIRC fort.14,
 SCHISM hgrid.gr3, TELEMAC Selafin and .cli) or by our own 2DM reader; QGIS's readers (MDAL)
 check the 2DM, Selafin and UGRID files in tests/qgis/test_export.py."""
@@ -15,11 +15,12 @@ import shapely
 from pyproj import CRS
 from scipy.io import netcdf_file
 
-from floodmesh.core import export, io
+from floodmesh.core.steps import export
+from floodmesh.core import io
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import boundary_loops, triangle_areas
+from floodmesh.core.steps.mesh import boundary_loops, triangle_areas
 from floodmesh.core.options import RunOptions, parse_formats
-from floodmesh.core.pipeline import OUTPUT_FILES, run_pipeline
+from floodmesh.core.chain.pipeline import OUTPUT_FILES, run_pipeline
 from floodmesh.core.points import PointCloud
 
 from ..conftest import UTM_ORIGIN, hole_mesh, plane_points, write_export_inputs, write_regions
@@ -447,6 +448,11 @@ def test_ugrid_netcdf(mesh, tmp_path):
         assert gm.epsg == 25832 and gm.EPSG_code == b"EPSG:25832"
         assert CRS.from_wkt(gm.wkt.decode()) == UTM32
         assert gm.grid_mapping_name == b"transverse_mercator"
+        # the two dummy scalars are written, not left as whatever memory scipy had
+        assert topo.getValue() == 0 and gm.getValue() == 0
+    again = tmp_path / "again_net.nc"
+    export.export_mesh(again, nodes, tris, crs="EPSG:25832", datum_offset=0.3)
+    assert again.read_bytes() == path.read_bytes()
 
 
 def test_netcdf_and_gpkg_need_a_crs(mesh, tmp_path):

@@ -15,9 +15,9 @@ import rasterio
 
 from floodmesh.core import io
 from floodmesh.core.errors import Cancelled, FloodMeshError
-from floodmesh.core.flood import (RESULT_RASTERS, flood_python, load_scenario, prepare,
-                                  run_flood, scenario_from_dict)
-from floodmesh.core.mesh import PSLG, triangulate_pslg
+from floodmesh.core.flood.model import (RESULT_RASTERS, flood_python, load_scenario, prepare,
+                                        run_flood, scenario_from_dict)
+from floodmesh.core.steps.mesh import PSLG, triangulate_pslg
 
 CRS = "EPSG:32756"
 X0, Y0 = 382_000.0, 6_354_000.0
@@ -144,7 +144,7 @@ def test_cancel_ends_the_child_and_writes_nothing(tmp_path):
 def test_flood_with_a_reference_compares_the_two_meshes(tmp_path, capsys):
     """The CLI runs the scenario on a coarse and a fine mesh of the same channel and compares:
     the extents nearly agree, max depths within centimetres; the maps are written."""
-    from floodmesh.core.cli import main
+    from floodmesh.core.frontends.cli import main
 
     rectangle_mesh(tmp_path / "coarse.2dm", 100, 20, lambda x, y: 0.02 * (100 - x), max_area=4)
     rectangle_mesh(tmp_path / "fine.2dm", 100, 20, lambda x, y: 0.02 * (100 - x), max_area=1)
@@ -218,7 +218,7 @@ def test_missing_anuga_is_one_line_naming_the_fix(tmp_path):
     rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0 * x)
     _write(tmp_path / "s.json", {"duration_s": 10})
     env = {**os.environ, "FLOODMESH_FLOOD_PYTHON": "/usr/bin/python3"}
-    done = subprocess.run([sys.executable, "-m", "floodmesh.core.cli", "flood",
+    done = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "flood",
                            str(tmp_path / "m.2dm"), "--scenario", str(tmp_path / "s.json"),
                            "--out", str(tmp_path / "out"), "--crs", CRS],
                           capture_output=True, text=True, env=env)
@@ -260,7 +260,7 @@ def test_a_level_boundary_fills_a_basin_to_its_level_not_above(tmp_path):
 
 
 def test_spatial_order_keeps_the_mesh_and_brings_neighbours_together():
-    from floodmesh.core.flood import spatial_order
+    from floodmesh.core.flood.model import spatial_order
 
     rng = np.random.default_rng(1)
     corners = np.array([[0, 0], [60, 0], [60, 40], [0, 40]], float)

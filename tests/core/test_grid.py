@@ -13,7 +13,7 @@ from pyproj import CRS
 from scipy.spatial import Delaunay
 
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.grid import grid_points_linear
+from floodmesh.core.steps.grid import grid_points_linear
 from floodmesh.core.points import PointCloud, split_holdout
 
 from ..conftest import plane_points
@@ -232,7 +232,7 @@ def test_tiles_equal_one_global_tin():
     coordinates: at UTM magnitudes Qhull's interpolation is off by centimetres."""
     from scipy.interpolate import griddata
 
-    from floodmesh.core import grid as grid_module
+    from floodmesh.core.steps import grid as grid_module
 
     rng = np.random.default_rng(5)
     n = 120_000

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 import shapely
 
-from floodmesh.core.hydraulic_lines import lines_for_hydraulics, thin_vertices
+from floodmesh.core.steps.hydraulic_lines import lines_for_hydraulics, thin_vertices
 from floodmesh.core.options import RunOptions
-from floodmesh.core.pipeline import run_pipeline
+from floodmesh.core.chain.pipeline import run_pipeline
 
 
 def test_lines_keep_clear_of_the_edge_and_of_other_lines():
@@ -92,7 +92,7 @@ def test_a_first_flood_sets_the_size_field_and_the_flow_zone():
     from affine import Affine
     from pyproj import CRS
 
-    from floodmesh.core.hydraulic_lines import flood_size_field, wet_zone
+    from floodmesh.core.steps.hydraulic_lines import flood_size_field, wet_zone
     from floodmesh.core.raster import Grid
 
     depth = np.zeros((40, 60))
@@ -133,7 +133,7 @@ def test_flow_spacing_thins_lines_to_the_flow_zone_triangle_side():
 
 
 def test_drop_spikes_removes_sharp_turns_only_where_asked():
-    from floodmesh.core.hydraulic_lines import drop_spikes
+    from floodmesh.core.steps.hydraulic_lines import drop_spikes
 
     # a hairpin at x = 10 (the line turns back at about 11°) and a right angle at (20, 2)
     line = np.array([[0, 0], [10, 0], [0, 2], [20, 2], [20, 10]], float)

@@ -3,10 +3,10 @@ crossings of own and detected lines) and the repair of boundary fans that ANUGA 
 import numpy as np
 import pytest
 
-from floodmesh.core.flood import merge_wall_fans
-from floodmesh.core.hydraulics import (boundary_edges, cfl_time_step, collinear_wall_stencils,
-                                       hydraulic_checks, inradii)
-from floodmesh.core.mesh import triangle_areas
+from floodmesh.core.flood.model import merge_wall_fans
+from floodmesh.core.steps.hydraulics import (boundary_edges, cfl_time_step, collinear_wall_stencils,
+                                             hydraulic_checks, inradii)
+from floodmesh.core.steps.mesh import triangle_areas
 
 
 def fan_mesh():
@@ -59,7 +59,7 @@ def test_crest_lowering_along_own_lines_against_the_dem():
     from affine import Affine
     from pyproj import CRS
 
-    from floodmesh.core.hydraulics import crest_lowering
+    from floodmesh.core.steps.hydraulics import crest_lowering
     from floodmesh.core.raster import Grid
 
     x = np.arange(10) + 0.5

@@ -19,7 +19,7 @@ from pyproj import CRS
 
 from floodmesh.core import io
 from floodmesh.core.errors import Cancelled
-from floodmesh.core.pipeline import OUTPUT_FILES, RunOptions, run_pipeline
+from floodmesh.core.chain.pipeline import OUTPUT_FILES, RunOptions, run_pipeline
 from floodmesh.core.points import PointCloud
 
 from ..conftest import plane_points
@@ -237,7 +237,7 @@ def test_ctrl_c_inside_a_compiled_call_is_an_interrupt():
     """Ctrl-C while numba runs reaches Python as a SystemError caused by the KeyboardInterrupt,
     at times through a second SystemError (the point index's query, seen in the full suite):
     a step of the chain turns either back into KeyboardInterrupt; other SystemErrors pass."""
-    from floodmesh.core.pipeline import _Steps
+    from floodmesh.core.chain.pipeline import _Steps
 
     steps = _Steps({"query": 1}, None, None, None)
 
@@ -265,7 +265,7 @@ def test_ctrl_c_inside_a_compiled_call_is_an_interrupt():
 
 
 def test_worker_given_sigterm_unwinds_and_says_so(runs, tmp_path):
-    """QGIS's worker (python -m floodmesh.core.worker) ended with SIGTERM mid-run: one error
+    """QGIS's worker (core.frontends.worker) ended with SIGTERM mid-run: one error
     line on its protocol, exit code 143, the previous folder intact, nothing left beside it."""
     import json
     import sys
@@ -276,7 +276,7 @@ def test_worker_given_sigterm_unwinds_and_says_so(runs, tmp_path):
     job = {"step": "run", "args": {"input": str(source), "output_folder": str(target),
                                    "options": {"holdout": 0.05, "cell_size": 1.0,
                                                "max_area": 30.0}}}
-    proc = subprocess.Popen([sys.executable, "-m", "floodmesh.core.worker"],
+    proc = subprocess.Popen([sys.executable, "-m", "floodmesh.core.frontends.worker"],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     proc.stdin.write(json.dumps(job))

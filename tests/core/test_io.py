@@ -8,7 +8,7 @@ from affine import Affine
 from pyproj import CRS
 
 from floodmesh.core import io
-from floodmesh.core.breaklines import BreakLine
+from floodmesh.core.steps.breaklines import BreakLine
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.points import PointCloud
 from floodmesh.core.raster import Grid

@@ -3,9 +3,9 @@ crest and a toe, two parallel lines, and a crest cut by a channel stay apart."""
 import numpy as np
 import pytest
 
-from floodmesh.core.breaklines import BreakLine
-from floodmesh.core.joining import join_pieces
-from floodmesh.core.localise import _ground_follows, fit_window, localise_traced
+from floodmesh.core.steps.breaklines import BreakLine
+from floodmesh.core.steps.joining import join_pieces
+from floodmesh.core.steps.localise import _ground_follows, fit_window, localise_traced
 
 ANGLE = np.radians(32.0)  # oblique to the grid
 TANGENT = np.array([np.cos(ANGLE), np.sin(ANGLE)])
@@ -101,7 +101,7 @@ def _branch(u0, u1, s=0.5):
 
 
 def test_an_end_short_of_a_line_becomes_a_shared_vertex_of_it():
-    from floodmesh.core.joining import snap_t_junctions
+    from floodmesh.core.steps.joining import snap_t_junctions
 
     main, branch = _piece(-30, 30), _branch(0.6, 20.6)  # 0.6 cells short of the middle
     main[:, 2] = 10.0 + 0.002 * np.arange(len(main))
@@ -126,7 +126,7 @@ def test_an_end_short_of_a_line_becomes_a_shared_vertex_of_it():
 
 @pytest.mark.parametrize("case", ["parallel", "far", "higher"])
 def test_ends_alongside_far_from_or_above_a_line_are_not_snapped(case):
-    from floodmesh.core.joining import snap_t_junctions
+    from floodmesh.core.steps.joining import snap_t_junctions
 
     main = _piece(-30, 30)
     other = (_piece(1.5, 30, 0.6) if case == "parallel" else _branch(3.0, 23.0)
@@ -139,8 +139,8 @@ def test_ends_alongside_far_from_or_above_a_line_are_not_snapped(case):
 def test_a_snapped_t_junction_meshes_at_25_degrees_with_a_node_of_degree_3():
     import shapely
 
-    from floodmesh.core.joining import snap_t_junctions
-    from floodmesh.core.mesh import build_pslg, triangulate_pslg
+    from floodmesh.core.steps.joining import snap_t_junctions
+    from floodmesh.core.steps.mesh import build_pslg, triangulate_pslg
 
     lines, _, snapped = snap_t_junctions([_piece(-30, 30), _branch(0.6, 20.6)], tolerance=1.6)
     assert snapped == 1
@@ -162,7 +162,7 @@ def test_a_snapped_t_junction_meshes_at_25_degrees_with_a_node_of_degree_3():
 
 
 def test_two_ends_crossing_at_a_corner_meet_in_one_node():
-    from floodmesh.core.joining import snap_t_junctions
+    from floodmesh.core.steps.joining import snap_t_junctions
 
     a = np.vstack([_piece(-30, 0), _piece(0.8, 0.8)])  # runs 0.8 m past the other line
     b = _branch(-0.5, 20, s=0.0)  # starts 0.5 m past the first

@@ -1,4 +1,4 @@
-"""Size guards (floodmesh.core.limits): the estimates behind the refusals are close to what a run
+"""Size guards (core.engine.limits): the estimates behind the refusals are close to what a run
 really makes, and a refusal comes before the work, with the estimate."""
 import json
 import time
@@ -9,12 +9,12 @@ from affine import Affine
 from pyproj import CRS
 
 from floodmesh.core import io
-from floodmesh.core.cli import main
+from floodmesh.core.frontends.cli import main
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.limits import (available_memory, check_memory, check_triangles,
-                                   estimate_triangles, footprint)
-from floodmesh.core.mesh import PSLG, build_mesh, triangulate_pslg
-from floodmesh.core.pipeline import RunOptions, run_pipeline
+from floodmesh.core.engine.limits import (available_memory, check_memory, check_triangles,
+                                          estimate_triangles, footprint)
+from floodmesh.core.steps.mesh import PSLG, build_mesh, triangulate_pslg
+from floodmesh.core.chain.pipeline import RunOptions, run_pipeline
 from floodmesh.core.raster import Grid
 
 from ..bad_inputs import plane_xyz, write_las

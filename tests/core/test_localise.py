@@ -3,8 +3,8 @@ noisy plane whose elevation is known."""
 import numpy as np
 import pytest
 
-from floodmesh.core.localise import (estimate_noise, fit_node_elevations, fit_window,
-                                     localise_breaklines)
+from floodmesh.core.steps.localise import (estimate_noise, fit_node_elevations, fit_window,
+                                           localise_breaklines)
 
 ANGLE = np.radians(35.0)  # the crest runs at 35° to the grid, the hard case for the tracer
 TANGENT = np.array([np.cos(ANGLE), np.sin(ANGLE)])
@@ -77,7 +77,7 @@ def test_node_elevations_take_the_noise_out_on_a_plane():
 def test_fits_in_chunks_give_the_same_numbers_as_all_at_once(monkeypatch):
     """Node and hinge fits go FIT_CHUNK centres at a time so that their memory stays bounded
     whatever the mesh: chunks of 7 give the same numbers, bit for bit, as one chunk of all."""
-    from floodmesh.core import localise
+    from floodmesh.core.steps import localise
 
     points = noisy_points(hinge, seed=4)
     window = fit_window(points, 100 * 100, 1.0)
@@ -104,11 +104,12 @@ def test_noise_estimate():
 def test_chain_fits_the_terrain_on_the_demo_floodplain(demo_points_file, tmp_path):
     """run_pipeline with the fits (the defaults) against the chain without them, scored on the
     demo's TRUE surface: a lower true RMSE with no more nodes; report.json states the fits."""
-    from floodmesh.core import demo, io
-    from floodmesh.core.accuracy import tin_elevation
-    from floodmesh.core.mesh import Mesh
+    from floodmesh.core.frontends import demo
+    from floodmesh.core import io
+    from floodmesh.core.steps.accuracy import tin_elevation
+    from floodmesh.core.steps.mesh import Mesh
     from floodmesh.core.options import RunOptions
-    from floodmesh.core.pipeline import run_pipeline
+    from floodmesh.core.chain.pipeline import run_pipeline
 
     rng = np.random.default_rng(0)
     local = rng.uniform((2, 2), (demo.WIDTH - 2, demo.HEIGHT - 2), (20_000, 2))
@@ -132,8 +133,8 @@ def test_chain_fits_the_terrain_on_the_demo_floodplain(demo_points_file, tmp_pat
 def test_a_line_hopping_from_crest_to_toe_is_cut():
     """A traced line that follows a bank's crest, hops across the 3 m wide bank and goes on along
     its toe (the staircase of an oblique band) comes out as two pieces, on the crest and toe."""
-    from floodmesh.core.breaklines import BreakLine
-    from floodmesh.core.localise import localise_traced
+    from floodmesh.core.steps.breaklines import BreakLine
+    from floodmesh.core.steps.localise import localise_traced
 
     def bank(xy):
         u = (xy - 50.0) @ NORMAL
@@ -154,8 +155,8 @@ def test_a_line_hopping_from_crest_to_toe_is_cut():
 def test_a_loop_without_a_kink_keeps_its_course():
     """Thinning drops unmoved vertices only over short stretches along the line: a closed loop
     on a plane (no kink anywhere, its ends 1 m apart) keeps its whole length."""
-    from floodmesh.core.breaklines import BreakLine
-    from floodmesh.core.localise import localise_traced
+    from floodmesh.core.steps.breaklines import BreakLine
+    from floodmesh.core.steps.localise import localise_traced
 
     points = noisy_points(lambda xy: 5.0 + 0.3 * xy[:, 0])
     square = [(30, 30), (70, 30), (70, 70), (30, 70), (30, 31)]

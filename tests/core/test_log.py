@@ -6,10 +6,10 @@ from affine import Affine
 from numpy.testing import assert_allclose
 from pyproj import CRS
 
-from floodmesh.core.breakpoints import log_breakpoints
+from floodmesh.core.steps.breakpoints import log_breakpoints
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.raster import Grid
-from floodmesh.core.slope import laplacian_of_gaussian
+from floodmesh.core.steps.slope import laplacian_of_gaussian
 
 D = 0.5
 CRS_M = CRS.from_epsg(25832)

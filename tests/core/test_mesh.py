@@ -1,4 +1,4 @@
-"""Meshing with break lines (floodmesh.core.mesh): quality bounds, honoured break lines, holes."""
+"""Meshing with break lines (core.steps.mesh): quality bounds, honoured break lines, holes."""
 import numpy as np
 import pytest
 import shapely
@@ -7,8 +7,8 @@ from pyproj import CRS
 from scipy.spatial import cKDTree
 
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import (PSLG, build_mesh, build_pslg, domain_from_dem, mesh_quality,
-                                 triangle_angles, triangle_areas, triangulate_pslg)
+from floodmesh.core.steps.mesh import (PSLG, build_mesh, build_pslg, domain_from_dem, mesh_quality,
+                                       triangle_angles, triangle_areas, triangulate_pslg)
 from floodmesh.core.raster import Grid
 
 ORIGIN = np.array([500_000.0, 6_000_000.0])
@@ -195,7 +195,7 @@ def test_crossing_break_lines_are_noded():
 def test_missing_segments_and_duplicate_nodes_are_counted(plane_mesh):
     """The segment check finds a segment whose chain of edges is broken (the triangles along it
     removed), and the duplicate count finds a node repeated."""
-    from floodmesh.core.mesh import Mesh, missing_segments
+    from floodmesh.core.steps.mesh import Mesh, missing_segments
 
     dem, _, mesh = plane_mesh
     assert missing_segments(mesh.nodes, mesh.triangles, mesh.segments) == 0
@@ -229,7 +229,7 @@ def test_user_boundary_with_a_hole_and_2d_user_lines(plane_mesh, tmp_path):
     segment of the 2-D user line is a chain of mesh edges, and the line's nodes take z from the
     DEM."""
     from floodmesh.core import io
-    from floodmesh.core.pipeline import mesh_constraints
+    from floodmesh.core.chain.pipeline import mesh_constraints
     from floodmesh.core.raster import bilinear
 
     dem, _, _ = plane_mesh
@@ -264,7 +264,7 @@ def test_bad_boundaries_are_refused(plane_mesh, tmp_path, polygon, words):
     """A self-intersecting (bow-tie) boundary and one away from the data get a message naming
     the problem and the fix; a boundary in another CRS is refused too."""
     from floodmesh.core.errors import FloodMeshError
-    from floodmesh.core.pipeline import mesh_constraints
+    from floodmesh.core.chain.pipeline import mesh_constraints
 
     dem, _, _ = plane_mesh
     x0, y0 = dem.transform.c, dem.transform.f - dem.shape[0] * dem.cell_size
@@ -281,9 +281,9 @@ def test_size_field_sets_the_local_maximum_area(plane_mesh):
     """A size raster asking for 2 m² on the western half and nothing (NaN) on the eastern: every
     triangle meets the field at its centroid and corners, the west is refined and the east keeps
     the global maximum; a slope-driven field is smallest where the slope is steepest."""
-    from floodmesh.core.mesh import size_from_slope
+    from floodmesh.core.steps.mesh import size_from_slope
     from floodmesh.core.raster import nearest_value
-    from floodmesh.core.slope import slope
+    from floodmesh.core.steps.slope import slope
 
     dem, lines, coarse = plane_mesh
     field = np.full(dem.shape, np.nan)

@@ -3,7 +3,7 @@ rasters, each meshed in a child process with a time bound, so that a crash in Tr
 or a refinement that never ends is caught and reported instead of taking the test run down.
 
 Each case must either give a valid mesh (every triangle counter-clockwise, the angle rule of
-``core.mesh.below_angle_bound`` kept, no triangle above the area bound, every input segment a
+``core.steps.mesh.below_angle_bound`` kept, no triangle above the area bound, every input segment a
 chain of mesh edges) or raise FloodMeshError. The number of cases run is printed at the end of
 the session (tests/conftest.py).
 
@@ -26,8 +26,8 @@ from hypothesis import strategies as st
 from pyproj import CRS
 
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import (below_angle_bound, build_mesh, build_pslg, domain_from_dem,
-                                 triangle_angles, triangulate_pslg)
+from floodmesh.core.steps.mesh import (below_angle_bound, build_mesh, build_pslg, domain_from_dem,
+                                       triangle_angles, triangulate_pslg)
 from floodmesh.core.raster import Grid
 
 from .. import fuzz_stats
@@ -136,7 +136,7 @@ def _check(vertices, triangles, pslg, min_angle, max_area) -> str:
         return f"{int((signed <= 0).sum())} triangles not counter-clockwise"
     if signed.max() > max_area * (1 + 1e-6):
         return f"largest triangle {signed.max()} above {max_area}"
-    # the one angle rule of core.mesh: below the bound only at input corners sharper than 60°
+    # the one angle rule of core.steps.mesh: below the bound only at input corners sharper than 60°
     defects, _ = below_angle_bound(xy, triangles, pslg.segments, min_angle)
     if defects.any():
         smallest = triangle_angles(xy, triangles[defects]).min()
@@ -383,7 +383,7 @@ def test_random_rasters_mesh_or_fail_clearly(sandbox, data):
 def raw_pslgs(draw):
     """PSLGs as they might reach triangulate_pslg from another caller: duplicate vertices,
     crossing or zero-length segments, indices out of range, NaN, holes anywhere."""
-    from floodmesh.core.mesh import PSLG
+    from floodmesh.core.steps.mesh import PSLG
 
     n = draw(st.integers(0, 12))
     size = draw(SIZES)

@@ -5,7 +5,7 @@ import pytest
 import shapely
 
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import below_angle_bound, build_pslg, triangulate_pslg
+from floodmesh.core.steps.mesh import below_angle_bound, build_pslg, triangulate_pslg
 
 # A valid star-shaped domain: on its 0.04 m snapping grid, the domain shrunk by the 0.2 m snap
 # distance came out invalid, and clipping the lines to it raised GEOS's "TopologyException: side

@@ -3,7 +3,7 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from floodmesh.core.nearest import nearest_line, point_index
+from floodmesh.core.engine.nearest import nearest_line, point_index
 
 
 def _random_lines(rng, n=40):
@@ -76,8 +76,8 @@ def test_cell_index_finds_the_points_the_point_index_finds_on_a_dem():
     from affine import Affine
     from pyproj import CRS
 
-    from floodmesh.core.nearest import CellIndex
-    from floodmesh.core.pipeline import _cell_points, _dem_cells
+    from floodmesh.core.engine.nearest import CellIndex
+    from floodmesh.core.chain.pipeline import _cell_points, _dem_cells
     from floodmesh.core.raster import Grid
 
     rng = np.random.default_rng(7)

@@ -23,7 +23,7 @@ def _lines(path, features):
 
 
 def _run(points, out, *options):
-    return subprocess.run([sys.executable, "-m", "floodmesh.core.cli", "run", str(points),
+    return subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "run", str(points),
                            "--out", str(out), "--max-area", "400", *options],
                           capture_output=True, text=True, timeout=600)
 

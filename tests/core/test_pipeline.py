@@ -1,4 +1,4 @@
-"""The whole chain (floodmesh.core.pipeline.run_pipeline) on the demo floodplain and real data."""
+"""The whole chain (core.chain.pipeline.run_pipeline) on the demo floodplain and real data."""
 import json
 import os
 
@@ -9,7 +9,7 @@ from pyproj import CRS
 
 from floodmesh.core import io
 from floodmesh.core.errors import Cancelled
-from floodmesh.core.pipeline import OUTPUT_FILES, RunOptions, run_pipeline
+from floodmesh.core.chain.pipeline import OUTPUT_FILES, RunOptions, run_pipeline
 from floodmesh.core.points import PointCloud
 
 from ..conftest import REAL_DATA, plane_points

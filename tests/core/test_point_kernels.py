@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from floodmesh.core.point_kernels import spread
+from floodmesh.core._kernels.points import spread
 
 
 def _numpy_spread(xy):
@@ -32,7 +32,7 @@ def test_spread_is_the_numpy_definition(case):
 
 def test_position_keys_are_the_numpy_keys():
     """The keys of the duplicate check equal the numpy expression they replaced."""
-    from floodmesh.core.point_kernels import position_keys
+    from floodmesh.core._kernels.points import position_keys
 
     rng = np.random.default_rng(2)
     xy = np.column_stack([400_000 + rng.uniform(0, 900, 20000),

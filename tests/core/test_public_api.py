@@ -36,7 +36,7 @@ def test_importing_the_package_is_light():
 
 
 def test_the_steps_chain_from_points_to_assessment():
-    from floodmesh.core.demo import synthetic_floodplain
+    from floodmesh.core.frontends.demo import synthetic_floodplain
 
     points, _ = synthetic_floodplain(density=1.0, seed=3)
     held = core.PointCloud(points.xyz[::200], points.crs)

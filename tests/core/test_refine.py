@@ -1,4 +1,4 @@
-"""Error-driven refinement (floodmesh.core.refine) on surfaces whose true error is known."""
+"""Error-driven refinement (floodmesh.core.steps.refine) on surfaces whose true error is known."""
 import json
 
 import numpy as np
@@ -8,9 +8,9 @@ from pyproj import CRS
 
 from floodmesh.core import io
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import triangle_angles, triangle_areas
+from floodmesh.core.steps.mesh import triangle_angles, triangle_areas
 from floodmesh.core.raster import Grid
-from floodmesh.core.refine import refine_mesh
+from floodmesh.core.steps.refine import refine_mesh
 
 X0, Y0, SIZE = 500_000.0, 6_000_000.0, 120
 

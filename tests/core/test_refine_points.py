@@ -4,8 +4,8 @@ import numpy as np
 from affine import Affine
 from pyproj import CRS
 
-from floodmesh.core.accuracy import residuals
-from floodmesh.core.mesh import build_mesh
+from floodmesh.core.steps.accuracy import residuals
+from floodmesh.core.steps.mesh import build_mesh
 from floodmesh.core.raster import Grid
 
 

@@ -1,6 +1,6 @@
-"""The report's pictures (floodmesh.core.report): valid PNGs, class colours where residuals of
+"""The report's pictures (floodmesh.core.io.report): valid PNGs, class colours where residuals of
 each class are, NaN residuals, atomic writing; the hillshade and the break lines over it, and
-report.html (floodmesh.core.report_html) of a run: its figures those of report.json, its images
+report.html (floodmesh.core.io.report_html) of a run: its figures those of report.json, its images
 embedded PNGs, its text escaped, the case without a holdout."""
 import json
 from html.parser import HTMLParser
@@ -10,7 +10,7 @@ import pytest
 from matplotlib import colors
 from matplotlib.image import imread
 
-from floodmesh.core import report
+from floodmesh.core.io import report
 from floodmesh.core.options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS
 
 from ..conftest import UTM_ORIGIN, hole_mesh
@@ -80,8 +80,8 @@ def test_map_shows_each_class_where_it_occurs(tmp_path, classes_mix):
     nodes, triangles = hole_mesh()
     xyz = check_points(classes_mix)
     xyz[-2:, :2] = np.array([[50.0, 30.0], [-5.0, 5.0]]) + UTM_ORIGIN  # in the hole, outside
-    from floodmesh.core.accuracy import residuals
-    from floodmesh.core.mesh import Mesh
+    from floodmesh.core.steps.accuracy import residuals
+    from floodmesh.core.steps.mesh import Mesh
 
     res = residuals(Mesh(nodes, triangles, None), xyz)
     assert np.isnan(res[-2:]).all() and np.allclose(res[:-2], classes_mix[:-2])
@@ -187,7 +187,7 @@ def test_hillshade_lights_the_slopes_facing_the_sun():
     """Sun from the north-west (315°), 45° high: flat ground is lit sin 45°, a slope facing
     north-west brighter, one facing south-east darker, a steep one facing away black. Rows run
     from north to south, so z rising with the row index falls to the north."""
-    from floodmesh.core.report import hillshade
+    from floodmesh.core.io.report import hillshade
 
     rows, cols = np.mgrid[0:20, 0:20].astype(float)
     flat = hillshade(np.zeros((20, 20)), 1.0)
@@ -215,7 +215,7 @@ def test_hillshade_is_sampled_for_a_large_dem():
     from pyproj import CRS
 
     from floodmesh.core.raster import Grid
-    from floodmesh.core.report import HILLSHADE_CELLS, sampled_hillshade
+    from floodmesh.core.io.report import HILLSHADE_CELLS, sampled_hillshade
 
     values = np.zeros((3000, 4000), np.float32)
     dem = Grid(values, Affine(0.5, 0, 1000.0, 0, -0.5, 2000.0), CRS.from_epsg(25832))
@@ -291,7 +291,7 @@ def _png_images(page):
 @pytest.fixture(scope="module")
 def html_run(demo_points_file, tmp_path_factory):
     """One run on the small demo floodplain (2 points/m², 1 % held out)."""
-    from floodmesh.core.pipeline import RunOptions, run_pipeline
+    from floodmesh.core.chain.pipeline import RunOptions, run_pipeline
 
     out = tmp_path_factory.mktemp("html")
     report_dict = run_pipeline(demo_points_file, out, RunOptions(holdout=0.01))
@@ -365,7 +365,7 @@ def test_breaklines_map_draws_magenta_lines_on_a_hillshade(html_run):
 
 def test_report_html_escapes_text(html_run):
     """Notes, input names and options are text, never markup."""
-    from floodmesh.core.report_html import report_html
+    from floodmesh.core.io.report_html import report_html
 
     _, report_dict = html_run
     hostile = dict(report_dict, input="/data/<b>reach</b> & co.laz",
@@ -380,7 +380,7 @@ def test_report_html_escapes_text(html_run):
 
 def test_report_html_verdicts(html_run):
     """A failed test says FAIL, too few check points say the test was not made."""
-    from floodmesh.core.report_html import report_html
+    from floodmesh.core.io.report_html import report_html
 
     _, report_dict = html_run
     failed = _Page(report_html(dict(report_dict, nssda_pass=False), {}))
@@ -396,7 +396,7 @@ def test_report_html_without_holdout(tmp_path):
     from pyproj import CRS
 
     from floodmesh.core import io
-    from floodmesh.core.pipeline import RunOptions, run_pipeline
+    from floodmesh.core.chain.pipeline import RunOptions, run_pipeline
     from floodmesh.core.points import PointCloud
 
     from ..conftest import plane_points

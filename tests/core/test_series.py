@@ -1,4 +1,4 @@
-"""Scale series (floodmesh.core.series): one mesh per setting on the demo floodplain, the table,
+"""Scale series (core.chain.series): one mesh per setting on the demo floodplain, the table,
 the plot and the meshes agree."""
 import csv
 import json
@@ -12,9 +12,9 @@ from matplotlib.image import imread
 
 from floodmesh.core import io
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.mesh import triangle_areas
+from floodmesh.core.steps.mesh import triangle_areas
 from floodmesh.core.options import RunOptions
-from floodmesh.core.series import COLUMNS, Setting, run_series, settings_grid
+from floodmesh.core.chain.series import COLUMNS, Setting, run_series, settings_grid
 
 AREAS = (400.0, 100.0, 25.0)
 
@@ -108,7 +108,7 @@ def test_series_meshes_have_runs_spacing_for_a_flood_model(series_run, demo_poin
                                                            tmp_path):
     """Each series mesh gets run's default --min-spacing (the cell size): no sliver at the
     domain edge where detected lines graze it; 0 turns it off, as for run."""
-    from floodmesh.core.hydraulics import inradii
+    from floodmesh.core.steps.hydraulics import inradii
 
     out, result, _ = series_run
     plain = run_series(demo_points_file, tmp_path / "plain",

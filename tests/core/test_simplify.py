@@ -1,12 +1,12 @@
-"""Break-line simplification (floodmesh.core.simplify): keep-every-n and Douglas–Peucker."""
+"""Break-line simplification (floodmesh.core.steps.simplify): keep-every-n and Douglas–Peucker."""
 import numpy as np
 import pytest
 import shapely
 
-from floodmesh.core.breaklines import BreakLine
+from floodmesh.core.steps.breaklines import BreakLine
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.simplify import (douglas_peucker_mask, max_deviation,
-                                     simplify_douglas_peucker, simplify_keep_every)
+from floodmesh.core.steps.simplify import (douglas_peucker_mask, max_deviation,
+                                           simplify_douglas_peucker, simplify_keep_every)
 
 
 def _line(coords):
@@ -132,7 +132,7 @@ def test_douglas_peucker_refuses_non_positive_tolerance(tolerance):
 def test_spline_stays_within_tolerance(shape, tolerance):
     """Every original vertex lies within the tolerance of the simplified segment that replaces
     it, in plan and in z at its foot on that segment; ends stay put; fewer vertices remain."""
-    from floodmesh.core.simplify import spline_plan
+    from floodmesh.core.steps.simplify import spline_plan
 
     if shape == "walk":
         coords = _random_walk(300, seed=4, step=0.7).coords
@@ -157,7 +157,7 @@ def test_spline_stays_within_tolerance(shape, tolerance):
 def test_spline_is_smoother_than_the_staircase():
     """On a grid staircase (a line at 20° traced through cell centres) the spline's vertices lie
     closer to the true straight line than the staircase's own vertices do."""
-    from floodmesh.core.simplify import spline_plan
+    from floodmesh.core.steps.simplify import spline_plan
 
     x = np.arange(0, 60.0)
     y = np.round(np.tan(np.radians(20)) * x)
@@ -176,10 +176,10 @@ def _traced_rough_lines(seed=0):
     from pyproj import CRS
     from scipy import ndimage
 
-    from floodmesh.core.breaklines import trace_breaklines
-    from floodmesh.core.breakpoints import classify_breakpoints
+    from floodmesh.core.steps.breaklines import trace_breaklines
+    from floodmesh.core.steps.breakpoints import classify_breakpoints
     from floodmesh.core.raster import Grid
-    from floodmesh.core.slope import slope
+    from floodmesh.core.steps.slope import slope
 
     rng = np.random.default_rng(seed)
     z = ndimage.gaussian_filter(rng.normal(0, 1, (120, 120)), 2) * 20
@@ -203,7 +203,7 @@ def _crossings(lines):
 def test_simplified_lines_do_not_cross(method, amount):
     """Dense traced lines on rough terrain do not cross; simplified one by one they do (so the
     case is a real one); simplify_breaklines gives back vertices until none cross."""
-    from floodmesh.core.simplify import simplify_breaklines, spline_plan
+    from floodmesh.core.steps.simplify import simplify_breaklines, spline_plan
 
     lines = _traced_rough_lines(seed=1)
     assert _crossings(lines) == 0
@@ -223,7 +223,7 @@ def test_slivers_merge_into_the_longer_line():
     """A line running 0.3 m beside a longer one merges into it at min_distance 0.5 m (only the
     part beyond the longer line's end survives), and both stay at min_distance 0.2 m; no two
     consecutive vertices are closer than min_distance."""
-    from floodmesh.core.simplify import simplify_breaklines
+    from floodmesh.core.steps.simplify import simplify_breaklines
 
     x = np.arange(0, 60.0)
     long_line = _line(np.column_stack([x, np.zeros_like(x), np.zeros_like(x)]))
@@ -242,7 +242,7 @@ def test_slivers_merge_into_the_longer_line():
 
 
 def test_simplify_breaklines_refuses_bad_arguments():
-    from floodmesh.core.simplify import simplify_breaklines
+    from floodmesh.core.steps.simplify import simplify_breaklines
 
     lines = [_random_walk(10, 0)]
     with pytest.raises(FloodMeshError, match="unknown simplification"):

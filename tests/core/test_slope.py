@@ -1,4 +1,5 @@
-"""Slope methods (``core.slope``) and the block processing behind them (``core.blocks``).
+"""Slope methods (``core.steps.slope``) and the block processing behind them
+(``core.engine.blocks``).
 
 References: analytic planes and an analytic curved surface (exact gradients), and GDAL's own
 ``gdaldem slope`` (Horn and ZevenbergenThorne) on the real Merewether DEM.
@@ -9,11 +10,11 @@ from affine import Affine
 from numpy.testing import assert_allclose, assert_array_equal
 from pyproj import CRS
 
-from floodmesh.core import blocks
+from floodmesh.core.engine import blocks
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.io import read_raster
 from floodmesh.core.raster import Grid
-from floodmesh.core.slope import SLOPE_METHODS, slope, slope_block
+from floodmesh.core.steps.slope import SLOPE_METHODS, slope, slope_block
 
 CRS_M = CRS.from_epsg(25832)
 X0, Y0 = 500000.0, 6001000.0  # upper-left corner of the synthetic grids

@@ -1,4 +1,4 @@
-"""The streaming block engine (``core.blocks``): every raster step file to file, block by block,
+"""The streaming block engine (``core.engine.blocks``): every raster step file to file, block by block,
 gives exactly what the step gives on the whole grid in memory, across block edges, for any
 window list; outputs are tiled, compressed and atomic."""
 import numpy as np
@@ -8,13 +8,15 @@ from affine import Affine
 from numpy.testing import assert_array_equal
 from pyproj import CRS
 
-from floodmesh.core import blocks, io
-from floodmesh.core.breakpoints import (_threshold_block, breakpoints_file,
-                                        classify_breakpoints, log_breakpoints, thin_breakpoints)
+from floodmesh.core.engine import blocks
+from floodmesh.core import io
+from floodmesh.core.steps.breakpoints import (_threshold_block, breakpoints_file,
+                                              classify_breakpoints, log_breakpoints,
+                                              thin_breakpoints)
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.raster import Grid
-from floodmesh.core.slope import (SLOPE_METHODS, laplacian_of_gaussian,
-                                  laplacian_of_gaussian_file, slope, slope_file)
+from floodmesh.core.steps.slope import (SLOPE_METHODS, laplacian_of_gaussian,
+                                        laplacian_of_gaussian_file, slope, slope_file)
 
 CRS_M = CRS.from_epsg(25832)
 
@@ -170,7 +172,7 @@ def test_unlisted_windows_are_nodata(dem_file, tmp_path):
 def test_streaming_commands_refuse_bad_rasters_in_one_line(tmp_path, capsys, command):
     """The file-to-file commands check a raster as reading it whole did: a rotated grid and a
     missing file are one-line errors, and nothing is written."""
-    from floodmesh.core.cli import main
+    from floodmesh.core.frontends.cli import main
 
     rotated = tmp_path / "rotated.tif"
     profile = dict(driver="GTiff", height=30, width=30, count=1, dtype="float32",

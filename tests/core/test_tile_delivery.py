@@ -14,11 +14,11 @@ import pytest
 import rasterio
 
 from floodmesh.core.errors import FloodMeshError
-from floodmesh.core.tiles import expand_tiles, read_dem_tiles
+from floodmesh.core.engine.tiles import expand_tiles, read_dem_tiles
 
 from ..conftest import REAL_DATA
 
-CLI = [sys.executable, "-m", "floodmesh.core.cli"]
+CLI = [sys.executable, "-m", "floodmesh.core.frontends.cli"]
 TOPOGRAPHY = REAL_DATA / "Topography.laz"
 CELL = "2"
 UNIQUE_GROUND = 8159  # Topography.laz's class 2 points, each in one tile once
@@ -214,7 +214,7 @@ def test_a_tiled_run_leaves_no_scratch_and_removes_a_killed_runs(tmp_path):
     stale = scratch / "floodmesh-bands-999999999-x1y2"  # no such process
     (stale / "band-0.npy").parent.mkdir()
     (stale / "band-0.npy").write_bytes(b"0")
-    run = subprocess.run([sys.executable, "-m", "floodmesh.core.cli", "run",
+    run = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "run",
                           str(survey / "tiles"), "--out", str(tmp_path / "out"),
                           "--max-area", "400", "--workers", "2"],
                          env={**os.environ, "TMPDIR": str(scratch)}, capture_output=True,

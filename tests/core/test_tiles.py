@@ -10,17 +10,17 @@ import rasterio
 from pyproj import CRS
 
 from floodmesh.core import io
-from floodmesh.core.demo import DEMO_ORIGIN
+from floodmesh.core.frontends.demo import DEMO_ORIGIN
 from floodmesh.core.errors import Cancelled, FloodMeshError
-from floodmesh.core.grid import grid_points_linear
+from floodmesh.core.steps.grid import grid_points_linear
 from floodmesh.core.options import RunOptions
-from floodmesh.core.pipeline import run_pipeline
+from floodmesh.core.chain.pipeline import run_pipeline
 from floodmesh.core.points import PointCloud
 from floodmesh.core.raster import Grid
-from floodmesh.core.breakpoints import breakpoints_file, classify_breakpoints
-from floodmesh.core.slope import slope
-from floodmesh.core.tiles import (_tile_points, grid_point_tiles, holdout_mask, read_back,
-                                  read_dem_tiles, slope_file64)
+from floodmesh.core.steps.breakpoints import breakpoints_file, classify_breakpoints
+from floodmesh.core.steps.slope import slope
+from floodmesh.core.engine.tiles import (_tile_points, grid_point_tiles, holdout_mask, read_back,
+                                         read_dem_tiles, slope_file64)
 
 from ..conftest import survey_tiles
 

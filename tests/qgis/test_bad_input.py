@@ -4,7 +4,7 @@ and no output left behind. The cases are in tests/bad_inputs.py."""
 import pytest
 from qgis.core import QgsProcessingException
 
-from floodmesh.core.cli import main
+from floodmesh.core.frontends.cli import main
 
 from ..bad_inputs import CASES, BadInput
 
@@ -45,7 +45,7 @@ def test_build_mesh_says_what_it_repaired_in_the_break_lines(processing, tmp_pat
     from qgis.core import QgsProcessingFeedback
 
     from floodmesh.core import io
-    from floodmesh.core.mesh import build_mesh
+    from floodmesh.core.steps.mesh import build_mesh
 
     from ..bad_inputs import write_tif, slope_dem
 

@@ -12,7 +12,7 @@ from qgis.core import (QgsMesh, QgsMeshDatasetGroupMetadata, QgsMeshDatasetIndex
 from floodmesh.algorithms.compat import LINESTRING_Z, POINT_Z, POLYGON_Z
 
 from floodmesh.core import io
-from floodmesh.core.mesh import triangle_areas
+from floodmesh.core.steps.mesh import triangle_areas
 
 from ..conftest import UTM_ORIGIN, write_export_inputs
 

@@ -10,7 +10,7 @@ from pyproj import CRS
 from qgis.core import QgsRasterLayer
 
 from floodmesh.core import io
-from floodmesh.core.flood import flood_python
+from floodmesh.core.flood.model import flood_python
 from floodmesh.core.raster import Grid
 
 X0, Y0 = 382_000.0, 6_354_000.0

@@ -7,8 +7,8 @@ import subprocess
 import numpy as np
 
 from floodmesh.core import io
-from floodmesh.core.drainage import flow_size
-from floodmesh.core.mesh import triangle_areas
+from floodmesh.core.steps.drainage import flow_size
+from floodmesh.core.steps.mesh import triangle_areas
 
 
 def _in_zone(mesh, dem, flow_area):

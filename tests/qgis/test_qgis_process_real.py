@@ -128,7 +128,7 @@ def _worker_of(pid):
                 command = fh.read()
         except OSError:
             continue
-        if ppid == pid and b"core.worker" in command:
+        if ppid == pid and b"core.frontends.worker" in command:
             return int(entry)
     return None
 

@@ -12,7 +12,7 @@ from floodmesh.core.options import BREAKLINE_COLOUR, RESIDUAL_CLASS_COLOURS
 
 
 def test_run_qlr_opens_the_run_styled_in_its_crs(demo_points_file, tmp_path):
-    run = subprocess.run([sys.executable, "-m", "floodmesh.core.cli", "run",
+    run = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "run",
                           str(demo_points_file), "--out", str(tmp_path / "levee run"),
                           "--max-area", "400"], capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]

@@ -9,7 +9,7 @@ from numpy.testing import assert_allclose
 from qgis.core import QgsMeshLayer, QgsRasterLayer, QgsVectorLayer
 
 from floodmesh.core import io
-from floodmesh.core.slope import slope
+from floodmesh.core.steps.slope import slope
 
 
 
@@ -134,8 +134,8 @@ def demo_rasters(tmp_path_factory):
     from affine import Affine
     from pyproj import CRS
 
-    from floodmesh.core import demo
-    from floodmesh.core.breakpoints import classify_breakpoints
+    from floodmesh.core.frontends import demo
+    from floodmesh.core.steps.breakpoints import classify_breakpoints
     from floodmesh.core.raster import Grid
 
     t = tmp_path_factory.mktemp("demo_rasters")
@@ -194,7 +194,7 @@ def test_refine_mesh_algorithm(processing, demo_rasters, tmp_path):
     mesh layer shaded by elevation, and the rounds are written as JSON."""
     from qgis.core import QgsProject
 
-    from floodmesh.core import demo
+    from floodmesh.core.frontends import demo
 
     rng = np.random.default_rng(0)
     xy = rng.uniform([1, 1], [299, 239], (6000, 2))
@@ -229,8 +229,8 @@ def test_build_mesh_with_a_domain_polygon_and_own_lines(processing, demo_rasters
     import shapely
     from qgis.core import QgsProcessingException
 
-    from floodmesh.core import demo
-    from floodmesh.core.mesh import triangle_areas
+    from floodmesh.core.frontends import demo
+    from floodmesh.core.steps.mesh import triangle_areas
 
     x0, y0 = demo.DEMO_ORIGIN
     hole = shapely.box(x0 + 100, y0 + 60, x0 + 112, y0 + 72)
@@ -268,7 +268,7 @@ def test_build_mesh_and_assess_accuracy_load_styled(processing, demo_rasters, tm
     categories of the class field."""
     from qgis.core import QgsCategorizedSymbolRenderer, QgsProject
 
-    from floodmesh.core import demo
+    from floodmesh.core.frontends import demo
 
     QgsProject.instance().clear()
     mesh = processing.runAndLoadResults("floodmesh:buildmesh", {

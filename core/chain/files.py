@@ -1,0 +1,306 @@
+"""The steps of the method as file-level functions: paths in, paths out, options, and the
+``progress`` (fraction 0–1), ``cancelled`` (polled) and ``note`` (what was assumed or repaired)
+callables. The command line (``cli``), QGIS's worker (``worker``) and the library call these and
+nothing else, so a step's glue is written once.
+
+Each returns a dict of what it wrote and measured, keyed as the QGIS algorithms' outputs
+(``OUTPUT``, ``NODES``, ``crs`` as WKT, …), with ``summary``: one or more lines saying what was
+written, which the command line prints and QGIS logs.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+from ..options import DEFAULT_MAX_TRIANGLES
+
+GEOTIFF = (".tif", ".tiff")
+
+
+def _files(reads, writes, *, geotiff=()) -> None:
+    """Before any work: no output may be (or replace) an input, each output's folder must be
+    writable, and the rasters written are GeoTIFFs."""
+    from ..io.outputs import check_outputs, require_suffix
+
+    check_outputs([r for r in reads if r], [w for w in writes if w])
+    for path in geotiff:
+        require_suffix(path, GEOTIFF, "a GeoTIFF")
+
+
+def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=None,
+         holdout: float = 0.0, seed: int = 0, holdout_output=None, workers=None,
+         scheduler=None, skip_unreadable: bool = False, progress=None, cancelled=None,
+         note=None) -> dict:
+    """Step 2: LiDAR points (a file, or tiles: gridded on Dask block by block, unreadable ones
+    left out with ``skip_unreadable``) to a DEM GeoTIFF at ``cell_size`` m by linear (TIN)
+    interpolation; ``holdout`` of the points held back and written to ``holdout_output``
+    (GeoPackage)."""
+    from .. import io
+    from ..options import check_cell_size, check_holdout, check_max_gap, check_seed
+    from .source import open_source
+
+    source = open_source(input, skip_unreadable=skip_unreadable)
+    _files(source.paths, [output, holdout_output], geotiff=[output])
+    check_cell_size(cell_size)
+    check_max_gap(max_gap)
+    check_holdout(holdout)
+    check_seed(seed)
+    classes = tuple(classes) if classes else None
+    if source.tiled:
+        from ..engine.tiles import grid_point_tiles
+
+        tiled = grid_point_tiles(source.paths, cell_size, max_gap=max_gap, crs=crs,
+                                 classes=classes, holdout=holdout, seed=seed, out_path=output,
+                                 keep=False, workers=workers, scheduler=scheduler,
+                                 progress=progress, cancelled=cancelled)
+        for message in tiled.notes if note else ():
+            note(message)
+        held, points_crs = tiled.holdout, tiled.crs
+        written = f"DEM of {tiled.n_tiles} tiles ({tiled.n_points:,} points) written to {output}"
+    else:
+        from ..steps.grid import grid_points_linear
+        from ..points import split_holdout
+
+        points = io.read_points(source.path, crs=crs, classes=classes, note=note)
+        gridding, kept_back = split_holdout(points, holdout, seed, note=note)
+        dem = grid_points_linear(gridding, cell_size, max_gap=max_gap, progress=progress,
+                                 cancelled=cancelled)
+        io.write_raster(output, dem)
+        held, points_crs = kept_back.xyz, points.crs
+        written = (f"DEM {dem.shape[1]} x {dem.shape[0]} cells of {dem.cell_size} m written to "
+                   f"{output}")
+    result = {"OUTPUT": str(output), "crs": points_crs.to_wkt()}
+    lines = []
+    if holdout_output and len(held):
+        io.write_points_gpkg(holdout_output, held, points_crs, layer="holdout")
+        result["HOLDOUT_OUTPUT"] = str(holdout_output)
+        lines.append(f"{len(held)} held-out points written to {holdout_output}")
+    return {**result, "summary": "\n".join([*lines, written])}
+
+
+def slope(input, output, *, method: str = "one-over-distance", sigma: float = 1.0,
+          log_kernel: str = "pratt", crs=None, progress=None, cancelled=None,
+          note=None) -> dict:
+    """Step 3: slope in degrees by a 3x3 kernel, or the Laplacian-of-Gaussian response (m,
+    ``method="log"``, σ ``sigma`` m), file to file block by block."""
+    from ..steps.slope import slope_raster_file
+
+    _files([input], [output], geotiff=[output])
+    slope_raster_file(input, output, method, sigma=sigma, log_kernel=log_kernel, crs=crs,
+                      note=note, progress=progress, cancelled=cancelled)
+    written = (f"Laplacian-of-Gaussian response (sigma {sigma} m, m) written to {output}"
+               if method == "log" else f"slope ({method}, degrees) written to {output}")
+    return {"OUTPUT": str(output), "summary": written}
+
+
+def breakpoints(input, output, *, s_crit: float = 10.0, sensitivity=None,
+                zero_crossings: bool = False, crs=None, progress=None, cancelled=None,
+                note=None) -> dict:
+    """Step 4: thinned breakpoints where the slope reaches ``s_crit`` degrees (or a LoG response
+    reaches ``sensitivity`` m), file to file block by block."""
+    from ..steps.breakpoints import breakpoints_file
+
+    _files([input], [output], geotiff=[output])
+    count = breakpoints_file(input, output, s_crit=s_crit, sensitivity=sensitivity,
+                             zero_crossings=zero_crossings, crs=crs, progress=progress,
+                             cancelled=cancelled)
+    return {"OUTPUT": str(output), "summary": f"{count} breakpoints written to {output}"}
+
+
+def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = "auto",
+          min_points: int = 3, min_length: float = 0.0, join: bool = True, seed: int = 0,
+          crs=None, progress=None, cancelled=None, note=None) -> dict:
+    """Step 5: break lines through the breakpoints (GeoPackage of LineStringZ)."""
+    from .. import io
+    from ..steps.breaklines import trace_breaklines
+
+    _files([breakpoints, slope, dem], [output])
+    points = io.read_raster(breakpoints, crs=crs)
+    points = points.with_values((points.values == 1).astype("uint8"))
+    terrain = io.read_raster(dem, crs=crs)
+    lines = trace_breaklines(points, io.read_raster(slope, crs=crs), terrain, s_crit, mode=mode,
+                             min_points=min_points, min_length=min_length, join=join, seed=seed)
+    io.write_breaklines(output, lines, terrain.crs)
+    return {"OUTPUT": str(output), "crs": terrain.crs.to_wkt(),
+            "summary": f"{len(lines)} break lines written to {output}"}
+
+
+def simplify(input, output, *, method: str, amount: float, min_distance: float = 0.0,
+             crs=None, progress=None, cancelled=None, note=None) -> dict:
+    """Step 6: break lines simplified by ``method`` (every ``amount``-th point, or within
+    ``amount`` m by Douglas–Peucker or a spline), crossings repaired, slivers merged."""
+    from .. import io
+    from ..raster import require_metric_crs
+    from ..steps.simplify import simplify_breaklines
+
+    _files([input], [output])
+    crs = require_metric_crs(crs or io.vector_crs(input), Path(input).name)
+    lines = io.read_breaklines(input)
+    simple = simplify_breaklines(lines, method, amount, min_distance=min_distance)
+    io.write_breaklines(output, simple, crs)
+    before, after = sum(len(x.coords) for x in lines), sum(len(x.coords) for x in simple)
+    return {"OUTPUT": str(output), "crs": crs.to_wkt(),
+            "summary": f"{len(simple)} break lines, {before} → {after} points, written to "
+                       f"{output}"}
+
+
+def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
+    """(DEM, break lines and the user's own, domain) of a meshing step."""
+    from .. import io
+    from .pipeline import mesh_constraints
+
+    terrain = io.read_raster(dem, crs=crs, note=note)
+    lines = io.read_lines_gpkg(breaklines) if breaklines else []
+    domain, own = mesh_constraints(terrain, boundary, user_lines, note=note)
+    return terrain, lines + own, domain
+
+
+def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_field=None,
+         min_area=None, flow_area: float | None = 0.0, conforming: bool = False,
+         min_angle: float = 25.0, max_area: float = 100.0,
+         max_triangles: int = DEFAULT_MAX_TRIANGLES, triangles=None, crs=None, progress=None,
+         cancelled=None, note=None) -> dict:
+    """Step 7: a Triangle mesh (SMS 2DM, and the triangles as a GeoPackage to ``triangles``) of
+    the DEM's valid area or ``boundary``, honouring the break lines and the user's own lines,
+    no angle below ``min_angle`` degrees and no triangle above ``max_area`` m² (smaller where
+    ``size_field`` or the flow zone, ``flow_area`` m², None: the default, 0: off, asks)."""
+    from .. import io
+    from ..steps.drainage import flow_area_for, flow_size
+    from ..steps.mesh import build_mesh, mesh_quality
+    from ..options import check_max_area, check_max_triangles, check_min_angle
+    from .pipeline import size_field as size_from
+    from ..steps.sizing import finer
+
+    _files([dem, breaklines, boundary, user_lines, size_field if size_field != "slope" else None],
+           [output, triangles])
+    check_min_angle(min_angle)
+    check_max_area(max_area)
+    check_max_triangles(max_triangles)
+    terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
+    size = size_from(size_field, terrain, max_area=max_area, min_area=min_area)
+    flow_area = flow_area_for(flow_area, terrain.cell_size)
+    if flow_area is not None:  # smaller triangles where water flows (see drainage)
+        size = finer(size, flow_size(terrain, flow_area=flow_area))
+    result_mesh = build_mesh(terrain, lines, min_angle=min_angle, max_area=max_area,
+                             conforming=conforming, domain=domain, size_field=size,
+                             max_triangles=max_triangles, note=note)
+    io.write_mesh_2dm(output, result_mesh.nodes, result_mesh.triangles, crs=terrain.crs)
+    result = {"OUTPUT": str(output), "crs": terrain.crs.to_wkt()}
+    if triangles:
+        io.write_mesh_gpkg(triangles, result_mesh.nodes, result_mesh.triangles, terrain.crs)
+        result["TRIANGLES"] = str(triangles)
+    q = mesh_quality(result_mesh, min_angle=min_angle, max_area=max_area)
+    return {**result, "NODES": q["nodes"], "TRIANGLE_COUNT": q["triangles"],
+            "summary": f"{q['nodes']} nodes, {q['triangles']} triangles (min angle "
+                       f"{q['min_angle_deg']:.2f}°, max area {q['max_area_m2']:.1f} m²) written "
+                       f"to {output}"}
+
+
+def measured_points(path, crs=None, fallback=None):
+    """(xyz, CRS) of measured points: a LiDAR point file (LAS/LAZ ground, XYZ/CSV; ``crs``
+    overrides its own) or a point layer (GeoPackage, Shapefile, GeoJSON; ``crs``, else its own,
+    else ``fallback``, the mesh's or DEM's)."""
+    from .. import io
+    from ..raster import require_metric_crs
+
+    if io.is_point_source(path):
+        cloud = io.read_points(path, crs=crs)
+        return cloud.xyz, cloud.crs
+    return io.read_points_vector(path), require_metric_crs(
+        crs or io.vector_crs(path) or fallback, Path(path).name)
+
+
+def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=None, check=None,
+           min_angle: float = 25.0, max_area: float = 100.0, lower: float = 0.10,
+           upper: float = 0.25, target_rmse=None, target_max=None, max_nodes: int = 1_000_000,
+           max_rounds: int = 8, report=None, crs=None, progress=None, cancelled=None,
+           note=None) -> dict:
+    """Step 9: refine the mesh with the measured ``points`` until no triangle's points misfit by
+    more than ``lower`` m RMS and none by more than ``upper`` m (or the targets are met);
+    ``check`` points are only measured, each round."""
+    from .. import io
+    from ..steps.mesh import mesh_quality
+    from ..steps.refine import refine_mesh
+
+    _files([dem, points, check, breaklines, boundary, user_lines], [output, report])
+    terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
+    measured = measured_points(points, crs, terrain.crs)[0]
+    check_xyz = measured_points(check, crs, terrain.crs)[0] if check else None
+    refined, rounds = refine_mesh(terrain, lines, measured, check=check_xyz, domain=domain,
+                                  min_angle=min_angle, max_area=max_area, lower=lower,
+                                  upper=upper, target_rmse=target_rmse, target_max=target_max,
+                                  max_nodes=max_nodes, max_rounds=max_rounds, progress=progress,
+                                  cancelled=cancelled)
+    io.write_mesh_2dm(output, refined.nodes, refined.triangles, crs=terrain.crs)
+    result = {"OUTPUT": str(output), "NODES": len(refined.nodes), "RMSE": rounds[-1].rmse_m,
+              "crs": terrain.crs.to_wkt()}
+    if report:
+        io.write_json(report, {"rounds": [asdict(r) for r in rounds],
+                               **mesh_quality(refined, min_angle=min_angle, max_area=max_area)})
+        result["REPORT"] = str(report)
+    table = [f"{'round':>5}{'nodes':>9}{'RMSE cm':>9}{'max cm':>8}{'check RMSE':>12}"
+             f"{'inserted':>10}{'refined':>9}"]
+    table += [f"{k:>5}{r.nodes:>9}{100 * r.rmse_m:>9.1f}{100 * r.max_abs_m:>8.1f}"
+              f"{100 * r.check_rmse_m:>12.1f}{r.inserted:>10}{r.refined:>9}"
+              for k, r in enumerate(rounds, 1)]
+    return {**result, "summary": "\n".join([*table, f"{len(refined.nodes)} nodes written to "
+                                                    f"{output}"])}
+
+
+def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=None,
+           cancelled=None, note=None) -> dict:
+    """Step 8: residuals of check points against the mesh's TIN (GeoPackage), their statistics
+    (RMSE, NSSDA test, classes) to ``report`` (JSON) and the residual map and histogram into the
+    folder ``png``."""
+    from .. import io
+    from ..steps.accuracy import accuracy_statistics, residuals
+    from ..steps.mesh import Mesh
+
+    _files([mesh, points], [output, report])
+    read = io.read_2dm(mesh)
+    xyz, points_crs = measured_points(points, crs, read.crs)
+    res = residuals(Mesh(read.nodes, read.triangles, points_crs), xyz)
+    io.write_residuals(output, xyz, res, points_crs)
+    stats = accuracy_statistics(res)
+    result = {"OUTPUT": str(output), "RMSE": stats["rmse_m"], "statistics": stats}
+    if report:
+        io.write_json(report, stats)
+        result["REPORT"] = str(report)
+    if png:
+        from ..io.report import write_report_pngs
+
+        Path(png).mkdir(parents=True, exist_ok=True)
+        result["figures"] = [str(p) for p in write_report_pngs(png, read.nodes, read.triangles,
+                                                               xyz, res)]
+    return {**result, "summary": json.dumps(stats, indent=2)}
+
+
+def export(mesh, output, *, fmt=None, crs=None, open_boundaries=None, snap: float = 1.0,
+           regions=None, material_field=None, datum_offset: float = 0.0,
+           element_elevations: bool = False, breaklines=None, progress=None, cancelled=None,
+           note=None) -> dict:
+    """A mesh (SMS 2DM) for a solver: TELEMAC (SLF + CLI), ADCIRC, SCHISM, UGRID, … by ``fmt``
+    or ``output``'s extension, with open boundaries, material regions and a datum offset."""
+    from .. import io
+    from ..steps.export import export_mesh, format_of, layers_crs
+
+    fmt = format_of(output, fmt)
+    _files([mesh, open_boundaries, regions, breaklines],
+           [output, Path(output).with_suffix(".cli") if fmt == "slf" else None])
+    read = io.read_2dm(mesh)
+    crs = layers_crs(crs or read.crs, {"open boundary": open_boundaries, "region": regions,
+                                       "break line": breaklines})
+    written = export_mesh(
+        output, read.nodes, read.triangles, fmt=fmt, crs=crs,
+        open_lines=io.read_lines_gpkg(open_boundaries) if open_boundaries else (),
+        snap=snap, regions=io.read_regions(regions, field=material_field) if regions else (),
+        materials=read.materials, datum_offset=datum_offset,
+        element_elevations=element_elevations,
+        breaklines=io.read_lines_gpkg(breaklines) if breaklines else ())
+    result = {"OUTPUT": str(output), "files": [str(p) for p in written],
+              "crs": crs.to_wkt() if crs is not None else None}
+    if fmt == "slf":
+        result["CLI"] = str(written[1])
+    return {**result, "summary": f"{len(read.nodes)} nodes, {len(read.triangles)} triangles "
+                                 f"written as {fmt} to {', '.join(str(p) for p in written)}"}

@@ -1,0 +1,633 @@
+"""The whole chain, points → grid → slope → breakpoints → break lines → mesh → assessment,
+with every intermediate written to an output folder and a report of figures and timings."""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import shapely
+from pyproj import CRS
+
+from .. import io
+from ..steps.accuracy import accuracy_statistics, residuals
+from ..steps.breaklines import trace_breaklines
+from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
+from ..engine.compiles import CompileWatch
+from ..steps.drainage import (CHANNEL_AREA, flow_area_for, flow_size, flow_spacing,
+                              height_above_drainage)
+from ..errors import Cancelled, FloodMeshError
+from ..steps.export import export_formats
+from ..steps.grid import check_grid, grid_points_linear
+from ..steps.hydraulic_lines import lines_for_hydraulics
+from ..steps.hydraulics import hydraulic_checks
+from ..io.layer_definition import QLR_NAME, write_layer_definition
+from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
+from ..steps.localise import fit_node_elevations, fit_window, localise_traced
+from ..engine.nearest import CellIndex, point_index
+from ..steps.mesh import (build_mesh, domain_from_dem, edge_tolerance, mesh_quality,
+                          size_from_slope, user_domain)
+from ..points import PointCloud, split_holdout
+from ..raster import Grid
+from ..steps.simplify import max_deviation, simplify_breaklines
+from ..options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_fits
+from ..io.outputs import check_output_folder, scratch_folder, staged_folder
+from ..steps.refine import refine_mesh
+from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_pngs
+from ..io.report_html import HTML_NAME, write_report_html
+from ..steps.sizing import far_field_size, finer
+from ..steps.slope import laplacian_of_gaussian, slope
+from .source import DEM, DEM_TILES, POINT_TILES, POINTS, Source, open_source
+from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles, slope_file64,
+                            write_front_rasters)
+
+OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
+                "mesh.prj", "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG,
+                BREAKLINES_PNG, "report.json", HTML_NAME, QLR_NAME)
+
+
+class _Steps:
+    """Times each step, reports overall progress and checks for cancellation between steps."""
+
+    def __init__(self, weights: dict, progress, cancelled, log):
+        self.weights, self.total = weights, float(sum(weights.values()))
+        self.progress, self.cancelled, self.log = progress, cancelled, log
+        self.done, self.seconds, self.cpu_seconds = 0.0, {}, {}
+        self.compiles = CompileWatch(log)  # numba's first-run compile, said when it happens
+
+    def run(self, name: str, func: Callable, *args, **kwargs):
+        if self.cancelled and self.cancelled():
+            raise Cancelled()
+        if self.log:
+            self.log(f"{name}...")
+        start, cpu = time.perf_counter(), time.process_time()
+        weight = self.weights.get(name, 1.0)
+        if "progress" in kwargs and self.progress:
+            base = self.done
+            kwargs["progress"] = lambda f: self.progress((base + f * weight) / self.total)
+        try:
+            with self.compiles.watching():
+                result = func(*args, **kwargs)
+        except Exception as exc:
+            # Ctrl-C inside an extension can reach Python as another error raised while handling
+            # it: a SystemError from a compiled (numba) call, at times through a second one; a
+            # ValueError from shapely's Cython buffer code. It is the interrupt all the same
+            cause = exc.__cause__ or exc.__context__
+            while cause is not None and not isinstance(cause, KeyboardInterrupt):
+                cause = cause.__cause__ or cause.__context__
+            if cause is not None:  # Ctrl-C, or SIGTERM taken as it (cli.Terminated)
+                raise cause.with_traceback(None) from None
+            raise
+        self.seconds[name] = round(time.perf_counter() - start, 3)
+        self.cpu_seconds[name] = round(time.process_time() - cpu, 3)  # all threads
+        self.done += weight
+        if self.progress:
+            self.progress(self.done / self.total)
+        return result
+
+
+def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
+                 progress: Callable[[float], None] | None = None,
+                 cancelled: Callable[[], bool] | None = None,
+                 log: Callable[[str], None] | None = None) -> dict:
+    """Run the whole chain on a point file or DEM, or their tiles (a path, folder, pattern, list
+    or ``source.Source``), and write ``OUTPUT_FILES`` into ``out_dir``, and ``mesh.<ext>`` for
+    each of ``options.formats`` (see ``export``).
+
+    ``progress`` receives the overall fraction done (0–1), ``cancelled`` is polled between and
+    inside long steps (raising ``Cancelled``), ``log`` receives step names and notes (what was
+    assumed or repaired on the user's behalf, also listed in the report). Returns the report.
+    """
+    options.validate()
+    started = time.perf_counter()
+    notes = []
+
+    def note(message: str):
+        notes.append(message)
+        if log:
+            log(f"note: {message}")
+
+    out, source = Path(out_dir), open_source(input_path)
+    inputs = run_inputs(source, options)
+    check_output_folder(out, inputs, run_outputs(options.formats))
+    steps = _Steps(_step_weights(options), progress, cancelled, log)
+    front = trace_front(source, options, steps, cancelled=cancelled, note=note)
+    n_breakpoints = int(front.breakpoints.values.sum())
+    if front.files:  # traced, and on disk for the output: only the size fields may read them
+        if options.size_field != "slope":
+            front.slope_grid = None
+        if options.far_field_area is None:
+            front.breakpoints = None
+    fits = _TerrainFits(front, options)
+    simplified, lines, confidence = _break_lines(front, options, steps, fits)
+    size, max_area, hand, flow_area = _size_fields(front, options, steps, fits.window)
+    domain = (front.domain if front.domain is not None else domain_from_dem(
+        front.dem, tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size)))
+    detected, line_stats = _lines_for_flood(front, options, steps, lines, domain, hand,
+                                            flow_area)
+    hand = None  # the flow zone's work is in the size field and the lines now
+    mesh_lines = detected + front.own_lines
+    mesh = steps.run("mesh", build_mesh, front.dem, mesh_lines, min_angle=options.min_angle,
+                     max_area=max_area, conforming=options.conforming, domain=domain,
+                     size_field=size, max_triangles=options.max_triangles, note=note)
+    mesh, rounds = _terrain_z(mesh, front, options, steps, fits, mesh_lines, domain, size,
+                              max_area, cancelled)
+    # the terrain fits are done: their points and index go before the assessment and writing
+    size = fits.index = front.measured = None
+    res = steps.run("assess", residuals, mesh, front.holdout.xyz)
+    deviation, quality, stats, hydraulics = steps.run(
+        "figures", _figures, front, options, simplified, mesh, res, detected, max_area)
+    figures = {"n_breakpoints": n_breakpoints, "deviation": deviation, "quality": quality,
+               "stats": stats, "rounds": rounds, "terrain_fit": fits.record(),
+               "line_stats": line_stats, "hydraulics": hydraulics, "notes": notes}
+
+    def write_all(stage):
+        exported = _write_outputs(stage, front, options, mesh, lines, res, confidence,
+                                  group=out.name)
+        report = _report(source, front, options, simplified, lines, exported, figures,
+                         steps)
+        # the page of report.json, written inside the step: "write" is its last timing
+        write_report_html(stage, report, elapsed_s=time.perf_counter() - started)
+        return report
+
+    # the folder is replaced as a whole: an interrupt leaves the old run's files or these
+    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage:
+        report = steps.run("write", write_all, stage)
+        io.write_json(stage / "report.json", report)
+    compiled = steps.compiles.summary()
+    if compiled and log:
+        log(compiled)
+    return report
+
+
+def _step_weights(options: RunOptions) -> dict:
+    """The steps a run with ``options`` takes, each with its share of the progress bar."""
+    weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
+               "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
+               "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
+               "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
+    del weights["node elevations" if options.refine else "refine"]
+    if not options.localise:
+        del weights["localise"]
+    if not (options.localise or options.node_elevation == "plane"):
+        del weights["fit window"]
+    if flow_area_for(options.flow_area, 1.0) is None:
+        del weights["flow zone"]
+    return weights
+
+
+class _TerrainFits:
+    """The points of every terrain fit of a run (localisation, node z, refinement) and their one
+    index: the points gridded, or the DEM's cell centres drawn (the same seeded draw each time)
+    when a fit needs them, as ``Front.measured`` says; the fits' window and what they did."""
+
+    def __init__(self, front: Front, options: RunOptions):
+        self.front, self.seed = front, options.seed
+        self.cell_centres = front.measured is None  # the DEM's, drawn when a fit needs them
+        self.index = self.window = None
+        self.counts = {"localise": options.localise, "node_elevation": options.node_elevation}
+        self.node_counts = {}
+
+    def measured(self) -> tuple[np.ndarray, object]:
+        """The fits' points and their index (None: not built yet)."""
+        if self.front.measured is None:
+            self.front.measured, self.index = _dem_measured(self.front.dem, self.seed)
+        return self.front.measured, self.index
+
+    def let_go(self) -> None:
+        """The DEM's cell centres (28 B a cell) are drawn again for the node fits after the
+        mesh, not held over the flow zone and meshing, the steps of the command's peak."""
+        if self.cell_centres:
+            self.front.measured = self.index = None
+
+    def record(self) -> dict:
+        """The report's ``terrain_fit``: options, window, localisation and node-fit counts."""
+        return {**self.counts, **({"nodes": self.node_counts} if self.node_counts else {})}
+
+
+def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits):
+    """(simplified, final lines, their fit RMS or None): the traced lines simplified, then moved
+    onto the terrain's kinks by the hinge fits (``localise``) where asked."""
+    dem, (method, amount) = front.dem, options.simplification()
+    min_distance = dem.cell_size / 2 if options.min_distance is None else options.min_distance
+    simplified = lines = steps.run("simplify", simplify_breaklines, front.traced, method, amount,
+                                   min_distance=min_distance)
+    confidence = None
+    if options.localise or options.node_elevation == "plane":
+        area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+        fits.index, fits.window = steps.run(
+            "fit window", _fit_window, *fits.measured(), area, dem.cell_size,
+            node_radius=options.node_radius, seed=options.seed)
+        fits.counts.update(asdict(fits.window))
+    if options.localise:
+        join_gap = 6 * dem.cell_size if options.join_gap is None else options.join_gap
+        lines, confidence, counts = steps.run(
+            "localise", localise_traced, lines, front.measured, fits.window,
+            s_crit=options.s_crit, tolerance=dem.cell_size / 10, max_gap=20 * dem.cell_size,
+            join_gap=join_gap, join_lateral=dem.cell_size, index=fits.index)
+        fits.counts.update(counts)
+    fits.let_go()
+    return simplified, lines, confidence
+
+
+def _size_fields(front: Front, options: RunOptions, steps: _Steps, window):
+    """(size field or None, the largest area, height above drainage or None, flow area or
+    None): the user's size field, finer off the lines where asked (far field) and where water
+    flows (flow zone)."""
+    dem, max_area = front.dem, options.max_area
+    size = size_field(options.size_field, dem, front.slope_grid, max_area=max_area,
+                      min_area=options.min_area, s_crit=options.s_crit)
+    if options.far_field_area is not None:  # grows off the lines, where the terrain is plane
+        far = far_field_size(dem, front.breakpoints, max_area=max_area,
+                             far_field_area=options.far_field_area,
+                             tolerance=max(0.01, window.noise / 2) if window else 0.02)
+        size = finer(size, far)
+        max_area = options.far_field_area
+    hand, flow_area = None, flow_area_for(options.flow_area, dem.cell_size)
+    if flow_area is not None:  # resolution where water flows (see drainage)
+        hand, _ = steps.run("flow zone", height_above_drainage, dem, channel_area=CHANNEL_AREA)
+        size = finer(size, flow_size(dem, flow_area=flow_area, hand=hand))
+    return size, max_area, hand, flow_area
+
+
+def _lines_for_flood(front: Front, options: RunOptions, steps: _Steps, lines, domain, hand,
+                     flow_area):
+    """(the detected lines' coordinates, their statistics or None): lines a flood model can
+    afford (see hydraulic_lines), unless ``options.min_spacing`` is 0."""
+    detected, dem = [line.coords for line in lines], front.dem
+    spacing = dem.cell_size if options.min_spacing is None else options.min_spacing
+    if spacing <= 0:
+        return detected, None
+    within = (shapely.union_all(io.read_boundary(options.flow_zone)) if options.flow_zone
+              else None)
+    return steps.run("hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
+                     own_lines=front.own_lines, within=within,
+                     flow_spacing=None if hand is None else flow_spacing(
+                         dem, flow_area=flow_area, hand=hand))
+
+
+def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits,
+               mesh_lines, domain, size, max_area, cancelled):
+    """(mesh, refinement rounds): refined on the points gridded until the bounds hold, or its
+    node z fitted on them (``node_elevation="plane"``); the held-out points stay independent."""
+    delta = front.dem.cell_size / 2
+
+    def elevations(mesh):
+        """Node z with the noise taken out, from the points gridded only (never the held-out)."""
+        if options.node_elevation != "plane":
+            return mesh
+        points, fit_index = fits.measured()
+        z, counts = fit_node_elevations(mesh.nodes, points, mesh_lines, fits.window.node_radius,
+                                        on_line=delta / 10, index=fit_index)
+        fits.node_counts.update(counts)
+        return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
+
+    if not options.refine:
+        return steps.run("node elevations", elevations, mesh), []
+    return steps.run("refine", refine_mesh, front.dem, mesh_lines, fits.measured()[0],
+                     check=front.holdout.xyz, domain=domain, size_field=size,
+                     min_angle=options.min_angle, max_area=max_area,
+                     conforming=options.conforming, elevations=elevations,
+                     lower=options.refine_lower, upper=options.refine_upper,
+                     max_nodes=options.max_triangles, cancelled=cancelled)
+
+
+def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected, max_area):
+    """(largest simplification deviation, mesh quality, accuracy statistics, hydraulic checks)."""
+    method, amount = options.simplification()
+    delta = front.dem.cell_size / 2
+    deviation = max_deviation(front.traced, simplified)
+    alpha = deviation / delta if method == "keep-every" else amount / delta
+    return (deviation, mesh_quality(mesh, min_angle=options.min_angle, max_area=max_area),
+            accuracy_statistics(res, alpha=alpha, delta=delta),
+            hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
+                             detected_lines=detected, dem=front.dem))
+
+
+def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, res, confidence,
+                   *, group: str) -> list:
+    """The run's files into ``out`` (``OUTPUT_FILES`` but the report's two); returns the solver
+    exports written."""
+    dem, holdout = front.dem, front.holdout
+    io.write_raster(out / "dem.tif", dem)
+    if front.files:
+        write_front_rasters(front.files, out)
+    else:
+        io.write_raster(out / "slope.tif", front.slope_grid)
+        io.write_raster(out / "breakpoints.tif", front.breakpoints, valid=np.isfinite(dem.values))
+    io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs, fit_rms=confidence)
+    # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
+    if "2dm" not in options.formats:
+        io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles, crs=dem.crs)
+    if "gpkg" not in options.formats:
+        io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
+    io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
+    write_layer_definition(out, group=group, crs_wkt=dem.crs.to_wkt(),
+                           elevation_range=(mesh.nodes[:, 2].min(), mesh.nodes[:, 2].max()))
+    write_report_pngs(out, mesh.nodes, mesh.triangles, holdout.xyz, res, dem=dem,
+                      lines=[line.coords for line in lines])
+    return (export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
+                           crs=dem.crs, breaklines=[line.coords for line in lines])
+            if options.formats else [])
+
+
+def _report(source: Source, front: Front, options: RunOptions, simplified, lines, exported,
+            figures: dict, steps: _Steps) -> dict:
+    """report.json: the input, grid, lines, mesh quality, accuracy, terrain fits, notes, files
+    and the steps' timings."""
+    dem, traced, (method, amount) = front.dem, front.traced, options.simplification()
+    min_distance = dem.cell_size / 2 if options.min_distance is None else options.min_distance
+    return {
+        "input": source.named,
+        "crs": dem.crs.to_string(),
+        "options": {k: v for k, v in asdict(options).items()},
+        "n_points": front.n_points,
+        "holdout_source": front.holdout_source,
+        "grid": {"rows": dem.shape[0], "cols": dem.shape[1], "cell_size_m": dem.cell_size,
+                 "valid_cells": int(np.isfinite(dem.values).sum())},
+        "n_breakpoints": figures["n_breakpoints"],
+        "n_breaklines_traced": len(traced),
+        "n_breaklines": len(lines),
+        "breakline_length_m": float(sum(line.length for line in lines)),
+        "breakline_points_traced": int(sum(len(t.coords) for t in traced)),
+        "breakline_points_kept": int(sum(len(t.coords) for t in lines)),
+        "simplification": {"method": method, "value": amount, "min_distance_m": min_distance,
+                           "max_deviation_m": figures["deviation"]},
+        **figures["quality"],
+        **figures["stats"],
+        "refinement": [asdict(r) for r in figures["rounds"]],
+        "terrain_fit": figures["terrain_fit"],
+        "hydraulic_lines": figures["line_stats"],
+        "hydraulics": figures["hydraulics"],
+        "notes": figures["notes"],
+        "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
+        "seconds": steps.seconds,
+        "cpu_seconds": steps.cpu_seconds,
+    }
+
+
+def _fit_window(points, index, area, cell_size, *, node_radius, seed):
+    """(index of the points, built if None, ``FitWindow``): the index serves every later
+    terrain fit."""
+    index = point_index(points) if index is None else index
+    return index, fit_window(points, area, cell_size, node_radius=node_radius, seed=seed,
+                             index=index)
+
+
+def run_inputs(source: Source, options: RunOptions) -> list:
+    """The files a run reads: never to be replaced by its outputs."""
+    size = options.size_field if options.size_field != "slope" else None
+    return [*source.paths, options.boundary, options.user_lines, size]
+
+
+def run_outputs(formats) -> list:
+    """The names a run with these solver formats writes into its folder."""
+    return [*OUTPUT_FILES, *(f"mesh{EXPORT_EXTENSIONS[f]}" for f in formats),
+            *(["mesh.cli"] if "slf" in formats else [])]
+
+
+@dataclass
+class Front:
+    """The chain up to the traced break lines: what every mesh of one input shares."""
+
+    dem: Grid
+    holdout: PointCloud      # check points: withheld LiDAR points, or DEM cell centres
+    holdout_source: str
+    n_points: int            # points read (0 for a DEM)
+    slope_grid: Grid         # first-order slope (degrees), which the tracer follows
+    breakpoints: Grid
+    traced: list             # BreakLine, before simplification
+    domain: object = None    # the user's domain (Multi)Polygon, None: the DEM's data
+    own_lines: list = field(default_factory=list)  # the modeller's own lines (k, 3) arrays
+    # (n, 3) points gridded, for the terrain fits and refinement; None: the DEM's cell centres
+    # (point tiles, a DEM), drawn from it when a fit needs them
+    measured: np.ndarray | None = None
+    files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
+
+
+@dataclass
+class _Terrain:
+    """What reading a source gives the front: the DEM and the points held out."""
+
+    dem: Grid
+    holdout: PointCloud
+    holdout_source: str
+    n_points: int
+    measured: np.ndarray | None = None  # the points gridded (None: the DEM's cell centres)
+    files: dict | None = None           # point tiles: the DEM, slope and breakpoints files
+
+
+def trace_front(source, options: RunOptions, steps: "_Steps | None" = None, *,
+                cancelled: Callable[[], bool] | None = None,
+                note: Callable[[str], None] | None = None) -> Front:
+    """Read, grid (holding points out), slope, breakpoints and trace ``source`` (a
+    ``source.Source``, or what ``open_source`` takes), as ``options`` say; each step timed
+    through ``steps`` (a silent one if None); ``note`` receives what was assumed or repaired on
+    the user's behalf. Grids and meshes too large for the triangle limit or the memory are
+    refused before the work."""
+    steps = steps or _Steps({}, None, cancelled, None)
+    source = open_source(source)
+    terrain = _READERS[source.kind](source, options, steps, cancelled=cancelled, note=note)
+    dem = terrain.dem
+    domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
+                                  options.user_lines,
+                                  tolerance=edge_tolerance(*options.simplification(),
+                                                           dem.cell_size), note=note)
+    if terrain.files:
+        slope_grid = read_back(terrain.files["slope"], dem.crs)
+        breakpoints = read_back(terrain.files["breakpoints"], dem.crs)
+    else:
+        slope_grid, breakpoints = _slope_and_breakpoints(dem, options, steps, cancelled)
+    traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
+                       options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
+                       min_length=options.min_length, seed=options.seed)
+    return Front(dem, terrain.holdout, terrain.holdout_source, terrain.n_points, slope_grid,
+                 breakpoints, traced, domain, own_lines, terrain.measured, terrain.files)
+
+
+def _slope_and_breakpoints(dem: Grid, options: RunOptions, steps: _Steps, cancelled):
+    """(first-order slope, breakpoints) of a DEM in memory: by the slope method and S_crit, or
+    by the Laplacian of Gaussian (the tracer still follows first-order slope)."""
+    if options.slope_method != "log":
+        slope_grid = steps.run("slope", slope, dem, options.slope_method, cancelled=cancelled)
+        return slope_grid, steps.run("breakpoints", classify_breakpoints, slope_grid,
+                                     options.s_crit)
+    response = steps.run("slope", laplacian_of_gaussian, dem, options.sigma,
+                         kernel=options.log_kernel, cancelled=cancelled)
+    breakpoints = steps.run("breakpoints", log_breakpoints, response, options.sensitivity,
+                            zero_crossings=options.zero_crossings)
+    return steps.run("tracing slope", slope, dem, "one-over-distance",
+                     cancelled=cancelled), breakpoints
+
+
+def _read_points(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
+                 note) -> _Terrain:
+    """One point file, gridded in memory with ``options.holdout`` of its points held out."""
+    data = steps.run("read", io.read_points, source.path, crs=options.crs,
+                     classes=options.classes, note=note)
+    gridding, holdout = split_holdout(data, options.holdout, options.seed, note=note)
+    # refuse, before the work, a grid or mesh too large for the limit or the memory
+    plan = check_grid(gridding, options.cell_size, options.max_gap)
+    if options.slope_method == "log":
+        check_sigma_fits(options.sigma, plan["rows"], plan["cols"], options.cell_size)
+    triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
+    check_memory(points=len(gridding), cells=plan["rows"] * plan["cols"],
+                 triangles=triangles, advice="give a larger cell size or maximum area, or "
+                                             "split the data into tiles")
+    dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
+                    max_gap=options.max_gap, progress=None, cancelled=cancelled, plan=plan)
+    return _Terrain(dem, holdout, "LiDAR points withheld from gridding", len(data),
+                    measured=gridding.xyz)
+
+
+def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
+              note) -> _Terrain:
+    """A DEM (one raster, or DEM tiles mosaicked), its own cell size kept; check points are a
+    seeded draw of its cells."""
+    if source.tiled:
+        dem = steps.run("read", read_dem_tiles, source.paths, crs=options.crs)
+    else:
+        dem = steps.run("read", io.read_raster, source.path, crs=options.crs, note=note)
+    valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+    triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
+    check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
+                 advice="resample the DEM to larger cells or split it into tiles")
+    return _Terrain(dem, _dem_check_points(dem, options.holdout, options.seed),
+                    "DEM cell centres (not independent of the DEM)", 0)
+
+
+def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
+                      note) -> _Terrain:
+    """Point tiles gridded on Dask; the DEM, slope and breakpoints go file to file, block by
+    block (see tiles), unless the Laplacian of Gaussian needs the DEM in memory. The tiles'
+    points are not kept: the terrain fits and --refine use the DEM's cell centres; the per-tile
+    held-out points stay the independent check."""
+    files = None
+    if options.slope_method != "log":
+        files = {"folder": scratch_folder("tiles")}
+        files["dem"] = Path(files["folder"].name) / "dem.tif"
+    data = steps.run("grid", _grid_tiles, source, options, cancelled=cancelled, note=note,
+                     dem_path=files and files["dem"])
+    if files:
+        folder, crs_wkt = files["dem"].parent, data.crs.to_wkt()
+        files["slope"] = steps.run("slope", slope_file64, files["dem"], folder / "slope.tif",
+                                   options.slope_method, crs=crs_wkt, cancelled=cancelled)
+        files["breakpoints"] = folder / "breakpoints.tif"
+        steps.run("breakpoints", breakpoints_file, files["slope"], files["breakpoints"],
+                  s_crit=options.s_crit, input_dtype=np.float64, crs=crs_wkt,
+                  cancelled=cancelled)
+        data.dem = read_back(files["dem"], data.crs)
+    return _Terrain(data.dem, PointCloud(data.holdout, data.dem.crs),
+                    "LiDAR points withheld from gridding, tile by tile", data.n_points,
+                    files=files)
+
+
+_READERS = {POINTS: _read_points, DEM: _read_dem, DEM_TILES: _read_dem,
+            POINT_TILES: _read_point_tiles}
+
+
+def _grid_tiles(source: Source, options: RunOptions, *, cancelled=None, note=None,
+                dem_path=None) -> TiledDem:
+    """Point tiles gridded on Dask (``tiles.TiledDem``); with ``dem_path`` the DEM goes there
+    (float64) instead of into memory."""
+    def check(plan):  # before round two: the chain after gridding, which holds the whole DEM
+        triangles = check_triangles(plan["area"], options.max_area, options.max_triangles)
+        check_memory(cells=plan["rows"] * plan["cols"], triangles=triangles,
+                     cell_bytes=BYTES_PER_FITTED_CELL,
+                     advice="give a larger cell size or maximum area, or grid the tiles alone "
+                            "(floodmesh grid TILES --out dem.tif) and mesh it in parts")
+
+    tiled = grid_point_tiles(source.paths, options.cell_size, max_gap=options.max_gap,
+                             crs=options.crs, classes=options.classes, holdout=options.holdout,
+                             seed=options.seed, out_path=dem_path, keep=dem_path is None,
+                             dtype="float32" if dem_path is None else "float64",
+                             workers=options.workers, scheduler=options.scheduler,
+                             processes=options.processes, progress=None,
+                             cancelled=cancelled, check=check)
+    for message in tiled.notes:
+        if note:
+            note(message)
+    return tiled
+
+
+def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: float,
+               min_area: float | None = None, s_crit: float = 10.0) -> Grid | None:
+    """The size field a user asked for: None, "slope" (from ``slope_grid``, or the DEM's
+    one-over-distance slope; ``min_area`` defaults to ``max_area``/25) or a raster file of local
+    maximum areas (m²) in the DEM's CRS."""
+    if source is None:
+        return None
+    if source == "slope":
+        slope_grid = slope(dem, "one-over-distance") if slope_grid is None else slope_grid
+        return size_from_slope(slope_grid, max_area=max_area, s_crit=s_crit,
+                               min_area=max_area / 25 if min_area is None else min_area)
+    field = io.read_raster(source, crs=dem.crs)
+    if not field.crs.equals(dem.crs, ignore_axis_order=True):
+        raise FloodMeshError(f"the size field {Path(source).name} is in {field.crs.name}, the "
+                             f"DEM in {dem.crs.name}; reproject it to the DEM's CRS")
+    return field
+
+
+def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
+                     tolerance: float | None = None, note=None):
+    """(domain, lines) from a user's boundary polygon file (None: the DEM's data) and a file of
+    their own break or structure lines (2-D lines take z from the DEM), both checked against the
+    DEM's CRS; ``tolerance`` (m) as ``user_domain``'s; ``note`` hears of line parts left out
+    (zero length, not numbers) and of domain left without data."""
+    for path, what in ((boundary, "boundary polygon"), (user_lines, "user line")):
+        if path is not None:
+            crs = io.vector_crs(path)
+            if crs is not None and not dem.crs.equals(CRS.from_user_input(crs),
+                                                      ignore_axis_order=True):
+                raise FloodMeshError(f"the {what} file {Path(path).name} is in "
+                                     f"{CRS.from_user_input(crs).name}, the DEM in "
+                                     f"{dem.crs.name}; reproject it to the DEM's CRS")
+    domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name,
+                          tolerance=tolerance, note=note) if boundary is not None else None)
+    lines = io.read_lines_gpkg(user_lines, note) if user_lines is not None else []
+    return domain, lines
+
+
+def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
+    """A seeded random ``fraction`` of the DEM's valid cells as points (cell centre, z), in the
+    draw's order (``_cell_points``)."""
+    return PointCloud(_cell_points(dem, _dem_cells(dem, fraction, seed)), dem.crs)
+
+
+def _dem_measured(dem: Grid, seed: int) -> tuple[np.ndarray, CellIndex]:
+    """The DEM's valid cells as the terrain fits' points (all of them, in a seeded order) and
+    their index, which finds them from the grid (``nearest.CellIndex``, 4 B a cell, where an
+    index of the points themselves took 24 B a point)."""
+    cells = _dem_cells(dem, 1.0, seed)
+    return _cell_points(dem, cells), CellIndex(dem.transform, dem.shape, cells)
+
+
+def _dem_cells(dem: Grid, fraction: float, seed: int) -> np.ndarray:
+    """Flat indices of a seeded random ``fraction`` of the DEM's valid cells (at least 30), in
+    the draw's order."""
+    cells = np.flatnonzero(np.isfinite(dem.values))
+    n = max(int(round(fraction * cells.size)), min(cells.size, 30))
+    return cells[np.random.default_rng(seed).choice(cells.size, size=n, replace=False)]
+
+
+def _cell_points(dem: Grid, cells: np.ndarray) -> np.ndarray:
+    """The centres and z of the DEM's flat ``cells`` as (n, 3) points. Built column by column,
+    Fortran-ordered so that each coordinate is contiguous (the terrain fits read them so without
+    copies), from the flat cell indices: where row and column grids and a stacked copy took some
+    80 B a cell more (the same numbers, as ``Grid.cell_centres`` and ``nearest.CellIndex``)."""
+    n = len(cells)
+    xyz = np.empty((3, n)).T
+    t, width = dem.transform, dem.shape[1]
+    for axis, index, scale, offset in ((0, cells % width, t.a, t.c),
+                                       (1, cells // width, t.e, t.f)):
+        column = xyz[:, axis]
+        column[...] = index
+        del index
+        column += 0.5
+        column *= scale
+        column += offset
+    np.take(dem.values, cells, out=xyz[:, 2])
+    return xyz
+

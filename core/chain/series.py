@@ -1,0 +1,184 @@
+"""Scale series: one mesh per maximum triangle area and break-line simplification on one input,
+each assessed on the same held-out points, and a table (and plot) of nodes against error, so that
+a modeller can pick the coarsest mesh that meets the need."""
+from __future__ import annotations
+
+import csv
+import itertools
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .. import io
+from ..steps.accuracy import accuracy_statistics, nssda_threshold_m, residuals
+from ..errors import FloodMeshError
+from ..steps.hydraulic_lines import lines_for_hydraulics
+from ..steps.mesh import Mesh, build_mesh, domain_from_dem, edge_tolerance
+from ..options import RunOptions
+from ..io.outputs import check_output_folder, staged_folder
+from .pipeline import run_inputs, trace_front
+from ..steps.simplify import simplify_breaklines
+from .source import open_source
+
+_OWN_MESH = re.compile(r"^mesh_.+\.2dm$")
+SERIES_FILES = ("series.csv", "series.json", "series.png")
+
+
+def _is_own(name: str) -> bool:
+    """Whether a series writes files of this name (see ``outputs.staged_folder``)."""
+    return name in SERIES_FILES or bool(_OWN_MESH.match(name))
+
+
+COLUMNS = ("label", "max_area_m2", "simplification", "amount", "nodes", "triangles",
+           "n_assessed", "rmse_m", "mean_m", "max_abs_m", "share_over_25cm", "nssda_pass")
+_SHORT = {"keep-every": "k", "douglas-peucker": "dp", "spline": "sp"}
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One mesh of the series: maximum triangle area (m²) and break-line simplification
+    (keep-every n, or douglas-peucker / spline within ``amount`` metres)."""
+
+    max_area: float
+    method: str = "keep-every"
+    amount: float = 4.0
+
+    @property
+    def label(self) -> str:
+        """Short name used in file names and on the plot, e.g. ``a100-k4``, ``a50-dp0.5``."""
+        return f"a{self.max_area:g}-{_SHORT[self.method]}{self.amount:g}"
+
+
+def settings_grid(max_areas, method: str = "keep-every", amounts=(4,)) -> list[Setting]:
+    """Every combination of ``max_areas`` (m²) and simplification ``amounts``, areas first."""
+    if not len(max_areas) or not len(amounts):
+        raise FloodMeshError("a scale series needs at least one maximum area and one "
+                             "simplification amount, e.g. --max-areas 400,200,100")
+    if method not in _SHORT:
+        raise FloodMeshError(f"unknown simplification {method!r}; choose from "
+                             f"{', '.join(_SHORT)}")
+    if min(max_areas) <= 0:
+        raise FloodMeshError(f"maximum areas must be positive m², got {list(max_areas)}")
+    return [Setting(float(a), method, float(n)) for a, n in itertools.product(max_areas, amounts)]
+
+
+def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Setting], *,
+                 min_angle: float = 25.0, min_distance: float | None = None, domain=None,
+                 own_lines: list = (), min_spacing: float | None = None,
+                 log: Callable[[str], None] | None = None) -> tuple[list[dict], list[Mesh]]:
+    """Mesh ``dem`` with the ``traced`` break lines once per setting and assess each mesh on the
+    check points ``check_xyz`` (n, 3; m). ``min_distance`` (m) defaults to half a cell;
+    ``domain`` and ``own_lines`` as for ``build_mesh`` (a user's domain and lines);
+    ``min_spacing`` (m; default the cell size, 0 off) as ``run``'s: the detected lines made
+    affordable for a flood model (``hydraulic_lines``).
+
+    Returns one row per setting (``COLUMNS``: errors in metres, ``share_over_25cm`` a fraction)
+    and the meshes, in the order of ``settings``."""
+    min_distance = dem.cell_size / 2 if min_distance is None else min_distance
+    spacing = dem.cell_size if min_spacing is None else min_spacing
+    simplified, domains = {}, {}
+    rows, meshes = [], []
+    for setting in settings:
+        if log:
+            log(f"mesh {setting.label}...")
+        key = (setting.method, setting.amount)
+        if key not in simplified:
+            # the DEM's data, its edge within the setting's tolerance (a user's domain as given)
+            domains[key] = domain if domain is not None else domain_from_dem(
+                dem, tolerance=edge_tolerance(setting.method, setting.amount, dem.cell_size))
+            simplified[key] = [line.coords for line in simplify_breaklines(
+                traced, setting.method, setting.amount, min_distance=min_distance)]
+            if spacing > 0:
+                simplified[key], _ = lines_for_hydraulics(
+                    simplified[key], domains[key], spacing=spacing, own_lines=own_lines)
+        mesh = build_mesh(dem, simplified[key] + list(own_lines), min_angle=min_angle,
+                          max_area=setting.max_area, domain=domains[key])
+        stats = accuracy_statistics(residuals(mesh, check_xyz))
+        rows.append({"label": setting.label, "max_area_m2": setting.max_area,
+                     "simplification": setting.method, "amount": setting.amount,
+                     "nodes": int(len(mesh.nodes)), "triangles": int(len(mesh.triangles)),
+                     "n_assessed": stats["n_assessed"], "rmse_m": stats["rmse_m"],
+                     "mean_m": stats["mean_m"], "max_abs_m": stats["max_abs_residual_m"],
+                     "share_over_25cm": stats["classes"][">25 cm"],
+                     "nssda_pass": stats["nssda_pass"]})
+        meshes.append(mesh)
+    return rows, meshes
+
+
+def write_series_csv(path, rows: list[dict]) -> Path:
+    """The rows as CSV (``COLUMNS``; empty cells for missing values), written atomically."""
+    path = Path(path)
+    with io.atomic_output(path) as tmp:
+        with open(tmp, "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=COLUMNS)
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({k: "" if row[k] is None else row[k] for k in COLUMNS})
+    return path
+
+
+def write_series_png(path, rows: list[dict], *, nssda_threshold_m: float | None = None) -> Path:
+    """Nodes (log scale) against holdout RMSE (cm), one line per simplification, each point
+    labelled with its setting; the NSSDA bound dashed when given."""
+    from ..io.report import new_figure, save_png
+
+    fig = new_figure(8, 5)
+    ax = fig.add_subplot()
+    assessed = [r for r in rows if r["rmse_m"] is not None]
+    for key, group in itertools.groupby(sorted(assessed, key=lambda r: (
+            r["simplification"], r["amount"], r["nodes"])),
+            key=lambda r: (r["simplification"], r["amount"])):
+        group = list(group)
+        ax.plot([r["nodes"] for r in group], [100 * r["rmse_m"] for r in group], "o-",
+                label=f"{key[0]} {key[1]:g}")
+        for r in group:
+            ax.annotate(r["label"], (r["nodes"], 100 * r["rmse_m"]), textcoords="offset points",
+                        xytext=(4, 4), fontsize="small")
+    if nssda_threshold_m is not None:
+        ax.axhline(100 * nssda_threshold_m, color="0.3", linestyle="--",
+                   label=f"NSSDA bound {100 * nssda_threshold_m:.1f} cm")
+    ax.set_xscale("log")
+    ax.set_xlabel("mesh nodes")
+    ax.set_ylabel("holdout RMSE (cm)")
+    ax.set_title("scale series: nodes against terrain error")
+    ax.grid(True, which="both", alpha=0.3)
+    if assessed:
+        ax.legend()
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
+def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting], *,
+               log: Callable[[str], None] | None = None,
+               cancelled: Callable[[], bool] | None = None) -> dict:
+    """Read, grid, slope, breakpoints and trace ``input_path`` once (as ``options`` say), then
+    mesh and assess once per setting; write ``SERIES_FILES`` and ``mesh_<label>.2dm`` per row
+    into ``out_dir``. Returns the series.json content."""
+    out, source = Path(out_dir), open_source(input_path)
+    inputs = run_inputs(source, options)
+    check_output_folder(out, inputs, [*SERIES_FILES, *(f"mesh_{s.label}.2dm" for s in settings)])
+    front = trace_front(source, options, cancelled=cancelled)
+    rows, meshes = scale_series(front.dem, front.traced, front.holdout.xyz, settings,
+                                min_angle=options.min_angle,
+                                min_distance=options.min_distance, domain=front.domain,
+                                own_lines=front.own_lines, min_spacing=options.min_spacing,
+                                log=log)
+    # the folder is replaced as a whole: an interrupt leaves the old series' files or these
+    with staged_folder(out, own=_is_own, keep=inputs) as stage:
+        for row, mesh in zip(rows, meshes):
+            io.write_mesh_2dm(stage / f"mesh_{row['label']}.2dm", mesh.nodes, mesh.triangles)
+        n = max((r["n_assessed"] for r in rows), default=0)
+        threshold = nssda_threshold_m(n)
+        write_series_csv(stage / "series.csv", rows)
+        write_series_png(stage / "series.png", rows,
+                         nssda_threshold_m=None if np.isnan(threshold) else threshold)
+        result = {"input": source.named, "crs": front.dem.crs.to_string(),
+                  "cell_size_m": front.dem.cell_size, "min_angle_deg": options.min_angle,
+                  "n_holdout": len(front.holdout), "holdout_source": front.holdout_source,
+                  "n_breaklines_traced": len(front.traced), "rows": rows,
+                  "files": [*SERIES_FILES, *(f"mesh_{r['label']}.2dm" for r in rows)]}
+        io.write_json(stage / "series.json", result)
+    return io.jsonable(result)

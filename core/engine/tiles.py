@@ -1,0 +1,840 @@
+"""A survey delivered as tiles: LAS/LAZ/XYZ point tiles gridded tile by tile on Dask, and DEM
+tiles (several GeoTIFFs) read as one grid.
+
+Point tiles are gridded in two rounds of Dask tasks. Round one reads each tile, draws its
+holdout points (seeded by the run's seed and the tile's file name, so the same tile always holds
+back the same points, whatever the other tiles) and keeps the tile's edge band: its points
+within two halos of its outline, in a scratch file on a local cluster (on a running scheduler's
+workers, in their memory). Round two grids the DEM in blocks of about one tile
+(``grid.grid_window``): each block re-reads the tile under it and takes its neighbours' edge
+bands, so every TIN triangle that can cover a block cell is formed as in one TIN of all the
+points, and the DEM equals gridding the whole cloud at once (to round-off) with no seam. A
+worker holds one tile's points and one block of cells at a time: peak memory depends on the
+tile size, not on the area.
+
+A folder is read as a surveyor delivers it: its LAS/LAZ (or DEM) files are the tiles, XYZ text
+only by its numbers, and the rest (a README, a tile index, a .prj) is named in a note and left
+out. An empty tile, a sliver of one or two points, a tile over water or without ground go
+through with a note: a sparse tile's points are all edge band, gridded in its neighbours'
+blocks, so the DEM is still the one of all the points. A tile repeating another's points (the
+same tile under two names) is counted once; an unreadable tile is refused by name, or left out
+with a note (``skip_unreadable``). A task's FloodMeshError comes back to the client as a value,
+so the user sees the one message, never a Dask log.
+
+The tasks run on a ``dask.distributed`` cluster: a local one (``workers`` processes, or threads
+where processes cannot be started) or a running scheduler's (``scheduler`` address), whose
+workers must see the tile files at the same paths and have FloodMesh installed.
+"""
+from __future__ import annotations
+
+import contextlib
+import glob
+import math
+import os
+import time
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+from affine import Affine
+from pyproj import CRS
+
+from ..errors import Cancelled, FloodMeshError
+from ..io.outputs import scratch_folder
+from ..raster import Grid, require_metric_crs
+
+LAS_EXTENSIONS = (".las", ".laz")
+XYZ_EXTENSIONS = (".xyz", ".txt", ".csv", ".pts")
+DEM_EXTENSIONS = (".tif", ".tiff", ".vrt", ".asc", ".img")
+GLOB_CHARACTERS = "*?["
+
+
+# ---------------------------------------------------------------------------------------------
+# which files
+def _items(inputs) -> list[str]:
+    if isinstance(inputs, (str, os.PathLike)):
+        return [str(inputs)]
+    return [str(item) for item in inputs]
+
+
+class TileSet(list):
+    """The tile files (Paths) ``expand_tiles`` found, sorted, each once, with its ``notes`` on
+    the files it left out and ``skip_unreadable``: whether an unreadable tile is left out with a
+    note rather than refused. Passed on whole, it keeps both to the gridding."""
+
+    def __init__(self, paths=(), notes=(), skip_unreadable: bool = False):
+        super().__init__(paths)
+        self.notes, self.skip_unreadable = list(notes), skip_unreadable
+
+
+def is_tile_set(inputs) -> bool:
+    """True for several inputs, a folder or a glob pattern; False for one file."""
+    if isinstance(inputs, TileSet):
+        return True
+    items = _items(inputs)
+    return len(items) > 1 or any(Path(i).is_dir() or any(ch in i for ch in GLOB_CHARACTERS)
+                                 for i in items)
+
+
+def is_tile(path: Path) -> bool:
+    """A tile by its name and content: LAS/LAZ and DEM rasters by their extension (one that does
+    not hold what its extension says is a broken tile, named when read), XYZ text only where its
+    first lines are x, y, z numbers (``io.file_format``); hidden files never."""
+    from ..io import file_format
+
+    ext = path.suffix.lower()
+    if path.name.startswith("."):
+        return False
+    return ext in LAS_EXTENSIONS + DEM_EXTENSIONS or (ext in XYZ_EXTENSIONS
+                                                      and file_format(path) == "xyz")
+
+
+def _listed(item: str) -> list[Path]:
+    """The files one input names: a folder's (not recursive), a glob pattern's, or the file."""
+    path = Path(item)
+    if path.is_dir():
+        return sorted(p for p in path.iterdir() if p.is_file())
+    if any(ch in item for ch in GLOB_CHARACTERS) and not path.exists():
+        found = sorted(Path(p) for p in glob.glob(item) if Path(p).is_file())
+        if not found:
+            raise FloodMeshError(f"no file matches {item}: check the pattern (quote it so the "
+                                 "shell does not expand it)")
+        return found
+    if not path.is_file():
+        raise FloodMeshError(f"tile {path} does not exist or is not a file: check the path")
+    return [path]
+
+
+def _listing(names: list[str]) -> str:
+    """The names, those of an extension shared by more than three files counted instead."""
+    groups = {}
+    for name in names:
+        groups.setdefault(Path(name).suffix.lower() or name, []).append(name)
+    return ", ".join(", ".join(group) if len(group) <= 3 else f"{len(group)} {ext} files"
+                     for ext, group in groups.items())
+
+
+def expand_tiles(inputs, *, skip_unreadable: bool = False) -> TileSet:
+    """The tiles of a folder, a glob pattern, a file, or a list of these, sorted, each once
+    (``TileSet``): the files ``is_tile`` takes, but no XYZ text beside LAS/LAZ tiles (check
+    points, a tile index); the others (a README, a .prj, LAStools' .lax) are named in one note
+    and left out. A TileSet is returned as it is."""
+    if isinstance(inputs, TileSet):
+        return inputs if inputs.skip_unreadable or not skip_unreadable else TileSet(
+            inputs, inputs.notes, True)
+    tiles, others = [], []
+    for item in _items(inputs):
+        listed = [p.resolve() for p in _listed(item)]
+        found = {p: None for p in listed if is_tile(p)}
+        if not found and (len(listed) > 1 or Path(item).is_dir()):
+            raise FloodMeshError(f"{item} holds no LAS/LAZ/XYZ point tiles or GeoTIFF DEM "
+                                 "tiles: check the path")
+        tiles += found
+        others += [p for p in listed if p not in found]
+    tiles = list(dict.fromkeys(tiles))
+    if any(p.suffix.lower() in LAS_EXTENSIONS for p in tiles):
+        others += [p for p in tiles if p.suffix.lower() in XYZ_EXTENSIONS]
+        tiles = [p for p in tiles if p.suffix.lower() not in XYZ_EXTENSIONS]
+    if not tiles:
+        raise FloodMeshError(f"none of {', '.join(_items(inputs))} is a LAS/LAZ/XYZ point tile "
+                             "or GeoTIFF DEM tile: check the paths")
+    taken = set(tiles)
+    others = sorted(p.name for p in dict.fromkeys(others) if p not in taken)
+    if len({tile_kind(p) for p in tiles}) > 1:
+        raise FloodMeshError("the tiles mix point files and DEM rasters: give one kind (a folder "
+                             "or pattern of LAS/LAZ/XYZ tiles, or of GeoTIFF DEM tiles)")
+    notes = [f"{len(others)} files beside the tiles are not tiles (LAS/LAZ, GeoTIFF or XYZ text "
+             f"of x, y, z) and were left out: {_listing(others)}"] if others else []
+    return TileSet(tiles, notes, skip_unreadable)
+
+
+def tile_kind(path: Path) -> str:
+    ext = Path(path).suffix.lower()
+    if ext in LAS_EXTENSIONS + XYZ_EXTENSIONS:
+        return "points"
+    if ext in DEM_EXTENSIONS:
+        return "dem"
+    raise FloodMeshError(f"tile {Path(path).name}: unknown file type '{ext}'; tiles are LAS/LAZ "
+                         "or XYZ point files, or GeoTIFF DEMs")
+
+
+# ---------------------------------------------------------------------------------------------
+# checks before any work: every tile readable, one CRS in metres
+@dataclass(frozen=True)
+class PointTile:
+    path: str
+    count: int          # points in the file (all classes; for text an estimate from its size)
+
+
+# the option that leaves unreadable tiles out, on the command line and in QGIS
+SKIP_UNREADABLE = "--skip-unreadable-tiles; in QGIS: Tiles: leave out unreadable tiles"
+
+
+class _Unreadable(FloodMeshError):
+    """A tile that cannot be read: refused, or left out with a note (``SKIP_UNREADABLE``)."""
+
+
+def _unreadable_note(exc: _Unreadable, skip: bool) -> str:
+    """The note on an unreadable tile left out; without ``skip`` it is refused, naming the option
+    that leaves it out."""
+    if not skip:
+        raise FloodMeshError(f"{exc}: replace it, or leave out the unreadable tiles "
+                             f"({SKIP_UNREADABLE})") from None
+    return f"{exc}: the tile was left out ({SKIP_UNREADABLE})"
+
+
+def _tile_header(path: Path) -> tuple[int, object]:
+    """(points in the file, its CRS or None); for text, the count is an estimate from its size."""
+    import laspy
+
+    from ..io import file_format
+
+    if path.suffix.lower() not in LAS_EXTENSIONS:
+        return max(1, path.stat().st_size // 20), None
+    if file_format(path) != "las":
+        raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file (it does not begin "
+                          "with the LAS signature 'LASF')")
+    try:
+        with laspy.open(path) as reader:
+            try:
+                file_crs = reader.header.parse_crs()
+            except Exception:
+                file_crs = None
+            return int(reader.header.point_count), file_crs
+    except Exception as exc:
+        raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file ({exc})") from None
+
+
+def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool = False
+                      ) -> tuple[list[PointTile], CRS, list[str]]:
+    """Read every tile's header; refuse, naming the tile, one that is unreadable (or leave it out
+    with a note, ``skip_unreadable``), without a CRS (unless ``crs`` is given), in a CRS not in
+    metres, or in another CRS than the first. An empty tile is left out with a note. Returns the
+    tiles, their CRS and the notes."""
+    tiles, first, notes = [], None, []
+    for path in map(Path, paths):
+        name = path.name
+        try:
+            count, file_crs = _tile_header(path)
+        except _Unreadable as exc:
+            notes.append(_unreadable_note(exc, skip_unreadable))
+            continue
+        if count == 0:
+            notes.append(f"tile {name} holds no points (its header counts 0): it adds none")
+            continue
+        tile_crs = require_metric_crs(crs if crs is not None else file_crs, f"tile {name}",
+                                      kind="points")
+        if first is None:
+            first = (name, tile_crs)
+        elif not tile_crs.equals(first[1], ignore_axis_order=True):
+            raise FloodMeshError(
+                f"tile {name} is in {tile_crs.name}, but tile {first[0]} is in {first[1].name}: "
+                f"all tiles must share one CRS; reproject {name} to the others' CRS first (pdal "
+                "translate IN OUT -f filters.reprojection --filters.reprojection.out_srs=EPSG:XXXX)")
+        tiles.append(PointTile(str(path), count))
+    if not tiles:
+        raise FloodMeshError(f"none of the {len(paths)} tiles holds points that can be read: "
+                             "check the tiles")
+    return tiles, first[1], notes
+
+
+# ---------------------------------------------------------------------------------------------
+# per-tile work (Dask tasks: plain functions of picklable arguments)
+def holdout_mask(n_points: int, fraction: float, seed: int, name: str) -> np.ndarray:
+    """Which of a tile's ``n_points`` are held out: ``fraction`` of them, drawn from a generator
+    seeded by ``seed`` and the tile's file ``name``, so reproducible tile by tile."""
+    n_out = int(round(fraction * n_points))
+    mask = np.zeros(n_points, dtype=bool)
+    if n_out:
+        rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
+        mask[rng.choice(n_points, size=n_out, replace=False)] = True
+    return mask
+
+
+def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """(xyz, LAS classes or None for text) of all a tile's points, as stored; a tile that cannot
+    be read raises ``_Unreadable`` naming it."""
+    import laspy
+
+    from ..io import read_xyz
+
+    if path.suffix.lower() not in LAS_EXTENSIONS:
+        try:
+            return read_xyz(path), None
+        except FloodMeshError as exc:  # not XYZ text (its message begins with the file's name)
+            if not str(exc).startswith(path.name):
+                raise
+            raise _Unreadable(f"tile {exc}") from None
+    try:
+        las = laspy.read(path)
+    except Exception as exc:
+        raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file ({exc})") from None
+    xyz = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
+    return xyz, np.asarray(las.classification)
+
+
+def _which(classes) -> str:
+    return "ground points (class 2)" if classes is None else f"points of classes {sorted(classes)}"
+
+
+def _kept(xyz: np.ndarray, cls, classes, name: str, notes=None) -> tuple[np.ndarray, str]:
+    """(the tile's points of ``classes``, or as one file keeps them (``io.classes_kept``: the
+    ground, or all of an unclassified tile), what was kept: "given", "ground", "whole" (an
+    unclassified tile), "text" (XYZ) or "none" (a tile over water or without ground, with a
+    note: its neighbours' points grid its ground))."""
+    from ..io import GROUND_CLASS, classes_kept
+
+    if cls is None:
+        return xyz, "text"
+    try:
+        kept = classes_kept(xyz, cls, classes, name, notes.append if notes is not None else None)
+    except FloodMeshError:
+        if notes is not None:
+            present = ", ".join(str(c) for c in np.unique(cls))
+            notes.append(f"tile {name} holds no {_which(classes)}, only classes {present}: it "
+                         "adds none")
+        return xyz[:0], "none"
+    if classes is not None:
+        return kept, "given"
+    return kept, "ground" if (cls == GROUND_CLASS).any() else "whole"
+
+
+def _usable(xyz: np.ndarray, crs_wkt: str, name: str, notes: list) -> tuple[np.ndarray, bool]:
+    """(the finite points, whether they are too few or too close to a line to make a terrain
+    model alone): ``points.clean_points``' checks and notes, but a sparse tile's points are kept
+    for its neighbours' blocks to grid."""
+    from ..points import clean_points
+
+    try:
+        return clean_points(xyz, crs_wkt, f"tile {name}", note=notes.append).xyz, False
+    except FloodMeshError:  # fewer than 3, or at one place or on one line
+        return xyz[np.isfinite(xyz).all(axis=1)], True
+
+
+def _digest(xyz: np.ndarray, chunk: int = 1 << 20) -> tuple[int, int]:
+    """(count, hash) of a tile's points to 0.1 mm, whatever their order: two tiles with the same
+    digest hold the same points. A million points at a time, to hold little beside the tile."""
+    total = 0
+    for start in range(0, len(xyz), chunk):
+        with np.errstate(invalid="ignore"):  # points without x, y or z: one key each
+            keys = np.rint(xyz[start:start + chunk] * 1e4).astype(np.int64).view(np.uint64)
+        mixed = (keys[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (keys[:, 1] * np.uint64(
+            0xC2B2AE3D27D4EB4F)) ^ (keys[:, 2] * np.uint64(0x165667B19E3779F9))
+        mixed ^= mixed >> np.uint64(31)
+        mixed *= np.uint64(0xBF58476D1CE4E5B9)
+        mixed ^= mixed >> np.uint64(29)
+        total = (total + int(mixed.sum(dtype=np.uint64))) % (1 << 64)
+    return len(xyz), total
+
+
+def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int, notes=None, *,
+               checked: bool = False) -> dict:
+    """A tile's gridding and held-out points, what was kept (``_kept``), and with ``notes`` (round
+    one) the digest of all its points and whether it is sparse (``_usable``); ``checked``: round
+    two, which only re-reads the tile and drops the same non-finite points."""
+    name = Path(path).name
+    xyz, cls = _read_raw(Path(path))
+    digest = None if checked else _digest(xyz)
+    kept, kind = _kept(xyz, cls, classes, name, notes)
+    del xyz, cls
+    if checked:
+        kept, sparse = kept[np.isfinite(kept).all(axis=1)], False
+    else:
+        kept, sparse = _usable(kept, crs_wkt, name, notes if notes is not None else [])
+    held = holdout_mask(len(kept), holdout, seed, name)
+    return {"gridding": kept[~held], "held": kept[held], "kind": kind, "digest": digest,
+            "sparse": sparse}
+
+
+def _tile_points(path: str, crs_wkt: str, classes, holdout: float, seed: int, notes=None, *,
+                 checked: bool = False):
+    """(gridding xyz, held-out xyz) of one tile (``_tile_read``)."""
+    tile = _tile_read(path, crs_wkt, classes, holdout, seed, notes, checked=checked)
+    return tile["gridding"], tile["held"]
+
+
+def _within(xyz: np.ndarray, box) -> np.ndarray:
+    xmin, ymin, xmax, ymax = box
+    return ((xyz[:, 0] >= xmin) & (xyz[:, 0] <= xmax) & (xyz[:, 1] >= ymin)
+            & (xyz[:, 1] <= ymax))
+
+
+def read_tile(path: str, crs_wkt: str, classes, holdout: float, seed: int, band: float,
+              spill: str | None = None) -> dict:
+    """Round one: a tile's figures, held-out points and edge band (points within ``band`` m of
+    its outline): the points, or with ``spill`` (a file path) the path of the ``.npy`` file
+    they were written to. A sparse tile's points are all edge band: its neighbours' blocks grid
+    them. An unreadable tile gives its message (``unreadable``) for the client to decide."""
+    from .limits import footprint
+
+    notes = []
+    try:
+        tile = _tile_read(path, crs_wkt, classes, holdout, seed, notes)
+    except _Unreadable as exc:
+        return {"path": path, "unreadable": str(exc)}
+    xyz, held = tile.pop("gridding"), tile.pop("held")
+    result = {"path": path, "bounds": None, "n_points": len(xyz) + len(held),
+              "n_gridding": len(xyz), "area": 0.0, "holdout": held, "notes": notes,
+              "edge": None, **tile}
+    if not len(xyz):
+        return result
+    lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
+    inner = (lo[0] + band, lo[1] + band, hi[0] - band, hi[1] - band)
+    edge = ~_within(xyz, inner) if inner[0] < inner[2] and inner[1] < inner[3] else np.ones(
+        len(xyz), bool)
+    edge = np.ascontiguousarray(xyz[edge])
+    if spill is not None:
+        np.save(spill, edge)
+        edge = spill
+    result.update(bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+                  area=footprint(xyz[:, :2])[0], edge=edge)
+    return result
+
+
+@dataclass(frozen=True)
+class _Failed:
+    """A task's FloodMeshError, returned as a value (``_task``)."""
+    message: str
+
+
+def _task(function, *args):
+    """``function(*args)`` on a worker; its FloodMeshError comes back as a value that the client
+    raises again (``_as_completed``), so that Dask logs no failed task: its log and traceback
+    would reach the user's terminal or QGIS log before the one clean message."""
+    try:
+        return function(*args)
+    except FloodMeshError as exc:
+        return _Failed(str(exc))
+
+
+def _figures(result):
+    return result if isinstance(result, _Failed) else {
+        k: v for k, v in result.items() if k != "edge"}
+
+
+def _edge(result):
+    return None if isinstance(result, _Failed) else result.get("edge")
+
+
+def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes, holdout: float,
+               seed: int) -> np.ndarray:
+    """Round two: the cells of one block, from the tiles under it (``full``: paths, re-read) and
+    its neighbours' edge bands (``edges``: arrays, or ``.npy`` files read in place)."""
+    from ..steps.grid import grid_window
+
+    box = window["box"]
+    parts = []
+    for edge in edges:
+        xyz = np.load(edge, mmap_mode="r") if isinstance(edge, str) else edge
+        parts.append(np.array(xyz[_within(xyz, box)]))
+        del xyz
+    for path in full:
+        xyz = _tile_points(path, crs_wkt, classes, holdout, seed, checked=True)[0]
+        parts.append(xyz[_within(xyz, box)])
+    xyz = np.concatenate(parts) if parts else np.empty((0, 3))
+    return grid_window(xyz, window["cell_size"], window["max_gap"], window["x0"], window["y1"],
+                       window["rows"], window["cols"], workers=1)
+
+
+# ---------------------------------------------------------------------------------------------
+# the cluster
+@contextlib.contextmanager
+def dask_client(workers: int | None = None, scheduler: str | None = None, *,
+                processes: bool = True):
+    """A ``distributed.Client``: of the running scheduler at ``scheduler`` (tcp://HOST:8786), or
+    of a local cluster of ``workers`` (default: one per core) single-threaded processes
+    (``processes=False``: threads, for hosts such as QGIS that cannot start Python processes)."""
+    import logging
+
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except Exception as exc:
+            raise FloodMeshError(f"cannot reach the Dask scheduler at {scheduler} ({exc}): check "
+                                 "the address (tcp://HOST:8786) and that `dask scheduler` runs "
+                                 "there") from None
+        with client:
+            yield client
+        return
+    workers = workers or os.cpu_count() or 1
+    if workers < 1:
+        raise FloodMeshError(f"--workers must be at least 1, got {workers}")
+    # Nothing of Dask's reaches the user's terminal or QGIS log: a task's FloodMeshError comes
+    # back as a value (``_task``); distributed's own logs are silenced below CRITICAL (a failure
+    # or a cancel mid-round otherwise logs the workers' closed connections as they stop); no
+    # dashboard, and the scheduler's HTTP server on a free local port, not 8787, which may be
+    # taken (distributed then warns).
+    # the workers' scratch (dask-scratch-space) in a folder of ours, removed with it
+    with scratch_folder("dask") as scratch, \
+            dask.config.set({"temporary-directory": scratch}), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=processes,
+                         dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
+                         memory_limit=0, silence_logs=logging.CRITICAL,
+                         local_directory=scratch) as cluster, \
+            Client(cluster) as client:
+        yield client
+
+
+@contextlib.contextmanager
+def _band_folder(scheduler: str | None):
+    """A scratch folder for round one's edge bands where the workers share this disk (a local
+    cluster), removed at the end; None for a running scheduler's workers, which may be on other
+    machines and keep the bands in their memory."""
+    if scheduler:
+        yield None
+        return
+    with scratch_folder("bands") as folder:
+        yield folder
+
+
+def _as_completed(client, futures, *, progress, cancelled, base: float, weight: float):
+    """Yield (index, result) as the tasks finish, reporting progress and polling cancellation;
+    on a failure or a cancel the remaining tasks are cancelled."""
+    pending = dict(enumerate(futures))
+    total = max(1, len(futures))
+    try:
+        while pending:
+            if cancelled is not None and cancelled():
+                raise Cancelled()
+            finished = [i for i, f in pending.items() if f.done()]
+            if not finished:
+                time.sleep(0.05)
+                continue
+            for i in finished:
+                future = pending.pop(i)
+                result = future.result()
+                if isinstance(result, _Failed):  # a task's FloodMeshError (``_task``)
+                    raise FloodMeshError(result.message)
+                if progress:
+                    progress(base + weight * (1 - len(pending) / total))
+                yield i, result
+    finally:
+        if pending:
+            client.cancel(list(pending.values()))
+
+
+# ---------------------------------------------------------------------------------------------
+# gridding a tile set
+@dataclass
+class TiledDem:
+    dem: Grid | None         # the whole DEM in memory (``keep=True``), else None
+    holdout: np.ndarray      # (n, 3) held-out points of all tiles
+    n_points: int            # points read, holdout included
+    n_tiles: int
+    area: float              # m² the points cover
+    notes: list
+    crs: CRS
+
+
+def _tiles_counted(meta: list, classes, skip_unreadable: bool, notes: list) -> list[int]:
+    """The tiles (indices into round one's ``meta``) whose points count, after leaving out, each
+    with a note: unreadable tiles (or refusing them, ``_unreadable_note``), tiles repeating an
+    earlier tile's points (a copy under another name), and, where the other tiles are
+    classified, tiles without ground taken whole as unclassified (one file of all the points
+    keeps only the ground). Their own notes and those on sparse tiles join ``notes``."""
+    from ..io import GROUND_CLASS
+
+    counted, seen = [], {}
+    for i, m in enumerate(meta):
+        name = Path(m["path"]).name
+        if "unreadable" in m:
+            notes.append(_unreadable_note(_Unreadable(m["unreadable"]), skip_unreadable))
+        elif m["digest"][0] and m["digest"] in seen:
+            first = Path(meta[seen[m["digest"]]]["path"]).name
+            notes.append(f"tile {name} repeats the {m['digest'][0]:,} points of tile {first} "
+                         f"(the same tile twice): they are counted once, {name} is left out")
+        else:
+            seen.setdefault(m["digest"], i)
+            counted.append(i)
+    if classes is None and any(meta[i]["kind"] == "ground" for i in counted):
+        for i in [i for i in counted if meta[i]["kind"] == "whole"]:
+            counted.remove(i)
+            notes.append(f"tile {Path(meta[i]['path']).name} holds no ground points (class "
+                         f"{GROUND_CLASS}), unlike the other tiles: its unclassified points are "
+                         "left out")
+    for i in counted:
+        m = meta[i]
+        notes += m["notes"]
+        if m["sparse"] and m["n_gridding"]:
+            n = m["n_gridding"]
+            notes.append(f"tile {Path(m['path']).name} holds only {n:,} usable "
+                         f"point{'s' * (n > 1)}, too few or too close to a line for a terrain "
+                         "model of its own: gridded with its neighbours' points")
+    return counted
+
+
+def _check_enough(n_gridding: int, n_tiles: int, classes) -> None:
+    if n_gridding < 3:
+        raise FloodMeshError(
+            f"the {n_tiles} tiles hold {n_gridding} usable {_which(classes)} together; at "
+            "least 3 are needed to make a terrain model: check the tiles and the classes to "
+            "grid (--classes, 'LAS classes' in QGIS)")
+
+
+def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
+                     crs=None, classes=None, holdout: float = 0.0, seed: int = 0,
+                     out_path=None, keep: bool = True, dtype: str = "float32",
+                     workers: int | None = None,
+                     scheduler: str | None = None, processes: bool = True,
+                     progress: Callable[[float], None] | None = None,
+                     cancelled: Callable[[], bool] | None = None,
+                     check: Callable[[dict], None] | None = None,
+                     skip_unreadable: bool = False) -> TiledDem:
+    """Grid LAS/LAZ/XYZ tiles (a folder, glob, list or ``TileSet``) to one DEM of ``cell_size``
+    m, tile by tile on Dask (see the module). The DEM is written block by block to ``out_path``
+    (a tiled GeoTIFF of ``dtype``: float32 compressed, or float64 as gridded) when given, and
+    kept in memory when ``keep``. ``check`` receives the layout (``check_layout``'s dict) before
+    round two, to refuse a run before its main work. Files that are not tiles, empty and sparse
+    tiles, tiles without the classes gridded and repeated tiles go through with a note;
+    unreadable tiles are refused by name, or left out with a note with ``skip_unreadable``."""
+    from ..steps.grid import check_layout, halo_width
+    from ..io import GROUND_CLASS
+    from .limits import check_memory
+    from ..options import check_cell_size, check_holdout, check_holdout_count, check_max_gap
+
+    cell_size = check_cell_size(cell_size)
+    check_max_gap(max_gap)
+    check_holdout(holdout)
+    paths = expand_tiles(inputs, skip_unreadable=skip_unreadable)
+    if tile_kind(paths[0]) != "points":
+        raise FloodMeshError("these tiles are DEM rasters: grid takes point tiles (LAS/LAZ/XYZ); "
+                             "give the DEM tiles to run directly")
+    tiles, tile_crs, checked = check_point_tiles(paths, crs=crs,
+                                                 skip_unreadable=paths.skip_unreadable)
+    notes = paths.notes + checked
+    crs_wkt = tile_crs.to_wkt()
+    halo = halo_width(cell_size, cell_size * 10 if max_gap is None else max_gap)
+    band = 2 * halo
+    largest = max(t.count for t in tiles)
+    with _band_folder(scheduler) as bands, \
+            dask_client(workers, scheduler, processes=processes) as client:
+        parallel = 1 if scheduler else sum(client.nthreads().values()) or 1
+        # A worker reads one tile (all classes) and grids a block of about its size.
+        check_memory(points=largest * parallel, advice=f"the largest tile holds {largest:,} "
+                     "points: give fewer --workers or cut the survey into smaller tiles")
+        firsts = [client.submit(_task, read_tile, t.path, crs_wkt, classes, holdout, seed, band,
+                                bands and os.path.join(bands, f"band-{i}.npy"),
+                                key=f"read-{i}-{Path(t.path).name}")
+                  for i, t in enumerate(tiles)]
+        figures = [client.submit(_figures, f) for f in firsts]
+        edges = [client.submit(_edge, f) for f in firsts]
+        meta = [None] * len(tiles)
+        for i, result in _as_completed(client, figures, progress=progress, cancelled=cancelled,
+                                       base=0.0, weight=0.3):
+            meta[i] = result
+        del firsts
+        indices = _tiles_counted(meta, classes, paths.skip_unreadable, notes)
+        counted = [meta[i] for i in indices]
+        gridded = [i for i in indices if meta[i]["n_gridding"]]  # sparse tiles too
+        n_points = sum(m["n_points"] for m in counted)
+        n_gridding = sum(m["n_gridding"] for m in counted)
+        _check_enough(n_gridding, len(tiles), classes)
+        if classes is None and any(m["kind"] == "ground" for m in counted):
+            classes = (GROUND_CLASS,)  # round two re-reads tiles with ground: their ground
+        check_holdout_count(holdout, n_points)
+        bounds = (min(meta[i]["bounds"][0] for i in gridded),
+                  min(meta[i]["bounds"][1] for i in gridded),
+                  max(meta[i]["bounds"][2] for i in gridded),
+                  max(meta[i]["bounds"][3] for i in gridded))
+        area = sum(m["area"] for m in counted)
+        widths = [max(meta[i]["bounds"][2] - meta[i]["bounds"][0],
+                      meta[i]["bounds"][3] - meta[i]["bounds"][1]) for i in gridded]
+        block = max(256, int(round(float(np.median(widths)) / cell_size)))
+        per_block = int(largest * (1 + 8 * band * cell_size * block
+                                   / max(max(widths), cell_size) ** 2))
+        plan = check_layout(bounds, n_gridding, area, cell_size, max_gap,
+                            memory_points=per_block * parallel,
+                            memory_cells=block * block * parallel, advice=(
+                                "give a larger cell size, fewer --workers or smaller tiles"))
+        rows, cols, x0, y1 = plan["rows"], plan["cols"], plan["x0"], plan["y1"]
+        if keep:
+            check_memory(cells=rows * cols, points=per_block * parallel,
+                         advice="give a larger cell size, or grid the tiles alone "
+                                "(floodmesh grid TILES --out dem.tif) and mesh a part")
+        if check is not None:
+            check(plan)
+        transform = Affine(cell_size, 0.0, x0, 0.0, -cell_size, y1)
+        tasks, windows = [], []
+        for r0 in range(0, rows, block):
+            for c0 in range(0, cols, block):
+                r1, c1 = min(rows, r0 + block), min(cols, c0 + block)
+                bx0, by1 = x0 + c0 * cell_size, y1 - r0 * cell_size
+                bx1, by0 = x0 + c1 * cell_size, y1 - r1 * cell_size
+                box = (bx0 - halo, by0 - halo, bx1 + halo, by1 + halo)
+                full, near = [], []
+                for i in gridded:
+                    tb = meta[i]["bounds"]
+                    if tb[0] > box[2] or tb[2] < box[0] or tb[1] > box[3] or tb[3] < box[1]:
+                        continue
+                    inner = (tb[0] + band, tb[1] + band, tb[2] - band, tb[3] - band)
+                    reaches_inner = (inner[0] < inner[2] and inner[1] < inner[3]
+                                     and box[0] <= inner[2] and box[2] >= inner[0]
+                                     and box[1] <= inner[3] and box[3] >= inner[1])
+                    if reaches_inner:
+                        full.append(tiles[i].path)
+                    else:
+                        near.append(edges[i])
+                window = {"box": box, "x0": bx0, "y1": by1, "rows": r1 - r0, "cols": c1 - c0,
+                          "cell_size": cell_size, "max_gap": plan["max_gap"]}
+                windows.append((r0, c0))
+                tasks.append(client.submit(_task, grid_block, window, full, near, crs_wkt,
+                                           classes, holdout, seed, key=f"grid-{r0}-{c0}"))
+        # the edge bands, some 17 MB a km² at 9 points/m² and 1 m cells, are the one term of the
+        # gridding that grows with the area: on a local cluster they wait in scratch files;
+        # a remote scheduler's workers hold them, each dropped from the cluster when the last
+        # block taking it is done
+        edges = near = None
+        values = np.full((rows, cols), np.nan) if keep else None
+        any_valid = False
+        with _dem_writer(out_path, rows, cols, transform, tile_crs, dtype) as write:
+            for i, block_values in _as_completed(client, tasks, progress=progress,
+                                                 cancelled=cancelled, base=0.3, weight=0.7):
+                r0, c0 = windows[i]
+                tasks[i] = None  # let the cluster forget the block
+                any_valid = any_valid or bool(np.isfinite(block_values).any())
+                if keep:
+                    values[r0:r0 + block_values.shape[0], c0:c0 + block_values.shape[1]] = \
+                        block_values
+                write(r0, c0, block_values)
+            if not any_valid:
+                raise FloodMeshError(
+                    f"no grid cell is covered by the points at a gap limit of {plan['max_gap']} "
+                    "m; the points are too sparse for this cell size: raise the cell size or "
+                    "the max gap")
+    held = np.concatenate([m["holdout"] for m in counted])
+    return TiledDem(Grid(values, transform, tile_crs) if keep else None, held, n_points,
+                    len(counted), area, notes, tile_crs)
+
+
+@contextlib.contextmanager
+def _dem_writer(path, rows: int, cols: int, transform, crs: CRS, dtype: str = "float32"):
+    """``write(row0, col0, values)`` into a tiled GeoTIFF (BigTIFF when needed) at ``path``, put
+    in place only when complete; a no-op writer without ``path``. float32 is compressed; float64
+    (the gridded values themselves, for the raster steps of ``run``) is not, as blocks writes
+    floats."""
+    if path is None:
+        yield lambda r0, c0, values: None
+        return
+    import rasterio
+    from rasterio.windows import Window
+
+    from ..io import atomic_output
+
+    nodata = -9999.0
+    profile = dict(driver="GTiff", height=rows, width=cols, count=1, dtype=dtype,
+                   crs=crs.to_wkt(), transform=transform, nodata=nodata, tiled=True,
+                   blockxsize=256, blockysize=256, BIGTIFF="IF_SAFER",
+                   **({"compress": "deflate"} if dtype == "float32" else {}))
+    with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
+        def write(r0, c0, values):
+            out = np.where(np.isfinite(values), values, nodata).astype(dtype)
+            dst.write(out, 1, window=Window(c0, r0, out.shape[1], out.shape[0]))
+        yield write
+
+
+def slope_file64(dem_path, slope_path, method: str, *, crs=None, cancelled=None) -> Path:
+    """Slope (degrees) of a float64 DEM file into a float64 file, block by block with a one-cell
+    halo (``blocks.map_raster``), never holding the whole raster: the very numbers of
+    ``slope.slope`` on the DEM in memory, as the kernel is the same and reads float64 (the
+    float32 ``slope.slope_file`` rounds the DEM first). ``breakpoints.breakpoints_file`` with
+    ``input_dtype=np.float64`` then gives ``classify_breakpoints``' breakpoints."""
+    from .blocks import cell_size, map_raster
+    from ..steps.slope import slope_block
+
+    d = cell_size(dem_path)
+    map_raster(dem_path, slope_path, lambda padded: slope_block(padded, d, method), halo=1,
+               dtype="float64", input_dtype=np.float64, crs=crs, cancelled=cancelled)
+    return Path(slope_path)
+
+
+def read_back(path, crs: CRS) -> Grid:
+    """A raster a run wrote (float64 with its nodata, or breakpoints: uint8, nodata 255) as the
+    Grid the steps in memory give: float64 with NaN, breakpoints 0 or 1."""
+    import rasterio
+
+    from ..io import read_band
+
+    with rasterio.open(path) as src:
+        if np.dtype(src.dtypes[0]) == np.uint8:
+            values = src.read(1)
+            values[values == src.nodata] = 0
+        else:
+            values = read_band(src)
+        return Grid(values, src.transform, crs)
+
+
+def write_front_rasters(files: dict, out) -> None:
+    """slope.tif (float32, as ``io.write_raster`` writes the slope in memory) and
+    breakpoints.tif of a run into ``out``, block by block from ``files`` (``slope``,
+    ``breakpoints``: the float64 slope and the breakpoints files)."""
+    import shutil
+
+    from .blocks import map_raster
+
+    map_raster(files["slope"], Path(out) / "slope.tif", lambda padded: padded, halo=0,
+               input_dtype=np.float64)
+    shutil.copyfile(files["breakpoints"], Path(out) / "breakpoints.tif")
+
+
+# ---------------------------------------------------------------------------------------------
+# DEM tiles
+def read_dem_tiles(inputs, *, crs=None) -> Grid:
+    """Several GeoTIFF DEM tiles (a folder, glob or list) as one Grid, after checking each: one
+    CRS in metres, the same cell size, cells aligned across tiles."""
+    import rasterio
+    from rasterio.merge import merge
+
+    from .limits import check_memory
+    from ..raster import check_transform
+
+    paths = expand_tiles(inputs)
+    if tile_kind(paths[0]) != "dem":
+        raise FloodMeshError("expected DEM tiles (GeoTIFF); these are point tiles")
+    first, sources = None, []
+    with contextlib.ExitStack() as stack:
+        for path in paths:
+            name = path.name
+            try:
+                src = stack.enter_context(rasterio.open(path))
+            except rasterio.errors.RasterioIOError as exc:
+                raise FloodMeshError(f"tile {name} is not a readable raster ({exc}): replace it "
+                                     "or leave it out") from None
+            check_transform(src.transform, f"tile {name}")
+            tile_crs = require_metric_crs(crs if crs is not None else
+                                          (src.crs.to_wkt() if src.crs else None),
+                                          f"tile {name}", kind="raster")
+            if first is None:
+                first = (name, tile_crs, src.transform)
+            else:
+                if not tile_crs.equals(first[1], ignore_axis_order=True):
+                    raise FloodMeshError(
+                        f"tile {name} is in {tile_crs.name}, but tile {first[0]} is in "
+                        f"{first[1].name}: all tiles must share one CRS; reproject {name} first "
+                        "(gdalwarp -t_srs EPSG:XXXX IN OUT)")
+                t, t0 = src.transform, first[2]
+                offset = ((t.c - t0.c) / t0.a, (t.f - t0.f) / t0.e)
+                if not np.isclose(t.a, t0.a, rtol=1e-9) or not all(
+                        abs(o - round(o)) < 1e-6 for o in offset):
+                    raise FloodMeshError(
+                        f"tile {name} has cells of {t.a:g} m at ({t.c:g}, {t.f:g}), not on the "
+                        f"grid of tile {first[0]} ({t0.a:g} m cells): resample it onto that "
+                        f"grid first (gdalwarp -tr {t0.a:g} {t0.a:g} -tap IN OUT)")
+            sources.append(src)
+        xmin = min(s.bounds.left for s in sources)
+        xmax = max(s.bounds.right for s in sources)
+        ymin = min(s.bounds.bottom for s in sources)
+        ymax = max(s.bounds.top for s in sources)
+        d = first[2].a
+        check_memory(cells=int(math.ceil((xmax - xmin) / d) * math.ceil((ymax - ymin) / d)),
+                     advice="resample the DEM tiles to larger cells")
+        mosaic, transform = merge(sources, nodata=np.nan, dtype="float64")
+    values = mosaic[0].astype(np.float64)
+    values[~np.isfinite(values)] = np.nan
+    if not np.isfinite(values).any():
+        raise FloodMeshError("the DEM tiles have no valid cells: check their nodata value")
+    return Grid(values, transform, first[1])

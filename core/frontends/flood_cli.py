@@ -1,0 +1,115 @@
+"""The ``floodmesh flood`` and ``floodmesh compare`` commands (added to ``cli.py``'s parser)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def cmd_flood(args):
+    from .console import ProgressBar, print_notes
+    from ..flood.compare import compare_floods
+    from ..flood.model import load_scenario, run_flood
+
+    scenario = load_scenario(args.scenario)
+    runs = [(args.mesh, Path(args.out) if not args.reference else Path(args.out) / "mesh")]
+    if args.reference:
+        runs.append((args.reference, Path(args.out) / "reference"))
+    reports = []
+    for mesh, out in runs:
+        bar = ProgressBar(f"flood {Path(mesh).stem}")
+        try:
+            reports.append(run_flood(mesh, scenario, out, crs=args.crs, progress=bar,
+                                     log=bar.log))
+        finally:
+            bar.close()
+        print_notes(reports[-1]["notes"])
+        print(_summary(reports[-1], out))
+        if args.size_field_area:
+            print(_write_flow_fields(out, args.size_field_area, reports[-1]))
+    if args.reference:
+        print(_comparison(compare_floods(runs[0][1], runs[1][1], args.out,
+                                         cell_size=args.cell_size)))
+
+
+def _write_flow_fields(out: Path, wet_area: float, report: dict) -> str:
+    """size_field.tif and wet_zone.gpkg from the run's max depth, for a second mesh."""
+    from .. import io
+    from ..steps.hydraulic_lines import flood_size_field, wet_zone
+
+    depth = io.read_raster(out / "max_depth.tif")
+    wet = report["scenario"]["wet_depth_m"]
+    io.write_raster(out / "size_field.tif", flood_size_field(depth, wet_area=wet_area,
+                                                             wet_depth=wet))
+    write_zone(out / "wet_zone.gpkg", wet_zone(depth, wet_depth=wet), depth.crs)
+    return (f"size_field.tif ({wet_area} m² where it flooded) and wet_zone.gpkg written: "
+            f"floodmesh run DEM --size-field {out}/size_field.tif --flow-zone "
+            f"{out}/wet_zone.gpkg meshes for this flood")
+
+
+def write_zone(path, zone, crs) -> None:
+    """A (Multi)Polygon as a GeoPackage of polygons (layer wet_zone)."""
+    import shapely.geometry
+
+    from .. import io
+
+    parts = list(getattr(zone, "geoms", [zone]))
+    io.write_gpkg(path, "wet_zone", "Polygon", {"id": "int"},
+                   ({"geometry": shapely.geometry.mapping(g), "properties": {"id": k + 1}}
+                    for k, g in enumerate(parts)), crs)
+
+
+def _summary(report: dict, out) -> str:
+    h, mb = report["hydraulics"], report["mass_balance"]
+    return (f"{report['nodes']} nodes, {report['triangles']} triangles: ANUGA {report['cpu_s']:.1f} s "
+            f"CPU, {report['time_steps']} steps (mean {report['mean_time_step_s']:.3g} s; "
+            f"smallest inradius {h['min_inradius_m']:.3g} m); flooded "
+            f"{report['flooded_area_m2']:.0f} m², max depth {report['max_depth_m']:.2f} m, "
+            f"mass balance error {mb['error_m3']:.3g} m³ ({100 * mb['relative_error']:.2g} %)\n"
+            f"written to {out}/")
+
+
+def _comparison(c: dict) -> str:
+    lines = [f"extent IoU {c['extent_iou']:.3f}, max-depth RMSE {c['max_depth_rmse_m']:.3f} m "
+             f"(bias {c['max_depth_bias_m']:+.3f} m), CPU {c['mesh_cpu_s']:.1f} s against "
+             f"{c['reference_cpu_s']:.1f} s ({c['cpu_ratio']:.2f}x)"]
+    for o in c["observations"]:
+        if o["difference_m"] is not None:
+            lines.append(f"  {o['name']}: peak stage {o['mesh_peak_stage_m']:.2f} m, "
+                         f"reference {o['reference_peak_stage_m']:.2f} m")
+    return "\n".join(lines)
+
+
+def cmd_compare(args):
+    from ..flood.compare import compare_floods
+
+    print(_comparison(compare_floods(args.mesh_run, args.reference_run, args.out,
+                                     cell_size=args.cell_size)))
+    print(f"comparison.json, depth_difference.tif and extent_difference.tif written to "
+          f"{args.out}/")
+
+
+def add_flood_commands(sub) -> None:
+    p = sub.add_parser("flood", help="run a flood on a mesh with ANUGA: max depth, level, speed "
+                                     "and arrival rasters, outflow hydrograph, mass balance")
+    p.add_argument("mesh", help="SMS 2DM mesh (e.g. mesh.2dm of floodmesh run)")
+    p.add_argument("--scenario", required=True, help="scenario JSON: inflows, boundaries, "
+                   "roughness, buildings, duration (see docs/user-guide.md, The scenario)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--crs", help="CRS of the mesh (default: that of mesh.gpkg or dem.tif "
+                                 "beside it)")
+    p.add_argument("--reference", metavar="MESH", help="also run the scenario on this mesh "
+                   "and compare (results in OUT/mesh, OUT/reference, comparison in OUT)")
+    p.add_argument("--cell-size", type=float, default=1.0,
+                   help="grid of the comparison, m (default %(default)s)")
+    p.add_argument("--size-field-area", type=float, metavar="M2",
+                   help="also write size_field.tif (M2 where it flooded, 5 m around) and "
+                        "wet_zone.gpkg, for a second mesh (run --size-field, --flow-zone)")
+    p.set_defaults(func=cmd_flood)
+
+    p = sub.add_parser("compare", help="compare two flood runs: extent IoU, max-depth RMSE and "
+                                       "bias, arrival times, observation stages, cost")
+    p.add_argument("mesh_run", help="output folder of floodmesh flood on the mesh to judge")
+    p.add_argument("reference_run", help="output folder of floodmesh flood on the reference")
+    p.add_argument("--out", required=True, help="folder for comparison.json and the maps")
+    p.add_argument("--cell-size", type=float, default=1.0,
+                   help="grid of the comparison, m (default %(default)s)")
+    p.set_defaults(func=cmd_compare)

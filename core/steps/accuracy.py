@@ -1,0 +1,88 @@
+"""Accuracy assessment: held-out LiDAR points against the mesh's TIN.
+
+Residual = measured z − TIN z, the TIN z interpolated linearly (barycentric) in the triangle that
+holds the point. Statistics follow the method: RMSE, mean, skew, 1.96·RMSE (95 % accuracy,
+NSSDA), the FEMA/NSSDA sample test and the residual classes <10 cm, 10–25 cm, >25 cm.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .mesh import Mesh
+
+CLASS_LIMITS_M = (0.10, 0.25)
+CLASS_NAMES = ("<10 cm", "10-25 cm", ">25 cm")
+
+
+def tin_elevation(mesh: Mesh, x, y) -> np.ndarray:
+    """Linear interpolation of the mesh's node elevations at (x, y); NaN outside the mesh."""
+    from .._kernels.mesh import locate
+
+    points = np.column_stack([np.ravel(x), np.ravel(y)]).astype(float)
+    return locate(mesh.nodes, mesh.triangles, points, mesh.nodes[:, 2])[1]
+
+
+def residuals(mesh: Mesh, points_xyz: np.ndarray) -> np.ndarray:
+    """Measured minus TIN elevation (m) for each point; NaN for points outside the mesh."""
+    if not len(points_xyz):  # holdout 0: no accuracy test
+        return np.empty(0)
+    return points_xyz[:, 2] - tin_elevation(mesh, points_xyz[:, 0], points_xyz[:, 1])
+
+
+def assess(mesh: Mesh, points_xyz: np.ndarray, *, alpha: float | None = None,
+           delta: float | None = None) -> tuple[np.ndarray, dict]:
+    """Step 8: the residuals of held-out points against the mesh's TIN (m, NaN outside it) and
+    their statistics (``accuracy_statistics``: RMSE, NSSDA test, classes, E = RMSE + α·Δ)."""
+    res = residuals(mesh, points_xyz)
+    return res, accuracy_statistics(res, alpha=alpha, delta=delta)
+
+
+def residual_class(res: np.ndarray) -> np.ndarray:
+    """0, 1, 2 for |residual| <10 cm, 10–25 cm, >25 cm; -1 where the residual is NaN."""
+    a = np.abs(res)
+    cls = np.digitize(a, CLASS_LIMITS_M).astype(np.int64)
+    return np.where(np.isfinite(res), cls, -1)
+
+
+def nssda_threshold_m(n: int) -> float:
+    """FEMA/NSSDA sample test bound: RMSE_sample ≤ 15·√(((n−1) − 2.326·√(n−1))/n) cm, in metres.
+
+    NaN when n is too small for the bound to exist (n < 7).
+    """
+    if n < 2:
+        return math.nan
+    inner = ((n - 1) - 2.326 * math.sqrt(n - 1)) / n
+    return 0.15 * math.sqrt(inner) if inner > 0 else math.nan
+
+
+def accuracy_statistics(res: np.ndarray, *, alpha: float | None = None,
+                        delta: float | None = None) -> dict:
+    """Residual statistics in metres, with the NSSDA test and, given α and Δ, the vertex bound
+    E = RMSE + α·Δ."""
+    inside = res[np.isfinite(res)]
+    n = int(inside.size)
+    stats = {"n_holdout": int(res.size), "n_assessed": n, "n_outside_mesh": int(res.size - n)}
+    if n == 0:
+        stats.update(rmse_m=None, mean_m=None, std_m=None, skew=None, accuracy_95_m=None,
+                     max_abs_residual_m=None, nssda_threshold_m=None, nssda_pass=None,
+                     classes={name: 0.0 for name in CLASS_NAMES})
+        return stats
+    rmse = float(np.sqrt(np.mean(inside ** 2)))
+    mean = float(inside.mean())
+    std = float(inside.std(ddof=1)) if n > 1 else 0.0
+    skew = float(np.mean((inside - mean) ** 3) / inside.std() ** 3) if n > 2 and inside.std() > 0 else 0.0
+    threshold = nssda_threshold_m(n)
+    cls = residual_class(inside)
+    stats.update(
+        rmse_m=rmse, mean_m=mean, std_m=std, skew=skew, accuracy_95_m=1.96 * rmse,
+        max_abs_residual_m=float(np.abs(inside).max()),
+        nssda_threshold_m=None if math.isnan(threshold) else threshold,
+        nssda_pass=None if math.isnan(threshold) else bool(rmse <= threshold),
+        classes={name: float((cls == k).mean()) for k, name in enumerate(CLASS_NAMES)},
+    )
+    if alpha is not None and delta is not None:
+        stats.update(alpha=float(alpha), delta_m=float(delta),
+                     vertex_error_bound_m=rmse + float(alpha) * float(delta))
+    return stats

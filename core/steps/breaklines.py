@@ -1,0 +1,554 @@
+"""Break lines: breakpoints joined into lines by the method's tracing rules.
+
+Only breakpoints are joined, and only grid neighbours (3x3 kernel). Breakpoints open lines in
+priority order (line ends first, i.e. breakpoints with one breakpoint neighbour, then by
+descending slope). From the opening point a path grows one neighbour at a time; the first two
+paths from it form one line through it, any further candidates of the opening point start lines of
+their own. Every other breakpoint belongs to at most one line. A candidate must:
+
+* differ in slope from the current point by less than S_crit (slope varies continuously);
+* not turn more than ±90° from the line's trend (the direction over the last three steps);
+* not cross an existing line diagonally.
+
+Among the candidates, "flat" terrain takes the one of least slope, "steep" terrain the one of
+least change of slope. Where that leaves a tie, the kernel widens: each tied candidate is scored
+by the best breakpoint ahead of it (within ±45° of its direction) on the 5x5 ring, then on the
+7x7 ring; a tie that survives both goes to the smallest turn, and only then to a random choice
+seeded by ``seed`` and the cell, so results are reproducible.
+
+Thinning keeps the interior cells of steep bands that run obliquely to the grid (they have a
+non-breakpoint diagonal neighbour); traced on their own they give short lines across the band.
+A short line every point of which lies next to a line at least twice as long adds nothing, and
+is dropped. The same bands cut their edge lines at every step of the staircase: thinning leaves
+a corner cell inside the band there, whose slope differs from the edge's by more than S_crit.
+Pieces whose ends are grid neighbours and point at each other are therefore joined (``join``);
+that joint is the one place where a line's slope may jump by S_crit or more.
+"""
+from __future__ import annotations
+
+import gc
+from contextlib import contextmanager
+
+import numba
+import numpy as np
+
+from ..errors import FloodMeshError
+from ..options import (TRACING_MODES, check_choice, check_min_length, check_min_points,
+                       check_s_crit)
+from ..raster import Grid
+
+MODES = TRACING_MODES
+# neighbour order: E, NE, N, NW, W, SW, S, SE as (row, col) offsets
+DR = np.array([0, -1, -1, -1, 0, 1, 1, 1], dtype=np.int64)
+DC = np.array([1, 1, 0, -1, -1, -1, 0, 1], dtype=np.int64)
+
+
+class BreakLine:
+    """One break line: ``coords`` (k, 3) x, y, z in metres, the slope (degrees) at each point,
+    and the connected break-line system it belongs to (lines that touch share a component)."""
+
+    __slots__ = ("coords", "slopes", "component")
+
+    def __init__(self, coords: np.ndarray, slopes: np.ndarray, component: int = 0):
+        self.coords, self.slopes, self.component = coords, slopes, component
+
+    def __repr__(self):
+        return f"BreakLine({len(self.coords)} points, component {self.component})"
+
+    @property
+    def length(self) -> float:
+        """Horizontal length in metres."""
+        return float(np.hypot(*np.diff(self.coords[:, :2], axis=0).T).sum())
+
+
+def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *,
+                     mode: str = "auto", min_points: int = 3, min_length: float = 0.0,
+                     join: bool = True, seed: int = 0) -> list[BreakLine]:
+    """Join thinned breakpoints into break lines (see the module docstring for the rules).
+
+    ``mode`` is "flat", "steep" or "auto" (steep when the median slope of the DEM is at least
+    S_crit). Lines with fewer than ``min_points`` points or shorter than ``min_length`` metres
+    are dropped. ``join`` joins pieces end to end across the corners that thinning leaves on
+    bands oblique to the grid (see ``_join_fragments``); without it every line obeys the slope
+    continuity rule strictly. ``seed`` settles ties that the 7x7 kernel leaves.
+    """
+    check_choice(mode, MODES, "tracing mode")
+    s_crit = check_s_crit(s_crit)
+    min_points = check_min_points(min_points)
+    min_length = check_min_length(min_length)
+    if breakpoints.shape != slope.shape or slope.shape != dem.shape:
+        raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
+                             f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")
+    if mode == "auto":
+        valid = slope.values[np.isfinite(slope.values)]  # a copy: the median may sort it
+        mode = "steep" if valid.size and np.median(valid, overwrite_input=True) >= s_crit \
+            else "flat"
+        del valid
+    bp = np.ascontiguousarray(breakpoints.values, dtype=np.bool_)
+    # the tracer reads slope only at breakpoints, where it is finite (slope >= S_crit)
+    slope_values = np.ascontiguousarray(slope.values, dtype=np.float64)
+    cells, starts = _trace(bp, slope_values, _opening_order(bp, slope_values), float(s_crit),
+                           mode == "steep", np.uint64(seed & 0xFFFFFFFFFFFFFFFF))
+    if join:
+        cells, starts = _join_fragments(cells, starts, *bp.shape)
+    cells, starts = _select(cells, starts, np.diff(starts) >= max(min_points, 2))
+    cells, starts = _select(cells, starts, _fringe_keep(cells, starts, *bp.shape))
+    rows, cols = np.divmod(cells, bp.shape[1])
+    x, y = dem.cell_centres(rows, cols)
+    if min_length > 0:
+        step = np.hypot(np.diff(x), np.diff(y))
+        step[starts[1:-1] - 1] = 0.0  # no step between one line's end and the next's start
+        length = np.add.reduceat(np.append(step, 0.0), starts[:-1]) if len(cells) else step
+        cells, starts = _select(cells, starts, length >= min_length - 1e-9)
+        rows, cols = np.divmod(cells, bp.shape[1])
+        x, y = dem.cell_centres(rows, cols)
+    components = _components(cells, starts, *bp.shape)
+    coords = np.column_stack([x, y, dem.values.ravel()[cells]])
+    slopes = slope.values.ravel()[cells]
+    with _collector_paused():  # a million small objects would trigger it dozens of times
+        return [BreakLine(coords[a:b], slopes[a:b], k)
+                for a, b, k in zip(starts[:-1].tolist(), starts[1:].tolist(), components.tolist())]
+
+
+@numba.njit(cache=True)
+def _end_cells(cells, first, last, at_start, n, out):
+    """The last ``n`` cells (fewer on short paths) up to one end of cells[first:last], ending at
+    the end cell; returns how many were written into ``out``."""
+    m = min(n, last - first)
+    for i in range(m):
+        out[i] = cells[first + m - 1 - i] if at_start else cells[last - m + i]
+    return m
+
+
+@numba.njit(cache=True)
+def _turns_ok(seq, m, cols, backwards):
+    """The tracing trend rule along seq[:m] (read backwards if asked): no step turns more than
+    90° from the direction over the (up to) three steps before it."""
+    for i in range(1, m - 1):
+        here = seq[m - 1 - i] if backwards else seq[i]
+        back = seq[m - 1 - max(0, i - 3)] if backwards else seq[max(0, i - 3)]
+        ahead = seq[m - 2 - i] if backwards else seq[i + 1]
+        tr, tc = here // cols - back // cols, here % cols - back % cols
+        sr, sc = ahead // cols - here // cols, ahead % cols - here % cols
+        if tr * sr + tc * sc < 0:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _root(parent, a):
+    """Union–find: the root of ``a``, halving the path on the way."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@numba.njit(cache=True)
+def _crosses_link(links, cell, k, cols):
+    """Whether a diagonal step from ``cell`` in direction ``k`` crosses the link between the
+    two cells beside it: (r, c + dc) linked to (r + dr, c) by the direction (dr, -dc)."""
+    if DR[k] == 0 or DC[k] == 0:
+        return False
+    side = cell + DC[k]
+    for j in range(8):
+        if DR[j] == DR[k] and DC[j] == -DC[k] and links[side] & (1 << j):
+            return True
+    return False
+
+
+@numba.njit(cache=True)
+def _join_fragments(cells, starts, rows, cols):
+    """Join paths end to end where an end cell is a grid neighbour of another path's end cell,
+    the two ends point at each other (their chords over six steps within 45°) and the joined
+    line keeps the trend rule across the joint.
+
+    Thinning leaves a corner cell inside the band at every step of a band that runs obliquely
+    to the grid; its slope differs from the edge's by more than S_crit, so the tracer ends the
+    line there. Joining the pieces restores one line per feature. Closest, straightest joins go
+    first; no path joins itself, and an opening point shared by several paths joins nothing."""
+    n_paths = starts.size - 1
+    n_ends = 2 * n_paths
+    in_paths = np.zeros(rows * cols, dtype=np.int32)
+    for i in range(cells.size):
+        in_paths[cells[i]] += 1
+    end_cell = np.empty(n_ends, dtype=np.int64)
+    end_at = np.full(rows * cols, -1, dtype=np.int32)  # the end in a cell that is in one path
+    for k in range(n_paths):
+        end_cell[2 * k] = cells[starts[k]]
+        end_cell[2 * k + 1] = cells[starts[k + 1] - 1]
+        end_at[end_cell[2 * k]] = 2 * k
+        end_at[end_cell[2 * k + 1]] = 2 * k + 1
+    reach = 7  # cells per end for the chord (six steps)
+    tail_a = np.empty(reach, dtype=np.int64)
+    tail_b = np.empty(reach, dtype=np.int64)
+    joint = np.empty(8, dtype=np.int64)
+    cand_cost = np.empty(8 * n_ends)
+    cand_a = np.empty(8 * n_ends, dtype=np.int64)
+    cand_b = np.empty(8 * n_ends, dtype=np.int64)
+    cand_dir = np.empty(8 * n_ends, dtype=np.int64)
+    n_cand = 0
+    for e in range(n_ends):
+        k = e // 2
+        if starts[k + 1] - starts[k] < 2 or in_paths[end_cell[e]] > 1:
+            continue
+        na = _end_cells(cells, starts[k], starts[k + 1], e % 2 == 0, reach, tail_a)
+        ur, uc = tail_a[na - 1] // cols - tail_a[0] // cols, tail_a[na - 1] % cols - tail_a[0] % cols
+        un = np.sqrt(ur * ur + uc * uc)
+        r, c = end_cell[e] // cols, end_cell[e] % cols
+        for j in range(8):
+            rr, cc = r + DR[j], c + DC[j]
+            if rr < 0 or rr >= rows or cc < 0 or cc >= cols:
+                continue
+            target = rr * cols + cc
+            if in_paths[target] != 1 or end_at[target] < 0:
+                continue
+            f = end_at[target]
+            m = f // 2
+            if m <= k or starts[m + 1] - starts[m] < 2:
+                continue  # each pair once, no self-joins
+            nb = _end_cells(cells, starts[m], starts[m + 1], f % 2 == 0, reach, tail_b)
+            vr = tail_b[nb - 1] // cols - tail_b[0] // cols
+            vc = tail_b[nb - 1] % cols - tail_b[0] % cols
+            facing = -(ur * vr + uc * vc) / (un * np.sqrt(vr * vr + vc * vc))
+            if facing < np.sqrt(0.5) - 1e-9:
+                continue
+            # the trend rule across the joint, in both directions
+            n_joint = 0
+            for q in range(max(0, na - 4), na):
+                joint[n_joint] = tail_a[q]
+                n_joint += 1
+            for q in range(nb - 1, max(-1, nb - 5), -1):
+                joint[n_joint] = tail_b[q]
+                n_joint += 1
+            if not (_turns_ok(joint, n_joint, cols, False) and _turns_ok(joint, n_joint, cols, True)):
+                continue
+            cand_cost[n_cand] = np.sqrt(DR[j] ** 2 + DC[j] ** 2) + (1.0 - facing)
+            cand_a[n_cand], cand_b[n_cand], cand_dir[n_cand] = e, f, j
+            n_cand += 1
+    links = np.zeros(rows * cols, dtype=np.uint8)  # as in _trace: bit k links to neighbour k
+    for k in range(n_paths):
+        for i in range(starts[k], starts[k + 1] - 1):
+            a, b = cells[i], cells[i + 1]
+            for q in range(8):
+                if b // cols - a // cols == DR[q] and b % cols - a % cols == DC[q]:
+                    links[a] |= 1 << q
+                    links[b] |= 1 << ((q + 4) % 8)
+    partner = np.full(n_ends, -1, dtype=np.int64)
+    chain = np.arange(n_paths)  # union-find over paths, to keep chains free of cycles
+    for t in np.argsort(cand_cost[:n_cand], kind="mergesort"):
+        e, f = cand_a[t], cand_b[t]
+        if partner[e] >= 0 or partner[f] >= 0:
+            continue
+        a, b = _root(chain, e // 2), _root(chain, f // 2)
+        if a == b:
+            continue
+        j = cand_dir[t]
+        here = end_cell[e]
+        if _crosses_link(links, here, j, cols):  # a diagonal joint must not cross a link
+            continue
+        links[here] |= 1 << j
+        links[end_cell[f]] |= 1 << ((j + 4) % 8)
+        chain[max(a, b)] = min(a, b)
+        partner[e], partner[f] = f, e
+    # walk each chain from a free end
+    out = np.empty(cells.size, dtype=np.int64)
+    out_starts = np.empty(n_paths + 1, dtype=np.int64)
+    out_starts[0] = 0
+    done = np.zeros(n_paths, dtype=np.bool_)
+    n_out, n_lines = 0, 0
+    for k in range(n_paths):
+        if done[k] or (partner[2 * k] >= 0 and partner[2 * k + 1] >= 0):
+            continue
+        e = 2 * k if partner[2 * k] < 0 else 2 * k + 1  # the free end starts the chain
+        while True:
+            m = e // 2
+            done[m] = True
+            if e % 2 == 0:
+                for i in range(starts[m], starts[m + 1]):
+                    out[n_out] = cells[i]
+                    n_out += 1
+            else:
+                for i in range(starts[m + 1] - 1, starts[m] - 1, -1):
+                    out[n_out] = cells[i]
+                    n_out += 1
+            far = e + 1 if e % 2 == 0 else e - 1
+            if partner[far] < 0:
+                break
+            e = partner[far]
+        n_lines += 1
+        out_starts[n_lines] = n_out
+    return out[:n_out].copy(), out_starts[:n_lines + 1].copy()
+
+
+@contextmanager
+def _collector_paused():
+    """Pause Python's cyclic garbage collector (BreakLines hold no reference cycles)."""
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
+
+
+def _opening_order(bp: np.ndarray, slope: np.ndarray) -> np.ndarray:
+    """Flat indices of the breakpoints in the order they open lines: line ends (one breakpoint
+    neighbour) first, then by descending slope; equal keys in raster order."""
+    flat = np.flatnonzero(bp)
+    ends = _neighbour_count(bp, flat) == 1
+    key = np.where(ends, 1000.0, 0.0) + slope.ravel()[flat]  # slopes are at most 90 degrees
+    return flat[np.argsort(-key, kind="stable")].astype(np.int64)
+
+
+@numba.njit(cache=True)
+def _neighbour_count(bp, flat):
+    rows, cols = bp.shape
+    count = np.zeros(flat.size, dtype=np.int64)
+    for i in range(flat.size):
+        r, c = flat[i] // cols, flat[i] % cols
+        for k in range(8):
+            rr, cc = r + DR[k], c + DC[k]
+            if 0 <= rr < rows and 0 <= cc < cols and bp[rr, cc]:
+                count[i] += 1
+    return count
+
+
+def _select(cells: np.ndarray, starts: np.ndarray, keep: np.ndarray):
+    """The paths (``cells`` split at ``starts``) for which ``keep`` is true."""
+    lengths = np.diff(starts)[keep]
+    mask = np.repeat(keep, np.diff(starts))
+    return cells[mask], np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+
+
+@numba.njit(cache=True)
+def _components(cells, starts, rows, cols):
+    """Component id (1, 2, … in order of first appearance) of each path: paths whose cells touch
+    (8-neighbourhood) share one. Union–find over the traced cells."""
+    owner = np.full(rows * cols, -1, dtype=np.int32)
+    n_paths = starts.size - 1
+    parent = np.arange(n_paths)
+    for k in range(n_paths):
+        for i in range(starts[k], starts[k + 1]):
+            owner[cells[i]] = k
+    for k in range(n_paths):
+        for i in range(starts[k], starts[k + 1]):
+            r, c = cells[i] // cols, cells[i] % cols
+            for j in range(8):
+                rr, cc = r + DR[j], c + DC[j]
+                if rr < 0 or rr >= rows or cc < 0 or cc >= cols:
+                    continue
+                other = owner[rr * cols + cc]
+                if other >= 0:
+                    a, b = _root(parent, k), _root(parent, other)
+                    if a != b:
+                        parent[max(a, b)] = min(a, b)
+    label = np.zeros(n_paths, dtype=np.int64)
+    ids = np.zeros(n_paths, dtype=np.int64)
+    n_ids = 0
+    for k in range(n_paths):
+        a = _root(parent, k)
+        if ids[a] == 0:
+            n_ids += 1
+            ids[a] = n_ids
+        label[k] = ids[a]
+    return label
+
+
+@numba.njit(cache=True)
+def _fringe_keep(cells, starts, rows, cols):
+    n_paths = starts.size - 1
+    length_at = np.zeros(rows * cols, dtype=np.int32)
+    owner = np.full(rows * cols, -1, dtype=np.int32)
+    for k in range(n_paths):
+        length = starts[k + 1] - starts[k]
+        for i in range(starts[k], starts[k + 1]):
+            if length > length_at[cells[i]]:
+                length_at[cells[i]] = length
+                owner[cells[i]] = k
+    keep = np.ones(n_paths, dtype=np.bool_)
+    for k in range(n_paths):
+        length = starts[k + 1] - starts[k]
+        beside = True
+        for i in range(starts[k], starts[k + 1]):
+            r, c = cells[i] // cols, cells[i] % cols
+            touched = False
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    rr, cc = r + dr, c + dc
+                    if rr < 0 or rr >= rows or cc < 0 or cc >= cols:
+                        continue
+                    other = owner[rr * cols + cc]
+                    if other >= 0 and other != k and length_at[rr * cols + cc] >= 2 * length:
+                        touched = True
+            if not touched:
+                beside = False
+                break
+        keep[k] = not beside
+    return keep
+
+
+TIE = 1e-9  # scores closer than this (degrees) are a tie
+
+
+@numba.njit(cache=True)
+def _ring_score(cr, cc, k, ring, bp, slope, used, steep):
+    """Best score among the free breakpoints on the square ring ``ring`` cells from (cr, cc)
+    that lie within ±45° of direction ``k``; inf where there are none."""
+    rows, cols = bp.shape
+    best = np.inf
+    dnorm = np.sqrt(DR[k] ** 2 + DC[k] ** 2)
+    for dr in range(-ring, ring + 1):
+        for dc in range(-ring, ring + 1):
+            if max(abs(dr), abs(dc)) != ring:
+                continue
+            rr, cc2 = cr + dr, cc + dc
+            if rr < 0 or rr >= rows or cc2 < 0 or cc2 >= cols:
+                continue
+            if not bp[rr, cc2] or used[rr, cc2]:
+                continue
+            cos = (dr * DR[k] + dc * DC[k]) / (np.sqrt(dr * dr + dc * dc) * dnorm)
+            if cos < np.sqrt(0.5) - 1e-9:
+                continue
+            score = abs(slope[rr, cc2] - slope[cr, cc]) if steep else slope[rr, cc2]
+            best = min(best, score)
+    return best
+
+
+@numba.njit(cache=True)
+def _seeded_pick(seed, cell, n):
+    """A reproducible choice among ``n``: splitmix64 of the seed and the cell."""
+    z = seed + np.uint64(cell) * np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return int(z % np.uint64(n))
+
+
+@numba.njit(cache=True)
+def _extend(start, trend_r, trend_c, bp, slope, used, links, s_crit, steep, seed, path):
+    """Grow a path from ``start`` (already in ``path[0]``); return its length."""
+    rows, cols = bp.shape
+    n = 1
+    cur = start
+    cand_k = np.empty(8, dtype=np.int64)
+    cand_score = np.empty(8)
+    cand_turn = np.empty(8)
+    while True:
+        cr, cc = cur // cols, cur % cols
+        if n >= 2:
+            back = path[max(0, n - 4)]
+            tr, tc = cr - back // cols, cc - back % cols
+        else:
+            tr, tc = trend_r, trend_c
+        has_trend = tr != 0 or tc != 0
+        tnorm = np.sqrt(tr * tr + tc * tc) if has_trend else 1.0
+        n_cand = 0
+        for k in range(8):
+            nr, nc = cr + DR[k], cc + DC[k]
+            if nr < 0 or nr >= rows or nc < 0 or nc >= cols:
+                continue
+            if not bp[nr, nc] or used[nr, nc]:
+                continue
+            ds = abs(slope[nr, nc] - slope[cr, cc])
+            if ds >= s_crit:
+                continue
+            turn = 0.0
+            if has_trend:
+                cos = (DR[k] * tr + DC[k] * tc) / (tnorm * np.sqrt(DR[k] ** 2 + DC[k] ** 2))
+                if cos < -1e-9:
+                    continue  # turns more than 90 degrees from the trend
+                turn = 1.0 - cos
+            if _crosses_link(links, cur, k, cols):  # a diagonal step across another link
+                continue
+            cand_k[n_cand] = k
+            cand_score[n_cand] = ds if steep else slope[nr, nc]
+            cand_turn[n_cand] = turn
+            n_cand += 1
+        if n_cand == 0:
+            return n
+        # the 3x3 kernel's choice, then 5x5 and 7x7 rings for its ties
+        n_tied = n_cand
+        for ring in range(1, 4):
+            if ring > 1:
+                for i in range(n_tied):
+                    cand_score[i] = _ring_score(cr, cc, cand_k[i], ring, bp, slope, used, steep)
+            best = np.inf
+            for i in range(n_tied):
+                best = min(best, cand_score[i])
+            m = 0
+            for i in range(n_tied):
+                if cand_score[i] <= best + TIE:
+                    cand_k[m], cand_turn[m] = cand_k[i], cand_turn[i]
+                    m += 1
+            n_tied = m
+            if n_tied == 1:
+                break
+        if n_tied > 1:  # then the smallest turn, then a seeded random choice
+            least = np.inf
+            for i in range(n_tied):
+                least = min(least, cand_turn[i])
+            m = 0
+            for i in range(n_tied):
+                if cand_turn[i] <= least + 1e-12:
+                    cand_k[m] = cand_k[i]
+                    m += 1
+            n_tied = m
+        best_k = cand_k[0] if n_tied == 1 else cand_k[_seeded_pick(seed, cur, n_tied)]
+        best = (cr + DR[best_k]) * cols + cc + DC[best_k]
+        links[cur] |= 1 << best_k
+        links[best] |= 1 << ((best_k + 4) % 8)
+        used[best // cols, best % cols] = True
+        path[n] = best
+        n += 1
+        cur = best
+
+
+@numba.njit(cache=True)
+def _trace(bp, slope, order, s_crit, steep, seed):
+    rows, cols = bp.shape
+    used = np.zeros((rows, cols), dtype=np.bool_)
+    links = np.zeros(rows * cols, dtype=np.uint8)
+    n_bp = order.size
+    cells = np.empty(2 * n_bp + 16, dtype=np.int64)
+    starts = np.empty(n_bp + 1, dtype=np.int64)
+    path_a = np.empty(n_bp + 1, dtype=np.int64)
+    path_b = np.empty(n_bp + 1, dtype=np.int64)
+    n_cells = 0
+    n_lines = 0
+    starts[0] = 0
+    for k in range(n_bp):
+        s = order[k]
+        if used[s // cols, s % cols]:
+            continue
+        used[s // cols, s % cols] = True
+        path_a[0] = s
+        len_a = _extend(s, 0, 0, bp, slope, used, links, s_crit, steep, seed, path_a)
+        if len_a == 1:
+            continue  # an isolated breakpoint opens no line
+        # the second path from the opening point heads away from the first
+        back_r = -(path_a[1] // cols - s // cols)
+        back_c = -(path_a[1] % cols - s % cols)
+        path_b[0] = s
+        len_b = _extend(s, back_r, back_c, bp, slope, used, links, s_crit, steep, seed, path_b)
+        for i in range(len_b - 1, 0, -1):
+            cells[n_cells] = path_b[i]
+            n_cells += 1
+        for i in range(len_a):
+            cells[n_cells] = path_a[i]
+            n_cells += 1
+        n_lines += 1
+        starts[n_lines] = n_cells
+        # every further candidate of the opening point starts a line of its own
+        while True:
+            path_a[0] = s
+            len_c = _extend(s, 0, 0, bp, slope, used, links, s_crit, steep, seed, path_a)
+            if len_c == 1:
+                break
+            for i in range(len_c):
+                cells[n_cells] = path_a[i]
+                n_cells += 1
+            n_lines += 1
+            starts[n_lines] = n_cells
+    return cells[:n_cells].copy(), starts[:n_lines + 1].copy()

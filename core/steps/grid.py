@@ -1,0 +1,219 @@
+"""Gridding: LiDAR points to a DEM by linear (TIN) interpolation at cell centres.
+
+Cells are aligned to whole multiples of the cell size d. A cell gets the elevation of the plane
+of the Delaunay triangle holding its centre; cells outside the data, or under a triangle with an
+edge longer than ``max_gap`` (water, buildings, voids), stay NaN instead of being bridged by long
+thin triangles.
+
+The grid is made in tiles of ``TILE`` x ``TILE`` cells, each from the points of the tile and a
+halo around it (at least ``max_gap`` wide, so every triangle that can cover a tile cell is
+formed as in one global TIN); tiles run in parallel threads and could stream from disk.
+"""
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
+import numpy as np
+from affine import Affine
+
+from .._kernels.delaunay import delaunay
+from ..errors import Cancelled, FloodMeshError
+from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
+from ..options import check_cell_size, check_max_gap
+from ..points import PointCloud
+from ..raster import Grid
+
+TILE = 256
+
+
+def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float | None = None,
+                       progress=None, cancelled=None, workers: int | None = None,
+                       plan: dict | None = None) -> Grid:
+    """DEM of cell size ``cell_size`` (m) by linear interpolation on the points' Delaunay TIN.
+
+    ``max_gap`` (m, default 10 cell sizes) is the longest triangle edge bridged; wider gaps become
+    nodata. Duplicate points are harmless (the triangulation skips them). Progress and
+    cancellation are polled per tile. ``plan``: what ``check_grid`` returned for these points
+    and arguments, where the caller checked them already (the points' footprint is a pass over
+    all of them).
+    """
+    cell_size = check_cell_size(cell_size)
+    plan = plan if plan is not None else check_grid(points, cell_size, max_gap)
+    max_gap, rows, cols, x0, y1 = (plan[k] for k in ("max_gap", "rows", "cols", "x0", "y1"))
+    values = grid_window(points.xyz, cell_size, max_gap, x0, y1, rows, cols, progress=progress,
+                         cancelled=cancelled, workers=workers)
+    if not np.isfinite(values).any():
+        raise FloodMeshError(
+            f"no grid cell is covered by the points at a gap limit of {max_gap} m; the points are "
+            "too sparse for this cell size: raise the cell size or the max gap")
+    if progress:
+        progress(1.0)
+    transform = Affine(cell_size, 0.0, x0, 0.0, -cell_size, y1)
+    return Grid(values, transform, points.crs)
+
+
+def halo_width(cell_size: float, max_gap: float) -> float:
+    """Metres of neighbouring points a window of cells needs so that every TIN triangle that
+    can cover one of its cells is formed as in one global TIN."""
+    return max(max_gap, 4 * cell_size)
+
+
+def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1: float,
+                rows: int, cols: int, *, progress=None, cancelled=None,
+                workers: int | None = None) -> np.ndarray:
+    """Cell values (rows, cols; NaN where no triangle covers) of the window whose upper-left
+    corner is (x0, y1), by linear interpolation on the TIN of ``xyz``. Points up to
+    ``halo_width`` beyond the window are used; points farther out are ignored."""
+    values = np.full((rows, cols), np.nan)
+    tiles = [(r, c) for r in range(0, rows, TILE) for c in range(0, cols, TILE)]
+    halo = halo_width(cell_size, max_gap)
+    # Points sorted once into buckets about a halo wide, row-major: a tile and its halo are
+    # then a few contiguous slices, one per bucket row.
+    per_tile = max(1, min(8, int(TILE * cell_size // halo)))
+    bucket_size = TILE * cell_size / per_tile
+    n_brows = math.ceil(rows / TILE) * per_tile
+    n_bcols = math.ceil(cols / TILE) * per_tile
+    xy, z, bounds = _bucket_sort(xyz, float(x0), float(y1), bucket_size, n_brows, n_bcols)
+
+    def grid_tile(tile):
+        r0, c0 = tile
+        if cancelled is not None and cancelled():
+            raise Cancelled()
+        x_lo, x_hi = c0 * cell_size - halo, (c0 + TILE) * cell_size + halo
+        y_lo, y_hi = r0 * cell_size - halo, (r0 + TILE) * cell_size + halo
+        j0 = max(0, int(x_lo // bucket_size))
+        j1 = min(n_bcols - 1, int(x_hi // bucket_size))
+        slices = [slice(bounds[i * n_bcols + j0], bounds[i * n_bcols + j1 + 1])
+                  for i in range(max(0, int(y_lo // bucket_size)),
+                                 min(n_brows - 1, int(y_hi // bucket_size)) + 1)]
+        local = np.concatenate([xy[sl] for sl in slices])
+        local_z = np.concatenate([z[sl] for sl in slices])
+        inside = ((local[:, 0] >= x_lo) & (local[:, 0] <= x_hi)
+                  & (local[:, 1] >= y_lo) & (local[:, 1] <= y_hi))
+        local, local_z = local[inside], local_z[inside]
+        if len(local) < 3:
+            return
+        triangles = delaunay(local)
+        if len(triangles):
+            _rasterise_tin(local, local_z, triangles, values, r0, min(rows, r0 + TILE),
+                           c0, min(cols, c0 + TILE), float(cell_size), float(max_gap))
+
+    with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+        for done, _ in enumerate(pool.map(grid_tile, tiles), start=1):
+            if progress:
+                progress(done / len(tiles))
+    return values
+
+
+def check_grid(points: PointCloud, cell_size: float, max_gap: float | None = None, *,
+               memory: int | None = None) -> dict:
+    """Check, before any cell is allocated, that a grid of ``cell_size`` suits the points: at
+    least 3 cells each way, a max gap (default 10 cells) that bridges the point spacing, and
+    memory for the points and the cells. Returns the grid's layout
+    (``rows``, ``cols``, ``x0``, ``y1``, ``max_gap``) and the points' ``area`` (m²) and
+    ``spacing`` (m)."""
+    xyz = points.xyz
+    bounds = (xyz[:, 0].min(), xyz[:, 1].min(), xyz[:, 0].max(), xyz[:, 1].max())
+    area, _ = footprint(xyz[:, :2])
+    return check_layout(bounds, len(xyz), area, cell_size, max_gap, memory=memory)
+
+
+def check_layout(bounds, n_points: int, area: float, cell_size: float,
+                 max_gap: float | None = None, *, memory: int | None = None,
+                 memory_points: int | None = None, memory_cells: int | None = None,
+                 advice: str | None = None) -> dict:
+    """``check_grid`` for points known by their ``bounds`` (xmin, ymin, xmax, ymax), count and
+    covered ``area`` (m²), as tiles are; the memory is checked for ``memory_points`` and
+    ``memory_cells`` (default: all the points and cells)."""
+    cell_size = check_cell_size(cell_size)
+    max_gap = check_max_gap(max_gap)
+    default_gap = max_gap is None
+    if default_gap:
+        max_gap = 10.0 * cell_size
+    xmin, ymin, xmax, ymax = bounds
+    x0 = math.floor(xmin / cell_size) * cell_size
+    y1 = math.ceil(ymax / cell_size) * cell_size
+    cols = max(1, math.ceil((xmax - x0) / cell_size))
+    rows = max(1, math.ceil((y1 - ymin) / cell_size))
+    spacing = math.sqrt(area / n_points)
+    if rows < 3 or cols < 3:
+        raise FloodMeshError(
+            f"the data covers only {xmax - xmin:.2f} x {ymax - ymin:.2f} m, fewer than 3 cells of "
+            f"{cell_size:g} m each way; choose a smaller cell size (the points are about "
+            f"{spacing:.2g} m apart)")
+    if max_gap < MIN_GAP_IN_SPACINGS * spacing:
+        fix = (f"give a cell size of at least {MIN_GAP_IN_SPACINGS * spacing / 10:.2g} m (the "
+               f"point spacing, {spacing:.2g} m, is a good choice) or a larger max gap"
+               if default_gap else
+               f"give a max gap of at least {MIN_GAP_IN_SPACINGS * spacing:.2g} m, or leave it "
+               "out (10 cells)")
+        raise FloodMeshError(
+            f"the points are about {spacing:.2g} m apart ({n_points:,} points over "
+            f"{area:,.0f} m²), so gaps of at most {max_gap:.2g} m "
+            f"({'10 cells of ' + format(cell_size, 'g') + ' m' if default_gap else 'max gap'}) "
+            f"would leave most grid cells empty: {fix}")
+    check_memory(points=n_points if memory_points is None else memory_points,
+                 cells=rows * cols if memory_cells is None else memory_cells, memory=memory,
+                 advice=advice or f"give a cell size larger than {cell_size:g} m, or split the "
+                                  "data into tiles")
+    return {"rows": rows, "cols": cols, "x0": float(x0), "y1": float(y1), "max_gap": max_gap,
+            "area": area, "spacing": spacing}
+
+
+@numba.njit(cache=True, nogil=True)
+def _bucket_sort(xyz, x0, y1, size, n_rows, n_cols):
+    """Local coordinates (x − x0, y1 − y: y down, keeping the digits that UTM magnitudes would
+    cost) and z, counting-sorted into row-major buckets of ``size`` metres; ``bounds[k]`` is the
+    first point of bucket k."""
+    n = xyz.shape[0]
+    key = np.empty(n, np.int64)
+    counts = np.zeros(n_rows * n_cols + 1, np.int64)
+    for p in range(n):
+        r = min(max(int((y1 - xyz[p, 1]) // size), 0), n_rows - 1)
+        c = min(max(int((xyz[p, 0] - x0) // size), 0), n_cols - 1)
+        key[p] = r * n_cols + c
+        counts[key[p] + 1] += 1
+    bounds = np.cumsum(counts)
+    fill = bounds[:-1].copy()
+    xy = np.empty((n, 2))
+    z = np.empty(n)
+    for p in range(n):
+        k = fill[key[p]]
+        fill[key[p]] += 1
+        xy[k, 0] = xyz[p, 0] - x0
+        xy[k, 1] = y1 - xyz[p, 1]
+        z[k] = xyz[p, 2]
+    return xy, z, bounds
+
+
+@numba.njit(cache=True, nogil=True)
+def _rasterise_tin(xy, z, simplices, out, row0, row1, col0, col1, d, max_gap):
+    """Linear interpolation of each triangle onto the cell centres it covers within rows
+    row0..row1-1 and columns col0..col1-1 of ``out`` (local coordinates, y down)."""
+    max_gap2 = max_gap * max_gap
+    eps = 1e-9
+    for t in range(simplices.shape[0]):
+        a, b, c = simplices[t, 0], simplices[t, 1], simplices[t, 2]
+        xa, ya, xb, yb, xc, yc = xy[a, 0], xy[a, 1], xy[b, 0], xy[b, 1], xy[c, 0], xy[c, 1]
+        if ((xb - xa) ** 2 + (yb - ya) ** 2 > max_gap2 or (xc - xb) ** 2 + (yc - yb) ** 2 > max_gap2
+                or (xa - xc) ** 2 + (ya - yc) ** 2 > max_gap2):
+            continue
+        det = (yb - yc) * (xa - xc) + (xc - xb) * (ya - yc)
+        if abs(det) < 1e-12:
+            continue
+        j0 = max(col0, int(math.ceil(min(xa, xb, xc) / d - 0.5)))
+        j1 = min(col1 - 1, int(math.floor(max(xa, xb, xc) / d - 0.5)))
+        i0 = max(row0, int(math.ceil(min(ya, yb, yc) / d - 0.5)))
+        i1 = min(row1 - 1, int(math.floor(max(ya, yb, yc) / d - 0.5)))
+        for i in range(i0, i1 + 1):
+            y = (i + 0.5) * d
+            for j in range(j0, j1 + 1):
+                x = (j + 0.5) * d
+                l1 = ((yb - yc) * (x - xc) + (xc - xb) * (y - yc)) / det
+                l2 = ((yc - ya) * (x - xc) + (xa - xc) * (y - yc)) / det
+                l3 = 1.0 - l1 - l2
+                if l1 >= -eps and l2 >= -eps and l3 >= -eps:
+                    out[i, j] = l1 * z[a] + l2 * z[b] + l3 * z[c]

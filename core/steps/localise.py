@@ -1,0 +1,463 @@
+"""Terrain fits to the measured points: break lines moved from grid cells onto the terrain's
+actual crest and toe, and mesh node elevations with the measurement noise taken out.
+
+Break-line localisation: at each vertex of a traced line, the measured points (LiDAR points put
+into the grid, or DEM cell centres where the input is a DEM) in a window along the line are fitted
+by two planes that meet in a line parallel to the traced one (a hinge; least squares, the hinge
+offset searched across the window and refined by a parabola). Where the hinge explains the
+points clearly better than one plane (an F ratio) and the slope changes across it by at least
+half of tan(S_crit), the vertex moves onto the hinge and takes its z; the fit's RMS residual is
+the vertex's confidence (m). The window follows point density and noise: it holds about
+``40 + 800·σ`` points (σ in m), at least one and at most 1.5 cells to each side and at most
+six cells along.
+
+Node elevations: nodes on break lines take z along the (localised) lines; every other node, z of
+a least-squares plane of the measured points within a radius (shrunk so that the window stays
+off the break lines). Points held out for the accuracy test are never among those fitted.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from numba import njit
+
+from ..engine.nearest import nearest_line, point_index
+from ..errors import FloodMeshError
+
+
+@dataclass(frozen=True)
+class FitWindow:
+    """Window of the terrain fits: hinge fits ``half_width`` (m) across a line and
+    ``half_length`` (m) along it; plane fits of node elevations within ``node_radius`` (m)."""
+
+    half_width: float
+    half_length: float
+    node_radius: float
+    density: float       # measured points per m²
+    noise: float         # estimated vertical noise (m), the median RMS of local plane fits
+
+
+def fit_window(points: np.ndarray, area: float, cell_size: float, *,
+               node_radius: float | None = None, seed: int = 0, index=None) -> FitWindow:
+    """The fitting windows for ``points`` (n, 3) covering ``area`` m² on a grid of
+    ``cell_size`` m: sized from their density and their noise (estimated from them).
+    ``index``: ``nearest.point_index(points)`` if built (here and in every fit below)."""
+    if not area > 0 or len(points) < 10:
+        raise FloodMeshError("too few measured points to fit the terrain to; turn off break-line "
+                             "localisation and plane node elevations (--no-localise "
+                             "--node-elevation dem)")
+    density = len(points) / area
+    noise = estimate_noise(points, density, seed=seed, index=index)
+    wanted = (40 + 800 * noise) / density  # m² of window
+    half_width = float(np.clip(np.sqrt(wanted) / 2, cell_size, 1.5 * cell_size))
+    half_length = float(np.clip(wanted / (4 * half_width), half_width, 6 * cell_size))
+    if node_radius is None:
+        node_radius = float(np.clip(np.sqrt(wanted / np.pi), cell_size, 3 * cell_size))
+    return FitWindow(half_width, half_length, float(node_radius), density, noise)
+
+
+def estimate_noise(points: np.ndarray, density: float, *, samples: int = 400,
+                   seed: int = 0, index=None) -> float:
+    """Vertical noise (m) of the points: the median RMS residual of least-squares planes fitted
+    to about 30 points around randomly chosen points (terrain curvature adds a little)."""
+    rng = np.random.default_rng(seed)
+    centres = points[rng.choice(len(points), size=min(samples, len(points)), replace=False), :2]
+    radius = np.sqrt(30 / density / np.pi)
+    index = index if index is not None else point_index(points)
+    _, rms, count = _plane_fits(index, points, centres, np.full(len(centres), radius))
+    good = count >= 10
+    return float(np.median(rms[good])) if good.any() else 0.0
+
+
+# Centres fitted at a time: the vectorised fits hold some 130 B for each (centre, neighbour)
+# pair, 490 MB for the 130,000 nodes of a 4 km² mesh at once; a chunk holds a few tens of MB,
+# whatever the mesh (each centre's fit is its own: the same numbers).
+FIT_CHUNK = 20_000
+
+
+def _chunks(n: int):
+    return [(a, min(n, a + FIT_CHUNK)) for a in range(0, n, FIT_CHUNK)]
+
+
+def _plane_fits(index, points, centres, radius):
+    """Least-squares planes of the points within ``radius`` (one per centre) of each centre:
+    (z at the centre, RMS residual, point count); NaN where fewer than 4 points."""
+    parts = [_plane_fits_chunk(index, points, centres[a:b], radius[a:b])
+             for a, b in _chunks(len(centres))]
+    if not parts:
+        return np.zeros(0), np.zeros(0), np.zeros(0, np.int64)
+    return tuple(np.concatenate(column) for column in zip(*parts))
+
+
+def _plane_fits_chunk(index, points, centres, radius):
+    indptr, indices = index.neighbours(centres, radius)
+    count = np.diff(indptr)
+    z = np.full(len(centres), np.nan)
+    rms = np.full(len(centres), np.nan)
+    fit = count >= 4
+    if not fit.any():
+        return z, rms, count
+    owner = np.repeat(np.arange(len(centres)), count)
+    p = points[indices]
+    dx, dy = p[:, 0] - centres[owner, 0], p[:, 1] - centres[owner, 1]
+    zmean = np.bincount(owner, p[:, 2], len(centres)) / np.maximum(count, 1)
+    dz = p[:, 2] - zmean[owner]
+    design = np.stack([np.ones_like(dx), dx, dy], axis=1)
+    ata = np.zeros((len(centres), 3, 3))
+    atz = np.zeros((len(centres), 3))
+    for i in range(3):
+        atz[:, i] = np.bincount(owner, design[:, i] * dz, len(centres))
+        for j in range(3):
+            ata[:, i, j] = np.bincount(owner, design[:, i] * design[:, j], len(centres))
+    ata[~fit] = np.eye(3)
+    ata += np.eye(3) * 1e-9
+    beta = np.linalg.solve(ata, atz[..., None])[..., 0]
+    resid = dz - (design * beta[owner]).sum(axis=1)
+    sse = np.bincount(owner, resid ** 2, len(centres))
+    z[fit] = zmean[fit] + beta[fit, 0]
+    rms[fit] = np.sqrt(sse[fit] / np.maximum(count[fit] - 3, 1))
+    return z, rms, count
+
+
+@njit(cache=True)
+def _solve4(a, b):
+    """Gaussian elimination with partial pivoting of a 4x4 system (a, b are overwritten)."""
+    n = 4
+    for k in range(n):
+        p = k
+        for i in range(k + 1, n):
+            if abs(a[i, k]) > abs(a[p, k]):
+                p = i
+        if abs(a[p, k]) < 1e-12:
+            return False
+        if p != k:
+            for j in range(n):
+                a[k, j], a[p, j] = a[p, j], a[k, j]
+            b[k], b[p] = b[p], b[k]
+        for i in range(k + 1, n):
+            f = a[i, k] / a[k, k]
+            for j in range(k, n):
+                a[i, j] -= f * a[k, j]
+            b[i] -= f * b[k]
+    for k in range(n - 1, -1, -1):
+        s = b[k]
+        for j in range(k + 1, n):
+            s -= a[k, j] * b[j]
+        b[k] = s / a[k, k]
+    return True
+
+
+@njit(cache=True)
+def _hinge_sse(u, v, z, m, u0, beta):
+    """SSE of the hinge z = a + b·v + c1·min(u-u0, 0) + c2·max(u-u0, 0) over the first m points,
+    its coefficients into ``beta``; inf with fewer than 4 points on a side."""
+    a = np.zeros((4, 4))
+    b = np.zeros(4)
+    row = np.empty(4)
+    left = 0
+    for k in range(m):
+        w = u[k] - u0
+        row[0] = 1.0
+        row[1] = v[k]
+        row[2] = min(w, 0.0)
+        row[3] = max(w, 0.0)
+        if w < 0:
+            left += 1
+        for i in range(4):
+            b[i] += row[i] * z[k]
+            for j in range(4):
+                a[i, j] += row[i] * row[j]
+    if left < 4 or m - left < 4:
+        return np.inf
+    for i in range(4):
+        a[i, i] += 1e-9
+    if not _solve4(a, b):
+        return np.inf
+    sse = 0.0
+    for k in range(m):
+        w = u[k] - u0
+        r = z[k] - (b[0] + b[1] * v[k] + b[2] * min(w, 0.0) + b[3] * max(w, 0.0))
+        sse += r * r
+    for i in range(4):
+        beta[i] = b[i]
+    return sse
+
+
+@njit(cache=True)
+def _hinge_fits(px, py, pz, indptr, indices, vx, vy, tx, ty, half_width, half_length):
+    """Per vertex: hinge offset across (m, + to the left of the tangent), z at the hinge, the
+    hinge's RMS residual, slope change across it, the single plane's SSE over the hinge's SSE,
+    the point count (NaN offsets where no fit)."""
+    n = len(vx)
+    out = np.full((n, 6), np.nan)
+    steps = 24
+    for i in range(n):
+        lo, hi = indptr[i], indptr[i + 1]
+        u = np.empty(hi - lo)
+        v = np.empty(hi - lo)
+        z = np.empty(hi - lo)
+        m = 0
+        for k in range(lo, hi):
+            q = indices[k]
+            dx, dy = px[q] - vx[i], py[q] - vy[i]
+            along = dx * tx[i] + dy * ty[i]
+            across = -dx * ty[i] + dy * tx[i]
+            if abs(along) <= half_length and abs(across) <= half_width:
+                u[m], v[m], z[m] = across, along, pz[q]
+                m += 1
+        if m < 12:
+            continue
+        zmean = 0.0
+        for k in range(m):
+            zmean += z[k]
+        zmean /= m
+        for k in range(m):
+            z[k] -= zmean
+        # one plane z = a + b·v + c·u: the hinge with c1 = c2, at any u0
+        beta = np.zeros(4)
+        reach = 0.7 * half_width
+        best, best_j = np.inf, -1
+        sses = np.full(steps + 1, np.inf)
+        for j in range(steps + 1):
+            u0 = -reach + 2 * reach * j / steps
+            sses[j] = _hinge_sse(u, v, z, m, u0, beta)
+            if sses[j] < best:
+                best, best_j = sses[j], j
+        if best_j < 0:
+            continue
+        h = 2 * reach / steps
+        u0 = -reach + h * best_j
+        if 0 < best_j < steps and np.isfinite(sses[best_j - 1]) and np.isfinite(sses[best_j + 1]):
+            curv = sses[best_j - 1] - 2 * best + sses[best_j + 1]
+            if curv > 0:
+                u0 += 0.5 * h * (sses[best_j - 1] - sses[best_j + 1]) / curv
+        sse = _hinge_sse(u, v, z, m, u0, beta)
+        if not np.isfinite(sse):
+            continue
+        # the single plane: least squares of [1, v, u]
+        a = np.zeros((4, 4))
+        b = np.zeros(4)
+        for k in range(m):
+            r0, r1, r2 = 1.0, v[k], u[k]
+            b[0] += r0 * z[k]
+            b[1] += r1 * z[k]
+            b[2] += r2 * z[k]
+            a[0, 0] += 1
+            a[0, 1] += r1
+            a[0, 2] += r2
+            a[1, 1] += r1 * r1
+            a[1, 2] += r1 * r2
+            a[2, 2] += r2 * r2
+        a[1, 0], a[2, 0], a[2, 1] = a[0, 1], a[0, 2], a[1, 2]
+        a[3, 3] = 1.0
+        plane = np.inf
+        if _solve4(a, b):
+            plane = 0.0
+            for k in range(m):
+                r = z[k] - (b[0] + b[1] * v[k] + b[2] * u[k])
+                plane += r * r
+        edge = best_j == 0 or best_j == steps
+        out[i, 0] = np.nan if edge else u0
+        out[i, 1] = zmean + beta[0]
+        out[i, 2] = np.sqrt(sse / max(m - 4, 1))
+        out[i, 3] = beta[3] - beta[2]
+        out[i, 4] = (plane - sse) / max(sse / max(m - 4, 1), 1e-12)
+        out[i, 5] = m
+    return out
+
+
+def _tangents(coords: np.ndarray) -> np.ndarray:
+    """Unit tangents at a line's vertices (central differences, one-sided at the ends)."""
+    d = np.empty((len(coords), 2))
+    d[1:-1] = coords[2:, :2] - coords[:-2, :2]
+    d[0] = coords[1, :2] - coords[0, :2]
+    d[-1] = coords[-1, :2] - coords[-2, :2]
+    length = np.hypot(*d.T)
+    length[length == 0] = 1.0
+    return d / length[:, None]
+
+
+def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: FitWindow, *,
+                        s_crit: float = 10.0, iterations: int = 2, min_f_ratio: float = 10.0,
+                        index=None) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """Break-line vertices moved onto the hinge of a two-plane fit to ``points`` (n, 3), z from
+    the fit (see the module's docstring). ``lines`` are (k, 3) arrays. Returns the moved lines
+    and, per line, each vertex's fit RMS residual (m) and the change of slope across the hinge
+    (negative on a crest, positive at a toe, whichever way the line runs), both NaN where the
+    vertex was not moved."""
+    if not lines:
+        return [], [], []
+    index = index if index is not None else point_index(points)
+    px, py, pz = (np.ascontiguousarray(points[:, k], dtype=float) for k in range(3))
+    min_kink = 0.5 * np.tan(np.radians(s_crit))
+    sizes = [len(c) for c in lines]
+    coords = np.concatenate([np.asarray(c, float)[:, :3] for c in lines])
+    starts = np.r_[0, np.cumsum(sizes)]
+    confidence = np.full(len(coords), np.nan)
+    kink = np.full(len(coords), np.nan)
+    reach = float(np.hypot(window.half_width, window.half_length))
+    for _ in range(iterations):
+        tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
+        fits = np.concatenate([_hinge_fits(px, py, pz, *index.neighbours(coords[a:b, :2], reach),
+                                           coords[a:b, 0].copy(), coords[a:b, 1].copy(),
+                                           tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
+                                           window.half_width, window.half_length)
+                               for a, b in _chunks(len(coords))])
+        good = (np.isfinite(fits[:, 0]) & (np.abs(fits[:, 3]) >= min_kink)
+                & (fits[:, 4] >= min_f_ratio))
+        normal = np.column_stack([-tangents[:, 1], tangents[:, 0]])
+        coords[good, :2] += fits[good, 0:1] * normal[good]
+        coords[good, 2] = fits[good, 1]
+        confidence[good] = fits[good, 2]
+        kink[good] = fits[good, 3]
+    bounds = list(zip(starts[:-1], starts[1:]))
+    return ([coords[a:b] for a, b in bounds], [confidence[a:b] for a, b in bounds],
+            [kink[a:b] for a, b in bounds])
+
+
+def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.ndarray],
+                        radius: float, *, on_line: float, index=None) -> tuple[np.ndarray, dict]:
+    """Node elevations (n,) with the noise taken out: nodes within ``on_line`` m of a break line
+    (k, 3 arrays) take z along it; the others z of a least-squares plane of ``points`` within
+    ``radius`` m (at most 0.9 of their distance to the nearest line, at least ``on_line``·10),
+    or keep theirs where fewer than 6 points are there (a node equally near two lines takes
+    the one listed first). Returns z and counts."""
+    z = np.asarray(nodes[:, 2], float).copy()
+    xy = np.asarray(nodes[:, :2], float)
+    usable = [np.asarray(c, float) for c in lines if len(c) >= 2]
+    distance = np.full(len(xy), np.inf)
+    on = np.zeros(len(xy), bool)
+    if usable:
+        geoms = np.array([shapely.LineString(c[:, :3] if c.shape[1] >= 3 else c[:, :2])
+                          for c in usable], dtype=object)
+        where = shapely.points(xy)
+        nearest, distance = nearest_line(xy, usable)
+        on = distance <= on_line
+        with_z = np.array([c.shape[1] >= 3 for c in usable])
+        pick = np.nonzero(on)[0]
+        pick = pick[with_z[nearest[pick]]]
+        along = shapely.line_locate_point(geoms[nearest[pick]], where[pick])
+        z[pick] = shapely.get_z(shapely.line_interpolate_point(geoms[nearest[pick]], along))
+    off = ~on
+    r = np.clip(0.9 * distance[off], min(radius, 10 * on_line), radius)
+    index = index if index is not None else point_index(points)
+    plane, _, count = _plane_fits(index, points, xy[off], r)
+    fitted = count >= 6
+    idx = np.nonzero(off)[0][fitted]
+    z[idx] = plane[fitted]
+    return z, {"on_lines": int(on.sum()), "plane_fitted": int(fitted.sum()),
+               "kept": int((~fitted).sum())}
+
+
+def _failed_fits_left_out(coords, moved, max_gap):
+    """Which vertices to keep: the moved ones, the line's ends, and runs of vertices the fit did
+    not move where the moved vertices on either side are farther apart than ``max_gap`` m along
+    the line (a stretch without a clear kink keeps its traced course)."""
+    keep = moved.copy()
+    keep[0] = keep[-1] = True
+    kept = np.nonzero(keep)[0]
+    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(coords[:, :2], axis=0).T))]
+    for a, b in zip(kept[:-1], kept[1:]):
+        if b - a > 1 and along[b] - along[a] > max_gap:
+            keep[a + 1:b] = True
+    return keep
+
+
+def _hops_cut(keep: np.ndarray, kink: np.ndarray) -> list[np.ndarray]:
+    """The kept vertex indices split into pieces where the line hops from a crest to a toe
+    (or back) across a band: between two moved vertices whose slope changes have opposite
+    signs, the segment after the first goes."""
+    signs = np.sign(kink[keep])
+    moved = np.nonzero(np.isfinite(signs))[0]
+    cuts = [i + 1 for i, j in zip(moved[:-1], moved[1:]) if signs[i] != signs[j]]
+    return np.split(keep, cuts)
+
+
+def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5, index=None):
+    """A check for ``join_pieces``: whether the measured points between two line ends (x, y, z)
+    follow the straight line between them, i.e. the median z of the points near each of the
+    gap's sample positions (every ``spacing`` m) lies on average within 0.05 m plus the noise
+    of the line's z. Gaps under a metre pass unchecked."""
+    index = index if index is not None else point_index(points)
+    radius = max(spacing, float(np.sqrt(8 / (np.pi * window.density))))
+    tolerance = 0.05 + window.noise
+
+    def follows(a, b) -> bool:
+        gap = float(np.hypot(*(b[:2] - a[:2])))
+        if gap < 1.0 or len(a) < 3 or not (np.isfinite(a[2]) and np.isfinite(b[2])):
+            return True
+        t = np.linspace(0, 1, max(3, int(gap / spacing)) + 2)[1:-1, None]
+        at = a[None, :3] * (1 - t) + b[None, :3] * t
+        indptr, indices = index.neighbours(at[:, :2], radius)
+        near = np.split(indices, indptr[1:-1])
+        off = [abs(np.median(points[k, 2]) - z) for k, z in zip(near, at[:, 2]) if len(k) >= 3]
+        return not off or float(np.mean(off)) <= tolerance
+
+    return follows
+
+
+def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
+                    s_crit: float = 10.0, tolerance: float = 0.1,
+                    max_gap: float = 12.0, join_gap: float | None = None,
+                    join_lateral: float = 1.0, index=None) -> tuple[list, list[float], dict]:
+    """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
+    move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within
+    ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
+    are cut where they hop across a band from crest to toe (``_hops_cut``), and pieces of one
+    kind (crest or toe) whose ends face each other across at most ``join_gap`` m are joined
+    (``joining.join_pieces``, lateral offset ``join_lateral`` m; None or 0: no joining), and line
+    ends that stop within ``join_lateral`` plus a tenth of ``join_gap`` m of another line's
+    interior, pointing at it at its height (within ``tolerance`` m plus a rise at ``s_crit``),
+    are snapped onto it (``joining.snap_t_junctions``). Returns
+    the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
+    where none moved) and counts. ``index``: ``nearest.point_index(points)`` if built."""
+    from .breaklines import BreakLine
+    from .joining import join_pieces, snap_t_junctions
+    from .simplify import douglas_peucker_mask
+
+    index = index if index is not None else point_index(points)  # one for both uses below
+    moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
+                                                   window, s_crit=s_crit, index=index)
+    pieces, hops = [], 0  # (coords, slopes, component, fit RMS, kink) per piece
+    for line, coords, fit, kink in zip(lines, moved, confidence, kinks):
+        fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap)
+        keep = np.nonzero(fitted)[0][douglas_peucker_mask(coords[fitted], tolerance)]
+        for piece in _hops_cut(keep, kink):
+            hops += 1
+            if len(piece) >= 2:
+                pieces.append((coords[piece], line.slopes[piece], line.component, fit[piece],
+                               kink[piece]))
+        hops -= 1
+    chains = [[(k, False, 0, len(p[0]))] for k, p in enumerate(pieces)]
+    if join_gap:
+        kinds = [np.sign(np.nanmedian(p[4])) if np.isfinite(p[4]).any() else 0 for p in pieces]
+        chains = join_pieces([p[0] for p in pieces], kinds, max_gap=join_gap,
+                             lateral=join_lateral, ground=_ground_follows(points, window,
+                                                                     index=index))
+    out, per_line = [], []
+    for chain in chains:
+        parts = [[(p[j][::-1] if reverse else p[j])[first:stop] for j in (0, 1, 3)]
+                 for p, reverse, first, stop in ((pieces[k], *rest) for k, *rest in chain)]
+        coords, slopes, fit = (np.concatenate([part[j] for part in parts]) for j in range(3))
+        out.append(BreakLine(coords, slopes, min(pieces[k][2] for k, *_ in chain)))
+        per_line.append(float(np.nanmedian(fit)) if np.isfinite(fit).any() else float("nan"))
+    t_junctions = 0
+    if join_gap and out:
+        snapped, takes, t_junctions = snap_t_junctions(
+            [line.coords for line in out], tolerance=join_lateral + 0.1 * join_gap,
+            rise=tolerance, grade=float(np.tan(np.radians(s_crit))))
+        out = [BreakLine(c, line.slopes[take], line.component)
+               for c, take, line in zip(snapped, takes, out)]
+    every = np.concatenate(confidence) if confidence else np.zeros(0)
+    done = np.isfinite(every)
+    return out, per_line, {"vertices": int(every.size), "vertices_localised": int(done.sum()),
+                           "vertices_kept": int(sum(len(line.coords) for line in out)),
+                           "hop_segments_cut": hops,
+                           "pieces_joined": len(pieces) - len(chains),
+                           "t_junctions_snapped": t_junctions,
+                           "join_gap_m": join_gap or 0.0,
+                           "thinning_tolerance_m": tolerance,
+                           "median_fit_rms_m": float(np.median(every[done])) if done.any()
+                           else None}

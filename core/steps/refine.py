@@ -1,0 +1,141 @@
+"""Error-driven mesh refinement (step 9 of the method).
+
+Each round meshes the DEM with its break lines, then measures the residual (point − TIN) of
+the refinement points (the LiDAR points used for gridding, or DEM cell centres): a point whose
+|residual| exceeds the ``upper`` bound goes into the TIN as a vertex with its measured
+elevation (the worst one per triangle and round); a triangle whose points' RMS residual
+exceeds the ``lower`` bound (a systematic misfit, not one noisy point) gets a quarter of its
+area as its local maximum. Rounds stop when the target holds (RMSE and/or largest |residual|
+of the refinement points), when the node budget would be passed, or when nothing is left to
+refine.
+Check points (held out, never used for refinement) are assessed every round, so the error
+reported is independent of the refinement.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .accuracy import residuals
+from ..errors import Cancelled, FloodMeshError
+from .mesh import Mesh, build_mesh, containing_triangle, triangle_areas
+from ..raster import Grid
+
+
+@dataclass(frozen=True)
+class RefineRound:
+    """One round: nodes, triangles, and RMSE / max |residual| (m) of the refinement points and
+    of the check points, with how many points it inserted and how many it refined around."""
+
+    nodes: int
+    triangles: int
+    rmse_m: float
+    max_abs_m: float
+    check_rmse_m: float
+    check_max_abs_m: float
+    inserted: int
+    refined: int
+
+
+def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
+                check: np.ndarray | None = None, domain=None, size_field=None,
+                min_angle: float = 25.0, conforming: bool = False, elevations=None,
+                max_area: float = 100.0, lower: float = 0.10, upper: float = 0.25,
+                target_rmse: float | None = None, target_max: float | None = None,
+                max_nodes: int = 1_000_000, max_rounds: int = 8,
+                progress: Callable[[float], None] | None = None,
+                cancelled: Callable[[], bool] | None = None) -> tuple[Mesh, list[RefineRound]]:
+    """Refine until the target holds on ``points`` (n, 3), within ``max_nodes`` nodes and
+    ``max_rounds`` rounds. Bounds and targets in metres; with no target, rounds go on until
+    nothing is left to refine. ``domain`` and ``size_field`` as for ``build_mesh``;
+    ``elevations(mesh)`` (or None) gives each round's mesh its node z.
+    Returns the last mesh within the budget and every round."""
+    points = np.asarray(points, float)
+    if points.ndim != 2 or points.shape[1] != 3 or not len(points):
+        raise FloodMeshError("refinement needs measured points (x, y, z); none were given")
+    if not 0 < lower <= upper:
+        raise FloodMeshError(f"refinement bounds must satisfy 0 < lower <= upper, got lower "
+                             f"{lower} m and upper {upper} m (10 and 25 cm are usual)")
+    if max_rounds < 1 or max_nodes < 3:
+        raise FloodMeshError("give at least one round and a node budget of at least 3")
+    floor = dem.cell_size ** 2 / 2  # no refinement below the DEM's own resolution
+    inserted = np.empty((0, 3))
+    local = np.empty((0, 3))  # x, y, local maximum area (m²) of every triangle refined so far
+    rounds, best = [], None
+    for k in range(max_rounds):
+        if cancelled is not None and cancelled():
+            raise Cancelled()
+        mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area, points=inserted,
+                          local_areas=local, domain=domain, size_field=size_field,
+                          conforming=conforming)
+        if elevations is not None:  # node z from a terrain fit, each round
+            mesh = elevations(mesh)
+        if len(mesh.nodes) > max_nodes:
+            if best is None:
+                raise FloodMeshError(f"the unrefined mesh already has {len(mesh.nodes)} nodes, "
+                                     f"over the budget of {max_nodes}; raise the budget or the "
+                                     "maximum triangle area")
+            break
+        if rounds and len(mesh.nodes) == rounds[-1].nodes:
+            break  # what is left to insert lies too close to a node or the boundary
+        res = residuals(mesh, points)
+        check_res = residuals(mesh, check) if check is not None and len(check) else np.array([])
+        found = containing_triangle(mesh.nodes[:, :2], mesh.triangles, points)
+        new_points = _worst_per_triangle(points, res, found, upper)
+        misfit = _misfit_triangles(mesh, found, res, lower, floor)
+        rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), _rmse(res),
+                                  _max_abs(res), _rmse(check_res), _max_abs(check_res),
+                                  len(new_points), len(misfit)))
+        best = mesh
+        if progress is not None:
+            progress((k + 1) / max_rounds)
+        if _met(res, target_rmse, target_max) or (not len(new_points) and not len(misfit)):
+            break
+        inserted = np.vstack([inserted, new_points])
+        local = np.vstack([local, misfit])
+    return best, rounds
+
+
+def _worst_per_triangle(points, res, found, upper) -> np.ndarray:
+    """The point of largest |residual| in each triangle, where it exceeds ``upper``: one new
+    vertex per triangle and round, as greedy TIN insertion does (its neighbours' residuals
+    change once it is in)."""
+    big = np.flatnonzero((np.abs(np.nan_to_num(res)) > upper) & (found >= 0))
+    if not len(big):
+        return points[:0]
+    order = big[np.lexsort((-np.abs(res[big]), found[big]))]
+    first = np.r_[True, found[order][1:] != found[order][:-1]]
+    return points[order[first]]
+
+
+def _misfit_triangles(mesh: Mesh, found, res, lower, floor) -> np.ndarray:
+    """Centroid x, y and a quarter of the area of each triangle whose points' RMS residual
+    exceeds ``lower``, where that quarter is at least ``floor`` m²."""
+    ok = (found >= 0) & np.isfinite(res)
+    n_tri = len(mesh.triangles)
+    count = np.bincount(found[ok], minlength=n_tri)
+    square = np.bincount(found[ok], weights=res[ok] ** 2, minlength=n_tri)
+    rms = np.sqrt(square / np.maximum(count, 1))
+    quarter = triangle_areas(mesh.nodes, mesh.triangles) / 4
+    pick = (count > 0) & (rms > lower) & (quarter >= floor)
+    centroid = mesh.nodes[mesh.triangles[pick], :2].mean(axis=1)
+    return np.column_stack([centroid, quarter[pick]])
+
+
+def _met(res, target_rmse, target_max) -> bool:
+    if target_rmse is None and target_max is None:
+        return False  # refine until nothing is left to refine
+    return ((target_rmse is None or _rmse(res) <= target_rmse)
+            and (target_max is None or _max_abs(res) <= target_max))
+
+
+def _rmse(res) -> float:
+    res = res[np.isfinite(res)]
+    return float(np.sqrt(np.mean(res ** 2))) if res.size else float("nan")
+
+
+def _max_abs(res) -> float:
+    res = res[np.isfinite(res)]
+    return float(np.abs(res).max()) if res.size else float("nan")
