@@ -33,8 +33,7 @@ import numba
 import numpy as np
 
 from ..errors import FloodMeshError
-from ..options import (TRACING_MODES, check_choice, check_min_length, check_min_points,
-                       check_s_crit)
+from ..options import TRACING_MODES, check_choice, check_min_length, check_min_points, check_s_crit
 from ..raster import Grid
 
 MODES = TRACING_MODES
@@ -158,6 +157,14 @@ def _crosses_link(links, cell, k, cols):
 
 
 @numba.njit(cache=True)
+def _add_link(links, a, b, k):
+    """Record the link from cell ``a`` to its neighbour ``b`` in direction ``k``: bit k of a's
+    links and bit k + 4 (the opposite direction) of b's."""
+    links[a] |= 1 << k
+    links[b] |= 1 << ((k + 4) % 8)
+
+
+@numba.njit(cache=True)
 def _join_fragments(cells, starts, rows, cols):
     """Join paths end to end where an end cell is a grid neighbour of another path's end cell,
     the two ends point at each other (their chords over six steps within 45°) and the joined
@@ -167,18 +174,39 @@ def _join_fragments(cells, starts, rows, cols):
     to the grid; its slope differs from the edge's by more than S_crit, so the tracer ends the
     line there. Joining the pieces restores one line per feature. Closest, straightest joins go
     first; no path joins itself, and an opening point shared by several paths joins nothing."""
+    in_paths, end_cell, end_at = _path_ends(cells, starts, rows, cols)
+    cost, end_a, end_b, direction = _joint_candidates(cells, starts, rows, cols, in_paths,
+                                                      end_cell, end_at)
+    links = _path_links(cells, starts, rows, cols)
+    partner = _chosen_joints(cost, end_a, end_b, direction, end_cell, links, cols)
+    return _walk_chains(cells, starts, partner)
+
+
+@numba.njit(cache=True)
+def _path_ends(cells, starts, rows, cols):
+    """Per cell, how many paths hold it; per path end (2k: path k's start, 2k + 1: its end), its
+    cell; per cell, the end in it (-1: none)."""
     n_paths = starts.size - 1
-    n_ends = 2 * n_paths
     in_paths = np.zeros(rows * cols, dtype=np.int32)
     for i in range(cells.size):
         in_paths[cells[i]] += 1
-    end_cell = np.empty(n_ends, dtype=np.int64)
+    end_cell = np.empty(2 * n_paths, dtype=np.int64)
     end_at = np.full(rows * cols, -1, dtype=np.int32)  # the end in a cell that is in one path
     for k in range(n_paths):
         end_cell[2 * k] = cells[starts[k]]
         end_cell[2 * k + 1] = cells[starts[k + 1] - 1]
         end_at[end_cell[2 * k]] = 2 * k
         end_at[end_cell[2 * k + 1]] = 2 * k + 1
+    return in_paths, end_cell, end_at
+
+
+@numba.njit(cache=True)
+def _joint_candidates(cells, starts, rows, cols, in_paths, end_cell, end_at):
+    """The possible joints: pairs of ends of two paths, in neighbouring cells held by one path
+    each, that face each other and keep the trend rule across the joint. Returns per joint its
+    cost (step length plus how far the ends are from facing), its two ends and the step's
+    direction from the first end's cell; each pair once."""
+    n_ends = end_cell.size
     reach = 7  # cells per end for the chord (six steps)
     tail_a = np.empty(reach, dtype=np.int64)
     tail_b = np.empty(reach, dtype=np.int64)
@@ -193,8 +221,6 @@ def _join_fragments(cells, starts, rows, cols):
         if starts[k + 1] - starts[k] < 2 or in_paths[end_cell[e]] > 1:
             continue
         na = _end_cells(cells, starts[k], starts[k + 1], e % 2 == 0, reach, tail_a)
-        ur, uc = tail_a[na - 1] // cols - tail_a[0] // cols, tail_a[na - 1] % cols - tail_a[0] % cols
-        un = np.sqrt(ur * ur + uc * uc)
         r, c = end_cell[e] // cols, end_cell[e] % cols
         for j in range(8):
             rr, cc = r + DR[j], c + DC[j]
@@ -208,50 +234,90 @@ def _join_fragments(cells, starts, rows, cols):
             if m <= k or starts[m + 1] - starts[m] < 2:
                 continue  # each pair once, no self-joins
             nb = _end_cells(cells, starts[m], starts[m + 1], f % 2 == 0, reach, tail_b)
-            vr = tail_b[nb - 1] // cols - tail_b[0] // cols
-            vc = tail_b[nb - 1] % cols - tail_b[0] % cols
-            facing = -(ur * vr + uc * vc) / (un * np.sqrt(vr * vr + vc * vc))
+            facing = _facing(tail_a, na, tail_b, nb, cols)
             if facing < np.sqrt(0.5) - 1e-9:
                 continue
-            # the trend rule across the joint, in both directions
-            n_joint = 0
-            for q in range(max(0, na - 4), na):
-                joint[n_joint] = tail_a[q]
-                n_joint += 1
-            for q in range(nb - 1, max(-1, nb - 5), -1):
-                joint[n_joint] = tail_b[q]
-                n_joint += 1
-            if not (_turns_ok(joint, n_joint, cols, False) and _turns_ok(joint, n_joint, cols, True)):
+            if not _joint_keeps_trend(tail_a, na, tail_b, nb, joint, cols):
                 continue
             cand_cost[n_cand] = np.sqrt(DR[j] ** 2 + DC[j] ** 2) + (1.0 - facing)
             cand_a[n_cand], cand_b[n_cand], cand_dir[n_cand] = e, f, j
             n_cand += 1
-    links = np.zeros(rows * cols, dtype=np.uint8)  # as in _trace: bit k links to neighbour k
-    for k in range(n_paths):
+    return cand_cost[:n_cand], cand_a[:n_cand], cand_b[:n_cand], cand_dir[:n_cand]
+
+
+@numba.njit(cache=True)
+def _chord(tail, n, cols):
+    """(rows, cols) from the first to the last of the cells tail[:n]."""
+    return tail[n - 1] // cols - tail[0] // cols, tail[n - 1] % cols - tail[0] % cols
+
+
+@numba.njit(cache=True)
+def _facing(tail_a, na, tail_b, nb, cols):
+    """How squarely two path ends (their last cells, each up to its end cell) point at each
+    other: the cosine between one end's chord and the other's reversed."""
+    ur, uc = _chord(tail_a, na, cols)
+    un = np.sqrt(ur * ur + uc * uc)
+    vr, vc = _chord(tail_b, nb, cols)
+    return -(ur * vr + uc * vc) / (un * np.sqrt(vr * vr + vc * vc))
+
+
+@numba.njit(cache=True)
+def _joint_keeps_trend(tail_a, na, tail_b, nb, joint, cols):
+    """Whether the line joined across two ends keeps the trend rule, read in both directions,
+    over the four cells on each side of the joint (``joint``: room for eight cells)."""
+    n_joint = 0
+    for q in range(max(0, na - 4), na):
+        joint[n_joint] = tail_a[q]
+        n_joint += 1
+    for q in range(nb - 1, max(-1, nb - 5), -1):
+        joint[n_joint] = tail_b[q]
+        n_joint += 1
+    return _turns_ok(joint, n_joint, cols, False) and _turns_ok(joint, n_joint, cols, True)
+
+
+@numba.njit(cache=True)
+def _path_links(cells, starts, rows, cols):
+    """The links between successive cells of the paths, as in _trace: bit k of a cell's links
+    is set where it links to its neighbour k."""
+    links = np.zeros(rows * cols, dtype=np.uint8)
+    for k in range(starts.size - 1):
         for i in range(starts[k], starts[k + 1] - 1):
             a, b = cells[i], cells[i + 1]
             for q in range(8):
                 if b // cols - a // cols == DR[q] and b % cols - a % cols == DC[q]:
-                    links[a] |= 1 << q
-                    links[b] |= 1 << ((q + 4) % 8)
-    partner = np.full(n_ends, -1, dtype=np.int64)
-    chain = np.arange(n_paths)  # union-find over paths, to keep chains free of cycles
-    for t in np.argsort(cand_cost[:n_cand], kind="mergesort"):
-        e, f = cand_a[t], cand_b[t]
+                    _add_link(links, a, b, q)
+    return links
+
+
+@numba.njit(cache=True)
+def _chosen_joints(cost, end_a, end_b, direction, end_cell, links, cols):
+    """The joints made, cheapest first: per end, the end it is joined to (-1: none). No end
+    joins twice, no chain closes on itself and a diagonal joint crosses no link; each joint
+    made is added to ``links``."""
+    partner = np.full(end_cell.size, -1, dtype=np.int64)
+    chain = np.arange(end_cell.size // 2)  # union-find over paths, to keep chains free of cycles
+    for t in np.argsort(cost, kind="mergesort"):
+        e, f = end_a[t], end_b[t]
         if partner[e] >= 0 or partner[f] >= 0:
             continue
         a, b = _root(chain, e // 2), _root(chain, f // 2)
         if a == b:
             continue
-        j = cand_dir[t]
+        j = direction[t]
         here = end_cell[e]
         if _crosses_link(links, here, j, cols):  # a diagonal joint must not cross a link
             continue
-        links[here] |= 1 << j
-        links[end_cell[f]] |= 1 << ((j + 4) % 8)
+        _add_link(links, here, end_cell[f], j)
         chain[max(a, b)] = min(a, b)
         partner[e], partner[f] = f, e
-    # walk each chain from a free end
+    return partner
+
+
+@numba.njit(cache=True)
+def _walk_chains(cells, starts, partner):
+    """The joined lines as (cells, starts): each chain of joined paths walked from a free end,
+    a path read backwards where the walk enters it at its end."""
+    n_paths = starts.size - 1
     out = np.empty(cells.size, dtype=np.int64)
     out_starts = np.empty(n_paths + 1, dtype=np.int64)
     out_starts[0] = 0
@@ -429,7 +495,7 @@ def _seeded_pick(seed, cell, n):
 @numba.njit(cache=True)
 def _extend(start, trend_r, trend_c, bp, slope, used, links, s_crit, steep, seed, path):
     """Grow a path from ``start`` (already in ``path[0]``); return its length."""
-    rows, cols = bp.shape
+    cols = bp.shape[1]
     n = 1
     cur = start
     cand_k = np.empty(8, dtype=np.int64)
@@ -442,67 +508,90 @@ def _extend(start, trend_r, trend_c, bp, slope, used, links, s_crit, steep, seed
             tr, tc = cr - back // cols, cc - back % cols
         else:
             tr, tc = trend_r, trend_c
-        has_trend = tr != 0 or tc != 0
-        tnorm = np.sqrt(tr * tr + tc * tc) if has_trend else 1.0
-        n_cand = 0
-        for k in range(8):
-            nr, nc = cr + DR[k], cc + DC[k]
-            if nr < 0 or nr >= rows or nc < 0 or nc >= cols:
-                continue
-            if not bp[nr, nc] or used[nr, nc]:
-                continue
-            ds = abs(slope[nr, nc] - slope[cr, cc])
-            if ds >= s_crit:
-                continue
-            turn = 0.0
-            if has_trend:
-                cos = (DR[k] * tr + DC[k] * tc) / (tnorm * np.sqrt(DR[k] ** 2 + DC[k] ** 2))
-                if cos < -1e-9:
-                    continue  # turns more than 90 degrees from the trend
-                turn = 1.0 - cos
-            if _crosses_link(links, cur, k, cols):  # a diagonal step across another link
-                continue
-            cand_k[n_cand] = k
-            cand_score[n_cand] = ds if steep else slope[nr, nc]
-            cand_turn[n_cand] = turn
-            n_cand += 1
+        n_cand = _step_candidates(cur, tr, tc, bp, slope, used, links, s_crit, steep,
+                                  cand_k, cand_score, cand_turn)
         if n_cand == 0:
             return n
-        # the 3x3 kernel's choice, then 5x5 and 7x7 rings for its ties
-        n_tied = n_cand
-        for ring in range(1, 4):
-            if ring > 1:
-                for i in range(n_tied):
-                    cand_score[i] = _ring_score(cr, cc, cand_k[i], ring, bp, slope, used, steep)
-            best = np.inf
-            for i in range(n_tied):
-                best = min(best, cand_score[i])
-            m = 0
-            for i in range(n_tied):
-                if cand_score[i] <= best + TIE:
-                    cand_k[m], cand_turn[m] = cand_k[i], cand_turn[i]
-                    m += 1
-            n_tied = m
-            if n_tied == 1:
-                break
-        if n_tied > 1:  # then the smallest turn, then a seeded random choice
-            least = np.inf
-            for i in range(n_tied):
-                least = min(least, cand_turn[i])
-            m = 0
-            for i in range(n_tied):
-                if cand_turn[i] <= least + 1e-12:
-                    cand_k[m] = cand_k[i]
-                    m += 1
-            n_tied = m
-        best_k = cand_k[0] if n_tied == 1 else cand_k[_seeded_pick(seed, cur, n_tied)]
+        best_k = _chosen_step(cur, n_cand, cand_k, cand_score, cand_turn, bp, slope, used,
+                              steep, seed)
         best = (cr + DR[best_k]) * cols + cc + DC[best_k]
-        links[cur] |= 1 << best_k
-        links[best] |= 1 << ((best_k + 4) % 8)
+        _add_link(links, cur, best, best_k)
         used[best // cols, best % cols] = True
         path[n] = best
         n += 1
         cur = best
+
+
+@numba.njit(cache=True)
+def _step_candidates(cur, tr, tc, bp, slope, used, links, s_crit, steep, cand_k, cand_score,
+                     cand_turn):
+    """The steps the tracing rules allow from ``cur`` to a free neighbouring breakpoint: slope
+    change under S_crit, at most 90° from the trend (tr, tc) (none: (0, 0)), no diagonal across
+    a link. Their directions, 3x3 kernel scores and turns go into ``cand_k``, ``cand_score``
+    and ``cand_turn``; returns how many."""
+    rows, cols = bp.shape
+    cr, cc = cur // cols, cur % cols
+    has_trend = tr != 0 or tc != 0
+    tnorm = np.sqrt(tr * tr + tc * tc) if has_trend else 1.0
+    n_cand = 0
+    for k in range(8):
+        nr, nc = cr + DR[k], cc + DC[k]
+        if nr < 0 or nr >= rows or nc < 0 or nc >= cols:
+            continue
+        if not bp[nr, nc] or used[nr, nc]:
+            continue
+        ds = abs(slope[nr, nc] - slope[cr, cc])
+        if ds >= s_crit:
+            continue
+        turn = 0.0
+        if has_trend:
+            cos = (DR[k] * tr + DC[k] * tc) / (tnorm * np.sqrt(DR[k] ** 2 + DC[k] ** 2))
+            if cos < -1e-9:
+                continue  # turns more than 90 degrees from the trend
+            turn = 1.0 - cos
+        if _crosses_link(links, cur, k, cols):  # a diagonal step across another link
+            continue
+        cand_k[n_cand] = k
+        cand_score[n_cand] = ds if steep else slope[nr, nc]
+        cand_turn[n_cand] = turn
+        n_cand += 1
+    return n_cand
+
+
+@numba.njit(cache=True)
+def _chosen_step(cur, n_cand, cand_k, cand_score, cand_turn, bp, slope, used, steep, seed):
+    """The direction of the step taken from ``cur`` among the ``n_cand`` candidates: the 3x3
+    kernel's choice, then the 5x5 and 7x7 rings' for its ties, then the smallest turn, then a
+    seeded random choice. Overwrites the candidate arrays."""
+    cols = bp.shape[1]
+    cr, cc = cur // cols, cur % cols
+    n_tied = n_cand
+    for ring in range(1, 4):
+        if ring > 1:
+            for i in range(n_tied):
+                cand_score[i] = _ring_score(cr, cc, cand_k[i], ring, bp, slope, used, steep)
+        best = np.inf
+        for i in range(n_tied):
+            best = min(best, cand_score[i])
+        m = 0
+        for i in range(n_tied):
+            if cand_score[i] <= best + TIE:
+                cand_k[m], cand_turn[m] = cand_k[i], cand_turn[i]
+                m += 1
+        n_tied = m
+        if n_tied == 1:
+            break
+    if n_tied > 1:  # then the smallest turn, then a seeded random choice
+        least = np.inf
+        for i in range(n_tied):
+            least = min(least, cand_turn[i])
+        m = 0
+        for i in range(n_tied):
+            if cand_turn[i] <= least + 1e-12:
+                cand_k[m] = cand_k[i]
+                m += 1
+        n_tied = m
+    return cand_k[0] if n_tied == 1 else cand_k[_seeded_pick(seed, cur, n_tied)]
 
 
 @numba.njit(cache=True)

@@ -40,11 +40,23 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
     Returns one chain per output line: a list
     of (line index, reversed, first, stop), i.e. ``lines[i][::-1 if reversed][first:stop]`` in
     order; every line appears in exactly one chain."""
-    from scipy.spatial import cKDTree
-
     n = len(lines)
     kinds = np.zeros(n, int) if kinds is None else np.asarray(kinds, int)
     reach = 2 * max_gap if reach is None else reach
+    points, directions, owners, ends = _line_ends(lines, reach)
+    if len(points) < 2:
+        return [[(i, False, 0, len(c))] for i, c in enumerate(lines)]
+    points, directions, owners = np.array(points), np.array(directions), np.array(owners)
+    candidates = _facing_ends(points, directions, owners, ends, kinds, max_gap=max_gap,
+                              lateral=lateral, max_turn=max_turn, ground=ground)
+    partner, joint = _chosen_joins(candidates, points, owners, n)
+    return _joined_chains(lines, partner, joint)
+
+
+def _line_ends(lines, reach: float):
+    """The ends of ``lines`` that have a direction: per end, its point and outward direction
+    (``_end_frame``), its owner (2·line for a line's start, 2·line + 1 for its end) and its
+    vertex (x, y, z)."""
     points, directions, owners, ends = [], [], [], []
     for i, c in enumerate(lines):
         c = np.asarray(c, float)
@@ -55,9 +67,16 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
                 points.append(p)
                 directions.append(d)
                 owners.append(2 * i + side)
-    if len(points) < 2:
-        return [[(i, False, 0, len(c))] for i, c in enumerate(lines)]
-    points, directions, owners = np.array(points), np.array(directions), np.array(owners)
+    return points, directions, owners, ends
+
+
+def _facing_ends(points, directions, owners, ends, kinds, *, max_gap: float, lateral: float,
+                 max_turn: float, ground):
+    """The possible joins, cheapest first: (cost, end a, end b, their mean direction from a
+    towards b) for every two ends of different lines, not a crest and a toe, that face each
+    other across a gap (or overlap) the module allows, over ground that follows the line."""
+    from scipy.spatial import cKDTree
+
     cos_turn = np.cos(np.radians(max_turn))
     candidates = []
     for a, b in cKDTree(points).query_pairs(max_gap + lateral):
@@ -77,8 +96,15 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
             continue
         candidates.append((max(along, 0.0) + 2 * across + (1 + da @ db) * max_gap, a, b, mean))
     candidates.sort(key=lambda t: t[0])
+    return candidates
+
+
+def _chosen_joins(candidates, points, owners, n: int):
+    """The joins made, in the order of ``candidates``: no end joins twice and no chain of the
+    ``n`` lines closes on itself. Returns per joined end (owner number) its partner, and its
+    joint: (midpoint, direction from the end's line into the partner's)."""
     partner = {}
-    joint = {}  # end -> (midpoint, direction from the end's line into the partner's)
+    joint = {}
     root = list(range(n))
 
     def find(i):
@@ -98,6 +124,13 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
         partner[ea], partner[eb] = eb, ea
         mid = 0.5 * (points[a] + points[b])
         joint[ea], joint[eb] = (mid, mean), (mid, -mean)
+    return partner, joint
+
+
+def _joined_chains(lines, partner, joint):
+    """The chains of joined lines, each walked from a free end, as ``join_pieces`` returns them;
+    an overlap at a joint trimmed at its midpoint."""
+    n = len(lines)
     chains, done = [], np.zeros(n, bool)
     for i in range(n):
         if done[i] or (2 * i in partner and 2 * i + 1 in partner):
@@ -109,17 +142,9 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
             done[k] = True
             c = np.asarray(lines[k], float)
             reverse = end % 2 == 1  # entered at its end: walk it backwards
-            ordered = c[::-1] if reverse else c
-            first, stop = 0, len(c)
             far = end + 1 if end % 2 == 0 else end - 1
-            if end in joint:  # trim what lies beyond the joint's midpoint
-                mid, into = joint[end]
-                while stop - first > 2 and (ordered[first, :2] - mid) @ into > 0:
-                    first += 1
-            if far in joint:
-                mid, into = joint[far]
-                while stop - first > 2 and (ordered[stop - 1, :2] - mid) @ into > 0:
-                    stop -= 1
+            first, stop = _span_within_joints(c[::-1] if reverse else c, joint.get(end),
+                                              joint.get(far))
             chain.append((k, bool(reverse), first, stop))
             if far not in partner:
                 break
@@ -128,6 +153,21 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
     for i in np.nonzero(~done)[0]:  # closed loops cannot occur (no cycles), but be safe
         chains.append([(int(i), False, 0, len(lines[i]))])
     return chains
+
+
+def _span_within_joints(ordered, entry_joint, exit_joint):
+    """(first, stop): the vertices of a line (in walking order) short of the midpoints of its
+    joints at entry and exit ((midpoint, direction into the partner), or None), at least two."""
+    first, stop = 0, len(ordered)
+    if entry_joint is not None:  # trim what lies beyond the joint's midpoint
+        mid, into = entry_joint
+        while stop - first > 2 and (ordered[first, :2] - mid) @ into > 0:
+            first += 1
+    if exit_joint is not None:
+        mid, into = exit_joint
+        while stop - first > 2 and (ordered[stop - 1, :2] - mid) @ into > 0:
+            stop -= 1
+    return first, stop
 
 
 def snap_t_junctions(lines, *, tolerance: float, min_angle: float = 30.0,
@@ -150,54 +190,20 @@ def snap_t_junctions(lines, *, tolerance: float, min_angle: float = 30.0,
     other at one corner, the second line's stub beyond the node is trimmed instead (an L).
     Returns the lines, per line the index of the input vertex each output vertex comes from
     (an inserted vertex: its segment's first), and how many ends were snapped."""
-    from scipy.spatial import cKDTree
-
     lines = [np.asarray(c, float) for c in lines]
     takes = [np.arange(len(c)) for c in lines]
     reach = 2 * tolerance if reach is None else reach
-    seg_a, seg_b, seg_line, seg_first = [], [], [], []
-    for i, c in enumerate(lines):
-        if len(c) >= 2:
-            seg_a.append(c[:-1])
-            seg_b.append(c[1:])
-            seg_line.append(np.full(len(c) - 1, i))
-            seg_first.append(np.arange(len(c) - 1))
-    if not tolerance > 0 or len(seg_a) < 2:
+    segments = _segment_index(lines) if tolerance > 0 else None
+    if segments is None:
         return lines, takes, 0
-    seg_a, seg_b = np.concatenate(seg_a), np.concatenate(seg_b)
-    seg_line, seg_first = np.concatenate(seg_line), np.concatenate(seg_first)
-    span = seg_b[:, :2] - seg_a[:, :2]
-    half = 0.5 * np.hypot(*span.T)
-    tree = cKDTree(0.5 * (seg_a[:, :2] + seg_b[:, :2]))
     sin_min = np.sin(np.radians(min_angle))
     best = []  # (|ahead|, line, side, hit row, direction, target line)
     for i, c in enumerate(lines):
         for side in (0, 1) if len(c) >= 2 else ():
-            p, d = _end_frame(c, side == 0, reach)
-            if d is None:
-                continue
-            k = np.asarray(tree.query_ball_point(p, tolerance + half.max()), int)
-            k = k[seg_line[k] != i]
-            if not k.size:
-                continue
-            cross = d[0] * span[k, 1] - d[1] * span[k, 0]  # d × (b - a)
-            rel = seg_a[k, :2] - p
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ahead = (rel[:, 0] * span[k, 1] - rel[:, 1] * span[k, 0]) / cross
-                at = (rel[:, 0] * d[1] - rel[:, 1] * d[0]) / cross
-            ok = ((np.abs(cross) >= sin_min * 2 * half[k]) & (np.abs(ahead) <= tolerance)
-                  & (at >= 0) & (at <= 1))
-            if not ok.any():
-                continue
-            m = np.nonzero(ok)[0][np.argmin(np.abs(ahead[ok]))]
-            hit = seg_a[k[m]] + at[m] * (seg_b[k[m]] - seg_a[k[m]])
-            for vertex in (seg_a[k[m]], seg_b[k[m]]):  # near a vertex: that one, no short edge
-                if np.hypot(*(vertex[:2] - hit[:2])) < 0.25 * tolerance:
-                    hit = vertex
-            end = c[-1 if side == 1 else 0]
-            if c.shape[1] > 2 and abs(hit[2] - end[2]) > rise + grade * abs(ahead[m]):
-                continue  # the other line lies higher or lower: no junction on the ground
-            best.append((abs(ahead[m]), i, side, hit, d, int(seg_line[k[m]])))
+            snap = _end_snap(c, i, side, segments, tolerance=tolerance, reach=reach,
+                             sin_min=sin_min, rise=rise, grade=grade)
+            if snap is not None:
+                best.append(snap)
     best.sort(key=lambda t: t[0])
     nodes = {}  # (line, target line) -> node of an applied snap
     snapped = 0
@@ -205,20 +211,80 @@ def snap_t_junctions(lines, *, tolerance: float, min_angle: float = 30.0,
         if (j, i) in nodes:  # j's end already met i here: trim i's stub beyond that node
             _trim_stub(lines, takes, i, side, nodes[(j, i)], 2 * tolerance)
             continue
-        c, take = (lines[i], takes[i]) if side == 1 else (lines[i][::-1], takes[i][::-1])
-        past = (c[:, :2] - hit[:2]) @ d >= 0
-        stop = len(c)
-        while stop > 1 and past[stop - 1]:
-            stop -= 1
-        c, take = c[:stop], take[:stop]
-        if stop > 1 and np.hypot(*(c[-1, :2] - hit[:2])) < 0.25 * tolerance:
-            c, take = c[:-1], take[:-1]
-        c, take = np.vstack([c, hit[None, :c.shape[1]]]), np.r_[take, take[-1]]
-        lines[i], takes[i] = (c, take) if side == 1 else (c[::-1], take[::-1])
+        _end_at_node(lines, takes, i, side, hit, d, tolerance)
         _insert_vertex(lines, takes, j, hit)
         nodes[(i, j)] = hit
         snapped += 1
     return lines, takes, snapped
+
+
+def _segment_index(lines):
+    """The segments of ``lines``: first and second vertices, the line each is on, their xy
+    spans, half lengths and a KD-tree of their midpoints; None with fewer than two lines of two
+    or more vertices."""
+    from scipy.spatial import cKDTree
+
+    seg_a, seg_b, seg_line = [], [], []
+    for i, c in enumerate(lines):
+        if len(c) >= 2:
+            seg_a.append(c[:-1])
+            seg_b.append(c[1:])
+            seg_line.append(np.full(len(c) - 1, i))
+    if len(seg_a) < 2:
+        return None
+    seg_a, seg_b, seg_line = np.concatenate(seg_a), np.concatenate(seg_b), np.concatenate(seg_line)
+    span = seg_b[:, :2] - seg_a[:, :2]
+    half = 0.5 * np.hypot(*span.T)
+    tree = cKDTree(0.5 * (seg_a[:, :2] + seg_b[:, :2]))
+    return seg_a, seg_b, seg_line, span, half, tree
+
+
+def _end_snap(c, i, side, segments, *, tolerance: float, reach: float, sin_min: float,
+              rise: float, grade: float):
+    """Where the end at ``side`` (0: start, 1: end) of line ``i`` (``c``) meets another line's
+    segment as ``snap_t_junctions`` says: (|distance ahead|, i, side, the node, the end's
+    direction, the other line), or None."""
+    seg_a, seg_b, seg_line, span, half, tree = segments
+    p, d = _end_frame(c, side == 0, reach)
+    if d is None:
+        return None
+    k = np.asarray(tree.query_ball_point(p, tolerance + half.max()), int)
+    k = k[seg_line[k] != i]
+    if not k.size:
+        return None
+    cross = d[0] * span[k, 1] - d[1] * span[k, 0]  # d × (b - a)
+    rel = seg_a[k, :2] - p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ahead = (rel[:, 0] * span[k, 1] - rel[:, 1] * span[k, 0]) / cross
+        at = (rel[:, 0] * d[1] - rel[:, 1] * d[0]) / cross
+    ok = ((np.abs(cross) >= sin_min * 2 * half[k]) & (np.abs(ahead) <= tolerance)
+          & (at >= 0) & (at <= 1))
+    if not ok.any():
+        return None
+    m = np.nonzero(ok)[0][np.argmin(np.abs(ahead[ok]))]
+    hit = seg_a[k[m]] + at[m] * (seg_b[k[m]] - seg_a[k[m]])
+    for vertex in (seg_a[k[m]], seg_b[k[m]]):  # near a vertex: that one, no short edge
+        if np.hypot(*(vertex[:2] - hit[:2])) < 0.25 * tolerance:
+            hit = vertex
+    end = c[-1 if side == 1 else 0]
+    if c.shape[1] > 2 and abs(hit[2] - end[2]) > rise + grade * abs(ahead[m]):
+        return None  # the other line lies higher or lower: no junction on the ground
+    return abs(ahead[m]), i, side, hit, d, int(seg_line[k[m]])
+
+
+def _end_at_node(lines, takes, i, side, hit, d, tolerance):
+    """Line ``i``'s end at ``side`` ended at the node ``hit``: its vertices past the node (along
+    ``d``, the end's direction) cut off, and one within a quarter of ``tolerance`` of it."""
+    c, take = (lines[i], takes[i]) if side == 1 else (lines[i][::-1], takes[i][::-1])
+    past = (c[:, :2] - hit[:2]) @ d >= 0
+    stop = len(c)
+    while stop > 1 and past[stop - 1]:
+        stop -= 1
+    c, take = c[:stop], take[:stop]
+    if stop > 1 and np.hypot(*(c[-1, :2] - hit[:2])) < 0.25 * tolerance:
+        c, take = c[:-1], take[:-1]
+    c, take = np.vstack([c, hit[None, :c.shape[1]]]), np.r_[take, take[-1]]
+    lines[i], takes[i] = (c, take) if side == 1 else (c[::-1], take[::-1])
 
 
 def _insert_vertex(lines, takes, j, point):

@@ -23,8 +23,8 @@ import numpy as np
 import shapely
 from numba import njit
 
-from ..engine.nearest import nearest_line, point_index
 from ..errors import FloodMeshError
+from ..engine.nearest import nearest_line, point_index
 
 
 @dataclass(frozen=True)
@@ -194,19 +194,8 @@ def _hinge_fits(px, py, pz, indptr, indices, vx, vy, tx, ty, half_width, half_le
     out = np.full((n, 6), np.nan)
     steps = 24
     for i in range(n):
-        lo, hi = indptr[i], indptr[i + 1]
-        u = np.empty(hi - lo)
-        v = np.empty(hi - lo)
-        z = np.empty(hi - lo)
-        m = 0
-        for k in range(lo, hi):
-            q = indices[k]
-            dx, dy = px[q] - vx[i], py[q] - vy[i]
-            along = dx * tx[i] + dy * ty[i]
-            across = -dx * ty[i] + dy * tx[i]
-            if abs(along) <= half_length and abs(across) <= half_width:
-                u[m], v[m], z[m] = across, along, pz[q]
-                m += 1
+        u, v, z, m = _window_points(px, py, pz, indices[indptr[i]:indptr[i + 1]], vx[i], vy[i],
+                                    tx[i], ty[i], half_width, half_length)
         if m < 12:
             continue
         zmean = 0.0
@@ -217,47 +206,13 @@ def _hinge_fits(px, py, pz, indptr, indices, vx, vy, tx, ty, half_width, half_le
             z[k] -= zmean
         # one plane z = a + b·v + c·u: the hinge with c1 = c2, at any u0
         beta = np.zeros(4)
-        reach = 0.7 * half_width
-        best, best_j = np.inf, -1
-        sses = np.full(steps + 1, np.inf)
-        for j in range(steps + 1):
-            u0 = -reach + 2 * reach * j / steps
-            sses[j] = _hinge_sse(u, v, z, m, u0, beta)
-            if sses[j] < best:
-                best, best_j = sses[j], j
+        u0, best_j = _hinge_offset(u, v, z, m, half_width, steps, beta)
         if best_j < 0:
             continue
-        h = 2 * reach / steps
-        u0 = -reach + h * best_j
-        if 0 < best_j < steps and np.isfinite(sses[best_j - 1]) and np.isfinite(sses[best_j + 1]):
-            curv = sses[best_j - 1] - 2 * best + sses[best_j + 1]
-            if curv > 0:
-                u0 += 0.5 * h * (sses[best_j - 1] - sses[best_j + 1]) / curv
         sse = _hinge_sse(u, v, z, m, u0, beta)
         if not np.isfinite(sse):
             continue
-        # the single plane: least squares of [1, v, u]
-        a = np.zeros((4, 4))
-        b = np.zeros(4)
-        for k in range(m):
-            r0, r1, r2 = 1.0, v[k], u[k]
-            b[0] += r0 * z[k]
-            b[1] += r1 * z[k]
-            b[2] += r2 * z[k]
-            a[0, 0] += 1
-            a[0, 1] += r1
-            a[0, 2] += r2
-            a[1, 1] += r1 * r1
-            a[1, 2] += r1 * r2
-            a[2, 2] += r2 * r2
-        a[1, 0], a[2, 0], a[2, 1] = a[0, 1], a[0, 2], a[1, 2]
-        a[3, 3] = 1.0
-        plane = np.inf
-        if _solve4(a, b):
-            plane = 0.0
-            for k in range(m):
-                r = z[k] - (b[0] + b[1] * v[k] + b[2] * u[k])
-                plane += r * r
+        plane = _plane_sse(u, v, z, m)
         edge = best_j == 0 or best_j == steps
         out[i, 0] = np.nan if edge else u0
         out[i, 1] = zmean + beta[0]
@@ -266,6 +221,77 @@ def _hinge_fits(px, py, pz, indptr, indices, vx, vy, tx, ty, half_width, half_le
         out[i, 4] = (plane - sse) / max(sse / max(m - 4, 1), 1e-12)
         out[i, 5] = m
     return out
+
+
+@njit(cache=True)
+def _window_points(px, py, pz, near, x, y, tx, ty, half_width, half_length):
+    """The points ``near`` a vertex at (x, y) with unit tangent (tx, ty) that lie in its fit
+    window: their offsets across (u, + to the left) and along (v) and their z, in the first m
+    places of each; returns u, v, z and m."""
+    u = np.empty(near.size)
+    v = np.empty(near.size)
+    z = np.empty(near.size)
+    m = 0
+    for k in range(near.size):
+        q = near[k]
+        dx, dy = px[q] - x, py[q] - y
+        along = dx * tx + dy * ty
+        across = -dx * ty + dy * tx
+        if abs(along) <= half_length and abs(across) <= half_width:
+            u[m], v[m], z[m] = across, along, pz[q]
+            m += 1
+    return u, v, z, m
+
+
+@njit(cache=True)
+def _hinge_offset(u, v, z, m, half_width, steps, beta):
+    """The hinge's offset across the line: the least SSE of ``steps`` + 1 offsets evenly over
+    ±0.7·``half_width``, refined by a parabola through its neighbours' SSE. Returns the offset
+    and the best step's index (-1: no offset fits; 0 or ``steps``: at the window's edge).
+    ``beta`` is scratch for the fits' coefficients."""
+    reach = 0.7 * half_width
+    best, best_j = np.inf, -1
+    sses = np.full(steps + 1, np.inf)
+    for j in range(steps + 1):
+        u0 = -reach + 2 * reach * j / steps
+        sses[j] = _hinge_sse(u, v, z, m, u0, beta)
+        if sses[j] < best:
+            best, best_j = sses[j], j
+    h = 2 * reach / steps
+    u0 = -reach + h * best_j
+    if 0 < best_j < steps and np.isfinite(sses[best_j - 1]) and np.isfinite(sses[best_j + 1]):
+        curv = sses[best_j - 1] - 2 * best + sses[best_j + 1]
+        if curv > 0:
+            u0 += 0.5 * h * (sses[best_j - 1] - sses[best_j + 1]) / curv
+    return u0, best_j
+
+
+@njit(cache=True)
+def _plane_sse(u, v, z, m):
+    """SSE of the single plane z = a + b·v + c·u fitted by least squares to the first m points;
+    inf where the fit is singular."""
+    a = np.zeros((4, 4))
+    b = np.zeros(4)
+    for k in range(m):
+        r0, r1, r2 = 1.0, v[k], u[k]
+        b[0] += r0 * z[k]
+        b[1] += r1 * z[k]
+        b[2] += r2 * z[k]
+        a[0, 0] += 1
+        a[0, 1] += r1
+        a[0, 2] += r2
+        a[1, 1] += r1 * r1
+        a[1, 2] += r1 * r2
+        a[2, 2] += r2 * r2
+    a[1, 0], a[2, 0], a[2, 1] = a[0, 1], a[0, 2], a[1, 2]
+    a[3, 3] = 1.0
+    plane = np.inf
+    if _solve4(a, b):
+        plane = 0.0
+        for k in range(m):
+            r = z[k] - (b[0] + b[1] * v[k] + b[2] * u[k])
+            plane += r * r
+    return plane
 
 
 def _tangents(coords: np.ndarray) -> np.ndarray:
