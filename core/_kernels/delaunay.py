@@ -366,9 +366,8 @@ def _bucket(dd, dmin, scale, nb):
 
 
 @numba.njit(cache=True, nogil=True)
-def _sort_by_distance(xy, cx, cy, pts, ids):
-    """Fill pts (N, 2) and ids (N,) with the points and their indices in order of squared
-    distance from (cx, cy), ties broken on x then y."""
+def _squared_distances(xy, cx, cy):
+    """The points' squared distances from (cx, cy), and their least and greatest."""
     n = xy.shape[0]
     d = np.empty(n)
     dmin = np.inf
@@ -380,13 +379,16 @@ def _sort_by_distance(xy, cx, cy, pts, ids):
         d[i] = dd
         dmin = min(dmin, dd)
         dmax = max(dmax, dd)
-    nb = max(n // 2, 1)  # fine buckets (uniform in area for uniform points)
-    span = dmax - dmin
-    scale = nb / span if span > 0.0 else 0.0
-    shift = 0
-    while ((nb - 1) >> shift) >= 4096:
-        shift += 1
-    nc = ((nb - 1) >> shift) + 1  # coarse buckets
+    return d, dmin, dmax
+
+
+@numba.njit(cache=True, nogil=True)
+def _coarse_sort(xy, d, dmin, scale, nb, shift, pts, ids):
+    """Counting sort of the points, their distances d and indices into the nc coarse buckets
+    (2**shift fine buckets each): fills pts and ids, returns the sorted distances and
+    cstart, where coarse bucket c starts (nc + 1 entries)."""
+    n = xy.shape[0]
+    nc = ((nb - 1) >> shift) + 1
     cstart = np.zeros(nc + 1, np.int64)
     for i in range(n):
         cstart[(_bucket(d[i], dmin, scale, nb) >> shift) + 1] += 1
@@ -403,8 +405,14 @@ def _sort_by_distance(xy, cx, cy, pts, ids):
         pts[q, 0] = xy[i, 0]
         pts[q, 1] = xy[i, 1]
         ids[q] = i
-    d = ds
-    # fine counting sort inside each coarse bucket, through small buffers
+    return ds, cstart
+
+
+@numba.njit(cache=True, nogil=True)
+def _fine_sort(d, pts, ids, cstart, dmin, scale, nb, shift):
+    """Finish the sort inside each coarse bucket: a counting sort into its fine buckets,
+    through small buffers, then a comparison sort of each fine bucket."""
+    nc = cstart.shape[0] - 1
     biggest = 0
     for c in range(nc):
         biggest = max(biggest, cstart[c + 1] - cstart[c])
@@ -451,6 +459,21 @@ def _sort_by_distance(xy, cx, cy, pts, ids):
                 else:
                     _quicksort(d, pts, ids, lo + b0, lo + b1)
             b0 = b1
+
+
+@numba.njit(cache=True, nogil=True)
+def _sort_by_distance(xy, cx, cy, pts, ids):
+    """Fill pts (N, 2) and ids (N,) with the points and their indices in order of squared
+    distance from (cx, cy), ties broken on x then y."""
+    d, dmin, dmax = _squared_distances(xy, cx, cy)
+    nb = max(xy.shape[0] // 2, 1)  # fine buckets (uniform in area for uniform points)
+    span = dmax - dmin
+    scale = nb / span if span > 0.0 else 0.0
+    shift = 0  # 2**shift fine buckets to a coarse one, for at most 4096 coarse buckets
+    while ((nb - 1) >> shift) >= 4096:
+        shift += 1
+    d, cstart = _coarse_sort(xy, d, dmin, scale, nb, shift, pts, ids)
+    _fine_sort(d, pts, ids, cstart, dmin, scale, nb, shift)
 
 
 # --------------------------------------------------------------------------------------------
@@ -550,9 +573,9 @@ def _legalize(a, tri, half, pts, hull_start, hull_tri, hull_prev, stack):
 
 
 @numba.njit(cache=True, nogil=True)
-def _seed(xy):
-    """Seed triangle (i0, i1, i2), clockwise, of a Delaunay triangle near the middle, and its
-    circumcentre; i2 = -1 if all points are collinear (or equal), i0 = -1 if one is not finite."""
+def _nearest_to_middle(xy):
+    """The point nearest the middle of the points' bounding box; -1 if a coordinate is not
+    finite."""
     n = xy.shape[0]
     xmin = np.inf
     ymin = np.inf
@@ -562,7 +585,7 @@ def _seed(xy):
         x = xy[i, 0]
         y = xy[i, 1]
         if not (np.isfinite(x) and np.isfinite(y)):
-            return -1, -1, -1, 0.0, 0.0
+            return -1
         xmin = min(xmin, x)
         xmax = max(xmax, x)
         ymin = min(ymin, y)
@@ -576,29 +599,43 @@ def _seed(xy):
         if dd < best:
             best = dd
             i0 = i
+    return i0
+
+
+@numba.njit(cache=True, nogil=True)
+def _nearest_neighbour(xy, i0):
+    """The point nearest point i0 other than its copies; -1 if all points equal it."""
     x0 = xy[i0, 0]
     y0 = xy[i0, 1]
     i1 = -1
     best = np.inf
-    for i in range(n):
+    for i in range(xy.shape[0]):
         dd = (xy[i, 0] - x0) ** 2 + (xy[i, 1] - y0) ** 2
         if 0.0 < dd < best:
             best = dd
             i1 = i
-    if i1 == -1:
-        return i0, i1, -1, 0.0, 0.0
+    return i1
+
+
+@numba.njit(cache=True, nogil=True)
+def _empty_circle_apex(xy, i0, i1):
+    """A point making a Delaunay triangle with the Delaunay edge i0-i1 (nearest neighbours);
+    -1 if all points are collinear.
+
+    On either side of the edge, the point whose circle through i0 and i1 has its centre
+    furthest back (least t along that side's normal) makes a Delaunay triangle with them: an
+    empty circle, so no point comes before the seeds in the sweep.
+    t = (p - i0).(p - i1) / ((i1 - i0) x (p - i0)), in units of |i1 - i0| / 2. (delaunator
+    takes the smallest circumcircle, which need not be empty.)"""
+    x0 = xy[i0, 0]
+    y0 = xy[i0, 1]
     x1 = xy[i1, 0]
     y1 = xy[i1, 1]
-    # i0-i1 (nearest neighbours) is a Delaunay edge. On either side of it, the point whose circle
-    # through i0 and i1 has its centre furthest back (least t along that side's normal) makes a
-    # Delaunay triangle with them: an empty circle, so no point comes before the seeds in the
-    # sweep. t = (p - i0).(p - i1) / ((i1 - i0) x (p - i0)), in units of |i1 - i0| / 2.
-    # (delaunator takes the smallest circumcircle, which need not be empty.)
     ileft = -1
     tleft = np.inf
     iright = -1
     tright = np.inf
-    for i in range(n):
+    for i in range(xy.shape[0]):
         px = xy[i, 0]
         py = xy[i, 1]
         o = _orient(x0, y0, x1, y1, px, py)
@@ -616,10 +653,25 @@ def _seed(xy):
             if iright == -1 or t < tright:
                 tright = t
                 iright = i
-    i2 = ileft if ileft != -1 else iright
+    return ileft if ileft != -1 else iright
+
+
+@numba.njit(cache=True, nogil=True)
+def _seed(xy):
+    """Seed triangle (i0, i1, i2), clockwise, of a Delaunay triangle near the middle, and its
+    circumcentre; i2 = -1 if all points are collinear (or equal), i0 = -1 if one is not finite."""
+    i0 = _nearest_to_middle(xy)
+    if i0 == -1:
+        return -1, -1, -1, 0.0, 0.0
+    i1 = _nearest_neighbour(xy, i0)
+    if i1 == -1:
+        return i0, i1, -1, 0.0, 0.0
+    i2 = _empty_circle_apex(xy, i0, i1)
     if i2 == -1:
         return i0, i1, -1, 0.0, 0.0
-    if _orient(x0, y0, x1, y1, xy[i2, 0], xy[i2, 1]) > 0.0:
+    x0 = xy[i0, 0]
+    y0 = xy[i0, 1]
+    if _orient(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]) > 0.0:
         i1, i2 = i2, i1  # clockwise, as delaunator
     dx = xy[i1, 0] - x0
     dy = xy[i1, 1] - y0
@@ -634,13 +686,10 @@ def _seed(xy):
 
 
 @numba.njit(cache=True, nogil=True)
-def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
-    """Triangulate the sorted points pts; returns the length used in tri (3 per triangle) and
-    the number of distinct points that could not be inserted (0 but for pathological rounding
-    in the sort)."""
-    n = pts.shape[0]
+def _seed_ranks(ids, i0, i1, i2):
+    """The ranks in the sort of the seed points i0, i1, i2."""
     r0 = r1 = r2 = -1
-    for k in range(n):
+    for k in range(ids.shape[0]):
         idk = ids[k]
         if idk == i0:
             r0 = k
@@ -648,14 +697,13 @@ def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
             r1 = k
         elif idk == i2:
             r2 = k
-    hash_size = max(int(np.ceil(np.sqrt(n))), 1)
-    hull_prev = np.empty(n, np.int32)
-    hull_next = np.empty(n, np.int32)
-    hull_tri = np.empty(n, np.int32)
-    hull_hash = np.full(hash_size, -1, np.int32)
-    stack = np.empty(n + 16, np.int32)  # untouched pages cost no memory
+    return r0, r1, r2
 
-    hull_start = r0
+
+@numba.njit(cache=True, nogil=True)
+def _start_hull(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull_tri, hull_hash):
+    """The seed triangle (r0, r1, r2) as triangle 0 and as the first hull."""
+    hash_size = hull_hash.shape[0]
     hull_next[r0] = r1
     hull_prev[r2] = r1
     hull_next[r1] = r2
@@ -669,6 +717,24 @@ def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
     hull_hash[_hash_key(pts[r1, 0], pts[r1, 1], cx, cy, hash_size)] = r1
     hull_hash[_hash_key(pts[r2, 0], pts[r2, 1], cx, cy, hash_size)] = r2
     _add_triangle(tri, half, 0, r0, r1, r2, -1, -1, -1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
+    """Triangulate the sorted points pts; returns the length used in tri (3 per triangle) and
+    the number of distinct points that could not be inserted (0 but for pathological rounding
+    in the sort). The per-point loop stays whole: split into compiled helpers (hull search,
+    forward and backward fans) it ran about 15 % slower on 2 M points."""
+    n = pts.shape[0]
+    r0, r1, r2 = _seed_ranks(ids, i0, i1, i2)
+    hash_size = max(int(np.ceil(np.sqrt(n))), 1)
+    hull_prev = np.empty(n, np.int32)
+    hull_next = np.empty(n, np.int32)
+    hull_tri = np.empty(n, np.int32)
+    hull_hash = np.full(hash_size, -1, np.int32)
+    stack = np.empty(n + 16, np.int32)  # untouched pages cost no memory
+    _start_hull(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull_tri, hull_hash)
+    hull_start = r0
     tlen = 3
 
     sx0, sy0 = pts[r0, 0], pts[r0, 1]
@@ -688,7 +754,6 @@ def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
         if ((px == sx0 and py == sy0) or (px == sx1 and py == sy1)
                 or (px == sx2 and py == sy2)):
             continue  # a seed point or a copy of one
-
         # a visible hull edge, starting from the hash
         key = _hash_key(px, py, cx, cy, hash_size)
         start = 0
@@ -718,7 +783,6 @@ def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
         tlen += 3
         hull_tri[k] = _legalize(t + 2, tri, half, pts, hull_start, hull_tri, hull_prev, stack)
         hull_tri[e] = t
-
         # walk forward along the hull, adding triangles
         nn = hull_next[e]
         while True:
