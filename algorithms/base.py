@@ -10,6 +10,7 @@ from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
 from qgis.PyQt.QtCore import QCoreApplication
 
 from ..core.errors import FloodMeshError
+from ..core.options import is_point_source
 from .compat import METRES, VECTOR_LINE, VECTOR_POLYGON
 from .child import run_step
 
@@ -231,8 +232,6 @@ def point_cloud_parameter(algorithm, label):
 
 def point_cloud_file(algorithm, parameters, context):
     """The file behind the POINT_CLOUD layer (LAS/LAZ, COPC or an EPT's ept.json), or None."""
-    from ..core.io import is_point_source
-
     layer = algorithm.parameterAsPointCloudLayer(parameters, POINT_CLOUD, context)
     if layer is None:
         return None

@@ -7,6 +7,7 @@ from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterMeshLayer,
                        QgsRasterLayer)
 
+from ..core.options import RESULT_RASTERS
 from .base import FloodMeshAlgorithm, crs_or_none, layer_file
 from .styles import load_results, run_group_name
 
@@ -48,8 +49,6 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputFile(self.REPORT, self.tr("Report")))
 
     def process(self, parameters, context, feedback):
-        from ..core.flood.model import RESULT_RASTERS  # plain names; ANUGA runs in its own child
-
         mesh_layer = self.parameterAsMeshLayer(parameters, self.MESH, context)
         mesh_path = layer_file(mesh_layer, "Mesh")
         crs = crs_or_none(self, parameters, self.CRS, context)

@@ -18,7 +18,9 @@ core.RunOptions())``. Names are imported on first use, so ``import floodmesh.cor
 light (no numba, rasterio or Triangle until a step needs them).
 """
 
+import importlib as _importlib
 import os as _os
+import tempfile as _tempfile
 
 # public name → the module that defines it (or (module, its name there)); never a submodule's
 # name, which the import system sets on the package once that submodule is imported
@@ -42,10 +44,8 @@ __all__ = sorted(_API)
 def __getattr__(name):
     if name not in _API:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import importlib
-
     module, attribute = (_API[name] if isinstance(_API[name], tuple) else (_API[name], name))
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), attribute)
+    value = getattr(_importlib.import_module(f"{__name__}.{module}"), attribute)
     globals()[name] = value
     return value
 
@@ -59,12 +59,10 @@ def _numba_cache() -> None:
     neither can be written (a read-only install and home) every ``cache=True`` kernel would
     fail with 'no locator available'. Point it at a writable folder before numba is imported,
     or else turn caching off (kernels are then compiled afresh in each process)."""
-    import tempfile
-
     def writable(folder) -> bool:
         try:
             _os.makedirs(folder, exist_ok=True)
-            with tempfile.TemporaryFile(dir=folder):
+            with _tempfile.TemporaryFile(dir=folder):
                 return True
         except OSError:
             return False
@@ -74,7 +72,7 @@ def _numba_cache() -> None:
         return
     home_cache = _os.environ.get("XDG_CACHE_HOME") or _os.path.expanduser("~/.cache")
     try:
-        temporary = _os.path.join(tempfile.gettempdir(), f"floodmesh-numba-{_os.getuid()}")
+        temporary = _os.path.join(_tempfile.gettempdir(), f"floodmesh-numba-{_os.getuid()}")
     except FileNotFoundError:  # no usable temporary folder
         temporary = None
     for folder in (_os.path.join(home_cache, "floodmesh", "numba"), temporary):
@@ -83,6 +81,7 @@ def _numba_cache() -> None:
         if writable(folder):
             _os.environ["NUMBA_CACHE_DIR"] = folder
             return
+    # lazy: numba loads only when this runs
     import numba.core.dispatcher
 
     numba.core.dispatcher.Dispatcher.enable_caching = lambda self: None

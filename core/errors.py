@@ -1,5 +1,8 @@
 """The one family of errors FloodMesh raises for bad input: each message names the problem and the fix."""
 
+import signal
+import threading
+
 
 class FloodMeshError(ValueError):
     """Bad input or parameters; the message says what was received and what to do."""
@@ -14,17 +17,12 @@ class Terminated(KeyboardInterrupt):
     worker) taken as Ctrl-C is: every step unwinds, removing its temporaries and scratch."""
 
     def __init__(self, signum: int):
-        import signal
-
         super().__init__(signal.Signals(signum).name)
         self.signum = signum
 
 
 def terminate_as_interrupt() -> None:
     """Raise ``Terminated`` on SIGTERM and SIGHUP from now on (in the main thread only)."""
-    import signal
-    import threading
-
     def terminate(signum, frame):
         raise Terminated(signum)
 

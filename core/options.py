@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 from .errors import FloodMeshError
 
@@ -28,6 +29,13 @@ OUTSIDE_MESH_COLOUR = "#9e9e9e"
 # break lines: a magenta line on a white halo, readable on the mesh's colour ramp; mesh edges
 BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR = "#b0006e", "#ffffff", "#404040"
 RESIDUAL_CLASS_LABELS = ("< 10 cm", "10–25 cm", "> 25 cm", "outside the mesh")  # classes 0-2, -1
+# point files FloodMesh reads (LAS/LAZ, COPC too, and XYZ/CSV text) and an Entwine Point Tile
+# index, as QGIS's point-cloud layers open them
+POINT_EXTENSIONS = (".las", ".laz", ".xyz", ".txt", ".csv", ".pts")
+EPT_NAME = "ept.json"
+# the flood's result rasters by what they hold, as run_flood writes them and QGIS loads them
+RESULT_RASTERS = {"max_depth": "max_depth.tif", "max_stage": "max_water_level.tif",
+                  "max_speed": "max_speed.tif", "arrival_s": "arrival_time.tif"}
 # solver export formats (core.steps.export), named by the extension each writes
 EXPORT_FORMATS = ("2dm", "slf", "14", "gr3", "nc", "gpkg")
 EXPORT_EXTENSIONS = {f: f".{f}" for f in EXPORT_FORMATS}
@@ -37,6 +45,12 @@ EXPORT_FORMAT_LABELS = ("SMS 2DM: BASEMENT, TUFLOW FV, SRH-2D (.2dm)",
                         "UGRID netCDF: D-Flow FM, QGIS (.nc)",
                         "GeoPackage layers: HEC-RAS (.gpkg)")
 
+
+
+def is_point_source(path) -> bool:
+    """True for a point file FloodMesh reads: LAS/LAZ (COPC too), XYZ/CSV text, or an EPT."""
+    path = Path(path)
+    return path.suffix.lower() in POINT_EXTENSIONS or path.name == EPT_NAME
 
 def export_format(name: str) -> str:
     """``name`` if it is one of EXPORT_FORMATS, else a FloodMeshError listing them."""

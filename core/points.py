@@ -52,7 +52,8 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
 
 def _check_area(xy: np.ndarray, source: str) -> None:
     """Refuse points that all lie at one place or on one straight line (in any direction)."""
-    from ._kernels.points import spread  # loads numba: only where points are read
+    # lazy: numba loads only where points are read
+    from ._kernels.points import spread
 
     span, across, along = spread(xy[:, 0], xy[:, 1])
     if span <= 0:
@@ -67,6 +68,7 @@ def _check_area(xy: np.ndarray, source: str) -> None:
 def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
     """Say how many points repeat another's x, y (to 0.1 mm) with a different z, and by how
     much. One integer key per point, sorted: a few seconds for 10 million points."""
+    # lazy: numba loads only when this runs
     from ._kernels.points import position_keys
 
     key = position_keys(xyz[:, 0], xyz[:, 1], 1e-4)

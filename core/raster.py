@@ -31,6 +31,7 @@ def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     """Return ``crs`` as a pyproj CRS, refusing none, geographic, and horizontal or vertical
     units other than metres. ``kind`` ("points" or "raster") picks the reprojection command the
     message suggests."""
+    # lazy: PROJ loads only when this runs
     from pyproj import CRS
 
     if crs is None:

@@ -15,15 +15,18 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import importlib
+import importlib.util
 import sys
 from pathlib import Path
+
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 # name → (numba signature, the kernel in raster_kernels); float32 C arrays, as map_raster has them
 EXPORTS = {
-    "slope_f32": ("f4[:,::1](f4[:,::1], f4[:,::1], f8, i8, f8)", "_slope_block"),
-    "missing_to_nan_f32": ("b1(f4[:,:], f4)", "_missing_to_nan"),
-    "nan_to_value_f32": ("f4[:,::1](f4[:,::1], f4)", "_nan_to_value"),
+    "slope_f32": ("f4[:,::1](f4[:,::1], f4[:,::1], f8, i8, f8)", "slope_kernel"),
+    "missing_to_nan_f32": ("b1(f4[:,:], f4)", "missing_to_nan"),
+    "nan_to_value_f32": ("f4[:,::1](f4[:,::1], f4)", "nan_to_value"),
 }
 PREFIX = "_raster_aot_"
 _loaded: dict = {}
@@ -31,8 +34,6 @@ _loaded: dict = {}
 
 def module_name() -> str | None:
     """The extension's name for this source, NumPy and CPU; None where the CPU is unknown."""
-    import numpy as np
-
     try:
         with open("/proc/cpuinfo") as cpuinfo:
             flags = next(line for line in cpuinfo if line.startswith("flags"))
@@ -61,6 +62,7 @@ def kernel(name: str):
     module = _module()
     if module is not None:
         return getattr(module, name)
+    # lazy: numba loads only when this runs
     from . import raster as raster_kernels
 
     return getattr(raster_kernels, EXPORTS[name][1])
@@ -79,8 +81,6 @@ def build(log=None) -> bool:
     if name is None:
         return False
     if not any(HERE.glob(f"{name}.*")):
-        import importlib.util
-
         if importlib.util.find_spec("numpy.distutils") is None:
             if log:  # numba.pycc builds through numpy.distutils, gone for Python >= 3.12
                 log("no ahead-of-time raster kernels: numba's ahead-of-time compiler needs "
@@ -102,9 +102,11 @@ def build(log=None) -> bool:
 
 
 def _compile(name: str) -> None:
+    # lazy: numba loads only when this runs
     import numba.pycc.compiler as pycc_compiler
     from numba.pycc import CC
 
+    # lazy: numba loads only when this runs
     from . import raster as raster_kernels
 
     class Flags(pycc_compiler.Flags):

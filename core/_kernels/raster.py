@@ -146,7 +146,7 @@ def _raw_gradient_row(r0, r1, r2, g, d, method, diagonal):
 
 
 @numba.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def _slope_block(padded, out, d, method, diagonal):
+def slope_kernel(padded, out, d, method, diagonal):
     """Slope (degrees) of the interior of ``padded`` (float32 or float64) into ``out``; the
     arithmetic is float64 whatever the input, so float32 files give the float64 result.
 
@@ -182,7 +182,7 @@ def _slope_block(padded, out, d, method, diagonal):
 
 
 @numba.njit(cache=True, nogil=True)
-def _missing_to_nan(values, missing):
+def missing_to_nan(values, missing):
     """NaN for ``missing`` and ±inf in a 2-D float array, in place; whether a finite cell is
     left. (Selects, not branches: the row loops vectorise.)"""
     nan = values.dtype.type(np.nan)
@@ -199,7 +199,7 @@ def _missing_to_nan(values, missing):
 
 
 @numba.njit(cache=True, nogil=True)
-def _nan_to_value(values, value):
+def nan_to_value(values, value):
     """``value`` for NaN in a 2-D float array, in place; returns it."""
     for i in range(values.shape[0]):
         row = values[i]

@@ -13,7 +13,15 @@ import json
 from dataclasses import asdict
 from pathlib import Path
 
-from ..options import DEFAULT_MAX_TRIANGLES
+from .. import io
+from ..io.outputs import check_outputs, require_suffix
+from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_holdout, check_max_area,
+                       check_max_gap, check_max_triangles, check_min_angle, check_seed)
+from ..points import split_holdout
+from ..raster import require_metric_crs
+from ..steps.breakpoints import breakpoints_file
+from ..steps.sizing import finer
+from ..steps.slope import slope_raster_file
 
 GEOTIFF = (".tif", ".tiff")
 
@@ -21,8 +29,6 @@ GEOTIFF = (".tif", ".tiff")
 def _files(reads, writes, *, geotiff=()) -> None:
     """Before any work: no output may be (or replace) an input, each output's folder must be
     writable, and the rasters written are GeoTIFFs."""
-    from ..io.outputs import check_outputs, require_suffix
-
     check_outputs([r for r in reads if r], [w for w in writes if w])
     for path in geotiff:
         require_suffix(path, GEOTIFF, "a GeoTIFF")
@@ -36,8 +42,7 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     left out with ``skip_unreadable``) to a DEM GeoTIFF at ``cell_size`` m by linear (TIN)
     interpolation; ``holdout`` of the points held back and written to ``holdout_output``
     (GeoPackage)."""
-    from .. import io
-    from ..options import check_cell_size, check_holdout, check_max_gap, check_seed
+    # lazy: PROJ loads only when this runs
     from .source import open_source
 
     source = open_source(input, skip_unreadable=skip_unreadable)
@@ -48,6 +53,7 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     check_seed(seed)
     classes = tuple(classes) if classes else None
     if source.tiled:
+        # lazy: PROJ loads only when this runs
         from ..engine.tiles import grid_point_tiles
 
         tiled = grid_point_tiles(source.paths, cell_size, max_gap=max_gap, crs=crs,
@@ -59,8 +65,8 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
         held, points_crs = tiled.holdout, tiled.crs
         written = f"DEM of {tiled.n_tiles} tiles ({tiled.n_points:,} points) written to {output}"
     else:
+        # lazy: numba loads only when this runs
         from ..steps.grid import grid_points_linear
-        from ..points import split_holdout
 
         points = io.read_points(source.path, crs=crs, classes=classes, note=note)
         gridding, kept_back = split_holdout(points, holdout, seed, note=note)
@@ -84,8 +90,6 @@ def slope(input, output, *, method: str = "one-over-distance", sigma: float = 1.
           note=None) -> dict:
     """Step 3: slope in degrees by a 3x3 kernel, or the Laplacian-of-Gaussian response (m,
     ``method="log"``, σ ``sigma`` m), file to file block by block."""
-    from ..steps.slope import slope_raster_file
-
     _files([input], [output], geotiff=[output])
     slope_raster_file(input, output, method, sigma=sigma, log_kernel=log_kernel, crs=crs,
                       note=note, progress=progress, cancelled=cancelled)
@@ -99,8 +103,6 @@ def breakpoints(input, output, *, s_crit: float = 10.0, sensitivity=None,
                 note=None) -> dict:
     """Step 4: thinned breakpoints where the slope reaches ``s_crit`` degrees (or a LoG response
     reaches ``sensitivity`` m), file to file block by block."""
-    from ..steps.breakpoints import breakpoints_file
-
     _files([input], [output], geotiff=[output])
     count = breakpoints_file(input, output, s_crit=s_crit, sensitivity=sensitivity,
                              zero_crossings=zero_crossings, crs=crs, progress=progress,
@@ -112,7 +114,7 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
           min_points: int = 3, min_length: float = 0.0, join: bool = True, seed: int = 0,
           crs=None, progress=None, cancelled=None, note=None) -> dict:
     """Step 5: break lines through the breakpoints (GeoPackage of LineStringZ)."""
-    from .. import io
+    # lazy: numba loads only when this runs
     from ..steps.breaklines import trace_breaklines
 
     _files([breakpoints, slope, dem], [output])
@@ -130,8 +132,7 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
              crs=None, progress=None, cancelled=None, note=None) -> dict:
     """Step 6: break lines simplified by ``method`` (every ``amount``-th point, or within
     ``amount`` m by Douglas–Peucker or a spline), crossings repaired, slivers merged."""
-    from .. import io
-    from ..raster import require_metric_crs
+    # lazy: numba and GEOS load only when this runs
     from ..steps.simplify import simplify_breaklines
 
     _files([input], [output])
@@ -147,7 +148,7 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
 
 def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
     """(DEM, break lines and the user's own, domain) of a meshing step."""
-    from .. import io
+    # lazy: numba, PROJ and GEOS load only when this runs
     from .pipeline import mesh_constraints
 
     terrain = io.read_raster(dem, crs=crs, note=note)
@@ -165,12 +166,10 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     the DEM's valid area or ``boundary``, honouring the break lines and the user's own lines,
     no angle below ``min_angle`` degrees and no triangle above ``max_area`` m² (smaller where
     ``size_field`` or the flow zone, ``flow_area`` m², None: the default, 0: off, asks)."""
-    from .. import io
+    # lazy: numba, PROJ and GEOS load only when this runs
     from ..steps.drainage import flow_area_for, flow_size
     from ..steps.mesh import build_mesh, mesh_quality
-    from ..options import check_max_area, check_max_triangles, check_min_angle
     from .pipeline import size_field as size_from
-    from ..steps.sizing import finer
 
     _files([dem, breaklines, boundary, user_lines, size_field if size_field != "slope" else None],
            [output, triangles])
@@ -201,9 +200,6 @@ def measured_points(path, crs=None, fallback=None):
     """(xyz, CRS) of measured points: a LiDAR point file (LAS/LAZ ground, XYZ/CSV; ``crs``
     overrides its own) or a point layer (GeoPackage, Shapefile, GeoJSON; ``crs``, else its own,
     else ``fallback``, the mesh's or DEM's)."""
-    from .. import io
-    from ..raster import require_metric_crs
-
     if io.is_point_source(path):
         cloud = io.read_points(path, crs=crs)
         return cloud.xyz, cloud.crs
@@ -219,7 +215,7 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
     """Step 9: refine the mesh with the measured ``points`` until no triangle's points misfit by
     more than ``lower`` m RMS and none by more than ``upper`` m (or the targets are met);
     ``check`` points are only measured, each round."""
-    from .. import io
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import mesh_quality
     from ..steps.refine import refine_mesh
 
@@ -253,7 +249,7 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
     """Step 8: residuals of check points against the mesh's TIN (GeoPackage), their statistics
     (RMSE, NSSDA test, classes) to ``report`` (JSON) and the residual map and histogram into the
     folder ``png``."""
-    from .. import io
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.accuracy import accuracy_statistics, residuals
     from ..steps.mesh import Mesh
 
@@ -268,6 +264,7 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
         io.write_json(report, stats)
         result["REPORT"] = str(report)
     if png:
+        # lazy: PROJ and GEOS load only when this runs
         from ..io.report import write_report_pngs
 
         Path(png).mkdir(parents=True, exist_ok=True)
@@ -282,7 +279,7 @@ def export(mesh, output, *, fmt=None, crs=None, open_boundaries=None, snap: floa
            note=None) -> dict:
     """A mesh (SMS 2DM) for a solver: TELEMAC (SLF + CLI), ADCIRC, SCHISM, UGRID, … by ``fmt``
     or ``output``'s extension, with open boundaries, material regions and a datum offset."""
-    from .. import io
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.export import export_mesh, format_of, layers_crs
 
     fmt = format_of(output, fmt)

@@ -12,36 +12,36 @@ import shapely
 from pyproj import CRS
 
 from .. import io
+from ..engine.compiles import CompileWatch
+from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
+from ..engine.nearest import CellIndex, point_index
+from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles, slope_file64,
+                            write_front_rasters)
+from ..errors import Cancelled, FloodMeshError
+from ..io.layer_definition import QLR_NAME, write_layer_definition
+from ..io.outputs import check_output_folder, scratch_folder, staged_folder
+from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_pngs
+from ..io.report_html import HTML_NAME, write_report_html
+from ..options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_fits
+from ..points import PointCloud, split_holdout
+from ..raster import Grid
 from ..steps.accuracy import accuracy_statistics, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
-from ..engine.compiles import CompileWatch
 from ..steps.drainage import (CHANNEL_AREA, flow_area_for, flow_size, flow_spacing,
                               height_above_drainage)
-from ..errors import Cancelled, FloodMeshError
 from ..steps.export import export_formats
 from ..steps.grid import check_grid, grid_points_linear
 from ..steps.hydraulic_lines import lines_for_hydraulics
 from ..steps.hydraulics import hydraulic_checks
-from ..io.layer_definition import QLR_NAME, write_layer_definition
-from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
 from ..steps.localise import fit_node_elevations, fit_window, localise_traced
-from ..engine.nearest import CellIndex, point_index
 from ..steps.mesh import (build_mesh, domain_from_dem, edge_tolerance, mesh_quality,
                           size_from_slope, user_domain)
-from ..points import PointCloud, split_holdout
-from ..raster import Grid
-from ..steps.simplify import max_deviation, simplify_breaklines
-from ..options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_fits
-from ..io.outputs import check_output_folder, scratch_folder, staged_folder
 from ..steps.refine import refine_mesh
-from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_pngs
-from ..io.report_html import HTML_NAME, write_report_html
+from ..steps.simplify import max_deviation, simplify_breaklines
 from ..steps.sizing import far_field_size, finer
 from ..steps.slope import laplacian_of_gaussian, slope
-from .source import DEM, DEM_TILES, POINT_TILES, POINTS, Source, open_source
-from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles, slope_file64,
-                            write_front_rasters)
+from .source import DEM, DEM_TILES, POINTS, POINT_TILES, Source, open_source
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
                 "mesh.prj", "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG,

@@ -13,14 +13,15 @@ from typing import Callable
 import numpy as np
 
 from .. import io
-from ..steps.accuracy import accuracy_statistics, nssda_threshold_m, residuals
 from ..errors import FloodMeshError
+from ..io.outputs import check_output_folder, staged_folder
+from ..io.report import new_figure, save_png
+from ..options import RunOptions
+from ..steps.accuracy import accuracy_statistics, nssda_threshold_m, residuals
 from ..steps.hydraulic_lines import lines_for_hydraulics
 from ..steps.mesh import Mesh, build_mesh, domain_from_dem, edge_tolerance
-from ..options import RunOptions
-from ..io.outputs import check_output_folder, staged_folder
-from .pipeline import run_inputs, trace_front
 from ..steps.simplify import simplify_breaklines
+from .pipeline import run_inputs, trace_front
 from .source import open_source
 
 _OWN_MESH = re.compile(r"^mesh_.+\.2dm$")
@@ -123,8 +124,6 @@ def write_series_csv(path, rows: list[dict]) -> Path:
 def write_series_png(path, rows: list[dict], *, nssda_threshold_m: float | None = None) -> Path:
     """Nodes (log scale) against holdout RMSE (cm), one line per simplification, each point
     labelled with its setting; the NSSDA bound dashed when given."""
-    from ..io.report import new_figure, save_png
-
     fig = new_figure(8, 5)
     ax = fig.add_subplot()
     assessed = [r for r in rows if r["rmse_m"] is not None]

@@ -7,9 +7,10 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import FloodMeshError
-from ..io import RASTER_EXTENSIONS, is_point_source, require_file
 from ..engine.tiles import TileSet, expand_tiles, is_tile_set, tile_kind
+from ..errors import FloodMeshError
+from ..io import RASTER_EXTENSIONS, require_file
+from ..options import is_point_source
 
 POINTS, DEM, POINT_TILES, DEM_TILES = "points", "dem", "point tiles", "dem tiles"
 

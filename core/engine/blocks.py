@@ -13,9 +13,15 @@ The result equals applying the kernel to the whole NaN-padded raster, for any wi
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterable, Sequence
 
 import numpy as np
+
+from .._kernels.aot import kernel
+from ..errors import Cancelled, FloodMeshError
+from ..io import (atomic_output, no_valid_cells, raster_crs_wkt, raster_profile, read_band,
+                  require_file)
 
 DEFAULT_BLOCK_ROWS = 2048
 # File to file: strips of this many rows (a multiple of the tile size), the full width.
@@ -63,10 +69,6 @@ def run_blocks(read_into: Callable, write: Callable, shape: tuple[int, int],
     previous one, so reading, computing and writing overlap; ``read_into`` and ``write`` (the
     GDAL calls) stay in this thread: GDAL 3.6 hung with a reader thread beside a writer. Two
     buffers per window shape alternate, so the kernel may return a view of its input."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    from ..errors import Cancelled
-
     windows = list(windows)
     buffers: dict = {}
     pending = None  # (window, future) of the window being computed
@@ -144,10 +146,9 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
     This is the unit a tiled or distributed run calls per tile: it reads only the windows (plus
     halo) it is given.
     """
+    # lazy: GDAL loads only when this runs
     import rasterio
     from rasterio.windows import Window
-
-    from ..io import require_file, atomic_output, no_valid_cells, raster_crs_wkt, raster_profile
 
     if nodata is None:
         nodata = FLOAT_NODATA if np.dtype(dtype).kind == "f" else BYTE_NODATA
@@ -197,9 +198,8 @@ def _band_reader(src, dtype):
     ``to_nan(padded)``, on the whole padded buffer (NaN beyond the raster) in the worker thread,
     makes nodata and ±inf NaN in floats and returns whether a finite cell is in it. Files that
     mask cells by a mask band rather than a nodata value are read masked (``io.read_band``)."""
+    # lazy: GDAL loads only when this runs
     from rasterio.enums import MaskFlags
-
-    from ..io import read_band
 
     flags = src.mask_flag_enums[0]
     if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags or np.dtype(dtype).kind != "f":
@@ -224,20 +224,18 @@ def _band_reader(src, dtype):
 
 
 def _kernel(name: str, dtype):
-    """``raster_kernels``' ``_name``: ahead of time for float32 (``compiled``), else numba's."""
+    """The raster kernel ``name``: ahead of time for float32 (``compiled``), else numba's."""
     if np.dtype(dtype) == np.float32:
-        from .._kernels.aot import kernel
-
         return kernel(f"{name}_f32")
+    # lazy: numba loads only when this runs
     from .._kernels import raster as raster_kernels
 
-    return getattr(raster_kernels, f"_{name}")
+    return getattr(raster_kernels, name)
 
 
 def _open(path):
+    # lazy: GDAL loads only when this runs
     import rasterio
-
-    from ..errors import FloodMeshError
 
     try:
         return rasterio.open(path)
@@ -247,9 +245,8 @@ def _open(path):
 
 def cell_size(path) -> float:
     """The cell size d (m) of a raster file, for kernels that need it."""
+    # lazy: GDAL loads only when this runs
     import rasterio
-
-    from ..io import require_file
 
     with rasterio.open(require_file(path, "raster")) as src:
         return float(src.transform.a)

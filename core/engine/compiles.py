@@ -36,6 +36,7 @@ class CompileWatch:
         if self.log is None:
             yield
             return
+        # lazy: numba loads only when this runs
         from numba.core import event
 
         watch = self

@@ -29,8 +29,10 @@ from __future__ import annotations
 
 import contextlib
 import glob
+import logging
 import math
 import os
+import shutil
 import time
 import zlib
 from dataclasses import dataclass
@@ -42,8 +44,14 @@ from affine import Affine
 from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
+from ..io import GROUND_CLASS, atomic_output, classes_kept, file_format, read_band, read_xyz
 from ..io.outputs import scratch_folder
-from ..raster import Grid, require_metric_crs
+from ..options import check_cell_size, check_holdout, check_holdout_count, check_max_gap
+from ..points import clean_points
+from ..raster import Grid, check_transform, require_metric_crs
+from ..steps.slope import slope_block
+from .blocks import cell_size, map_raster
+from .limits import check_memory, footprint
 
 LAS_EXTENSIONS = (".las", ".laz")
 XYZ_EXTENSIONS = (".xyz", ".txt", ".csv", ".pts")
@@ -82,8 +90,6 @@ def is_tile(path: Path) -> bool:
     """A tile by its name and content: LAS/LAZ and DEM rasters by their extension (one that does
     not hold what its extension says is a broken tile, named when read), XYZ text only where its
     first lines are x, y, z numbers (``io.file_format``); hidden files never."""
-    from ..io import file_format
-
     ext = path.suffix.lower()
     if path.name.startswith("."):
         return False
@@ -187,9 +193,8 @@ def _unreadable_note(exc: _Unreadable, skip: bool) -> str:
 
 def _tile_header(path: Path) -> tuple[int, object]:
     """(points in the file, its CRS or None); for text, the count is an estimate from its size."""
+    # lazy: laspy loads only when this runs
     import laspy
-
-    from ..io import file_format
 
     if path.suffix.lower() not in LAS_EXTENSIONS:
         return max(1, path.stat().st_size // 20), None
@@ -256,9 +261,8 @@ def holdout_mask(n_points: int, fraction: float, seed: int, name: str) -> np.nda
 def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """(xyz, LAS classes or None for text) of all a tile's points, as stored; a tile that cannot
     be read raises ``_Unreadable`` naming it."""
+    # lazy: laspy loads only when this runs
     import laspy
-
-    from ..io import read_xyz
 
     if path.suffix.lower() not in LAS_EXTENSIONS:
         try:
@@ -284,8 +288,6 @@ def _kept(xyz: np.ndarray, cls, classes, name: str, notes=None) -> tuple[np.ndar
     ground, or all of an unclassified tile), what was kept: "given", "ground", "whole" (an
     unclassified tile), "text" (XYZ) or "none" (a tile over water or without ground, with a
     note: its neighbours' points grid its ground))."""
-    from ..io import GROUND_CLASS, classes_kept
-
     if cls is None:
         return xyz, "text"
     try:
@@ -305,8 +307,6 @@ def _usable(xyz: np.ndarray, crs_wkt: str, name: str, notes: list) -> tuple[np.n
     """(the finite points, whether they are too few or too close to a line to make a terrain
     model alone): ``points.clean_points``' checks and notes, but a sparse tile's points are kept
     for its neighbours' blocks to grid."""
-    from ..points import clean_points
-
     try:
         return clean_points(xyz, crs_wkt, f"tile {name}", note=notes.append).xyz, False
     except FloodMeshError:  # fewer than 3, or at one place or on one line
@@ -367,8 +367,6 @@ def read_tile(path: str, crs_wkt: str, classes, holdout: float, seed: int, band:
     its outline): the points, or with ``spill`` (a file path) the path of the ``.npy`` file
     they were written to. A sparse tile's points are all edge band: its neighbours' blocks grid
     them. An unreadable tile gives its message (``unreadable``) for the client to decide."""
-    from .limits import footprint
-
     notes = []
     try:
         tile = _tile_read(path, crs_wkt, classes, holdout, seed, notes)
@@ -422,6 +420,7 @@ def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes, hol
                seed: int) -> np.ndarray:
     """Round two: the cells of one block, from the tiles under it (``full``: paths, re-read) and
     its neighbours' edge bands (``edges``: arrays, or ``.npy`` files read in place)."""
+    # lazy: numba loads only when this runs
     from ..steps.grid import grid_window
 
     box = window["box"]
@@ -446,8 +445,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None, *,
     """A ``distributed.Client``: of the running scheduler at ``scheduler`` (tcp://HOST:8786), or
     of a local cluster of ``workers`` (default: one per core) single-threaded processes
     (``processes=False``: threads, for hosts such as QGIS that cannot start Python processes)."""
-    import logging
-
+    # lazy: Dask loads only when this runs
     import dask
     from distributed import Client, LocalCluster
 
@@ -537,8 +535,6 @@ def _tiles_counted(meta: list, classes, skip_unreadable: bool, notes: list) -> l
     earlier tile's points (a copy under another name), and, where the other tiles are
     classified, tiles without ground taken whole as unclassified (one file of all the points
     keeps only the ground). Their own notes and those on sparse tiles join ``notes``."""
-    from ..io import GROUND_CLASS
-
     counted, seen = [], {}
     for i, m in enumerate(meta):
         name = Path(m["path"]).name
@@ -592,10 +588,8 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
     round two, to refuse a run before its main work. Files that are not tiles, empty and sparse
     tiles, tiles without the classes gridded and repeated tiles go through with a note;
     unreadable tiles are refused by name, or left out with a note with ``skip_unreadable``."""
+    # lazy: numba loads only when this runs
     from ..steps.grid import check_layout, halo_width
-    from ..io import GROUND_CLASS
-    from .limits import check_memory
-    from ..options import check_cell_size, check_holdout, check_holdout_count, check_max_gap
 
     cell_size = check_cell_size(cell_size)
     check_max_gap(max_gap)
@@ -720,10 +714,9 @@ def _dem_writer(path, rows: int, cols: int, transform, crs: CRS, dtype: str = "f
     if path is None:
         yield lambda r0, c0, values: None
         return
+    # lazy: GDAL loads only when this runs
     import rasterio
     from rasterio.windows import Window
-
-    from ..io import atomic_output
 
     nodata = -9999.0
     profile = dict(driver="GTiff", height=rows, width=cols, count=1, dtype=dtype,
@@ -743,9 +736,6 @@ def slope_file64(dem_path, slope_path, method: str, *, crs=None, cancelled=None)
     ``slope.slope`` on the DEM in memory, as the kernel is the same and reads float64 (the
     float32 ``slope.slope_file`` rounds the DEM first). ``breakpoints.breakpoints_file`` with
     ``input_dtype=np.float64`` then gives ``classify_breakpoints``' breakpoints."""
-    from .blocks import cell_size, map_raster
-    from ..steps.slope import slope_block
-
     d = cell_size(dem_path)
     map_raster(dem_path, slope_path, lambda padded: slope_block(padded, d, method), halo=1,
                dtype="float64", input_dtype=np.float64, crs=crs, cancelled=cancelled)
@@ -755,9 +745,8 @@ def slope_file64(dem_path, slope_path, method: str, *, crs=None, cancelled=None)
 def read_back(path, crs: CRS) -> Grid:
     """A raster a run wrote (float64 with its nodata, or breakpoints: uint8, nodata 255) as the
     Grid the steps in memory give: float64 with NaN, breakpoints 0 or 1."""
+    # lazy: GDAL loads only when this runs
     import rasterio
-
-    from ..io import read_band
 
     with rasterio.open(path) as src:
         if np.dtype(src.dtypes[0]) == np.uint8:
@@ -772,10 +761,6 @@ def write_front_rasters(files: dict, out) -> None:
     """slope.tif (float32, as ``io.write_raster`` writes the slope in memory) and
     breakpoints.tif of a run into ``out``, block by block from ``files`` (``slope``,
     ``breakpoints``: the float64 slope and the breakpoints files)."""
-    import shutil
-
-    from .blocks import map_raster
-
     map_raster(files["slope"], Path(out) / "slope.tif", lambda padded: padded, halo=0,
                input_dtype=np.float64)
     shutil.copyfile(files["breakpoints"], Path(out) / "breakpoints.tif")
@@ -786,11 +771,9 @@ def write_front_rasters(files: dict, out) -> None:
 def read_dem_tiles(inputs, *, crs=None) -> Grid:
     """Several GeoTIFF DEM tiles (a folder, glob or list) as one Grid, after checking each: one
     CRS in metres, the same cell size, cells aligned across tiles."""
+    # lazy: GDAL loads only when this runs
     import rasterio
     from rasterio.merge import merge
-
-    from .limits import check_memory
-    from ..raster import check_transform
 
     paths = expand_tiles(inputs)
     if tile_kind(paths[0]) != "dem":

@@ -13,12 +13,12 @@ import json
 import sys
 import time
 
+import numpy as np
+
 
 def _series(times, values, hold=False):
     """f(t) by linear interpolation; outside the series 0 (a hydrograph) or, with ``hold``,
     the first and last values (a level)."""
-    import numpy as np
-
     times, values = np.asarray(times, float), np.asarray(values, float)
 
     def f(t):
@@ -53,7 +53,7 @@ def _boundary_objects(anuga, domain, kinds: dict):
 
 
 def run(job_dir: str) -> None:
-    import numpy as np
+    # lazy: optional, in the flood environment only
     import anuga
 
     with open(f"{job_dir}/job.json") as fh:

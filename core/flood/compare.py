@@ -13,7 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import io
 from ..errors import FloodMeshError
+from ..raster import Grid
+from .model import cell_centres
 
 EXTENT_CODES = {1: "wet on the mesh only", 2: "wet on the reference only", 3: "wet on both"}
 
@@ -31,6 +34,7 @@ def _load(folder) -> tuple[dict, dict]:
 
 
 def _sample(arrays: dict, grid_xy: np.ndarray) -> dict:
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import containing_triangle
 
     tri = containing_triangle(arrays["nodes"][:, :2], arrays["triangles"], grid_xy)
@@ -49,11 +53,8 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
     by ``run_flood``) on a grid of ``cell_size`` m over their common extent; with ``out_dir``
     write ``comparison.json``, ``depth_difference.tif`` and ``extent_difference.tif`` there.
     Returns the figures."""
+    # lazy: PROJ loads only when this runs
     from pyproj import CRS
-
-    from .. import io
-    from .model import cell_centres
-    from ..raster import Grid
 
     rep_a, arr_a = _load(mesh_run)
     rep_b, arr_b = _load(reference_run)

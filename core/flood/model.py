@@ -28,14 +28,17 @@ from typing import Callable
 
 import numpy as np
 
+from .. import io
 from ..errors import Cancelled, FloodMeshError
+from ..options import RESULT_RASTERS
+from ..raster import Grid, require_metric_crs
+from ..steps.hydraulics import (boundary_edges, collinear_wall_stencils, edge_nodes,
+                                hydraulic_checks, neighbours)
 
 BOUNDARY_KINDS = ("wall", "outflow", "level")
 SIDES = ("north", "south", "east", "west")
 BUILDING_MODES = ("raised", "holes")
 WORKER = Path(__file__).with_name("anuga_worker.py")
-RESULT_RASTERS = {"max_depth": "max_depth.tif", "max_stage": "max_water_level.tif",
-                  "max_speed": "max_speed.tif", "arrival_s": "arrival_time.tif"}
 FLOOD_FILES = tuple(RESULT_RASTERS.values()) + ("hydrograph.csv", "observations.csv",
                                                 "report.json")
 
@@ -141,7 +144,7 @@ def _polygon_list(spec, base: Path) -> list:
             if path.lower().endswith((".csv", ".txt")):
                 polygons.append(_read_xy_csv(path))
             else:
-                from .. import io
+                # lazy: GEOS loads only when this runs
                 import shapely
                 for geometry, _ in io.read_regions(path):
                     for part in getattr(geometry, "geoms", [geometry]):
@@ -286,9 +289,8 @@ def _worker_env() -> dict:
 def tag_boundary(nodes, triangles, boundaries) -> tuple[np.ndarray, list, dict]:
     """(edges (k, 3) rows triangle, edge, tag index; tag names; tag → kind spec) for every
     boundary edge. Edges no boundary names are walls."""
+    # lazy: GEOS loads only when this runs
     import shapely
-
-    from ..steps.hydraulics import boundary_edges, edge_nodes
 
     edges = boundary_edges(triangles)
     pairs = edge_nodes(triangles, edges)
@@ -327,6 +329,7 @@ def tag_boundary(nodes, triangles, boundaries) -> tuple[np.ndarray, list, dict]:
 def _inside(polygons, xy: np.ndarray, buffer: float = 0.0) -> np.ndarray:
     """Which of ``xy`` lie inside (or within ``buffer`` of) any polygon; the index of the last
     polygon containing each (-1: none)."""
+    # lazy: GEOS loads only when this runs
     import shapely
 
     which = np.full(len(xy), -1)
@@ -344,8 +347,6 @@ def merge_wall_fans(nodes, triangles, max_rounds: int = 100_000) -> tuple[np.nda
     a neighbour on the same straight wall (a node of those two triangles only) is dropped and
     the two merge into one. The boundary's shape does not change. Returns (triangles, how many
     nodes were dropped); the dropped nodes stay in ``nodes``, unreferenced."""
-    from ..steps.hydraulics import collinear_wall_stencils, neighbours
-
     tri = np.array(triangles, np.int64)
     xy = nodes[:, :2]
     removed = 0
@@ -460,6 +461,7 @@ def prepare(nodes, triangles, scenario: Scenario) -> dict:
             inflows.append({"discharge_m3s": float(inflow.discharge_m3s)})
     obs = np.full(len(scenario.observation_points), -1)
     if scenario.observation_points:
+        # lazy: PROJ and GEOS load only when this runs
         from ..steps.mesh import containing_triangle
         xy = np.array([[x, y] for _, x, y in scenario.observation_points])
         obs = containing_triangle(nodes[:, :2], triangles, xy)
@@ -544,8 +546,8 @@ def outflow_hydrograph(result: dict) -> np.ndarray:
 def result_grids(nodes, triangles, result: dict, crs, cell_size: float) -> dict:
     """The per-triangle maxima as Grids (cell centres take the value of their triangle; NaN
     outside the mesh; dry cells 0 depth and speed, NaN level and arrival)."""
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import containing_triangle
-    from ..raster import Grid
 
     transform, (rows, cols), xy = cell_centres(nodes[:, :2].min(axis=0),
                                                nodes[:, :2].max(axis=0), cell_size)
@@ -566,6 +568,7 @@ def result_grids(nodes, triangles, result: dict, crs, cell_size: float) -> dict:
 def cell_centres(lo, hi, cell_size: float):
     """(transform, (rows, cols), centres (rows·cols, 2)) of a north-up grid of ``cell_size``
     aligned to its multiples and covering the box ``lo``–``hi`` (m)."""
+    # lazy: affine loads only when this runs
     from affine import Affine
 
     x0, y1 = np.floor(lo[0] / cell_size) * cell_size, np.ceil(hi[1] / cell_size) * cell_size
@@ -579,6 +582,7 @@ def cell_centres(lo, hi, cell_size: float):
 
 def default_cell_size(nodes, triangles) -> float:
     """Half the side of the median triangle's square, rounded to 0.25 m, at least 0.25 m."""
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import triangle_areas
 
     side = np.sqrt(np.median(np.abs(triangle_areas(nodes, triangles))))
@@ -594,10 +598,8 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
     the mesh's CRS (``crs``, else that of a ``mesh.gpkg`` or ``dem.tif`` beside the mesh), the
     outflow hydrograph, the stage at the observation points and ``report.json`` (hydraulic
     checks of the mesh, mass balance, cost). Returns the report."""
-    from .. import io
-    from ..steps.hydraulics import hydraulic_checks
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import triangle_areas
-    from ..raster import require_metric_crs
 
     crs = require_metric_crs(crs or mesh_crs(mesh_path), f"the mesh {Path(mesh_path).name}")
     python = require_flood_python()
@@ -667,8 +669,6 @@ def _jsonable_scenario(scenario: Scenario) -> dict:
 
 def write_table(path, header, rows) -> None:
     """A CSV of ``header`` and numeric ``rows``, written atomically."""
-    from .. import io
-
     with io.atomic_output(Path(path)) as tmp:
         with open(tmp, "w", newline="") as fh:
             writer = csv.writer(fh)
@@ -679,8 +679,6 @@ def write_table(path, header, rows) -> None:
 
 def mesh_crs(mesh_path):
     """The CRS of a ``mesh.gpkg`` or ``dem.tif`` beside a 2DM (which carries none), or None."""
-    from .. import io
-
     folder = Path(mesh_path).parent
     gpkg = Path(mesh_path).with_suffix(".gpkg")
     for candidate in (gpkg, folder / "mesh.gpkg"):
@@ -688,6 +686,7 @@ def mesh_crs(mesh_path):
             return io.vector_crs(candidate)
     dem = folder / "dem.tif"
     if dem.is_file():
+        # lazy: GDAL loads only when this runs
         import rasterio
         with rasterio.open(dem) as src:
             return src.crs.to_wkt() if src.crs else None

@@ -6,16 +6,20 @@ Ctrl-C exits with 130 and leaves no half-written file.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
 import time
 from pathlib import Path
 
-from .console import ProgressBar, print_note, print_notes
+from .. import io
+from ..chain import files as steps
 from ..errors import Cancelled, FloodMeshError, Terminated, terminate_as_interrupt
 from ..options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
                        NODE_ELEVATIONS, RunOptions, parse_formats)
+from .console import ProgressBar, print_note, print_notes
+from .flood_cli import add_flood_commands
 
 DEFAULTS = RunOptions()
 
@@ -212,6 +216,7 @@ def _options(args) -> RunOptions:
 def _input(args):
     """The run's ``source.Source``, decided here once: one file, or the tiles of the folders,
     patterns and files given; with --skip-unreadable-tiles, unreadable tiles left out."""
+    # lazy: PROJ loads only when this runs
     from ..chain.source import open_source
 
     items = args.input if isinstance(args.input, list) else [args.input]
@@ -242,6 +247,7 @@ def _summary(report: dict, out: Path) -> str:
 
 
 def cmd_run(args):
+    # lazy: numba, PROJ and GEOS load only when this runs
     from ..chain.pipeline import run_pipeline
 
     bar = ProgressBar("run")
@@ -255,6 +261,7 @@ def cmd_run(args):
 
 
 def cmd_series(args):
+    # lazy: numba, PROJ and GEOS load only when this runs
     from ..chain.series import run_series, settings_grid
 
     if args.tolerances:
@@ -279,7 +286,7 @@ def cmd_series(args):
 
 
 def cmd_demo(args):
-    from .. import io
+    # lazy: GEOS loads only when this runs
     from .demo import synthetic_floodplain
 
     out = Path(args.out)
@@ -306,8 +313,6 @@ def _step(label: str, func, *args, **options) -> dict:
 
 
 def cmd_grid(args):
-    from ..chain import files as steps
-
     _step("grid", steps.grid, _input(args), args.out, cell_size=args.cell_size, crs=args.crs,
           classes=args.classes, max_gap=args.max_gap, holdout=args.holdout, seed=args.seed,
           holdout_output=_holdout_target(args) if args.holdout else None,
@@ -319,30 +324,22 @@ def _holdout_target(args) -> str:
 
 
 def cmd_slope(args):
-    from ..chain import files as steps
-
     _step(args.method, steps.slope, args.dem, args.out, method=args.method, sigma=args.sigma,
           log_kernel=args.log_kernel, crs=args.crs)
 
 
 def cmd_breakpoints(args):
-    from ..chain import files as steps
-
     _step("breakpoints", steps.breakpoints, args.slope, args.out, s_crit=args.s_crit,
           sensitivity=args.sensitivity, zero_crossings=args.zero_crossings, crs=args.crs)
 
 
 def cmd_breaklines(args):
-    from ..chain import files as steps
-
     _step("breaklines", steps.trace, args.breakpoints, args.slope, args.dem, args.out,
           s_crit=args.s_crit, mode=args.mode, min_points=args.min_points,
           min_length=args.min_length, join=not args.no_join, seed=args.seed, crs=args.crs)
 
 
 def cmd_simplify(args):
-    from ..chain import files as steps
-
     method, amount = RunOptions(keep_every=args.keep_every, tolerance=args.tolerance,
                                 spline=args.spline).simplification()
     _step("simplify", steps.simplify, args.breaklines, args.out, method=method, amount=amount,
@@ -350,8 +347,6 @@ def cmd_simplify(args):
 
 
 def cmd_mesh(args):
-    from ..chain import files as steps
-
     _step("mesh", steps.mesh, args.dem, args.out, breaklines=args.breaklines,
           boundary=args.boundary, user_lines=args.user_lines, size_field=args.size_field,
           min_area=args.min_area, flow_area=0.0, conforming=args.conforming,
@@ -360,8 +355,6 @@ def cmd_mesh(args):
 
 
 def cmd_assess(args):
-    from ..chain import files as steps
-
     result = _step("assess", steps.assess, args.mesh, args.points, args.out,
                    report=args.report, png=args.png, crs=args.crs)
     for path in result.get("figures", ()):
@@ -369,8 +362,6 @@ def cmd_assess(args):
 
 
 def cmd_export(args):
-    from ..chain import files as steps
-
     _step("export", steps.export, args.mesh, args.output, fmt=args.format, crs=args.crs,
           open_boundaries=args.open_boundaries, snap=args.snap, regions=args.regions,
           material_field=args.material_field, datum_offset=args.datum_offset,
@@ -378,8 +369,6 @@ def cmd_export(args):
 
 
 def cmd_refine(args):
-    from ..chain import files as steps
-
     _step("refine", steps.refine, args.dem, args.points, args.out, breaklines=args.breaklines,
           boundary=args.boundary, user_lines=args.user_lines, check=args.check,
           min_angle=args.min_angle, max_area=args.max_area, lower=args.lower, upper=args.upper,
@@ -396,7 +385,6 @@ def build_parser() -> argparse.ArgumentParser:
     _add_chain_commands(sub)
     _add_step_commands(sub)
     _add_mesh_commands(sub)
-    from .flood_cli import add_flood_commands
     add_flood_commands(sub)
     return parser
 
@@ -603,8 +591,6 @@ def command() -> None:
     (``_QUICK_EXIT``) the process ends as soon as the output is in place and the streams are
     flushed, without the interpreter's teardown of every module (0.03-0.06 s, 5 % of ``floodmesh
     slope`` on a 6000² DEM); other commands exit normally, running their exit handlers."""
-    import os
-
     argv = sys.argv[1:]
     try:
         code = main(argv)

@@ -70,6 +70,7 @@ def _distance(line: shapely.LineString, xy: np.ndarray, *, within: float,
               spacing: float = 0.02) -> np.ndarray:
     """Distance (m) from points to a line, inf beyond ``within`` metres; exact to spacing²/8
     through a KD-tree of the line resampled every ``spacing`` metres (fast for millions of points)."""
+    # lazy: SciPy loads only when this runs
     from scipy.spatial import cKDTree
 
     tree = cKDTree(np.asarray(shapely.segmentize(line, spacing).coords))
@@ -134,6 +135,7 @@ def synthetic_floodplain(*, density: float = 9.0, noise: float = 0.05, vegetatio
     ``density`` ground points per m², Gaussian ``noise`` (m) on z, ``vegetation`` extra points per
     ground point 0.5–12 m above the ground (class 1).
     """
+    # lazy: PROJ loads only when this runs
     from pyproj import CRS
 
     rng = np.random.default_rng(seed)

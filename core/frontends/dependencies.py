@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import re
+import sys
 from pathlib import Path
 
 REQUIREMENTS = Path(__file__).parents[1] / "requirements.txt"  # the one list (pyproject reads it)
@@ -48,8 +49,6 @@ def missing_dependencies() -> list[str]:
 def install_hint(missing: list[str]) -> str:
     """One message naming the missing packages and the command that installs them into this
     Python (the worker's: QGIS itself never imports them), numpy kept at its version."""
-    import sys
-
     quoted = " ".join(f'"{r}"' if "[" in r or ">" in r else r for r in missing)
     try:
         import numpy

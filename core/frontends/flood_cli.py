@@ -3,12 +3,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .. import io
+from ..flood.compare import compare_floods
+from ..flood.model import load_scenario, run_flood
+from ..steps.hydraulic_lines import flood_size_field, wet_zone
+from .console import ProgressBar, print_notes
+
 
 def cmd_flood(args):
-    from .console import ProgressBar, print_notes
-    from ..flood.compare import compare_floods
-    from ..flood.model import load_scenario, run_flood
-
     scenario = load_scenario(args.scenario)
     runs = [(args.mesh, Path(args.out) if not args.reference else Path(args.out) / "mesh")]
     if args.reference:
@@ -32,9 +34,6 @@ def cmd_flood(args):
 
 def _write_flow_fields(out: Path, wet_area: float, report: dict) -> str:
     """size_field.tif and wet_zone.gpkg from the run's max depth, for a second mesh."""
-    from .. import io
-    from ..steps.hydraulic_lines import flood_size_field, wet_zone
-
     depth = io.read_raster(out / "max_depth.tif")
     wet = report["scenario"]["wet_depth_m"]
     io.write_raster(out / "size_field.tif", flood_size_field(depth, wet_area=wet_area,
@@ -47,9 +46,8 @@ def _write_flow_fields(out: Path, wet_area: float, report: dict) -> str:
 
 def write_zone(path, zone, crs) -> None:
     """A (Multi)Polygon as a GeoPackage of polygons (layer wet_zone)."""
+    # lazy: GEOS loads only when this runs
     import shapely.geometry
-
-    from .. import io
 
     parts = list(getattr(zone, "geoms", [zone]))
     io.write_gpkg(path, "wet_zone", "Polygon", {"id": "int"},
@@ -79,8 +77,6 @@ def _comparison(c: dict) -> str:
 
 
 def cmd_compare(args):
-    from ..flood.compare import compare_floods
-
     print(_comparison(compare_floods(args.mesh_run, args.reference_run, args.out,
                                      cell_size=args.cell_size)))
     print(f"comparison.json, depth_difference.tif and extent_difference.tif written to "

@@ -16,19 +16,21 @@ import tempfile
 import time
 from pathlib import Path
 
+from .. import io
+from .._kernels.aot import build
 from ..engine.compiles import CompileWatch
+from ..options import RunOptions
+from ..steps.breakpoints import breakpoints_file
+from ..steps.slope import slope_file
 
 
 def compile_kernels(log=print) -> float:
     """Run the whole chain on a tiny synthetic floodplain (and the file-to-file raster steps),
     which compiles every kernel or loads it from the cache, saying so through ``log`` when
     numba really compiles (``compiles.CompileWatch``). Returns the seconds taken."""
-    from .. import io
-    from ..steps.breakpoints import breakpoints_file
+    # lazy: GEOS, numba and PROJ load only when this runs
     from .demo import synthetic_floodplain
-    from ..options import RunOptions
     from ..chain.pipeline import run_pipeline
-    from ..steps.slope import slope_file
 
     start, watch = time.perf_counter(), CompileWatch(log)
     points, _ = synthetic_floodplain(density=0.5, vegetation=0.0)
@@ -49,7 +51,6 @@ def main() -> int:
     print(f"floodmesh: kernels ready ({seconds:.0f} s)", file=sys.stderr)
     # after the numba kernels (which serve where the build cannot): the streaming raster
     # kernels ahead of time, so that `floodmesh slope` starts without numba
-    from .._kernels.aot import build
 
     start = time.perf_counter()
     if build(log=lambda message: print(f"floodmesh: {message}", file=sys.stderr)):

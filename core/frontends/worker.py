@@ -31,6 +31,9 @@ import time
 from ..chain import files as steps
 from ..engine.compiles import CompileWatch
 from ..errors import Cancelled, FloodMeshError, Terminated, terminate_as_interrupt
+from ..flood.model import load_scenario, run_flood
+from ..options import RunOptions
+from .dependencies import install_hint, missing_dependencies
 
 PARTIAL_GLOB = ".*.partial*"  # the temporary names io.atomic_output writes under
 
@@ -78,7 +81,7 @@ def _file_step(func):
 
 
 def step_run(ch, *, input, output_folder, options, skip_unreadable=False):
-    from ..options import RunOptions
+    # lazy: numba, PROJ and GEOS load only when this runs
     from ..chain.pipeline import run_pipeline
     from ..chain.source import open_source
 
@@ -89,6 +92,7 @@ def step_run(ch, *, input, output_folder, options, skip_unreadable=False):
             options[key] = tuple(options[key])
     report = run_pipeline(input, output_folder, RunOptions(**options), progress=ch.progress,
                           cancelled=ch.cancelled, log=_pipeline_log(ch))
+    # lazy: PROJ loads only when this runs
     from pyproj import CRS
 
     return {"nodes": report["nodes"], "triangles": report["triangles"],
@@ -96,8 +100,6 @@ def step_run(ch, *, input, output_folder, options, skip_unreadable=False):
 
 
 def step_flood(ch, *, mesh, scenario, output, crs=None):
-    from ..flood.model import load_scenario, run_flood
-
     report = run_flood(mesh, load_scenario(scenario), output, crs=crs, progress=ch.progress,
                        log=ch.info)
     for message in report["notes"]:
@@ -126,8 +128,6 @@ STEPS = {"grid": _file_step(steps.grid), "slope": _file_step(steps.slope),
 
 def run_job(job: dict, ch: Channel) -> int:
     """Run one job, answering on ``ch``; the exit code (0 done, 2 bad input, 130 cancelled)."""
-    from .dependencies import install_hint, missing_dependencies
-
     missing = missing_dependencies()
     if missing:
         ch.send(error=install_hint(missing))

@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FloodMeshError
-from ..points import PointCloud, clean_points
 from ..engine.limits import check_memory
+from ..errors import FloodMeshError
+from ..options import EPT_NAME, POINT_EXTENSIONS, is_point_source
+from ..points import PointCloud, clean_points
+from ..raster import Grid, METRE_NAMES, check_transform, require_metric_crs
 from .outputs import remove_stale_temporaries, temp_name
-from ..raster import METRE_NAMES, Grid, check_transform, require_metric_crs
 
-POINT_EXTENSIONS = (".las", ".laz", ".xyz", ".txt", ".csv", ".pts")
 RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
 GROUND_CLASS = 2
 UNCLASSIFIED = (0, 1)  # LAS "created, never classified" and "unclassified"
@@ -89,6 +89,7 @@ def read_point_file(path: Path, classes=None, note=None):
 
 
 def _read_las(path: Path, classes, note=None):
+    # lazy: laspy loads only when this runs
     import laspy
 
     try:
@@ -140,21 +141,11 @@ def classes_kept(xyz, cls, classes, name: str, note=None):
     return xyz if keep.all() else xyz[keep]  # a ground-only file needs no copy
 
 
-EPT_NAME = "ept.json"  # an Entwine Point Tile index, as QGIS's point-cloud layers open them
-
-
-def is_point_source(path) -> bool:
-    """True for a point file FloodMesh reads: LAS/LAZ (COPC too), XYZ/CSV text, or an EPT."""
-    path = Path(path)
-    return path.suffix.lower() in POINT_EXTENSIONS or path.name == EPT_NAME
-
-
 def _read_ept(path: Path, classes, note=None):
     """The points of an Entwine Point Tile index (``ept.json`` with LAZ nodes in ``ept-data``,
     as Entwine, untwine and QGIS 3.22 with PDAL write): every node, since each point lies in
     exactly one."""
-    import json
-
+    # lazy: laspy loads only when this runs
     import laspy
 
     try:
@@ -270,6 +261,7 @@ def file_format(path) -> str | None:
 
 def write_points_las(path, points: PointCloud, *, classes=GROUND_CLASS) -> None:
     """Write points as LAS/LAZ (by extension) with the CRS; ``classes`` one code or one per point."""
+    # lazy: laspy loads only when this runs
     import laspy
 
     header = laspy.LasHeader(point_format=3, version="1.4")
@@ -328,6 +320,7 @@ def no_valid_cells(path) -> FloodMeshError:
 def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
     """Band 1 (or a window of it) as ``dtype`` with NaN for nodata and ±inf, in one buffer (no
     masked array) unless the file masks cells by a mask band rather than a nodata value."""
+    # lazy: GDAL loads only when this runs
     from rasterio.enums import MaskFlags
 
     flags = src.mask_flag_enums[0]
@@ -347,6 +340,7 @@ def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
 
 def nodata_tagged(path) -> bool:
     """Whether a raster file says which value is nodata (a tag or a mask band)."""
+    # lazy: GDAL loads only when this runs
     import rasterio
     from rasterio.enums import MaskFlags
 
@@ -364,6 +358,7 @@ def read_raster(path, *, crs=None, note=None) -> Grid:
     every other cell are nodata too. ``note`` (given for DEMs) receives what was assumed: such
     sentinels, further bands left unused, elevations stored as whole numbers.
     """
+    # lazy: GDAL loads only when this runs
     import rasterio
 
     path = require_file(path, "raster")
@@ -438,6 +433,7 @@ def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
 def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
     """Write a Grid as a tiled, compressed GeoTIFF (``raster_profile``); float NaN (or
     cells outside ``valid``) become nodata."""
+    # lazy: GDAL loads only when this runs
     import rasterio
 
     values = grid.values
@@ -481,6 +477,7 @@ def write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, 
                 atomic: bool = True) -> None:
     """Write one layer; ``atomic=False`` adds it to ``path`` as it is (a GeoPackage being
     assembled under a temporary name, see ``atomic_output``)."""
+    # lazy: OGR loads only when this runs
     import fiona
 
     schema = {"geometry": geometry_type, "properties": properties}
@@ -561,6 +558,7 @@ def write_points_gpkg(path, xyz: np.ndarray, crs, *, layer="points", attributes=
 def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:
     """Check points with their residual (m), the TIN's z there and the residual class
     (0: <10 cm, 1: 10–25 cm, 2: >25 cm, −1: outside the mesh)."""
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.accuracy import residual_class
 
     write_points_gpkg(path, xyz, crs, layer="residuals",
@@ -571,6 +569,7 @@ def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:
 def read_breaklines(path) -> list:
     """Read a line layer as BreakLines (slopes unknown: NaN; component from ``component_id``
     where the layer has it, else 0)."""
+    # lazy: numba loads only when this runs
     from ..steps.breaklines import BreakLine
 
     return [BreakLine(coords, np.full(len(coords), np.nan),
@@ -599,6 +598,7 @@ def _line_part(part, z_missing=np.nan) -> np.ndarray | None:
 
 def _line_parts(path, note=None) -> list[tuple[np.ndarray, dict]]:
     """Each part of each line feature as ((k, 3) coordinates, the feature's attributes)."""
+    # lazy: OGR loads only when this runs
     import fiona
 
     path = require_file(path, "line file")
@@ -633,6 +633,7 @@ def _line_parts(path, note=None) -> list[tuple[np.ndarray, dict]]:
 def read_regions(path, *, field: str | None = None, what: str = "regions") -> list:
     """Polygon features as (shapely geometry, material id): the integer attribute ``field``, or
     2, 3, … in feature order (1 being the rest of the domain)."""
+    # lazy: OGR and GEOS load only when this runs
     import fiona
     import shapely.geometry
 
@@ -670,6 +671,7 @@ def read_regions(path, *, field: str | None = None, what: str = "regions") -> li
 
 def read_points_vector(path) -> np.ndarray:
     """Read the PointZ features of a vector file (e.g. holdout points) as an (N, 3) array."""
+    # lazy: OGR loads only when this runs
     import fiona
 
     path = require_file(path, "point layer")
@@ -687,6 +689,7 @@ def read_boundary(path) -> list:
 
 def vector_crs(path):
     """The CRS (WKT) of a vector file, or None where it has none."""
+    # lazy: OGR loads only when this runs
     import fiona
 
     path = require_file(path, "vector layer")
@@ -742,6 +745,7 @@ def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: 
 def write_prj(path, crs) -> None:
     """The CRS of a file that cannot hold one (SMS 2DM) as WKT in ``<stem>.prj`` beside it, as
     shapefiles and ASCII grids carry theirs; ``read_prj`` and the QGIS plugin read it back."""
+    # lazy: PROJ loads only when this runs
     from pyproj import CRS
 
     with atomic_output(Path(path).with_suffix(".prj")) as tmp:
@@ -836,6 +840,7 @@ def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, laye
                     attributes=None, atomic: bool = True):
     """Write the mesh's triangles as PolygonZ features (id, area_m2, min_angle_deg, and any
     per-triangle ``attributes``)."""
+    # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import triangle_angles, triangle_areas
 
     areas = triangle_areas(nodes, triangles)

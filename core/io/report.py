@@ -13,8 +13,8 @@ import numpy as np
 
 from .. import io
 from ..engine.arrays import unique_rows
-from ..steps.accuracy import CLASS_LIMITS_M, accuracy_statistics, residual_class
 from ..options import OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS
+from ..steps.accuracy import CLASS_LIMITS_M, accuracy_statistics, residual_class
 
 HISTOGRAM_PNG = "residual_histogram.png"
 MAP_PNG = "residual_map.png"
@@ -29,6 +29,7 @@ HILLSHADE_CELLS = 1500
 def new_figure(width_in: float, height_in: float):
     """A matplotlib Figure on an Agg canvas: no window, no change to pyplot's global backend
     (which QGIS, or a user's session, may have set to Qt)."""
+    # lazy: matplotlib loads only when this runs
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -109,6 +110,7 @@ def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.n
     """Map of the mesh's edges (faint grey, up to ``MAP_EDGES``) and the held-out points ``xyz``
     (m) coloured by the class of ``res`` (m): <10 cm green, 10–25 cm orange, >25 cm red,
     outside the mesh grey; equal aspect, easting and northing in metres."""
+    # lazy: matplotlib loads only when this runs
     from matplotlib.collections import LineCollection
 
     res = np.asarray(res, float)
@@ -190,6 +192,7 @@ def write_breaklines_map(path, dem, lines) -> Path:
     """Map of the break lines ``lines`` ((k, 2+) coordinate arrays, m) in magenta on a white
     halo (their QGIS style) over a grey hillshade of ``dem`` (a ``raster.Grid``; sun from the
     north-west, 315°, 45° high; nodata white); equal aspect, easting and northing in metres."""
+    # lazy: matplotlib loads only when this runs
     from matplotlib.collections import LineCollection
     from matplotlib.lines import Line2D
 

@@ -18,6 +18,7 @@ CLASS_NAMES = ("<10 cm", "10-25 cm", ">25 cm")
 
 def tin_elevation(mesh: Mesh, x, y) -> np.ndarray:
     """Linear interpolation of the mesh's node elevations at (x, y); NaN outside the mesh."""
+    # lazy: numba loads only when this runs
     from .._kernels.mesh import locate
 
     points = np.column_stack([np.ravel(x), np.ravel(y)]).astype(float)

@@ -25,9 +25,9 @@ import numpy as np
 from .. import io
 from ..engine.arrays import unique_rows
 from ..errors import FloodMeshError
-from .mesh import boundary_loops
-from ..raster import require_metric_crs
 from ..options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
+from ..raster import require_metric_crs
+from .mesh import boundary_loops
 
 ADCIRC_MAINLAND, ADCIRC_ISLAND = 20, 21  # no normal flow, natural (weak), free tangential slip
 SCHISM_EXTERIOR, SCHISM_ISLAND = 0, 1
@@ -168,6 +168,7 @@ def _crs(crs):
     """The mesh's CRS: projected, in metres, as FloodMesh's meshes are."""
     if crs is None:
         return None
+    # lazy: PROJ loads only when this runs
     from pyproj import CRS
     from pyproj.exceptions import CRSError
 
@@ -194,6 +195,7 @@ def mesh_boundary(nodes, triangles, open_lines=(), *, snap: float = 1.0) -> Boun
     islands = [_signed_area(xy[loop]) < 0 for loop in loops]
     labels = [np.zeros(len(loop), np.int64) for loop in loops]  # 0 land, k: open line k
     if len(open_lines):
+        # lazy: GEOS loads only when this runs
         import shapely
 
         if not snap > 0:
@@ -281,6 +283,7 @@ def region_materials(nodes, triangles, regions, materials) -> np.ndarray:
     whose centroid it contains, later regions over earlier ones."""
     if not len(regions):
         return materials
+    # lazy: GEOS loads only when this runs
     import shapely
 
     centroid = np.asarray(nodes, float)[triangles][:, :, :2].mean(axis=1)
@@ -459,6 +462,7 @@ def write_ugrid(path, mesh: SolverMesh, *, title: str = "FloodMesh mesh") -> Non
     (z: bed elevation, m, standard name altitude), edge and face node connectivity (1-based),
     and the CRS in ``projected_coordinate_system`` (EPSG code, WKT and CF grid mapping), as
     D-Flow FM's net files and QGIS (MDAL) read them."""
+    # lazy: SciPy loads only when this runs
     from scipy.io import netcdf_file
 
     crs = mesh.crs

@@ -20,8 +20,8 @@ import numpy as np
 from affine import Affine
 
 from .._kernels.delaunay import delaunay
-from ..errors import Cancelled, FloodMeshError
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
+from ..errors import Cancelled, FloodMeshError
 from ..options import check_cell_size, check_max_gap
 from ..points import PointCloud
 from ..raster import Grid

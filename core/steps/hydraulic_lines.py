@@ -96,6 +96,7 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     (e.g. ``wet_zone`` of a first flood); ``flow_spacing`` (a Grid of spacings in m, NaN
     outside the flow zone) widens the spacing where it is larger; returns (lines, counts of
     what was done)."""
+    # lazy: GEOS loads only when this runs
     import shapely
 
     clearance = 2 * spacing if clearance is None else clearance
@@ -148,6 +149,7 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
 def _near(lines: list, bounds: list, box, spacing: float):
     """The union of those ``lines`` (with their ``bounds``) within ``spacing`` of the box
     ``box`` (xmin, ymin, xmax, ymax), grown by ``spacing``."""
+    # lazy: GEOS loads only when this runs
     import shapely
 
     b = np.asarray(bounds, float).reshape(-1, 4)
@@ -183,6 +185,7 @@ def _parts(geometry):
 
 
 def _wet_mask(max_depth, wet_depth: float, margin: float) -> np.ndarray:
+    # lazy: SciPy loads only when this runs
     from scipy.ndimage import binary_dilation
 
     wet = np.nan_to_num(np.asarray(max_depth.values, float), nan=0.0) > wet_depth
@@ -206,6 +209,7 @@ def flood_size_field(max_depth, *, wet_area: float, wet_depth: float = 0.05,
 def wet_zone(max_depth, *, wet_depth: float = 0.05, margin: float = 10.0):
     """The (Multi)Polygon where a first flood was deeper than ``wet_depth``, grown by
     ``margin`` m: detected lines outside it shape no flow (``lines_for_hydraulics(within=)``)."""
+    # lazy: GEOS and GDAL load only when this runs
     import shapely
     from rasterio.features import shapes
 

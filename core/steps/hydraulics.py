@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..raster import bilinear
+
 G = 9.81
 CHECK_DEPTH_M = 1.0        # the depth the time-step estimate is stated for
 SMALL_INRADIUS_M = 0.15    # triangles under this inradius are counted (issue 16's figure)
@@ -17,6 +19,7 @@ EDGE_BAND_M = 2.0          # "at the domain edge": within this distance of the b
 
 def inradii(nodes: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Inradius of each triangle (m): 2·area / perimeter."""
+    # lazy: PROJ and GEOS load only when this runs
     from .mesh import triangle_areas
 
     p = nodes[triangles][:, :, :2]
@@ -100,8 +103,10 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
     edge at the points where the modeller's ``own_lines`` cross ``detected_lines`` (lists of
     (k, 2+) coordinate arrays); with the ``dem`` (a Grid), how far the mesh's surface along
     the own lines (crests the modeller chose) falls below the DEM's."""
+    # lazy: SciPy loads only when this runs
     from scipy.spatial import cKDTree
 
+    # lazy: PROJ and GEOS load only when this runs
     from .mesh import triangle_areas
     from ..io.report import mesh_edges
 
@@ -158,6 +163,7 @@ def _inner_node_distance(nodes, bnodes) -> float | None:
     """The smallest distance (m) from a node off the boundary to the boundary's edges (each
     node's nearest edge from a tree of them: the distance to one multi-line of all edges took
     time in proportion to nodes × edges)."""
+    # lazy: numba loads only when this runs
     from ..engine.nearest import nearest_line
 
     inner = np.setdiff1d(np.arange(len(nodes)), bnodes)
@@ -169,10 +175,11 @@ def _inner_node_distance(nodes, bnodes) -> float | None:
 def crest_lowering(nodes, triangles, lines, dem, step: float = 0.5) -> dict:
     """The mesh's surface (linear on each triangle) against the DEM (bilinear) every ``step``
     m along ``lines``: the largest and the mean lowering (DEM − mesh, m); None without lines."""
+    # lazy: GEOS loads only when this runs
     import shapely
 
+    # lazy: numba loads only when this runs
     from .._kernels.mesh import locate
-    from ..raster import bilinear
 
     points = [np.asarray(shapely.segmentize(shapely.LineString(np.asarray(c)[:, :2]),
                                             step).coords) for c in lines if len(c) >= 2]
@@ -188,6 +195,7 @@ def crest_lowering(nodes, triangles, lines, dem, step: float = 0.5) -> dict:
 
 def _crossings(own_lines, detected_lines) -> np.ndarray:
     """(k, 2) points where any own line meets any detected line."""
+    # lazy: GEOS loads only when this runs
     import shapely
 
     own = [shapely.LineString(np.asarray(c)[:, :2]) for c in own_lines if len(c) >= 2]

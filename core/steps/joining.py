@@ -75,6 +75,7 @@ def _facing_ends(points, directions, owners, ends, kinds, *, max_gap: float, lat
     """The possible joins, cheapest first: (cost, end a, end b, their mean direction from a
     towards b) for every two ends of different lines, not a crest and a toe, that face each
     other across a gap (or overlap) the module allows, over ground that follows the line."""
+    # lazy: SciPy loads only when this runs
     from scipy.spatial import cKDTree
 
     cos_turn = np.cos(np.radians(max_turn))
@@ -222,6 +223,7 @@ def _segment_index(lines):
     """The segments of ``lines``: first and second vertices, the line each is on, their xy
     spans, half lengths and a KD-tree of their midpoints; None with fewer than two lines of two
     or more vertices."""
+    # lazy: SciPy loads only when this runs
     from scipy.spatial import cKDTree
 
     seg_a, seg_b, seg_line = [], [], []

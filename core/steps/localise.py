@@ -23,8 +23,11 @@ import numpy as np
 import shapely
 from numba import njit
 
-from ..errors import FloodMeshError
 from ..engine.nearest import nearest_line, point_index
+from ..errors import FloodMeshError
+from .breaklines import BreakLine
+from .joining import join_pieces, snap_t_junctions
+from .simplify import douglas_peucker_mask
 
 
 @dataclass(frozen=True)
@@ -439,10 +442,6 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     are snapped onto it (``joining.snap_t_junctions``). Returns
     the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
     where none moved) and counts. ``index``: ``nearest.point_index(points)`` if built."""
-    from .breaklines import BreakLine
-    from .joining import join_pieces, snap_t_junctions
-    from .simplify import douglas_peucker_mask
-
     index = index if index is not None else point_index(points)  # one for both uses below
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
                                                    window, s_crit=s_crit, index=index)

@@ -12,11 +12,12 @@ import shapely
 from pyproj import CRS
 
 from ..engine.arrays import unique_rows
-from ..errors import FloodMeshError
 from ..engine.limits import check_triangles
+from ..errors import FloodMeshError
 from ..options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles, check_min_angle,
                        check_tolerance)
 from ..raster import Grid, bilinear, nearest_value
+from .outline import smooth_outline
 
 # Triangle leaves skinny triangles in the concentric shells it builds around input corners
 # sharper than 60 degrees (Miller, Pav & Walkington 2003), so break lines may not form them.
@@ -56,9 +57,8 @@ def domain_from_dem(dem: Grid, *, min_area: float = 0.0, tolerance: float | None
     default and at most Δ = d/2, d the cell size: farther out, a node on the edge could lie
     more than a cell from every valid cell centre); see ``outline``.
     """
+    # lazy: GDAL loads only when this runs
     from rasterio.features import shapes
-
-    from .outline import smooth_outline
 
     valid = np.isfinite(dem.values).astype(np.uint8)
     parts = [shapely.geometry.shape(geom) for geom, value in
@@ -90,6 +90,7 @@ def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon",
     islands) included, clipped to the DEM's valid area (``domain_from_dem``, its edge
     straightened within ``tolerance`` m; the area clipped off said to ``note``); refuses
     invalid or non-overlapping ones."""
+    # lazy: GEOS loads only when this runs
     from shapely.validation import explain_validity
 
     polygons = [polygons] if isinstance(polygons, shapely.Geometry) else list(polygons)
@@ -312,6 +313,7 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     before Triangle starts, from the meshed ``area`` (m², default the vertices' bounding box).
     Returns vertices (n, 2), the PSLG's vertices first, then ``points``, and triangles (m, 3).
     """
+    # lazy: Triangle loads only when this runs
     import triangle
 
     min_angle = check_min_angle(min_angle)
@@ -474,6 +476,7 @@ def size_from_slope(slope: Grid, *, max_area: float, min_area: float, s_crit: fl
 def containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Index of the triangle holding each point, -1 outside the mesh (on an edge or a node: the
     lowest-index triangle holding it; see ``mesh_kernels``)."""
+    # lazy: numba loads only when this runs
     from .._kernels.mesh import locate
 
     return locate(xy, triangles, points)[0]
@@ -530,6 +533,7 @@ def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float,
     PSLG's vertices, its ``segments`` and each other (first come, first kept). A point a hair
     off a segment (a DEM cell centre on a traced line) would make Triangle refine towards it
     without end, leaving nodes on one spot and a triangulation no point can be located in."""
+    # lazy: SciPy loads only when this runs
     from scipy.spatial import cKDTree
 
     inside = shapely.contains_xy(domain.buffer(-snap), points[:, 0], points[:, 1])
@@ -675,6 +679,7 @@ def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
 def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndarray) -> int:
     """How many input segments are not a chain of mesh edges (nodes on the segment, in order,
     each consecutive pair an edge of a triangle)."""
+    # lazy: SciPy loads only when this runs
     from scipy.spatial import cKDTree
 
     if not len(segments):

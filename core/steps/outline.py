@@ -35,6 +35,7 @@ def smooth_outline(polygons: list, tolerance: float, cell: float, *,
     """``polygons`` whose edges run along a grid of ``cell`` m (cell-centre outlines) with their
     staircases straightened within ``tolerance`` m (see the module docstring); corners inside
     stay at ``sharpest`` degrees or more."""
+    # lazy: GEOS loads only when this runs
     from shapely.geometry.polygon import orient
 
     polygons = [orient(p, 1.0) for p in polygons]  # the domain left of every ring
@@ -104,6 +105,7 @@ def _straightened(points, rank, corner, touching, along, tolerance, cell, sharpe
     """One ring's pieces (see ``_pieces``) straightened within ``tolerance`` (m): the ring's
     coordinates (k, 2), closed. Where it is ``touching`` another stretch of the boundary, it
     keeps its corners within a cell (``along`` it, m) as they are."""
+    # lazy: numba loads only when this runs
     from .simplify import douglas_peucker_mask
 
     n = len(points)
@@ -206,6 +208,7 @@ def _through(coords, position, rank, kept, w, tolerance):
     """Douglas–Peucker's vertices within ``tolerance`` (by ``rank``, None: plain) from the
     vertex before the first two of ``kept`` through piece ``w`` to the one after them: the new
     vertices between those two, and the positions of all."""
+    # lazy: numba loads only when this runs
     from .simplify import douglas_peucker_mask
 
     n = len(coords)

@@ -18,10 +18,10 @@ from typing import Callable
 
 import numpy as np
 
-from .accuracy import residuals
 from ..errors import Cancelled, FloodMeshError
-from .mesh import Mesh, build_mesh, containing_triangle, triangle_areas
 from ..raster import Grid
+from .accuracy import residuals
+from .mesh import Mesh, build_mesh, containing_triangle, triangle_areas
 
 
 @dataclass(frozen=True)

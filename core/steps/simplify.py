@@ -14,10 +14,10 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from .breaklines import BreakLine
 from ..engine.nearest import nearest_line
 from ..options import (SIMPLIFY_METHODS, check_choice, check_min_distance, check_positive_int,
                        check_tolerance)
+from .breaklines import BreakLine
 
 
 def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
@@ -124,6 +124,7 @@ def spline_plan(coords: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.nd
     fixed; then Douglas–Peucker within ``tolerance``/2 on the smoothed vertices. Returns the
     smoothed positions and the mask of vertices kept: every original vertex lies within
     ``tolerance`` of the simplified line, horizontally and vertically."""
+    # lazy: SciPy loads only when this runs
     from scipy.interpolate import make_smoothing_spline
 
     coords = np.asarray(coords, float)

@@ -14,6 +14,7 @@ def far_field_size(dem: Grid, breakpoints: Grid, *, max_area: float, far_field_a
     """Local maximum triangle areas (m²): ``max_area`` within two cells of a breakpoint, growing
     over half a far-field triangle's edge to ``far_field_area``, or to the largest equilateral
     triangle that the smoothed DEM's curvature allows within ``tolerance`` m."""
+    # lazy: SciPy loads only when this runs
     from scipy.ndimage import distance_transform_edt, gaussian_filter
 
     d = dem.cell_size

@@ -18,11 +18,15 @@ differences.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from .. import io
+from .._kernels import aot as compiled
 from ..engine.blocks import cell_size, map_overlap, map_raster
 from ..errors import FloodMeshError
+from ..io import require_file
 from ..options import LOG_KERNELS, SLOPE_METHOD_NAMES, check_choice, check_sigma_fits
 from ..raster import Grid
 
@@ -56,14 +60,15 @@ def slope_block(padded: np.ndarray, d: float, method: str = "one-over-distance",
     is float64); the result is ``dtype``. ``diagonal_distance`` applies to "max-slope":
     diagonal neighbours at √2·d (True) or d.
     """
-    from .._kernels.raster import _slope_block
+    # lazy: numba loads only when this runs
+    from .._kernels.raster import slope_kernel
 
     diagonal = SQRT2 * d if diagonal_distance else d
     padded = np.asarray(padded)
     if padded.dtype not in (np.float32, np.float64):
         padded = padded.astype(np.float64)
     out = np.empty((padded.shape[0] - 2, padded.shape[1] - 2), dtype)
-    return _slope_block(padded, out, float(d), _method_code(method), diagonal)
+    return slope_kernel(padded, out, float(d), _method_code(method), diagonal)
 
 
 def slope(dem: Grid, method: str = "one-over-distance", *, diagonal_distance: bool = True,
@@ -83,10 +88,6 @@ def slope_file(dem_path, out_path, method: str = "one-over-distance", *,
                cancelled=None) -> None:
     """Slope (degrees, float32) of a DEM file into a GeoTIFF, streamed block by block in float32
     (``blocks.map_raster``; ``windows`` as there); the same values as ``slope`` on the DEM."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    from .._kernels import aot as compiled
-
     code, d = _method_code(method), cell_size(dem_path)
     diagonal = SQRT2 * d if diagonal_distance else d
     kernel = compiled.kernel("slope_f32")
@@ -135,9 +136,8 @@ def laplacian_of_gaussian_file(dem_path, out_path, sigma: float, *, kernel: str 
                                crs=None, windows=None, progress=None, cancelled=None) -> None:
     """``laplacian_of_gaussian`` of a DEM file into a float32 GeoTIFF, streamed block by block
     (``blocks.map_raster``); the same values as in memory."""
+    # lazy: GDAL loads only when this runs
     import rasterio
-
-    from ..io import require_file
 
     with rasterio.open(require_file(dem_path, "raster")) as src:
         d, shape = float(src.transform.a), (src.height, src.width)
@@ -159,6 +159,7 @@ def _log_block(sigma: float, d: float, kernel: str, shape):
         halo = reach + 1
 
         def block(padded):
+            # lazy: SciPy loads only when this runs
             from scipy import ndimage
 
             padded = padded.astype(np.float64, copy=False)
@@ -175,6 +176,7 @@ def _log_block(sigma: float, d: float, kernel: str, shape):
         weights = _analytic_log_kernel(sigma, d, reach)
 
         def block(padded):
+            # lazy: SciPy loads only when this runs
             from scipy import ndimage
 
             padded = padded.astype(np.float64, copy=False)
@@ -190,6 +192,7 @@ def _log_block(sigma: float, d: float, kernel: str, shape):
 
 def _gaussian_nan(values, sigma_cells):
     """Gaussian smoothing that ignores NaN (normalised convolution); NaN stays NaN."""
+    # lazy: SciPy loads only when this runs
     from scipy import ndimage
 
     valid = np.isfinite(values)
@@ -218,8 +221,6 @@ def slope_raster_file(dem_path, out_path, method: str = "one-over-distance", *, 
     """Slope (degrees) or, with ``method="log"``, the LoG response of a DEM file into a GeoTIFF:
     streamed block by block, except a raster without a nodata tag, whose sentinels
     (``io.read_raster``, which tells ``note``) are found on the whole raster in memory."""
-    from .. import io
-
     if io.nodata_tagged(dem_path):
         if method == "log":
             laplacian_of_gaussian_file(dem_path, out_path, sigma, kernel=log_kernel, crs=crs,

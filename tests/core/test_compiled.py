@@ -47,7 +47,7 @@ def test_ahead_of_time_slope_equals_numba(aot, method):
     ours = np.empty((59, 75), np.float32)
     jit = np.empty_like(ours)
     aot.slope_f32(padded, ours, 0.5, code, 0.5 * np.sqrt(2))
-    raster_kernels._slope_block(padded, jit, 0.5, code, 0.5 * np.sqrt(2))
+    raster_kernels.slope_kernel(padded, jit, 0.5, code, 0.5 * np.sqrt(2))
     assert np.isfinite(ours).sum() > 3000
     assert_array_equal(ours, jit)
 
@@ -56,12 +56,12 @@ def test_ahead_of_time_nodata_conversions_equal_numba(aot):
     block = ragged_block()
     view, jit_view = block.copy()[2:50, 3:60], block.copy()[2:50, 3:60]  # strided, as read
     assert aot.missing_to_nan_f32(view, np.float32(-9999.0)) \
-        == raster_kernels._missing_to_nan(jit_view, np.float32(-9999.0))
+        == raster_kernels.missing_to_nan(jit_view, np.float32(-9999.0))
     assert_array_equal(view, jit_view)
     assert not np.isin(view, [-9999.0, np.inf, -np.inf]).any() and np.isnan(view).any()
     values = np.ascontiguousarray(view)
     assert_array_equal(aot.nan_to_value_f32(values.copy(), np.float32(-9999.0)),
-                       raster_kernels._nan_to_value(values.copy(), np.float32(-9999.0)))
+                       raster_kernels.nan_to_value(values.copy(), np.float32(-9999.0)))
 
 
 def test_slope_command_starts_without_numba(aot, tmp_path):

@@ -15,8 +15,9 @@ import rasterio
 
 from floodmesh.core import io
 from floodmesh.core.errors import Cancelled, FloodMeshError
-from floodmesh.core.flood.model import (RESULT_RASTERS, flood_python, load_scenario, prepare,
-                                        run_flood, scenario_from_dict)
+from floodmesh.core.flood.model import (flood_python, load_scenario, prepare, run_flood,
+                                        scenario_from_dict)
+from floodmesh.core.options import RESULT_RASTERS
 from floodmesh.core.steps.mesh import PSLG, triangulate_pslg
 
 CRS = "EPSG:32756"

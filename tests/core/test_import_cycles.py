@@ -81,5 +81,42 @@ def test_no_import_cycles_counting_imports_inside_functions():
     assert "core.chain.pipeline" in known and "algorithms.base" in known
     assert "core.io" in known and "core.steps.mesh" in known
     graph = {m: imported(m, p, known) for m, p in known.items()}
-    assert "core.io" in graph["core.engine.blocks"]  # function-level imports are seen
+    assert "core.steps.grid" in graph["core.engine.tiles"]  # function-level imports are seen
     assert cycles(graph) == []
+
+
+def private_names_taken(module: str, path: Path, known: dict) -> list:
+    """``_name``s that ``module`` takes from another of the package's modules: imported by name,
+    or read as an attribute of a module it imported."""
+    package = module if path.stem == "__init__" else module.rsplit(".", 1)[0]
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    taken, aliases = [], set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level:
+            parts = package.split(".")
+            base = ".".join(parts[:len(parts) - node.level + 1] + (
+                [node.module] if node.module else []))
+            for alias in node.names:
+                if f"{base}.{alias.name}" in known:
+                    aliases.add(alias.asname or alias.name)
+                elif alias.name.startswith("_") and not alias.name.startswith("__"):
+                    taken.append(f"{base}.{alias.name}")
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                and node.value.id in aliases and node.attr.startswith("_")
+                and not node.attr.startswith("__")):
+            taken.append(f"{node.value.id}.{node.attr}")
+    return taken
+
+
+def test_the_private_name_finder_finds_one(tmp_path):
+    path = tmp_path / "m.py"
+    path.write_text("from .raster import _slope\nfrom . import io\nio._write(1)\n")
+    known = {"core.m": path, "core.raster": path, "core.io": path}
+    assert private_names_taken("core.m", path, known) == ["core.raster._slope", "io._write"]
+
+
+def test_no_private_name_crosses_a_module():
+    known = modules()
+    taken = {m: found for m, p in known.items() if (found := private_names_taken(m, p, known))}
+    assert not taken, taken

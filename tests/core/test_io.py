@@ -10,6 +10,7 @@ from pyproj import CRS
 from floodmesh.core import io
 from floodmesh.core.steps.breaklines import BreakLine
 from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.options import is_point_source
 from floodmesh.core.points import PointCloud
 from floodmesh.core.raster import Grid
 
@@ -376,7 +377,7 @@ def test_an_ept_index_reads_as_the_laz_it_was_built_from(real_data, tmp_path):
     order = lambda xyz: xyz[np.lexsort(xyz.T)]  # noqa: E731
     np.testing.assert_array_equal(order(from_ept.xyz), order(from_laz.xyz))
     assert from_ept.crs == from_laz.crs
-    assert io.is_point_source(ept) and not io.is_point_source(tmp_path / "other.json")
+    assert is_point_source(ept) and not is_point_source(tmp_path / "other.json")
     meta = json.loads(ept.read_text())
     ept.write_text(json.dumps({**meta, "dataType": "binary"}))
     with pytest.raises(FloodMeshError, match="EPT nodes of type 'binary' cannot be read"):
