@@ -572,6 +572,148 @@ def _check_enough(n_gridding: int, n_tiles: int, classes) -> None:
             "grid (--classes, 'LAS classes' in QGIS)")
 
 
+def _round_one(client, tiles: list, crs_wkt: str, classes, holdout: float, seed: int,
+               band: float, bands: str | None, *, progress, cancelled) -> tuple[list, list]:
+    """Round one: each tile read on a worker (``read_tile``, its edge band of ``band`` m in a
+    file in ``bands`` when given); (each tile's figures, the futures of the edge bands), in the
+    order of ``tiles``. Only the bands' futures outlive it: the cluster forgets the rest."""
+    firsts = [client.submit(_task, read_tile, t.path, crs_wkt, classes, holdout, seed, band,
+                            bands and os.path.join(bands, f"band-{i}.npy"),
+                            key=f"read-{i}-{Path(t.path).name}")
+              for i, t in enumerate(tiles)]
+    figures = [client.submit(_figures, f) for f in firsts]
+    edges = [client.submit(_edge, f) for f in firsts]
+    meta = [None] * len(tiles)
+    for i, result in _as_completed(client, figures, progress=progress, cancelled=cancelled,
+                                   base=0.0, weight=0.3):
+        meta[i] = result
+    return meta, edges
+
+
+@dataclass
+class _Layout:
+    """Round two's layout of the DEM over the tiles that count (``_tile_layout``)."""
+    counted: list            # round one's figures of the tiles whose points count
+    gridded: list            # indices into round one's figures of the tiles with points to grid
+    classes: tuple | None    # the classes round two re-reads
+    n_points: int            # points of the counted tiles, holdout included
+    area: float              # m² the points cover
+    block: int               # cells a side of a block of round two
+    plan: dict               # ``check_layout``'s
+
+
+def _tile_layout(meta: list, classes, holdout: float, cell_size: float, max_gap: float | None,
+                 band: float, *, largest: int, parallel: int, keep: bool,
+                 skip_unreadable: bool, notes: list) -> _Layout:
+    """The tiles that count (``_tiles_counted``; their notes join ``notes``) and round two's
+    layout over them: bounds, blocks of about a tile's width (at least 256 cells) and the plan
+    (``check_layout``); refused where the points are too few, or where ``parallel`` blocks (a
+    tile of up to ``largest`` points and its neighbours' bands each) or, with ``keep``, the
+    whole DEM would not fit in memory."""
+    # lazy: numba loads only when this runs
+    from ..steps.grid import check_layout
+
+    indices = _tiles_counted(meta, classes, skip_unreadable, notes)
+    counted = [meta[i] for i in indices]
+    gridded = [i for i in indices if meta[i]["n_gridding"]]  # sparse tiles too
+    n_points = sum(m["n_points"] for m in counted)
+    n_gridding = sum(m["n_gridding"] for m in counted)
+    _check_enough(n_gridding, len(meta), classes)
+    if classes is None and any(m["kind"] == "ground" for m in counted):
+        classes = (GROUND_CLASS,)  # round two re-reads tiles with ground: their ground
+    check_holdout_count(holdout, n_points)
+    bounds = (min(meta[i]["bounds"][0] for i in gridded),
+              min(meta[i]["bounds"][1] for i in gridded),
+              max(meta[i]["bounds"][2] for i in gridded),
+              max(meta[i]["bounds"][3] for i in gridded))
+    area = sum(m["area"] for m in counted)
+    widths = [max(meta[i]["bounds"][2] - meta[i]["bounds"][0],
+                  meta[i]["bounds"][3] - meta[i]["bounds"][1]) for i in gridded]
+    block = max(256, int(round(float(np.median(widths)) / cell_size)))
+    per_block = int(largest * (1 + 8 * band * cell_size * block
+                               / max(max(widths), cell_size) ** 2))
+    plan = check_layout(bounds, n_gridding, area, cell_size, max_gap,
+                        memory_points=per_block * parallel,
+                        memory_cells=block * block * parallel, advice=(
+                            "give a larger cell size, fewer --workers or smaller tiles"))
+    if keep:
+        check_memory(cells=plan["rows"] * plan["cols"], points=per_block * parallel,
+                     advice="give a larger cell size, or grid the tiles alone "
+                            "(floodmesh grid TILES --out dem.tif) and mesh a part")
+    return _Layout(counted, gridded, classes, n_points, area, block, plan)
+
+
+def _block_sources(box: tuple, gridded: list, meta: list, tiles: list, edges: list,
+                   band: float) -> tuple[list, list]:
+    """What the block within ``box`` (m) grids: the paths of the tiles it reaches more than
+    ``band`` m inside, re-read whole, and the edge bands (futures) of the others it reaches."""
+    full, near = [], []
+    for i in gridded:
+        tb = meta[i]["bounds"]
+        if tb[0] > box[2] or tb[2] < box[0] or tb[1] > box[3] or tb[3] < box[1]:
+            continue
+        inner = (tb[0] + band, tb[1] + band, tb[2] - band, tb[3] - band)
+        reaches_inner = (inner[0] < inner[2] and inner[1] < inner[3]
+                         and box[0] <= inner[2] and box[2] >= inner[0]
+                         and box[1] <= inner[3] and box[3] >= inner[1])
+        if reaches_inner:
+            full.append(tiles[i].path)
+        else:
+            near.append(edges[i])
+    return full, near
+
+
+def _submit_blocks(client, layout: _Layout, meta: list, tiles: list, edges: list,
+                   cell_size: float, halo: float, band: float, crs_wkt: str, holdout: float,
+                   seed: int) -> tuple[list, list]:
+    """Round two submitted: a ``grid_block`` task (key ``grid-ROW-COL``) for each block of the
+    layout, on the points within ``halo`` m of it (``_block_sources``); (the tasks, the (row,
+    col) of each block's first cell)."""
+    plan, block = layout.plan, layout.block
+    rows, cols, x0, y1 = plan["rows"], plan["cols"], plan["x0"], plan["y1"]
+    tasks, windows = [], []
+    for r0 in range(0, rows, block):
+        for c0 in range(0, cols, block):
+            r1, c1 = min(rows, r0 + block), min(cols, c0 + block)
+            bx0, by1 = x0 + c0 * cell_size, y1 - r0 * cell_size
+            bx1, by0 = x0 + c1 * cell_size, y1 - r1 * cell_size
+            box = (bx0 - halo, by0 - halo, bx1 + halo, by1 + halo)
+            full, near = _block_sources(box, layout.gridded, meta, tiles, edges, band)
+            window = {"box": box, "x0": bx0, "y1": by1, "rows": r1 - r0, "cols": c1 - c0,
+                      "cell_size": cell_size, "max_gap": plan["max_gap"]}
+            windows.append((r0, c0))
+            tasks.append(client.submit(_task, grid_block, window, full, near, crs_wkt,
+                                       layout.classes, holdout, seed, key=f"grid-{r0}-{c0}"))
+    return tasks, windows
+
+
+def _gather_blocks(client, tasks: list, windows: list, plan: dict, cell_size: float, crs: CRS,
+                   out_path, keep: bool, dtype: str, *, progress, cancelled) -> Grid | None:
+    """Round two's blocks as they finish, written to ``out_path`` (``_dem_writer``) and, with
+    ``keep``, into the DEM in memory, returned (else None); each task is dropped from ``tasks``
+    as its block comes, for the cluster to forget it. Refused where no cell is covered."""
+    rows, cols = plan["rows"], plan["cols"]
+    transform = Affine(cell_size, 0.0, plan["x0"], 0.0, -cell_size, plan["y1"])
+    values = np.full((rows, cols), np.nan) if keep else None
+    any_valid = False
+    with _dem_writer(out_path, rows, cols, transform, crs, dtype) as write:
+        for i, block_values in _as_completed(client, tasks, progress=progress,
+                                             cancelled=cancelled, base=0.3, weight=0.7):
+            r0, c0 = windows[i]
+            tasks[i] = None  # let the cluster forget the block
+            any_valid = any_valid or bool(np.isfinite(block_values).any())
+            if keep:
+                values[r0:r0 + block_values.shape[0], c0:c0 + block_values.shape[1]] = \
+                    block_values
+            write(r0, c0, block_values)
+        if not any_valid:
+            raise FloodMeshError(
+                f"no grid cell is covered by the points at a gap limit of {plan['max_gap']} "
+                "m; the points are too sparse for this cell size: raise the cell size or "
+                "the max gap")
+    return Grid(values, transform, crs) if keep else None
+
+
 def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
                      crs=None, classes=None, holdout: float = 0.0, seed: int = 0,
                      out_path=None, keep: bool = True, dtype: str = "float32",
@@ -589,7 +731,7 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
     tiles, tiles without the classes gridded and repeated tiles go through with a note;
     unreadable tiles are refused by name, or left out with a note with ``skip_unreadable``."""
     # lazy: numba loads only when this runs
-    from ..steps.grid import check_layout, halo_width
+    from ..steps.grid import halo_width
 
     cell_size = check_cell_size(cell_size)
     check_max_gap(max_gap)
@@ -611,98 +753,25 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
         # A worker reads one tile (all classes) and grids a block of about its size.
         check_memory(points=largest * parallel, advice=f"the largest tile holds {largest:,} "
                      "points: give fewer --workers or cut the survey into smaller tiles")
-        firsts = [client.submit(_task, read_tile, t.path, crs_wkt, classes, holdout, seed, band,
-                                bands and os.path.join(bands, f"band-{i}.npy"),
-                                key=f"read-{i}-{Path(t.path).name}")
-                  for i, t in enumerate(tiles)]
-        figures = [client.submit(_figures, f) for f in firsts]
-        edges = [client.submit(_edge, f) for f in firsts]
-        meta = [None] * len(tiles)
-        for i, result in _as_completed(client, figures, progress=progress, cancelled=cancelled,
-                                       base=0.0, weight=0.3):
-            meta[i] = result
-        del firsts
-        indices = _tiles_counted(meta, classes, paths.skip_unreadable, notes)
-        counted = [meta[i] for i in indices]
-        gridded = [i for i in indices if meta[i]["n_gridding"]]  # sparse tiles too
-        n_points = sum(m["n_points"] for m in counted)
-        n_gridding = sum(m["n_gridding"] for m in counted)
-        _check_enough(n_gridding, len(tiles), classes)
-        if classes is None and any(m["kind"] == "ground" for m in counted):
-            classes = (GROUND_CLASS,)  # round two re-reads tiles with ground: their ground
-        check_holdout_count(holdout, n_points)
-        bounds = (min(meta[i]["bounds"][0] for i in gridded),
-                  min(meta[i]["bounds"][1] for i in gridded),
-                  max(meta[i]["bounds"][2] for i in gridded),
-                  max(meta[i]["bounds"][3] for i in gridded))
-        area = sum(m["area"] for m in counted)
-        widths = [max(meta[i]["bounds"][2] - meta[i]["bounds"][0],
-                      meta[i]["bounds"][3] - meta[i]["bounds"][1]) for i in gridded]
-        block = max(256, int(round(float(np.median(widths)) / cell_size)))
-        per_block = int(largest * (1 + 8 * band * cell_size * block
-                                   / max(max(widths), cell_size) ** 2))
-        plan = check_layout(bounds, n_gridding, area, cell_size, max_gap,
-                            memory_points=per_block * parallel,
-                            memory_cells=block * block * parallel, advice=(
-                                "give a larger cell size, fewer --workers or smaller tiles"))
-        rows, cols, x0, y1 = plan["rows"], plan["cols"], plan["x0"], plan["y1"]
-        if keep:
-            check_memory(cells=rows * cols, points=per_block * parallel,
-                         advice="give a larger cell size, or grid the tiles alone "
-                                "(floodmesh grid TILES --out dem.tif) and mesh a part")
+        meta, edges = _round_one(client, tiles, crs_wkt, classes, holdout, seed, band, bands,
+                                 progress=progress, cancelled=cancelled)
+        layout = _tile_layout(meta, classes, holdout, cell_size, max_gap, band, largest=largest,
+                              parallel=parallel, keep=keep,
+                              skip_unreadable=paths.skip_unreadable, notes=notes)
         if check is not None:
-            check(plan)
-        transform = Affine(cell_size, 0.0, x0, 0.0, -cell_size, y1)
-        tasks, windows = [], []
-        for r0 in range(0, rows, block):
-            for c0 in range(0, cols, block):
-                r1, c1 = min(rows, r0 + block), min(cols, c0 + block)
-                bx0, by1 = x0 + c0 * cell_size, y1 - r0 * cell_size
-                bx1, by0 = x0 + c1 * cell_size, y1 - r1 * cell_size
-                box = (bx0 - halo, by0 - halo, bx1 + halo, by1 + halo)
-                full, near = [], []
-                for i in gridded:
-                    tb = meta[i]["bounds"]
-                    if tb[0] > box[2] or tb[2] < box[0] or tb[1] > box[3] or tb[3] < box[1]:
-                        continue
-                    inner = (tb[0] + band, tb[1] + band, tb[2] - band, tb[3] - band)
-                    reaches_inner = (inner[0] < inner[2] and inner[1] < inner[3]
-                                     and box[0] <= inner[2] and box[2] >= inner[0]
-                                     and box[1] <= inner[3] and box[3] >= inner[1])
-                    if reaches_inner:
-                        full.append(tiles[i].path)
-                    else:
-                        near.append(edges[i])
-                window = {"box": box, "x0": bx0, "y1": by1, "rows": r1 - r0, "cols": c1 - c0,
-                          "cell_size": cell_size, "max_gap": plan["max_gap"]}
-                windows.append((r0, c0))
-                tasks.append(client.submit(_task, grid_block, window, full, near, crs_wkt,
-                                           classes, holdout, seed, key=f"grid-{r0}-{c0}"))
+            check(layout.plan)
+        tasks, windows = _submit_blocks(client, layout, meta, tiles, edges, cell_size, halo,
+                                        band, crs_wkt, holdout, seed)
         # the edge bands, some 17 MB a km² at 9 points/m² and 1 m cells, are the one term of the
         # gridding that grows with the area: on a local cluster they wait in scratch files;
         # a remote scheduler's workers hold them, each dropped from the cluster when the last
         # block taking it is done
-        edges = near = None
-        values = np.full((rows, cols), np.nan) if keep else None
-        any_valid = False
-        with _dem_writer(out_path, rows, cols, transform, tile_crs, dtype) as write:
-            for i, block_values in _as_completed(client, tasks, progress=progress,
-                                                 cancelled=cancelled, base=0.3, weight=0.7):
-                r0, c0 = windows[i]
-                tasks[i] = None  # let the cluster forget the block
-                any_valid = any_valid or bool(np.isfinite(block_values).any())
-                if keep:
-                    values[r0:r0 + block_values.shape[0], c0:c0 + block_values.shape[1]] = \
-                        block_values
-                write(r0, c0, block_values)
-            if not any_valid:
-                raise FloodMeshError(
-                    f"no grid cell is covered by the points at a gap limit of {plan['max_gap']} "
-                    "m; the points are too sparse for this cell size: raise the cell size or "
-                    "the max gap")
-    held = np.concatenate([m["holdout"] for m in counted])
-    return TiledDem(Grid(values, transform, tile_crs) if keep else None, held, n_points,
-                    len(counted), area, notes, tile_crs)
+        edges = None
+        dem = _gather_blocks(client, tasks, windows, layout.plan, cell_size, tile_crs, out_path,
+                             keep, dtype, progress=progress, cancelled=cancelled)
+    held = np.concatenate([m["holdout"] for m in layout.counted])
+    return TiledDem(dem, held, layout.n_points, len(layout.counted), layout.area, notes,
+                    tile_crs)
 
 
 @contextlib.contextmanager
