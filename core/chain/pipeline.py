@@ -13,10 +13,11 @@ from pyproj import CRS
 
 from .. import io
 from ..engine.compiles import CompileWatch
-from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles
+from ..engine.limits import (BYTES_PER_FITTED_CELL, BYTES_PER_POINT, available_memory,
+                             check_memory, check_triangles)
 from ..engine.nearest import CellIndex, point_index
-from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles, slope_file64,
-                            write_front_rasters)
+from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
+                            read_gridded_points, slope_file64, write_front_rasters)
 from ..errors import Cancelled, FloodMeshError
 from ..io.layer_definition import QLR_NAME, write_layer_definition
 from ..io.outputs import check_output_folder, scratch_folder, staged_folder
@@ -187,7 +188,9 @@ class _TerrainFits:
         self.front, self.seed = front, options.seed
         self.cell_centres = front.measured is None  # the DEM's, drawn when a fit needs them
         self.index = self.window = None
-        self.counts = {"localise": options.localise, "node_elevation": options.node_elevation}
+        self.counts = {"localise": options.localise, "node_elevation": options.node_elevation,
+                       "points": "DEM cell centres" if self.cell_centres
+                       else "LiDAR points gridded"}
         self.node_counts = {}
 
     def measured(self) -> tuple[np.ndarray, object]:
@@ -402,7 +405,7 @@ class Front:
     domain: object = None    # the user's domain (Multi)Polygon, None: the DEM's data
     own_lines: list = field(default_factory=list)  # the modeller's own lines (k, 3) arrays
     # (n, 3) points gridded, for the terrain fits and refinement; None: the DEM's cell centres
-    # (point tiles, a DEM), drawn from it when a fit needs them
+    # (a DEM, or point tiles too many for memory), drawn from it when a fit needs them
     measured: np.ndarray | None = None
     files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
 
@@ -501,9 +504,10 @@ def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
 def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
                       note) -> _Terrain:
     """Point tiles gridded on Dask; the DEM, slope and breakpoints go file to file, block by
-    block (see tiles), unless the Laplacian of Gaussian needs the DEM in memory. The tiles'
-    points are not kept: the terrain fits and --refine use the DEM's cell centres; the per-tile
-    held-out points stay the independent check."""
+    block (see tiles), unless the Laplacian of Gaussian needs the DEM in memory. The points
+    gridded are read back for the terrain fits and --refine, as one file's are kept, where
+    memory holds them beside the DEM (else the fits take the DEM's cell centres, with a note);
+    the per-tile held-out points stay the independent check."""
     files = None
     if options.slope_method != "log":
         files = {"folder": scratch_folder("tiles")}
@@ -519,9 +523,23 @@ def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, can
                   s_crit=options.s_crit, input_dtype=np.float64, crs=crs_wkt,
                   cancelled=cancelled)
         data.dem = read_back(files["dem"], data.crs)
+    measured = None
+    if _points_fit(data.n_gridding, data.dem.values.size):
+        measured = steps.run("read back", read_gridded_points, data, options.holdout,
+                             options.seed, cancelled=cancelled)
+    elif note:
+        note(f"the tiles' {data.n_gridding:,} points gridded are more than memory holds beside "
+             "the DEM: the terrain fits take the DEM's cell centres")
     return _Terrain(data.dem, PointCloud(data.holdout, data.dem.crs),
                     "LiDAR points withheld from gridding, tile by tile", data.n_points,
-                    files=files)
+                    measured=measured, files=files)
+
+
+def _points_fit(n_points: int, cells: int) -> bool:
+    """Whether ``n_points`` points (read and indexed) fit in the memory available beside a DEM
+    of ``cells`` cells and the fits over it."""
+    memory = available_memory()
+    return memory is None or n_points * BYTES_PER_POINT + cells * BYTES_PER_FITTED_CELL <= memory
 
 
 _READERS = {POINTS: _read_points, DEM: _read_dem, DEM_TILES: _read_dem,

@@ -527,6 +527,9 @@ class TiledDem:
     area: float              # m² the points cover
     notes: list
     crs: CRS
+    gridded: tuple = ()      # the tiles with points to grid, as round two re-reads them
+    classes: tuple | None = None  # the classes round two gridded
+    n_gridding: int = 0      # points gridded (all tiles)
 
 
 def _tiles_counted(meta: list, classes, skip_unreadable: bool, notes: list) -> list[int]:
@@ -771,7 +774,21 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
                              keep, dtype, progress=progress, cancelled=cancelled)
     held = np.concatenate([m["holdout"] for m in layout.counted])
     return TiledDem(dem, held, layout.n_points, len(layout.counted), layout.area, notes,
-                    tile_crs)
+                    tile_crs, tuple(tiles[i].path for i in layout.gridded), layout.classes,
+                    sum(meta[i]["n_gridding"] for i in layout.gridded))
+
+
+def read_gridded_points(tiled: TiledDem, holdout: float, seed: int, *,
+                        cancelled: Callable[[], bool] | None = None) -> np.ndarray:
+    """(n, 3) the points the tiles' DEM was gridded from, read back tile by tile as round two
+    reads them (the same classes, the same points held out): what the terrain fits take, as
+    for one file (``grid_point_tiles`` keeps none of them)."""
+    crs_wkt, parts = tiled.crs.to_wkt(), []
+    for path in tiled.gridded:
+        if cancelled is not None and cancelled():
+            raise Cancelled()
+        parts.append(_tile_points(path, crs_wkt, tiled.classes, holdout, seed, checked=True)[0])
+    return np.concatenate(parts) if parts else np.empty((0, 3))
 
 
 @contextlib.contextmanager

@@ -226,6 +226,7 @@ def test_real_merewether_dem(merewether_run):
     assert report["n_holdout"] >= 30 and report["n_outside_mesh"] < report["n_holdout"]
     assert report["n_breaklines"] > 0
     assert report["rmse_m"] < 0.5
+    assert report["terrain_fit"]["points"] == "DEM cell centres"
 
 
 def test_real_topography_laz(topography_run):
@@ -236,6 +237,7 @@ def test_real_topography_laz(topography_run):
     assert report["grid"]["cell_size_m"] == 2.0
     assert report["grid"]["valid_cells"] < report["grid"]["rows"] * report["grid"]["cols"]
     assert report["n_points"] == 8159
+    assert report["terrain_fit"]["points"] == "LiDAR points gridded"
     assert report["max_area_m2"] <= 100
 
 

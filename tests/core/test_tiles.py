@@ -103,15 +103,20 @@ def _lines(path):
 
 
 def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path):
-    # the terrain fits (issue 18) use the points of one file but the DEM's cell centres for
-    # tiles, whose points are not kept: the chain up to the mesh is compared without them
-    options = RunOptions(holdout=0.0, scheduler=scheduler, localise=False, node_elevation="dem")
+    # the terrain fits (localisation, node z) take the tiles' points read back, as one file's:
+    # with every point gridded, the same lines and mesh to the byte
+    options = RunOptions(holdout=0.0, scheduler=scheduler)
     tiled = run_pipeline(survey / "tiles", tmp_path / "tiled", options)
     single = run_pipeline(survey / "single.laz", tmp_path / "single", options)
     assert io.read_raster(tmp_path / "tiled" / "dem.tif").values.tobytes() == \
         io.read_raster(tmp_path / "single" / "dem.tif").values.tobytes()
-    for key in ("nodes", "triangles", "n_breakpoints", "n_breaklines", "min_angle_deg"):
+    for key in ("nodes", "triangles", "n_breakpoints", "n_breaklines", "min_angle_deg",
+                "terrain_fit"):
         assert tiled[key] == single[key], key
+    assert tiled["terrain_fit"]["points"] == "LiDAR points gridded"
+    for name in ("mesh.2dm", "breaklines.gpkg"):
+        assert (tmp_path / "tiled" / name).read_bytes() == \
+            (tmp_path / "single" / name).read_bytes(), name
     # slope and breakpoints went file to file for the tiles, in memory for the one file
     for name in ("slope.tif", "breakpoints.tif"):
         with rasterio.open(tmp_path / "tiled" / name) as a, \
@@ -228,13 +233,14 @@ def test_xyz_tiles_with_a_given_crs(survey, scheduler, tmp_path):
     np.testing.assert_allclose(from_xyz.dem.values, from_laz.dem.values, atol=1e-6)
 
 
-def test_refine_on_tiles_uses_the_dem_and_checks_on_the_tiles_holdout(survey, scheduler,
-                                                                       tmp_path):
-    # the tiles' points are not kept: the DEM's cell centres drive the refinement and the points
-    # each tile held back check it, round by round
+def test_refine_on_tiles_fits_the_points_and_checks_on_the_tiles_holdout(survey, scheduler,
+                                                                          tmp_path):
+    # the points gridded, read back from the tiles, drive the refinement and the points each
+    # tile held back check it, round by round
     options = RunOptions(holdout=0.01, scheduler=scheduler, refine=True, localise=False,
                          node_elevation="dem")
     report = run_pipeline(survey / "tiles", tmp_path / "refined", options)
+    assert report["terrain_fit"]["points"] == "LiDAR points gridded"
     rounds = report["refinement"]
     assert len(rounds) >= 2 and report["nodes"] == rounds[-1]["nodes"] > rounds[0]["nodes"]
     assert rounds[-1]["max_abs_m"] < rounds[0]["max_abs_m"]
@@ -243,3 +249,15 @@ def test_refine_on_tiles_uses_the_dem_and_checks_on_the_tiles_holdout(survey, sc
     assert report["holdout_source"] == "LiDAR points withheld from gridding, tile by tile"
     # the check points are the tiles' own held-out LiDAR points, 1 % of each tile
     assert abs(report["n_holdout"] - 0.01 * report["n_points"]) <= 4
+
+
+def test_tiles_whose_points_exceed_memory_fit_the_dem_cells_with_a_note(survey, scheduler,
+                                                                        tmp_path, monkeypatch):
+    # the fits' points are read back only where memory holds them beside the DEM: here it
+    # holds the DEM (the run's own memory checks pass) but not 8 B more a point
+    from floodmesh.core.chain import pipeline
+
+    monkeypatch.setattr(pipeline, "available_memory", lambda: 8)
+    report = run_pipeline(survey / "tiles", tmp_path / "out", RunOptions(scheduler=scheduler))
+    assert report["terrain_fit"]["points"] == "DEM cell centres"
+    assert any("more than memory holds" in n and "cell centres" in n for n in report["notes"])
