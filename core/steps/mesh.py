@@ -5,13 +5,13 @@ non-commercial use only), so another backend can replace it in one place.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import shapely
 from pyproj import CRS
 
-from ..engine.arrays import unique_rows
+from ..engine.arrays import spatial_order, unique_rows
 from ..engine.limits import check_triangles
 from ..errors import FloodMeshError
 from ..options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles, check_min_angle,
@@ -523,8 +523,21 @@ def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
     if not np.isfinite(z).all():
         raise FloodMeshError(f"{int((~np.isfinite(z)).sum())} mesh nodes fall where the DEM has no "
                              "data; check the domain against the DEM's nodata")
-    return Mesh(np.column_stack([vertices, z]), _counter_clockwise(vertices, triangles), dem.crs,
-                pslg.segments.astype(np.int64))
+    return in_spatial_order(Mesh(np.column_stack([vertices, z]),
+                                 _counter_clockwise(vertices, triangles), dem.crs,
+                                 pslg.segments.astype(np.int64)))
+
+
+def in_spatial_order(mesh: Mesh) -> Mesh:
+    """The mesh numbered for a solver: triangles along a Z-order curve, nodes as the triangles
+    first use them (``arrays.spatial_order``), the input segments renumbered with them; every
+    writer then writes that order."""
+    order, triangles = spatial_order(mesh.nodes, mesh.triangles)
+    number = np.full(len(mesh.nodes), -1, np.int64)
+    number[order] = np.arange(len(order))
+    segments = number[mesh.segments]
+    return replace(mesh, nodes=mesh.nodes[order], triangles=triangles,
+                   segments=segments[(segments >= 0).all(axis=1)])
 
 
 def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float, *,

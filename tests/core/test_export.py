@@ -644,3 +644,26 @@ def test_run_command_formats_option(tmp_path):
     assert good.returncode == 0, good.stderr
     assert (tmp_path / "out" / "mesh.gr3").is_file() and (tmp_path / "out" / "mesh.nc").is_file()
     assert not (tmp_path / "out" / "mesh.slf").exists()
+
+
+def test_every_format_is_written_in_spatial_order(demo_points_file, tmp_path):
+    """A mesh refined through break lines and a size field comes out of Triangle numbered all
+    over the domain; a solver sweeps triangles and their neighbours each time step, so every
+    file numbers nodes and triangles along the ground: a triangle's nodes lie close in the
+    node list (on the demo their index spread was 30 % of the nodes, 2.4 % in order)."""
+    out = tmp_path / "out"
+    report = run_pipeline(demo_points_file, out, RunOptions(formats=("2dm", "slf", "14", "nc")))
+    n = report["nodes"]
+    spread = lambda t: float(np.mean(t.max(axis=1) - t.min(axis=1)))  # noqa: E731
+    with netcdf_file(out / "mesh.nc", mmap=False) as nc:
+        ugrid = np.array(nc.variables["mesh2d_face_nodes"][:], np.int64) - 1
+    triangles = {"2dm": io.read_2dm(out / "mesh.2dm").triangles,
+                 "slf": read_selafin(out / "mesh.slf")["ikle"] - 1,
+                 "14": read_fort14(out / "mesh.14")["elements"][:, 2:] - 1, "nc": ugrid}
+    for fmt, t in triangles.items():
+        assert len(t) == report["triangles"] and spread(t) < 0.06 * n, (fmt, spread(t) / n)
+    # and the triangles follow one another along the ground: consecutive centres are close
+    nodes = io.read_2dm(out / "mesh.2dm").nodes
+    centres = nodes[triangles["2dm"]][:, :, :2].mean(axis=1)
+    step = np.linalg.norm(np.diff(centres, axis=0), axis=1)
+    assert np.median(step) < 2 * np.sqrt(np.median(triangle_areas(nodes, triangles["2dm"])))
