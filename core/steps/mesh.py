@@ -135,7 +135,32 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
     note = note or (lambda message: None)
     domain = _snapped_domain(domain, snap / 5)
-    inner = domain.buffer(-snap)
+    kept = _lines_inside(lines, domain.buffer(-snap), snap, note)
+    vertices, segments = _noded_segments(domain, kept, snap, note)
+    # break lines lie at least snap inside the boundary, boundary segments within a grid step
+    on_boundary = shapely.distance(
+        shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 2
+    segments, on_boundary = _prune_dangles(segments, on_boundary)
+    if not on_boundary.any():  # a sliver whose sides noding on the grid merged into one line
+        raise _vanishes(domain, snap / 5)
+    if drop_sharp_corners:
+        vertices, segments, shortened, dropped = _shorten_small_angles(
+            vertices, segments, on_boundary, SHARP_CORNER, 2 * snap)
+        if shortened or dropped:
+            note(f"{shortened + dropped} break-line segments meeting another at less than "
+                 f"{SHARP_CORNER:g} degrees were shortened near the meeting point"
+                 f"{f' ({dropped} too short were left out)' if dropped else ''}, so that the "
+                 "angle bound holds there")
+    used = np.unique(segments)
+    renumber = np.full(len(vertices), -1)
+    renumber[used] = np.arange(len(used))
+    vertices, segments = vertices[used], renumber[segments]
+    return PSLG(vertices.astype(float), segments.astype(np.int32), _hole_points(domain, snap))
+
+
+def _lines_inside(lines: list, inner, snap: float, note) -> list:
+    """The break lines (x, y[, z] arrays) clipped to ``inner``, the domain shrunk by ``snap``
+    m, as shapely lines; those unusable or wholly outside left out, with a note."""
     arrays = [np.asarray(c, float) for c in lines]
     usable = [c[:, :2] for c in arrays
               if c.ndim == 2 and len(c) >= 2 and np.isfinite(c[:, :2]).all()]
@@ -148,6 +173,12 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     if len(kept) < len(pieces):
         note(f"{len(pieces) - len(kept)} break lines lie wholly outside the meshed area (or within "
              f"{snap:g} m of its edge) and were left out")
+    return kept
+
+
+def _noded_segments(domain, kept: list, snap: float, note) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, segments) of the domain's boundary and the lines ``kept``, noded at their
+    crossings and touches on a ``snap``/5 grid (snap rounding), duplicates dissolved."""
     geoms = [domain.boundary] + kept
     noded = shapely.unary_union(geoms, grid_size=snap / 5)
     overlap = (shapely.length(domain.boundary) + sum(g.length for g in kept)
@@ -175,34 +206,19 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     if kept and (degree >= 3).any():
         note(f"break lines were joined at {int((degree >= 3).sum())} nodes where they cross or "
              "touch one another or the boundary")
-    # break lines lie at least snap inside the boundary, boundary segments within a grid step
-    on_boundary = shapely.distance(
-        shapely.points(vertices[segments].mean(axis=1)), domain.boundary) < snap / 2
-    segments, on_boundary = _prune_dangles(segments, on_boundary)
-    if not on_boundary.any():  # a sliver whose sides noding on the grid merged into one line
-        raise _vanishes(domain, snap / 5)
-    if drop_sharp_corners:
-        vertices, segments, shortened, dropped = _shorten_small_angles(
-            vertices, segments, on_boundary, SHARP_CORNER, 2 * snap)
-        if shortened or dropped:
-            note(f"{shortened + dropped} break-line segments meeting another at less than "
-                 f"{SHARP_CORNER:g} degrees were shortened near the meeting point"
-                 f"{f' ({dropped} too short were left out)' if dropped else ''}, so that the "
-                 "angle bound holds there")
-    used = np.unique(segments)
-    renumber = np.full(len(vertices), -1)
-    renumber[used] = np.arange(len(used))
-    vertices, segments = vertices[used], renumber[segments]
-    # a point of each area inside the domain's hull that it leaves out and Triangle does not
-    # reach from the hull: its holes (not an island inside a hole), and areas that parts
-    # touching at corners enclose (a gap between cells at a diagonal)
+    return vertices, segments
+
+
+def _hole_points(domain, snap: float) -> np.ndarray:
+    """(h, 2) a point of each area inside the domain's hull that it leaves out and Triangle
+    does not reach from the hull: its holes (not an island inside a hole), and areas that parts
+    touching at corners enclose (a gap between cells at a diagonal)."""
     hull = shapely.convex_hull(domain)
     gaps = shapely.get_parts(hull.difference(domain))
     gaps = gaps[(shapely.area(gaps) > (snap / 5) ** 2) & (shapely.length(
         shapely.intersection(shapely.boundary(gaps), hull.exterior)) < snap / 5)]
     holes = shapely.get_coordinates(shapely.point_on_surface(gaps))
-    return PSLG(vertices.astype(float), segments.astype(np.int32),
-                np.asarray(holes, float).reshape(-1, 2))
+    return np.asarray(holes, float).reshape(-1, 2)
 
 
 def _prune_dangles(segments, on_boundary):
@@ -339,20 +355,8 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     has_local = local_areas is not None and len(local_areas)
     for _ in range(12 if (has_local or size_field is not None) else 0):
         xy, tris = result["vertices"], result["triangles"]
-        limit = np.full(len(tris), float(max_area))
-        if has_local:
-            found = containing_triangle(xy, tris, local_areas[:, :2] - origin)
-            inside = found >= 0
-            np.minimum.at(limit, found[inside], local_areas[inside, 2])
-        if size_field is not None:
-            corners = xy[tris] + origin
-            at = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)
-            wanted = np.asarray(size_field(at[..., 0].ravel(), at[..., 1].ravel()), float)
-            wanted = np.where(np.isfinite(wanted), wanted, np.inf).reshape(-1, 4).min(axis=1)
-            if (wanted <= 0).any():
-                raise FloodMeshError("the size field asks for triangles of 0 m² or less; give "
-                                     "positive maximum areas (NaN where there is no limit)")
-            limit = np.minimum(limit, wanted)
+        limit = _area_limits(xy, tris, origin, max_area,
+                             local_areas if has_local else None, size_field)
         areas = triangle_areas(xy, tris)
         if (areas <= limit * (1 + 1e-9)).all():
             break
@@ -389,6 +393,28 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
             f"{REPAIR_PASSES} repair passes; a slightly different minimum angle or maximum area "
             "meshes this input")
     return result["vertices"] + origin, result["triangles"].astype(np.int64)
+
+
+def _area_limits(xy: np.ndarray, tris: np.ndarray, origin: np.ndarray, max_area: float,
+                 local_areas: np.ndarray | None, size_field) -> np.ndarray:
+    """Each triangle's largest area (m²): ``max_area``, less where it holds a point of
+    ``local_areas`` (x, y, area rows) or where ``size_field`` asks for less at its corners or
+    centroid; ``xy`` are Triangle's vertices, shifted by ``-origin``."""
+    limit = np.full(len(tris), float(max_area))
+    if local_areas is not None:
+        found = containing_triangle(xy, tris, local_areas[:, :2] - origin)
+        inside = found >= 0
+        np.minimum.at(limit, found[inside], local_areas[inside, 2])
+    if size_field is not None:
+        corners = xy[tris] + origin
+        at = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)
+        wanted = np.asarray(size_field(at[..., 0].ravel(), at[..., 1].ravel()), float)
+        wanted = np.where(np.isfinite(wanted), wanted, np.inf).reshape(-1, 4).min(axis=1)
+        if (wanted <= 0).any():
+            raise FloodMeshError("the size field asks for triangles of 0 m² or less; give "
+                                 "positive maximum areas (NaN where there is no limit)")
+        limit = np.minimum(limit, wanted)
+    return limit
 
 
 def _angle_defects(result: dict, pslg: PSLG, min_angle: float) -> int:
