@@ -135,7 +135,7 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
     note = note or (lambda message: None)
     domain = _snapped_domain(domain, snap / 5)
-    kept = _lines_inside(lines, domain.buffer(-snap), snap, note)
+    kept = _clipped_lines(lines, domain.buffer(-snap), snap, note)
     vertices, segments = _noded_segments(domain, kept, snap, note)
     # break lines lie at least snap inside the boundary, boundary segments within a grid step
     on_boundary = shapely.distance(
@@ -144,23 +144,15 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     if not on_boundary.any():  # a sliver whose sides noding on the grid merged into one line
         raise _vanishes(domain, snap / 5)
     if drop_sharp_corners:
-        vertices, segments, shortened, dropped = _shorten_small_angles(
-            vertices, segments, on_boundary, SHARP_CORNER, 2 * snap)
-        if shortened or dropped:
-            note(f"{shortened + dropped} break-line segments meeting another at less than "
-                 f"{SHARP_CORNER:g} degrees were shortened near the meeting point"
-                 f"{f' ({dropped} too short were left out)' if dropped else ''}, so that the "
-                 "angle bound holds there")
-    used = np.unique(segments)
-    renumber = np.full(len(vertices), -1)
-    renumber[used] = np.arange(len(used))
-    vertices, segments = vertices[used], renumber[segments]
-    return PSLG(vertices.astype(float), segments.astype(np.int32), _hole_points(domain, snap))
+        vertices, segments = _clear_sharp_corners(vertices, segments, on_boundary, snap, note)
+    vertices, segments = _used_vertices(vertices, segments)
+    return PSLG(vertices.astype(float), segments.astype(np.int32), _hole_points(domain, snap / 5))
 
 
-def _lines_inside(lines: list, inner, snap: float, note) -> list:
-    """The break lines (x, y[, z] arrays) clipped to ``inner``, the domain shrunk by ``snap``
-    m, as shapely lines; those unusable or wholly outside left out, with a note."""
+def _clipped_lines(lines, inner, snap: float, note) -> list:
+    """The break lines (x, y[, z] arrays) as LineStrings clipped to ``inner`` (the domain shrunk
+    by ``snap`` m); those with fewer than 2 points or non-finite coordinates, and those wholly
+    outside, are left out, each kind said to ``note``."""
     arrays = [np.asarray(c, float) for c in lines]
     usable = [c[:, :2] for c in arrays
               if c.ndim == 2 and len(c) >= 2 and np.isfinite(c[:, :2]).all()]
@@ -176,20 +168,30 @@ def _lines_inside(lines: list, inner, snap: float, note) -> list:
     return kept
 
 
-def _noded_segments(domain, kept: list, snap: float, note) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices, segments) of the domain's boundary and the lines ``kept``, noded at their
-    crossings and touches on a ``snap``/5 grid (snap rounding), duplicates dissolved."""
-    geoms = [domain.boundary] + kept
-    noded = shapely.unary_union(geoms, grid_size=snap / 5)
+def _noded_segments(domain, kept: list, snap: float, note):
+    """The ``domain``'s boundary and the ``kept`` break lines noded at their crossings and
+    touches on the ``snap``/5 m precision grid: vertices (n, 2) in m and segments (s, 2); the
+    lines merged (overlap) or joined there said to ``note``."""
+    noded = shapely.unary_union([domain.boundary] + kept, grid_size=snap / 5)
     overlap = (shapely.length(domain.boundary) + sum(g.length for g in kept)
                - shapely.length(noded))
     if overlap > snap:
         note(f"{overlap:.1f} m of break lines duplicated or ran along another line (or the "
              "boundary) and were merged into one")
     parts = [g for g in getattr(noded, "geoms", [noded]) if g.geom_type == "LineString"]
-    coords = [np.asarray(p.coords)[:, :2] for p in parts]
-    allpts = np.concatenate(coords)
-    vertices, inverse = unique_rows(np.round(allpts / (snap / 5)).astype(np.int64),
+    vertices, segments = _grid_segments([np.asarray(p.coords)[:, :2] for p in parts], snap / 5)
+    degree = np.bincount(segments.ravel(), minlength=len(vertices))
+    if kept and (degree >= 3).any():
+        note(f"break lines were joined at {int((degree >= 3).sum())} nodes where they cross or "
+             "touch one another or the boundary")
+    return vertices, segments
+
+
+def _grid_segments(coords: list[np.ndarray], grid: float):
+    """The points of the lines ``coords`` ((k, 2) arrays, m) rounded to the ``grid`` m precision
+    grid, each once, as vertices (n, 2) in m, and the lines' segments (s, 2) between them: each
+    once, lower index first, none of zero length."""
+    vertices, inverse = unique_rows(np.round(np.concatenate(coords) / grid).astype(np.int64),
                                     return_inverse=True)
     inverse = inverse.ravel()
     segments = []
@@ -200,23 +202,41 @@ def _noded_segments(domain, kept: list, snap: float, note) -> tuple[np.ndarray, 
         offset += len(c)
     segments = np.concatenate(segments)
     segments = segments[segments[:, 0] != segments[:, 1]]
-    segments = unique_rows(np.sort(segments, axis=1))
-    vertices = vertices * (snap / 5)
-    degree = np.bincount(segments.ravel(), minlength=len(vertices))
-    if kept and (degree >= 3).any():
-        note(f"break lines were joined at {int((degree >= 3).sum())} nodes where they cross or "
-             "touch one another or the boundary")
+    return vertices * grid, unique_rows(np.sort(segments, axis=1))
+
+
+def _clear_sharp_corners(vertices, segments, on_boundary, snap: float, note):
+    """Break-line segments meeting another at less than ``SHARP_CORNER`` degrees shortened to
+    end ``2·snap`` m off it (``_shorten_small_angles``; boundary segments kept), said to
+    ``note``: vertices (n, 2) and segments (s, 2)."""
+    vertices, segments, shortened, dropped = _shorten_small_angles(
+        vertices, segments, on_boundary, SHARP_CORNER, 2 * snap)
+    if shortened or dropped:
+        note(f"{shortened + dropped} break-line segments meeting another at less than "
+             f"{SHARP_CORNER:g} degrees were shortened near the meeting point"
+             f"{f' ({dropped} too short were left out)' if dropped else ''}, so that the "
+             "angle bound holds there")
     return vertices, segments
 
 
-def _hole_points(domain, snap: float) -> np.ndarray:
-    """(h, 2) a point of each area inside the domain's hull that it leaves out and Triangle
-    does not reach from the hull: its holes (not an island inside a hole), and areas that parts
-    touching at corners enclose (a gap between cells at a diagonal)."""
+def _used_vertices(vertices, segments):
+    """Only the vertices that ``segments`` end at, in their order, and the segments renumbered
+    to them."""
+    used = np.unique(segments)
+    renumber = np.full(len(vertices), -1)
+    renumber[used] = np.arange(len(used))
+    return vertices[used], renumber[segments]
+
+
+def _hole_points(domain, grid: float) -> np.ndarray:
+    """A point (h, 2; m) of each area inside the ``domain``'s hull that it leaves out and
+    Triangle does not reach from the hull: its holes (not an island inside a hole), and areas
+    that parts touching at corners enclose (a gap between cells at a diagonal); areas and
+    stretches of hull under the ``grid`` m precision grid do not count."""
     hull = shapely.convex_hull(domain)
     gaps = shapely.get_parts(hull.difference(domain))
-    gaps = gaps[(shapely.area(gaps) > (snap / 5) ** 2) & (shapely.length(
-        shapely.intersection(shapely.boundary(gaps), hull.exterior)) < snap / 5)]
+    gaps = gaps[(shapely.area(gaps) > grid ** 2) & (shapely.length(
+        shapely.intersection(shapely.boundary(gaps), hull.exterior)) < grid)]
     holes = shapely.get_coordinates(shapely.point_on_surface(gaps))
     return np.asarray(holes, float).reshape(-1, 2)
 
@@ -328,22 +348,15 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     A mesh estimated above ``max_triangles`` triangles (or the memory available) is refused
     before Triangle starts, from the meshed ``area`` (m², default the vertices' bounding box).
     Returns vertices (n, 2), the PSLG's vertices first, then ``points``, and triangles (m, 3).
+
+    The one function that calls Triangle: its helpers only prepare its input or check its output.
     """
     # lazy: Triangle loads only when this runs
     import triangle
 
-    min_angle = check_min_angle(min_angle)
-    max_area = check_max_area(max_area)
-    max_triangles = check_max_triangles(max_triangles)
-    _check_pslg(pslg)
-    if area is None:
-        area = float(np.prod(np.ptp(pslg.vertices, axis=0)))
-    check_triangles(area, max_area, max_triangles, len(pslg.vertices))
-    origin = pslg.vertices.min(axis=0)
-    vertices = pslg.vertices if points is None else np.vstack([pslg.vertices, points[:, :2]])
-    data = {"vertices": vertices - origin, "segments": pslg.segments}
-    if len(pslg.holes):
-        data["holes"] = pslg.holes - origin
+    min_angle, max_area, max_triangles = _checked_bounds(pslg, min_angle, max_area,
+                                                         max_triangles, area)
+    origin, data = _triangle_input(pslg, points)
     # Triangle reads numbers in its switches without exponents ("a2e-05" is area 2, then
     # switch e): write them positional
     quality = f"q{_positional(min_angle)}{'D' if conforming else ''}"
@@ -354,20 +367,12 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
                              "or a hole point lies outside its hole")
     has_local = local_areas is not None and len(local_areas)
     for _ in range(12 if (has_local or size_field is not None) else 0):
-        xy, tris = result["vertices"], result["triangles"]
-        limit = _area_limits(xy, tris, origin, max_area,
-                             local_areas if has_local else None, size_field)
-        areas = triangle_areas(xy, tris)
-        if (areas <= limit * (1 + 1e-9)).all():
+        limit = _area_limits(result, origin, max_area, local_areas if has_local else None,
+                             size_field)
+        refine = _refinement(result, limit, data, max_triangles,
+                             local="the size field" if size_field is not None else "refinement")
+        if refine is None:  # every triangle keeps its limit
             break
-        # the refined mesh, as if every triangle were refined to its limit at once
-        equivalent = float(areas.sum() / max(1, (areas / np.minimum(limit, areas)).sum()))
-        check_triangles(float(areas.sum()), equivalent, max_triangles,
-                        local="the size field" if size_field is not None else "refinement")
-        refine = {"vertices": xy, "triangles": tris, "segments": result["segments"],
-                  "triangle_max_area": limit[:, None]}
-        if len(pslg.holes):
-            refine["holes"] = data["holes"]
         result = triangle.triangulate(refine, f"rp{quality}a")
     # Triangle leaves a triangle below the bound now and then where the angle rule
     # (below_angle_bound) allows none: it declines to split a skinny triangle whose shortest edge
@@ -385,21 +390,42 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
                                        ("vertices", "triangles", "segments")}, "r" + switches)
         if len(result["vertices"]) == before:  # Triangle added nothing: it will not again
             break
-    left = _angle_defects(result, pslg, min_angle)
-    if left:
-        raise FloodMeshError(
-            f"Triangle left {left} triangles below the minimum angle of {min_angle:g} degrees "
-            f"away from any input corner sharper than {SHARP_CORNER:g} degrees after "
-            f"{REPAIR_PASSES} repair passes; a slightly different minimum angle or maximum area "
-            "meshes this input")
+    _check_angle_rule(result, pslg, min_angle)
     return result["vertices"] + origin, result["triangles"].astype(np.int64)
 
 
-def _area_limits(xy: np.ndarray, tris: np.ndarray, origin: np.ndarray, max_area: float,
+def _checked_bounds(pslg: PSLG, min_angle: float, max_area: float, max_triangles: int,
+                    area: float | None) -> tuple[float, float, int]:
+    """The min angle (degrees), max area (m²) and max triangles checked; refuses a PSLG that
+    Triangle cannot mesh (``_check_pslg``) and a mesh estimated above ``max_triangles``
+    triangles from the meshed ``area`` (m², default the vertices' bounding box)."""
+    min_angle = check_min_angle(min_angle)
+    max_area = check_max_area(max_area)
+    max_triangles = check_max_triangles(max_triangles)
+    _check_pslg(pslg)
+    if area is None:
+        area = float(np.prod(np.ptp(pslg.vertices, axis=0)))
+    check_triangles(area, max_area, max_triangles, len(pslg.vertices))
+    return min_angle, max_area, max_triangles
+
+
+def _triangle_input(pslg: PSLG, points: np.ndarray | None) -> tuple[np.ndarray, dict]:
+    """The origin (2,) in m, the PSLG's lowest x and y, and Triangle's input: the PSLG's
+    vertices then ``points`` (k, 2+), its segments and holes, coordinates from that origin."""
+    origin = pslg.vertices.min(axis=0)
+    vertices = pslg.vertices if points is None else np.vstack([pslg.vertices, points[:, :2]])
+    data = {"vertices": vertices - origin, "segments": pslg.segments}
+    if len(pslg.holes):
+        data["holes"] = pslg.holes - origin
+    return origin, data
+
+
+def _area_limits(result: dict, origin: np.ndarray, max_area: float,
                  local_areas: np.ndarray | None, size_field) -> np.ndarray:
-    """Each triangle's largest area (m²): ``max_area``, less where it holds a point of
-    ``local_areas`` (x, y, area rows) or where ``size_field`` asks for less at its corners or
-    centroid; ``xy`` are Triangle's vertices, shifted by ``-origin``."""
+    """Largest area (m²) each triangle of Triangle's ``result`` (coordinates from ``origin``)
+    may keep: ``max_area``, less where a ``local_areas`` point (x, y, m²) lies in it or the
+    ``size_field`` (m², NaN: no limit) asks for less at its centroid or corners."""
+    xy, tris = result["vertices"], result["triangles"]
     limit = np.full(len(tris), float(max_area))
     if local_areas is not None:
         found = containing_triangle(xy, tris, local_areas[:, :2] - origin)
@@ -415,6 +441,38 @@ def _area_limits(xy: np.ndarray, tris: np.ndarray, origin: np.ndarray, max_area:
                                  "positive maximum areas (NaN where there is no limit)")
         limit = np.minimum(limit, wanted)
     return limit
+
+
+def _refinement(result: dict, limit: np.ndarray, data: dict, max_triangles: int, *,
+                local: str) -> dict | None:
+    """Triangle's input to refine its ``result`` (switch r) to each triangle's ``limit`` (m²),
+    the holes of its first input ``data`` kept; None where every triangle keeps its limit.
+    Refuses a refined mesh estimated above ``max_triangles`` triangles (``local`` names what
+    asks for it)."""
+    xy, tris = result["vertices"], result["triangles"]
+    areas = triangle_areas(xy, tris)
+    if (areas <= limit * (1 + 1e-9)).all():
+        return None
+    # the refined mesh, as if every triangle were refined to its limit at once
+    equivalent = float(areas.sum() / max(1, (areas / np.minimum(limit, areas)).sum()))
+    check_triangles(float(areas.sum()), equivalent, max_triangles, local=local)
+    refine = {"vertices": xy, "triangles": tris, "segments": result["segments"],
+              "triangle_max_area": limit[:, None]}
+    if "holes" in data:
+        refine["holes"] = data["holes"]
+    return refine
+
+
+def _check_angle_rule(result: dict, pslg: PSLG, min_angle: float) -> None:
+    """Refuse Triangle's ``result`` where triangles still break the angle rule
+    (``below_angle_bound``) after the repair passes."""
+    left = _angle_defects(result, pslg, min_angle)
+    if left:
+        raise FloodMeshError(
+            f"Triangle left {left} triangles below the minimum angle of {min_angle:g} degrees "
+            f"away from any input corner sharper than {SHARP_CORNER:g} degrees after "
+            f"{REPAIR_PASSES} repair passes; a slightly different minimum angle or maximum area "
+            "meshes this input")
 
 
 def _angle_defects(result: dict, pslg: PSLG, min_angle: float) -> int:
