@@ -16,7 +16,8 @@ from pathlib import Path
 from .. import io
 from ..io.outputs import check_outputs, require_suffix
 from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_holdout, check_max_area,
-                       check_max_gap, check_max_triangles, check_min_angle, check_seed)
+                       check_max_gap, check_max_triangles, check_min_angle, check_seed,
+                       is_point_source)
 from ..points import split_holdout
 from ..raster import require_metric_crs
 from ..steps.breakpoints import breakpoints_file
@@ -200,7 +201,7 @@ def measured_points(path, crs=None, fallback=None):
     """(xyz, CRS) of measured points: a LiDAR point file (LAS/LAZ ground, XYZ/CSV; ``crs``
     overrides its own) or a point layer (GeoPackage, Shapefile, GeoJSON; ``crs``, else its own,
     else ``fallback``, the mesh's or DEM's)."""
-    if io.is_point_source(path):
+    if is_point_source(path):
         cloud = io.read_points(path, crs=crs)
         return cloud.xyz, cloud.crs
     return io.read_points_vector(path), require_metric_crs(

@@ -1,6 +1,10 @@
-"""Where outputs go, checked before the work: never onto an input, only into a folder that can
-be written; and a run's output folder replaced as a whole, so that an interrupt leaves the old
-set of files or the new one, never a mix.
+"""Where outputs go and how each is written. Checked before the work: never onto an input, only
+into a folder that can be written. A file is written under a temporary name beside it and
+renamed when complete (``atomic_output``, which every writer uses), so that an error, Ctrl-C or
+a cancel leaves the previous file (or none), never a truncated one; a run's output folder is
+replaced as a whole (``staged_folder``), so that an interrupt leaves the old set of files or the
+new one, never a mix. Here too: an input's existence check (``require_file``) and JSON
+(``write_json``), the one format with no module of its own.
 
 FloodMesh's own temporary names (``temp_name``, ``staged_folder``) carry the writing process's
 id, so that the leftovers of a killed run are known as such and removed by the next one.
@@ -9,12 +13,15 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import json
 import os
 import re
 import shutil
 import tempfile
 import uuid
 from pathlib import Path
+
+import numpy as np
 
 from ..errors import FloodMeshError
 
@@ -124,6 +131,15 @@ def require_suffix(path, suffixes, what: str) -> None:
                              f"{' or '.join(suffixes)}")
 
 
+def require_file(path, what: str) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise FloodMeshError(f"{what} {path} does not exist: check the path")
+    if not path.is_file():
+        raise FloodMeshError(f"{what} {path} is not a file")
+    return path
+
+
 # ---------------------------------------------------------------------------------------------
 # temporary names and their leftovers
 def temp_name(path) -> Path:
@@ -197,6 +213,31 @@ def _clean_run_leftovers(out: Path) -> None:
                 shutil.rmtree(entry.path, ignore_errors=True)
     if out.is_dir():
         remove_stale_temporaries(out)
+
+
+# ---------------------------------------------------------------------------------------------
+# a file, written atomically
+@contextlib.contextmanager
+def atomic_output(path):
+    """Yield a temporary path beside ``path`` (making its folder if missing); move it into
+    place only if the block succeeds."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path.parent)  # of this target and others, from killed runs
+    tmp = temp_name(path)
+    try:
+        yield tmp
+        # the previous file goes first: ext4 writes out at once a file renamed over another
+        # (auto_da_alloc), 0.05 s for a 144 MB raster; a new name leaves it to the kernel's
+        # write-back, as for any new file
+        with contextlib.suppress(FileNotFoundError):
+            if not path.is_dir():
+                path.unlink()
+        os.replace(tmp, path)
+    finally:
+        for leftover in (tmp, Path(f"{tmp}-journal"), Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):
+            with contextlib.suppress(FileNotFoundError):
+                leftover.unlink()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -312,3 +353,26 @@ def _replace_in(out: Path, staging: Path, own, keep: set) -> None:
         if (own(entry.name) and entry.name not in new and entry.is_file()
                 and os.path.realpath(entry.path) not in keep):
             os.unlink(entry.path)
+
+
+# ---------------------------------------------------------------------------------------------
+# JSON
+def jsonable(value):
+    """``value`` with numpy numbers as Python ones and non-finite floats as None (null)."""
+    if isinstance(value, dict):
+        return {k: jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, (np.floating, float)):
+        return None if not np.isfinite(value) else float(value)
+    return value
+
+
+def write_json(path, data: dict) -> None:
+    """Write ``data`` as indented JSON (see ``jsonable``), atomically."""
+    with atomic_output(path) as tmp:
+        with open(tmp, "w") as fh:
+            json.dump(jsonable(data), fh, indent=2, sort_keys=False)
+            fh.write("\n")

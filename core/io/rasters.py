@@ -1,0 +1,205 @@
+"""Rasters through rasterio (GDAL): a DEM read as a ``Grid`` with NaN for nodata (``read_raster``;
+``read_band`` for band 1 or a window of it), its CRS checked (``raster_crs``), and ``Grid``s
+written as tiled GeoTIFFs (``raster_profile``, ``write_raster``); ``read_input`` takes a point
+file or a DEM."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..engine.limits import check_memory
+from ..errors import FloodMeshError
+from ..options import is_point_source
+from ..raster import Grid, METRE_NAMES, check_transform, require_metric_crs
+from .outputs import atomic_output, require_file
+from .points import read_points
+
+RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
+# values DEM exports use for "no data" without always saying so in the file's nodata tag
+NODATA_SENTINELS = (-9999.0, -99999.0, -32768.0, -32767.0, 32767.0, 65535.0,
+                    float(np.finfo(np.float32).min), float(np.finfo(np.float32).max))
+SENTINEL_GAP_M = 100.0  # an untagged sentinel is nodata when this far beyond every other cell
+
+
+def raster_crs(src, path: Path, crs=None):
+    """The checked CRS of an open rasterio dataset (``crs`` overrides the file's): refuses
+    control-point georeferencing, rotated or non-square grids, and CRSs not in metres."""
+    transform, file_crs = src.transform, src.crs
+    if src.gcps[0] and transform.is_identity:
+        raise FloodMeshError(
+            f"raster {path.name} is georeferenced by control points, not a geotransform: "
+            "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
+    check_transform(transform, f"raster {path.name}")
+    return require_metric_crs(crs if crs is not None else
+                              (file_crs.to_wkt() if file_crs else None),
+                              f"raster {path.name}", kind="raster")
+
+
+def raster_crs_wkt(src, path: Path, crs=None) -> str:
+    """``raster_crs`` as WKT, for a raster step that passes the CRS through: the file's own WKT
+    where GDAL reads it as a projected (not compound) CRS in metres, without pyproj (0.1 s of
+    start-up, a fifth of ``floodmesh slope``'s at 6000²); else ``raster_crs``, its checks and
+    messages."""
+    file_crs = src.crs
+    if crs is None and file_crs and not src.gcps[0]:
+        wkt = file_crs.to_wkt()
+        unit, factor = file_crs.linear_units_factor if wkt.startswith("PROJCS[") else ("", 0)
+        if factor == 1.0 and unit.lower() in METRE_NAMES:
+            check_transform(src.transform, f"raster {path.name}")
+            return wkt
+    return raster_crs(src, path, crs).to_wkt()
+
+
+def no_valid_cells(path) -> FloodMeshError:
+    return FloodMeshError(f"raster {Path(path).name} has no valid cells (all nodata or NaN): "
+                          "check its nodata value and that it is the right file")
+
+
+def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
+    """Band 1 (or a window of it) as ``dtype`` with NaN for nodata and ±inf, in one buffer (no
+    masked array) unless the file masks cells by a mask band rather than a nodata value."""
+    # lazy: GDAL loads only when this runs
+    from rasterio.enums import MaskFlags
+
+    flags = src.mask_flag_enums[0]
+    if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags:
+        values = src.read(1, window=window, masked=True).astype(dtype).filled(np.nan)
+    else:
+        values = src.read(1, window=window, out_dtype=dtype)
+    bad = ~np.isfinite(values)  # ±inf cells are nodata too
+    if src.nodata is not None and np.isfinite(src.nodata):
+        # compare in the file's own type: a float32 nodata written as text may not round-trip
+        native = np.dtype(src.dtypes[0])
+        nodata = native.type(src.nodata) if native.kind == "f" else src.nodata
+        bad |= values == values.dtype.type(nodata)
+    values[bad] = np.nan
+    return values
+
+
+def nodata_tagged(path) -> bool:
+    """Whether a raster file says which value is nodata (a tag or a mask band)."""
+    # lazy: GDAL loads only when this runs
+    import rasterio
+    from rasterio.enums import MaskFlags
+
+    try:
+        with rasterio.open(require_file(path, "raster")) as src:
+            return src.nodata is not None or MaskFlags.all_valid not in src.mask_flag_enums[0]
+    except rasterio.errors.RasterioIOError as exc:
+        raise FloodMeshError(f"{Path(path).name} is not a readable raster ({exc})") from None
+
+
+def read_raster(path, *, crs=None, note=None) -> Grid:
+    """Read band 1 of a raster as a float64 Grid with NaN for nodata.
+
+    Without a nodata tag, cells holding a common sentinel (``NODATA_SENTINELS``) far beyond
+    every other cell are nodata too. ``note`` (given for DEMs) receives what was assumed: such
+    sentinels, further bands left unused, elevations stored as whole numbers.
+    """
+    # lazy: GDAL loads only when this runs
+    import rasterio
+
+    path = require_file(path, "raster")
+    try:
+        with rasterio.open(path) as src:
+            transform, crs = src.transform, raster_crs(src, path, crs)
+            check_memory(cells=src.width * src.height,
+                         advice="resample it to larger cells or split it into tiles")
+            values = read_band(src)
+            tagged, count, dtype = src.nodata is not None, src.count, src.dtypes[0]
+    except rasterio.errors.RasterioIOError as exc:
+        raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
+    if not tagged:
+        _untagged_nodata(values, path.name, note)
+    if note and count > 1:
+        note(f"raster {path.name} has {count} bands: band 1 is used as the elevations; "
+             f"extract another one first if it holds them (gdal_translate -b N IN OUT)")
+    if note and np.issubdtype(np.dtype(dtype), np.integer):
+        note(f"raster {path.name} stores elevations as whole numbers ({dtype}): its 1-unit "
+             "steps are terraces whose edges the slope sees and break lines may follow; use a "
+             "DEM with floating-point elevations (float32) where there is one")
+    if not np.isfinite(values).any():
+        raise no_valid_cells(path)
+    return Grid(values, transform, crs)
+
+
+def _untagged_nodata(values: np.ndarray, name: str, note=None) -> None:
+    """Set to NaN the cells of an untagged raster holding a nodata sentinel that lies more
+    than ``SENTINEL_GAP_M`` beyond every other cell, and say so."""
+    for sentinel in NODATA_SENTINELS:
+        hit = values == sentinel
+        if not hit.any():
+            continue
+        rest = values[~hit & np.isfinite(values)]
+        if rest.size and not (rest.min() - SENTINEL_GAP_M > sentinel
+                              or rest.max() + SENTINEL_GAP_M < sentinel):
+            continue
+        values[hit] = np.nan
+        if note:
+            note(f"raster {name} has no nodata value, but {int(hit.sum()):,} cells hold "
+                 f"{sentinel:g}, far from every other cell: they are taken as nodata; set it in "
+                 f"the file (gdal_edit.py -a_nodata {sentinel:g} {name}) to say so")
+
+
+TILE = 256  # GeoTIFF tile size (cells)
+# Codecs chosen by measurement (benchmarks/run.py --only codec, and slope file to file on a
+# 6000² DEM): float rasters (DEM, slope, LoG) are written uncompressed, as gdaldem writes them:
+# on 16 M float32 cells ZSTD level 1 costs 0.19 s of CPU per 64 MB and saves only 17-20 % (the
+# cells' low bits are noise), 30 % more CPU for the whole slope step; its floating-point
+# predictor saves another 10 % at twice the CPU; LZW and DEFLATE are slower still. Integer
+# rasters (breakpoints: mostly 0) take ZSTD level 1, which shrinks them 8x and more for almost
+# nothing. GDAL's own worker threads (NUM_THREADS, GDAL_NUM_THREADS) are not used: GDAL 3.6's
+# multi-threaded decoding hung in RasterIO (CPLJobQueue) in the tests.
+CREATION_OPTIONS = dict(tiled=True, blockxsize=TILE, blockysize=TILE, bigtiff="if_safer")
+INTEGER_COMPRESSION = dict(compress="zstd", zstd_level=1)
+
+
+def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
+    """A tiled GeoTIFF profile, compressed for integer rasters (``CREATION_OPTIONS``; rasters
+    under a tile stay striped); ``crs`` a pyproj CRS or WKT."""
+    wkt = crs if isinstance(crs, str) else crs.to_wkt()
+    profile = dict(driver="GTiff", height=shape[0], width=shape[1], count=1, dtype=dtype,
+                   crs=wkt, transform=transform, nodata=nodata, **CREATION_OPTIONS)
+    if np.dtype(dtype).kind != "f":
+        profile.update(INTEGER_COMPRESSION)
+    if shape[0] < TILE or shape[1] < TILE:
+        for key in ("tiled", "blockxsize", "blockysize"):
+            profile.pop(key)
+    return profile
+
+
+def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
+    """Write a Grid as a tiled, compressed GeoTIFF (``raster_profile``); float NaN (or
+    cells outside ``valid``) become nodata."""
+    # lazy: GDAL loads only when this runs
+    import rasterio
+
+    values = grid.values
+    if values.dtype == bool:
+        values = values.astype(np.uint8)
+    if np.issubdtype(values.dtype, np.floating):
+        values = values.astype(np.float32)
+        nodata = -9999.0
+        values = np.where(np.isfinite(values), values, nodata)
+    else:
+        nodata = 255
+        values = values.astype(np.uint8)
+    if valid is not None:
+        values = np.where(valid, values, nodata)
+    profile = raster_profile(values.shape, grid.transform, grid.crs, values.dtype, nodata)
+    with atomic_output(path) as tmp:
+        with rasterio.open(tmp, "w", **profile) as dst:
+            dst.write(values, 1)
+
+
+def read_input(path, *, crs=None, classes=None, note=None):
+    """A point file (→ PointCloud) or a raster DEM (→ Grid), by extension."""
+    ext = Path(path).suffix.lower()
+    if ext in RASTER_EXTENSIONS:
+        return read_raster(path, crs=crs, note=note)
+    if is_point_source(path):
+        return read_points(path, crs=crs, classes=classes, note=note)
+    require_file(path, "input")
+    raise FloodMeshError(f"{Path(path).name}: unknown input type '{ext}'; give a LAS/LAZ or XYZ/CSV "
+                         "point file, or a GeoTIFF/ASCII-grid DEM")
