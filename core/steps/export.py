@@ -495,7 +495,9 @@ def write_ugrid(path, mesh: SolverMesh, *, title: str = "FloodMesh mesh") -> Non
                                ("mesh2d_nFaces", m), ("mesh2d_nMax_face_nodes", 3), ("Two", 2)):
                 nc.createDimension(name, size)
             topology = nc.createVariable("mesh2d", "i4", ())
-            topology.assignValue(0)  # a dummy, but written: unset, scipy writes stale memory
+            # a dummy, but written: unset, scipy writes stale memory. Not assignValue: scipy
+            # >= 1.14 indexes the scalar's 0-d array with [:] there, which fails
+            topology.data[...] = 0
             attrs(topology, cf_role="mesh_topology", long_name="Topology data of 2D mesh",
                   topology_dimension=2, node_coordinates="mesh2d_node_x mesh2d_node_y",
                   node_dimension="mesh2d_nNodes", edge_node_connectivity="mesh2d_edge_nodes",
@@ -523,7 +525,7 @@ def write_ugrid(path, mesh: SolverMesh, *, title: str = "FloodMesh mesh") -> Non
                   "counter-clockwise", mesh="mesh2d", location="face", start_index=1,
                   _FillValue=-999)
             var = nc.createVariable(gm, "i4", ())
-            var.assignValue(0)  # as the topology's dummy
+            var.data[...] = 0  # as the topology's dummy
             cf = {k: v for k, v in crs.to_cf().items() if v is not None}
             epsg = crs.to_epsg()
             wkt = crs.to_wkt()
