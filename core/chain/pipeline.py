@@ -13,8 +13,7 @@ from pyproj import CRS
 
 from .. import io
 from ..engine.compiles import CompileWatch
-from ..engine.limits import (BYTES_PER_FITTED_CELL, BYTES_PER_POINT, available_memory,
-                             check_memory, check_triangles)
+from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles, fits_in_memory
 from ..engine.nearest import CellIndex, point_index
 from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
                             read_gridded_points, slope_file64, write_front_rasters)
@@ -524,7 +523,8 @@ def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, can
                   cancelled=cancelled)
         data.dem = read_back(files["dem"], data.crs)
     measured = None
-    if _points_fit(data.n_gridding, data.dem.values.size):
+    if fits_in_memory(points=data.n_gridding, cells=data.dem.values.size,
+                      cell_bytes=BYTES_PER_FITTED_CELL):
         measured = steps.run("read back", read_gridded_points, data, options.holdout,
                              options.seed, cancelled=cancelled)
     elif note:
@@ -533,13 +533,6 @@ def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, can
     return _Terrain(data.dem, PointCloud(data.holdout, data.dem.crs),
                     "LiDAR points withheld from gridding, tile by tile", data.n_points,
                     measured=measured, files=files)
-
-
-def _points_fit(n_points: int, cells: int) -> bool:
-    """Whether ``n_points`` points (read and indexed) fit in the memory available beside a DEM
-    of ``cells`` cells and the fits over it."""
-    memory = available_memory()
-    return memory is None or n_points * BYTES_PER_POINT + cells * BYTES_PER_FITTED_CELL <= memory
 
 
 _READERS = {POINTS: _read_points, DEM: _read_dem, DEM_TILES: _read_dem,

@@ -87,12 +87,29 @@ def check_triangles(area: float, max_area: float, max_triangles: int, input_vert
     return estimate
 
 
+def memory_needed(*, points: int = 0, cells: int = 0, triangles: int = 0,
+                  cell_bytes: int = BYTES_PER_CELL) -> int:
+    """Estimated peak bytes of ``points`` points, ``cells`` grid cells at ``cell_bytes`` a cell
+    and ``triangles`` triangles."""
+    return points * BYTES_PER_POINT + cells * cell_bytes + triangles * BYTES_PER_TRIANGLE
+
+
+def fits_in_memory(*, points: int = 0, cells: int = 0, triangles: int = 0,
+                   memory: int | None = None, cell_bytes: int = BYTES_PER_CELL) -> bool:
+    """Whether ``memory_needed`` is within ``memory`` bytes (by default what the system has
+    available; True where that cannot be read): ``check_memory``'s test, for work that has a
+    lighter alternative instead of a refusal."""
+    memory = available_memory() if memory is None else memory
+    return memory is None or memory_needed(points=points, cells=cells, triangles=triangles,
+                                           cell_bytes=cell_bytes) <= memory
+
+
 def check_memory(*, points: int = 0, cells: int = 0, triangles: int = 0,
                  memory: int | None = None, cell_bytes: int = BYTES_PER_CELL,
                  advice: str) -> int:
     """Refuse a run whose estimated peak memory exceeds ``memory`` bytes (by default what the
     system has available), at ``cell_bytes`` a grid cell; returns the estimate in bytes."""
-    need = points * BYTES_PER_POINT + cells * cell_bytes + triangles * BYTES_PER_TRIANGLE
+    need = memory_needed(points=points, cells=cells, triangles=triangles, cell_bytes=cell_bytes)
     memory = available_memory() if memory is None else memory
     if memory is not None and need > memory:
         parts = [f"{n:,} {name}" for n, name in ((points, "points"), (cells, "grid cells"),

@@ -12,7 +12,7 @@ from floodmesh.core import io
 from floodmesh.core.frontends.cli import main
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.engine.limits import (available_memory, check_memory, check_triangles,
-                                          estimate_triangles, footprint)
+                                          estimate_triangles, fits_in_memory, footprint)
 from floodmesh.core.steps.mesh import PSLG, build_mesh, triangulate_pslg
 from floodmesh.core.chain.pipeline import RunOptions, run_pipeline
 from floodmesh.core.raster import Grid
@@ -60,6 +60,14 @@ def test_memory_refusal_names_the_estimate():
     assert "1,000,000 points" in message and "10,000,000 grid cells" in message
     assert "about 0.8 GB of memory" in message and "but 0.1 GB is available" in message and "do less" in message
     assert check_memory(points=10, memory=10**8, advice="") > 0
+
+
+def test_fits_in_memory_is_the_refusals_test_without_refusing():
+    sizes = dict(points=10**6, cells=10**7, cell_bytes=100)
+    need = check_memory(**sizes, memory=10**10, advice="")
+    assert fits_in_memory(**sizes, memory=need) and not fits_in_memory(**sizes, memory=need - 1)
+    with pytest.raises(FloodMeshError):
+        check_memory(**sizes, memory=need - 1, advice="")
 
 
 def test_triangle_limit_refusal_gives_the_area_that_fits():
