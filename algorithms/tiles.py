@@ -26,11 +26,12 @@ def add_tile_parameters(algorithm, what: str):
                 SKIP_UNREADABLE, tr("Tiles: leave out unreadable tiles (a truncated or corrupt "
                                     "file), with a note naming them"), defaultValue=False),
             QgsProcessingParameterNumber(
-                WORKERS, tr("Tiles: parallel Dask workers (empty: one per core)"),
+                WORKERS, tr("Tiles: parallel threads or Dask workers (empty: one per core)"),
                 INTEGER, None, optional=True, minValue=1),
             QgsProcessingParameterString(
                 SCHEDULER, tr("Tiles: address of a running Dask scheduler (tcp://HOST:8786; "
-                              "empty: workers on this machine)"), optional=True)):
+                              "'local': a local cluster; empty: in memory where the tiles fit, "
+                              "else a local cluster)"), optional=True)):
         parameter.setFlags(parameter.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
         algorithm.addParameter(parameter)
 

@@ -245,6 +245,10 @@ def check_choice(value, choices, what: str) -> str:
     return value
 
 
+# --scheduler's value for a local Dask cluster even where the tiles fit in memory
+LOCAL_CLUSTER = "local"
+
+
 @dataclass(frozen=True)
 class RunOptions:
     """Parameters of the whole chain; the defaults are the method's reference case."""
@@ -289,8 +293,10 @@ class RunOptions:
     far_field_area: float | None = None  # m², larger triangles away from the break lines
     flow_area: float | None = None  # m², smaller triangles on low ground by drainage lines
     # (HAND); None: 23 cells (drainage.flow_area_for), 0: off
-    workers: int | None = None      # point tiles: local Dask workers (default one per core)
-    scheduler: str | None = None    # point tiles: a running dask.distributed scheduler's address
+    workers: int | None = None      # point tiles: threads or local Dask workers (default: cores)
+    # point tiles: a running dask.distributed scheduler's address, or LOCAL_CLUSTER; None: read
+    # in memory where they fit (``tiles.read_point_tiles``), else a local cluster
+    scheduler: str | None = None
     processes: bool = True          # point tiles: local workers are processes (False: threads)
 
     def __post_init__(self):

@@ -85,8 +85,9 @@ def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
     same = key[index][1:] == key[index][:-1]
     dz = np.abs(np.diff(xyz[index, 2]))[same]
     if dz.size and dz.max() > 0:
-        note(f"{source}: {int((dz > 0).sum()):,} points repeat the x, y of another with a "
-             f"different z (up to {dz.max():.3g} m apart); the grid keeps one of each: check for "
+        n = int((dz > 0).sum())
+        note(f"{source}: {n:,} point{'s repeat' if n > 1 else ' repeats'} the x, y of another "
+             f"with a different z (up to {dz.max():.3g} m apart); the grid keeps one of each: check for "
              "overlapping flight lines or tiles merged twice")
 
 

@@ -18,7 +18,7 @@ from ..io.outputs import check_outputs, require_suffix
 from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_holdout, check_max_area,
                        check_max_gap, check_max_triangles, check_min_angle, check_seed,
                        is_point_source)
-from ..points import split_holdout
+from ..points import PointCloud, split_holdout
 from ..raster import require_metric_crs
 from ..steps.breakpoints import breakpoints_file
 from ..steps.sizing import finer
@@ -53,10 +53,15 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     check_holdout(holdout)
     check_seed(seed)
     classes = tuple(classes) if classes else None
-    if source.tiled:
-        # lazy: PROJ loads only when this runs
-        from ..engine.tiles import grid_point_tiles
+    # lazy: PROJ loads only when this runs
+    from ..engine.tiles import grid_point_tiles, read_point_tiles
 
+    tiles = None
+    if source.tiled and not scheduler:  # in memory where they fit
+        tiles = read_point_tiles(source.paths, cell_size, crs=crs, classes=classes,
+                                 holdout=holdout, seed=seed, workers=workers,
+                                 cancelled=cancelled)
+    if source.tiled and tiles is None:
         tiled = grid_point_tiles(source.paths, cell_size, max_gap=max_gap, crs=crs,
                                  classes=classes, holdout=holdout, seed=seed, out_path=output,
                                  keep=False, workers=workers, scheduler=scheduler,
@@ -69,14 +74,21 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
         # lazy: numba loads only when this runs
         from ..steps.grid import grid_points_linear
 
-        points = io.read_points(source.path, crs=crs, classes=classes, note=note)
-        gridding, kept_back = split_holdout(points, holdout, seed, note=note)
+        if tiles is None:
+            points = io.read_points(source.path, crs=crs, classes=classes, note=note)
+            gridding, kept_back = split_holdout(points, holdout, seed, note=note)
+            held, points_crs, read = kept_back.xyz, points.crs, ""
+        else:
+            for message in tiles.notes if note else ():
+                note(message)
+            gridding = PointCloud(tiles.gridding, tiles.crs)
+            held, points_crs = tiles.holdout, tiles.crs
+            read = f" from {tiles.n_tiles} tiles ({tiles.n_points:,} points)"
         dem = grid_points_linear(gridding, cell_size, max_gap=max_gap, progress=progress,
                                  cancelled=cancelled)
         io.write_raster(output, dem)
-        held, points_crs = kept_back.xyz, points.crs
-        written = (f"DEM {dem.shape[1]} x {dem.shape[0]} cells of {dem.cell_size} m written to "
-                   f"{output}")
+        written = (f"DEM {dem.shape[1]} x {dem.shape[0]} cells of {dem.cell_size} m{read} "
+                   f"written to {output}")
     result = {"OUTPUT": str(output), "crs": points_crs.to_wkt()}
     lines = []
     if holdout_output and len(held):

@@ -16,7 +16,8 @@ from ..engine.compiles import CompileWatch
 from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles, fits_in_memory
 from ..engine.nearest import CellIndex, point_index
 from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
-                            read_gridded_points, slope_file64, write_front_rasters)
+                            read_gridded_points, read_point_tiles, slope_file64,
+                            write_front_rasters)
 from ..errors import Cancelled, FloodMeshError
 from ..io.layer_definition import QLR_NAME, write_layer_definition
 from ..io.outputs import check_output_folder, scratch_folder, staged_folder
@@ -409,6 +410,9 @@ class Front:
     files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
 
 
+TILE_HOLDOUT = "LiDAR points withheld from gridding, tile by tile"
+
+
 @dataclass
 class _Terrain:
     """What reading a source gives the front: the DEM and the points held out."""
@@ -470,7 +474,15 @@ def _read_points(source: Source, options: RunOptions, steps: _Steps, *, cancelle
     data = steps.run("read", io.read_points, source.path, crs=options.crs,
                      classes=options.classes, note=note)
     gridding, holdout = split_holdout(data, options.holdout, options.seed, note=note)
-    # refuse, before the work, a grid or mesh too large for the limit or the memory
+    return _grid_in_memory(gridding, holdout, "LiDAR points withheld from gridding", len(data),
+                           options, steps, cancelled=cancelled)
+
+
+def _grid_in_memory(gridding: PointCloud, holdout: PointCloud, holdout_source: str,
+                    n_points: int, options: RunOptions, steps: _Steps, *,
+                    cancelled) -> _Terrain:
+    """Points gridded in memory, ``holdout`` kept for the check; a grid or mesh too large for
+    the limit or the memory refused before the work."""
     plan = check_grid(gridding, options.cell_size, options.max_gap)
     if options.slope_method == "log":
         check_sigma_fits(options.sigma, plan["rows"], plan["cols"], options.cell_size)
@@ -480,8 +492,7 @@ def _read_points(source: Source, options: RunOptions, steps: _Steps, *, cancelle
                                              "split the data into tiles")
     dem = steps.run("grid", grid_points_linear, gridding, options.cell_size,
                     max_gap=options.max_gap, progress=None, cancelled=cancelled, plan=plan)
-    return _Terrain(dem, holdout, "LiDAR points withheld from gridding", len(data),
-                    measured=gridding.xyz)
+    return _Terrain(dem, holdout, holdout_source, n_points, measured=gridding.xyz)
 
 
 def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
@@ -502,11 +513,28 @@ def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
 
 def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
                       note) -> _Terrain:
+    """Point tiles read into memory where they fit and no scheduler is given
+    (``tiles.read_point_tiles``), then gridded as one file's points; else gridded on Dask
+    (``_read_tiles_on_dask``). The per-tile held-out points are the independent check."""
+    if not options.scheduler:
+        tiles = steps.run("read", read_point_tiles, source.paths, options.cell_size,
+                          crs=options.crs, classes=options.classes, holdout=options.holdout,
+                          seed=options.seed, workers=options.workers, cancelled=cancelled)
+        if tiles is not None:
+            for message in tiles.notes if note else ():
+                note(message)
+            return _grid_in_memory(PointCloud(tiles.gridding, tiles.crs),
+                                   PointCloud(tiles.holdout, tiles.crs), TILE_HOLDOUT,
+                                   tiles.n_points, options, steps, cancelled=cancelled)
+    return _read_tiles_on_dask(source, options, steps, cancelled=cancelled, note=note)
+
+
+def _read_tiles_on_dask(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
+                        note) -> _Terrain:
     """Point tiles gridded on Dask; the DEM, slope and breakpoints go file to file, block by
     block (see tiles), unless the Laplacian of Gaussian needs the DEM in memory. The points
     gridded are read back for the terrain fits and --refine, as one file's are kept, where
-    memory holds them beside the DEM (else the fits take the DEM's cell centres, with a note);
-    the per-tile held-out points stay the independent check."""
+    memory holds them beside the DEM (else the fits take the DEM's cell centres, with a note)."""
     files = None
     if options.slope_method != "log":
         files = {"folder": scratch_folder("tiles")}
@@ -531,7 +559,7 @@ def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, can
         note(f"the tiles' {data.n_gridding:,} points gridded are more than memory holds beside "
              "the DEM: the terrain fits take the DEM's cell centres")
     return _Terrain(data.dem, PointCloud(data.holdout, data.dem.crs),
-                    "LiDAR points withheld from gridding, tile by tile", data.n_points,
+                    TILE_HOLDOUT, data.n_points,
                     measured=measured, files=files)
 
 

@@ -35,6 +35,7 @@ import os
 import shutil
 import time
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -45,13 +46,13 @@ from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
 from ..io import GROUND_CLASS, atomic_output, classes_kept, file_format, read_band, read_xyz
-from ..io.outputs import scratch_folder
-from ..options import check_cell_size, check_holdout, check_holdout_count, check_max_gap
+from ..io.outputs import remove_stale_scratch, scratch_folder
+from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_holdout_count, check_max_gap
 from ..points import clean_points
 from ..raster import Grid, check_transform, require_metric_crs
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
-from .limits import check_memory, footprint
+from .limits import BYTES_PER_FITTED_CELL, check_memory, fits_in_memory, footprint
 
 LAS_EXTENSIONS = (".las", ".laz")
 XYZ_EXTENSIONS = (".xyz", ".txt", ".csv", ".pts")
@@ -172,6 +173,7 @@ def tile_kind(path: Path) -> str:
 class PointTile:
     path: str
     count: int          # points in the file (all classes; for text an estimate from its size)
+    bounds: tuple | None = None  # (xmin, ymin, xmax, ymax) m from a LAS header; None for text
 
 
 # the option that leaves unreadable tiles out, on the command line and in QGIS
@@ -191,13 +193,14 @@ def _unreadable_note(exc: _Unreadable, skip: bool) -> str:
     return f"{exc}: the tile was left out ({SKIP_UNREADABLE})"
 
 
-def _tile_header(path: Path) -> tuple[int, object]:
-    """(points in the file, its CRS or None); for text, the count is an estimate from its size."""
+def _tile_header(path: Path) -> tuple[int, object, tuple | None]:
+    """(points in the file, its CRS or None, its bounds (m) or None); for text, the count is an
+    estimate from its size and the bounds are unknown."""
     # lazy: laspy loads only when this runs
     import laspy
 
     if path.suffix.lower() not in LAS_EXTENSIONS:
-        return max(1, path.stat().st_size // 20), None
+        return max(1, path.stat().st_size // 20), None, None
     if file_format(path) != "las":
         raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file (it does not begin "
                           "with the LAS signature 'LASF')")
@@ -207,7 +210,10 @@ def _tile_header(path: Path) -> tuple[int, object]:
                 file_crs = reader.header.parse_crs()
             except Exception:
                 file_crs = None
-            return int(reader.header.point_count), file_crs
+            header = reader.header
+            return int(header.point_count), file_crs, (
+                float(header.mins[0]), float(header.mins[1]), float(header.maxs[0]),
+                float(header.maxs[1]))
     except Exception as exc:
         raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file ({exc})") from None
 
@@ -222,7 +228,7 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
     for path in map(Path, paths):
         name = path.name
         try:
-            count, file_crs = _tile_header(path)
+            count, file_crs, bounds = _tile_header(path)
         except _Unreadable as exc:
             notes.append(_unreadable_note(exc, skip_unreadable))
             continue
@@ -238,7 +244,7 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
                 f"tile {name} is in {tile_crs.name}, but tile {first[0]} is in {first[1].name}: "
                 f"all tiles must share one CRS; reproject {name} to the others' CRS first (pdal "
                 "translate IN OUT -f filters.reprojection --filters.reprojection.out_srs=EPSG:XXXX)")
-        tiles.append(PointTile(str(path), count))
+        tiles.append(PointTile(str(path), count, bounds))
     if not tiles:
         raise FloodMeshError(f"none of the {len(paths)} tiles holds points that can be read: "
                              "check the tiles")
@@ -361,33 +367,45 @@ def _within(xyz: np.ndarray, box) -> np.ndarray:
             & (xyz[:, 1] <= ymax))
 
 
-def read_tile(path: str, crs_wkt: str, classes, holdout: float, seed: int, band: float,
-              spill: str | None = None) -> dict:
-    """Round one: a tile's figures, held-out points and edge band (points within ``band`` m of
-    its outline): the points, or with ``spill`` (a file path) the path of the ``.npy`` file
-    they were written to. A sparse tile's points are all edge band: its neighbours' blocks grid
-    them. An unreadable tile gives its message (``unreadable``) for the client to decide."""
+def _tile_figures(path: str, crs_wkt: str, classes, holdout: float, seed: int
+                  ) -> tuple[dict, np.ndarray | None]:
+    """(a tile's figures and held-out points, its points to grid) as round one reads it
+    (``_tile_read``); an unreadable tile gives its message (``unreadable``) and no points, for
+    the client to decide."""
     notes = []
     try:
         tile = _tile_read(path, crs_wkt, classes, holdout, seed, notes)
     except _Unreadable as exc:
-        return {"path": path, "unreadable": str(exc)}
+        return {"path": path, "unreadable": str(exc)}, None
     xyz, held = tile.pop("gridding"), tile.pop("held")
-    result = {"path": path, "bounds": None, "n_points": len(xyz) + len(held),
-              "n_gridding": len(xyz), "area": 0.0, "holdout": held, "notes": notes,
-              "edge": None, **tile}
-    if not len(xyz):
+    figures = {"path": path, "bounds": None, "n_points": len(xyz) + len(held),
+               "n_gridding": len(xyz), "area": 0.0, "holdout": held, "notes": notes,
+               "edge": None, **tile}
+    if len(xyz):
+        lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
+        figures.update(bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+                       area=footprint(xyz[:, :2])[0])
+    return figures, xyz
+
+
+def read_tile(path: str, crs_wkt: str, classes, holdout: float, seed: int, band: float,
+              spill: str | None = None) -> dict:
+    """Round one: a tile's figures, held-out points and edge band (points within ``band`` m of
+    its outline): the points, or with ``spill`` (a file path) the path of the ``.npy`` file
+    they were written to (``_tile_figures``). A sparse tile's points are all edge band: its
+    neighbours' blocks grid them."""
+    result, xyz = _tile_figures(path, crs_wkt, classes, holdout, seed)
+    if xyz is None or not len(xyz):
         return result
-    lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
-    inner = (lo[0] + band, lo[1] + band, hi[0] - band, hi[1] - band)
+    lo_x, lo_y, hi_x, hi_y = result["bounds"]
+    inner = (lo_x + band, lo_y + band, hi_x - band, hi_y - band)
     edge = ~_within(xyz, inner) if inner[0] < inner[2] and inner[1] < inner[3] else np.ones(
         len(xyz), bool)
     edge = np.ascontiguousarray(xyz[edge])
     if spill is not None:
         np.save(spill, edge)
         edge = spill
-    result.update(bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
-                  area=footprint(xyz[:, :2])[0], edge=edge)
+    result["edge"] = edge
     return result
 
 
@@ -443,13 +461,13 @@ def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes, hol
 def dask_client(workers: int | None = None, scheduler: str | None = None, *,
                 processes: bool = True):
     """A ``distributed.Client``: of the running scheduler at ``scheduler`` (tcp://HOST:8786), or
-    of a local cluster of ``workers`` (default: one per core) single-threaded processes
+    (None or ``LOCAL_CLUSTER``) of a local cluster of ``workers`` (default: one per core) single-threaded processes
     (``processes=False``: threads, for hosts such as QGIS that cannot start Python processes)."""
     # lazy: Dask loads only when this runs
     import dask
     from distributed import Client, LocalCluster
 
-    if scheduler:
+    if scheduler and scheduler != LOCAL_CLUSTER:
         try:
             client = Client(scheduler, timeout="10s")
         except Exception as exc:
@@ -483,7 +501,7 @@ def _band_folder(scheduler: str | None):
     """A scratch folder for round one's edge bands where the workers share this disk (a local
     cluster), removed at the end; None for a running scheduler's workers, which may be on other
     machines and keep the bands in their memory."""
-    if scheduler:
+    if scheduler and scheduler != LOCAL_CLUSTER:
         yield None
         return
     with scratch_folder("bands") as folder:
@@ -717,6 +735,85 @@ def _gather_blocks(client, tasks: list, windows: list, plan: dict, cell_size: fl
     return Grid(values, transform, crs) if keep else None
 
 
+def _point_tiles(inputs, crs, skip_unreadable: bool) -> tuple[list[PointTile], CRS, list, bool]:
+    """(the point tiles, their CRS, the notes on the files left out, whether unreadable tiles
+    are left out) of ``inputs`` (``expand_tiles``, ``check_point_tiles``); the scratch killed
+    runs left is removed first, whichever way the tiles then go."""
+    remove_stale_scratch()
+    paths = expand_tiles(inputs, skip_unreadable=skip_unreadable)
+    if tile_kind(paths[0]) != "points":
+        raise FloodMeshError("these tiles are DEM rasters: grid takes point tiles (LAS/LAZ/XYZ); "
+                             "give the DEM tiles to run directly")
+    tiles, tile_crs, checked = check_point_tiles(paths, crs=crs,
+                                                 skip_unreadable=paths.skip_unreadable)
+    return tiles, tile_crs, paths.notes + checked, paths.skip_unreadable
+
+
+@dataclass
+class TilePoints:
+    """A tile set's points read in memory (``read_point_tiles``)."""
+    gridding: np.ndarray     # (n, 3) the points to grid, tile after tile
+    holdout: np.ndarray      # (m, 3) the points held out, tile by tile
+    n_points: int            # points of the tiles counted, holdout included
+    n_tiles: int             # tiles counted
+    notes: list
+    crs: CRS
+
+
+def _cells_estimate(tiles: list[PointTile], cell_size: float) -> int:
+    """Grid cells over the tiles' bounds (LAS headers); a text tile without bounds is taken as
+    one point a square metre."""
+    known = [t.bounds for t in tiles if t.bounds is not None]
+    area = 0.0
+    if known:
+        area = ((max(b[2] for b in known) - min(b[0] for b in known))
+                * (max(b[3] for b in known) - min(b[1] for b in known)))
+    area += sum(t.count for t in tiles if t.bounds is None)
+    return int(area / cell_size ** 2)
+
+
+def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
+                     holdout: float = 0.0, seed: int = 0, workers: int | None = None,
+                     skip_unreadable: bool = False, memory: int | None = None,
+                     cancelled: Callable[[], bool] | None = None) -> TilePoints | None:
+    """The points of a tile set that fits in memory with its grid of ``cell_size`` m
+    (``limits.fits_in_memory``; ``memory`` bytes, by default what is available), read here on
+    ``workers`` threads, tile by tile as round one
+    reads them: the same tiles counted, points held out and notes as ``grid_point_tiles``, so
+    that gridding them at once gives its DEM, without a cluster to start; None where they would
+    not fit (grid them with ``grid_point_tiles``)."""
+    tiles, tile_crs, notes, skip_unreadable = _point_tiles(inputs, crs, skip_unreadable)
+    if not fits_in_memory(points=sum(t.count for t in tiles),
+                          cells=_cells_estimate(tiles, cell_size),
+                          cell_bytes=BYTES_PER_FITTED_CELL, memory=memory):
+        return None
+    crs_wkt = tile_crs.to_wkt()
+    meta, points = [], []
+    with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+        reads = [pool.submit(_tile_figures, t.path, crs_wkt, classes, holdout, seed)
+                 for t in tiles]
+        try:
+            for read in reads:
+                while True:
+                    if cancelled is not None and cancelled():
+                        raise Cancelled()
+                    with contextlib.suppress(TimeoutError):
+                        figures, xyz = read.result(timeout=0.05)
+                        break
+                meta.append(figures)
+                points.append(xyz)
+        finally:
+            for read in reads:
+                read.cancel()
+    counted = _tiles_counted(meta, classes, skip_unreadable, notes)
+    gridding = [points[i] for i in counted if meta[i]["n_gridding"]]
+    _check_enough(sum(len(p) for p in gridding), len(meta), classes)
+    check_holdout_count(holdout, sum(meta[i]["n_points"] for i in counted))
+    return TilePoints(np.concatenate(gridding), np.concatenate([meta[i]["holdout"]
+                                                                for i in counted]),
+                      sum(meta[i]["n_points"] for i in counted), len(counted), notes, tile_crs)
+
+
 def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
                      crs=None, classes=None, holdout: float = 0.0, seed: int = 0,
                      out_path=None, keep: bool = True, dtype: str = "float32",
@@ -739,20 +836,15 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
     cell_size = check_cell_size(cell_size)
     check_max_gap(max_gap)
     check_holdout(holdout)
-    paths = expand_tiles(inputs, skip_unreadable=skip_unreadable)
-    if tile_kind(paths[0]) != "points":
-        raise FloodMeshError("these tiles are DEM rasters: grid takes point tiles (LAS/LAZ/XYZ); "
-                             "give the DEM tiles to run directly")
-    tiles, tile_crs, checked = check_point_tiles(paths, crs=crs,
-                                                 skip_unreadable=paths.skip_unreadable)
-    notes = paths.notes + checked
+    tiles, tile_crs, notes, skip_unreadable = _point_tiles(inputs, crs, skip_unreadable)
     crs_wkt = tile_crs.to_wkt()
     halo = halo_width(cell_size, cell_size * 10 if max_gap is None else max_gap)
     band = 2 * halo
     largest = max(t.count for t in tiles)
     with _band_folder(scheduler) as bands, \
             dask_client(workers, scheduler, processes=processes) as client:
-        parallel = 1 if scheduler else sum(client.nthreads().values()) or 1
+        remote = scheduler and scheduler != LOCAL_CLUSTER
+        parallel = 1 if remote else sum(client.nthreads().values()) or 1
         # A worker reads one tile (all classes) and grids a block of about its size.
         check_memory(points=largest * parallel, advice=f"the largest tile holds {largest:,} "
                      "points: give fewer --workers or cut the survey into smaller tiles")
@@ -760,7 +852,7 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
                                  progress=progress, cancelled=cancelled)
         layout = _tile_layout(meta, classes, holdout, cell_size, max_gap, band, largest=largest,
                               parallel=parallel, keep=keep,
-                              skip_unreadable=paths.skip_unreadable, notes=notes)
+                              skip_unreadable=skip_unreadable, notes=notes)
         if check is not None:
             check(layout.plan)
         tasks, windows = _submit_blocks(client, layout, meta, tiles, edges, cell_size, halo,

@@ -226,10 +226,13 @@ def _input(args):
 
 def _add_dask_options(p: argparse.ArgumentParser):
     p.add_argument("--workers", type=int,
-                   help="point tiles: local Dask worker processes (default one per core)")
+                   help="point tiles: threads reading them, or local Dask worker processes "
+                        "(default one per core)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="point tiles: send the per-tile work to this running dask.distributed "
-                        "scheduler (tcp://HOST:8786) instead of a local cluster")
+                        "scheduler (tcp://HOST:8786), or 'local' to a local cluster (default: "
+                        "the tiles are read into memory where they fit with their grid, else "
+                        "gridded tile by tile on a local cluster)")
     p.add_argument("--skip-unreadable-tiles", action="store_true",
                    help="point tiles: leave out a tile that cannot be read (a truncated or "
                         "corrupt file), with a note naming it, instead of stopping")

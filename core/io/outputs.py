@@ -168,12 +168,19 @@ def process_gone(pid: str | None) -> bool:
 def scratch_folder(kind: str) -> tempfile.TemporaryDirectory:
     """A scratch folder ``floodmesh-KIND-PID-…`` in the system's temporary folder, removed when
     the returned TemporaryDirectory is cleaned up (a ``with`` block's end, an error, Ctrl-C,
-    SIGTERM); scratch folders that killed runs left (their process gone) are removed first."""
+    SIGTERM); scratch folders that killed runs left are removed first
+    (``remove_stale_scratch``)."""
+    remove_stale_scratch()
+    return tempfile.TemporaryDirectory(prefix=f"floodmesh-{kind}-{os.getpid()}-")
+
+
+def remove_stale_scratch() -> None:
+    """Remove the scratch folders (``scratch_folder``) that killed runs left in the system's
+    temporary folder: those whose process has ended."""
     for path in Path(tempfile.gettempdir()).glob("floodmesh-*-*-*"):
         match = re.fullmatch(r"floodmesh-(bands|tiles|dask)-(?P<pid>\d+)-.*", path.name)
         if match and path.is_dir() and not path.is_symlink() and process_gone(match["pid"]):
             shutil.rmtree(path, ignore_errors=True)
-    return tempfile.TemporaryDirectory(prefix=f"floodmesh-{kind}-{os.getpid()}-")
 
 
 def remove_stale_temporaries(folder) -> list[str]:

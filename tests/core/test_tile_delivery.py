@@ -77,6 +77,11 @@ def delivery(tmp_path_factory):
     return folder
 
 
+# both ways a tile set goes: read in memory (the default where it fits) and on a local cluster
+ROUTES = pytest.mark.parametrize("route", [[], ["--scheduler", "local"]],
+                                 ids=["in-memory", "dask"])
+
+
 def _grid(inputs, out, *extra):
     return subprocess.run([*CLI, "grid", *map(str, inputs), "--cell-size", CELL, "--workers",
                            "2", "--out", str(out), *extra], capture_output=True, text=True,
@@ -99,8 +104,10 @@ def _clean(stderr):
                    stderr.splitlines()), stderr
 
 
-def test_a_delivery_folder_grids_to_the_dem_of_its_points_as_one_file(delivery, tmp_path):
-    result = _grid([delivery], tmp_path / "tiles.tif")
+@ROUTES
+def test_a_delivery_folder_grids_to_the_dem_of_its_points_as_one_file(delivery, tmp_path,
+                                                                       route):
+    result = _grid([delivery], tmp_path / "tiles.tif", *route)
     assert result.returncode == 0, result.stderr
     _clean(result.stderr)
     notes = _notes(result.stderr)
@@ -121,10 +128,12 @@ def test_a_delivery_folder_grids_to_the_dem_of_its_points_as_one_file(delivery, 
     assert np.array_equal(tiled, whole, equal_nan=True)  # the same TIN: cell for cell
 
 
-def test_run_on_a_delivery_folder(delivery, tmp_path):
+@ROUTES
+def test_run_on_a_delivery_folder(delivery, tmp_path, route):
     out = tmp_path / "reach"
     result = subprocess.run([*CLI, "run", str(delivery), "--out", str(out), "--workers", "2",
-                             "--cell-size", CELL, "--holdout", "0.01", "--max-area", "400"],
+                             "--cell-size", CELL, "--holdout", "0.01", "--max-area", "400",
+                             *route],
                             capture_output=True, text=True, timeout=1800)
     assert result.returncode == 0, result.stderr
     _clean(result.stderr)
@@ -137,14 +146,16 @@ def test_run_on_a_delivery_folder(delivery, tmp_path):
         assert name in notes, name
 
 
-def test_a_truncated_tile_is_named_with_the_option_that_leaves_it_out(delivery, tmp_path):
+@ROUTES
+def test_a_truncated_tile_is_named_with_the_option_that_leaves_it_out(delivery, tmp_path,
+                                                                       route):
     folder = tmp_path / "tiles"
     folder.mkdir()
     for name in ("T_1_1.laz", "T_1_2.laz", "T_2_1.laz", "T_2_2.laz"):
         (folder / name).write_bytes((delivery / name).read_bytes())
     data = (delivery / "T_1_2.laz").read_bytes()
     (folder / "T_1_2.laz").write_bytes(data[:len(data) // 2])  # the copy broke off
-    result = _grid([folder], tmp_path / "dem.tif")
+    result = _grid([folder], tmp_path / "dem.tif", *route)
     assert result.returncode == 2
     _clean(result.stderr)  # found on a worker: one clean line, no Dask log
     lines = result.stderr.strip().splitlines()
@@ -152,12 +163,12 @@ def test_a_truncated_tile_is_named_with_the_option_that_leaves_it_out(delivery, 
     assert "T_1_2.laz" in lines[0] and "--skip-unreadable-tiles" in lines[0]
     assert not (tmp_path / "dem.tif").exists()
 
-    result = _grid([folder], tmp_path / "dem.tif", "--skip-unreadable-tiles")
+    result = _grid([folder], tmp_path / "dem.tif", "--skip-unreadable-tiles", *route)
     assert result.returncode == 0, result.stderr
     _clean(result.stderr)
     assert any("T_1_2.laz" in n for n in _notes(result.stderr)), result.stderr
     (folder / "T_1_2.laz").unlink()
-    without = _grid([folder], tmp_path / "without.tif")
+    without = _grid([folder], tmp_path / "without.tif", *route)
     assert without.returncode == 0, without.stderr
     assert np.array_equal(_dem(tmp_path / "dem.tif")[0], _dem(tmp_path / "without.tif")[0],
                           equal_nan=True)
@@ -198,10 +209,12 @@ def test_a_file_is_a_tile_by_its_content(tmp_path):
         expand_tiles(tmp_path)
 
 
-def test_a_tiled_run_leaves_no_scratch_and_removes_a_killed_runs(tmp_path):
+@pytest.mark.parametrize("route", [[], ["--scheduler", "local"]], ids=["in-memory", "dask"])
+def test_a_tiled_run_leaves_no_scratch_and_removes_a_killed_runs(tmp_path, route):
     """Scratch lives in floodmesh-KIND-PID-… folders of the temporary folder, Dask's workers'
     too (no dask-scratch-space of their own): gone after the run, and what a killed run left
-    (its process gone) is removed by the next."""
+    (its process gone) is removed by the next, whether the tiles are read in memory or go to a
+    local cluster."""
     import os
     import subprocess
     import sys
@@ -216,7 +229,7 @@ def test_a_tiled_run_leaves_no_scratch_and_removes_a_killed_runs(tmp_path):
     (stale / "band-0.npy").write_bytes(b"0")
     run = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "run",
                           str(survey / "tiles"), "--out", str(tmp_path / "out"),
-                          "--max-area", "400", "--workers", "2"],
+                          "--max-area", "400", "--workers", "2", *route],
                          env={**os.environ, "TMPDIR": str(scratch)}, capture_output=True,
                          text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]

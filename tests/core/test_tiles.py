@@ -4,6 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import fiona
 import numpy as np
 import pytest
 import rasterio
@@ -20,7 +21,7 @@ from floodmesh.core.raster import Grid
 from floodmesh.core.steps.breakpoints import breakpoints_file, classify_breakpoints
 from floodmesh.core.steps.slope import slope
 from floodmesh.core.engine.tiles import (_tile_points, grid_point_tiles, holdout_mask, read_back,
-                                         read_dem_tiles, slope_file64)
+                                         read_dem_tiles, read_point_tiles, slope_file64)
 
 from ..conftest import survey_tiles
 
@@ -102,12 +103,15 @@ def _lines(path):
     return sorted(tuple(map(tuple, np.round(c, 6))) for c in io.read_lines_gpkg(path))
 
 
-def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path):
-    # the terrain fits (localisation, node z) take the tiles' points read back, as one file's:
-    # with every point gridded, the same lines and mesh to the byte
-    options = RunOptions(holdout=0.0, scheduler=scheduler)
+@pytest.mark.parametrize("route", ["dask", "in-memory"])
+def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path, route):
+    # on Dask the terrain fits (localisation, node z) take the tiles' points read back, as one
+    # file's; in memory (the default where the tiles fit) the points read: with every point
+    # gridded, the same lines and mesh to the byte either way
+    options = RunOptions(holdout=0.0, scheduler=scheduler if route == "dask" else None)
     tiled = run_pipeline(survey / "tiles", tmp_path / "tiled", options)
     single = run_pipeline(survey / "single.laz", tmp_path / "single", options)
+    assert ("read back" in tiled["seconds"]) == (route == "dask")
     assert io.read_raster(tmp_path / "tiled" / "dem.tif").values.tobytes() == \
         io.read_raster(tmp_path / "single" / "dem.tif").values.tobytes()
     for key in ("nodes", "triangles", "n_breakpoints", "n_breaklines", "min_angle_deg",
@@ -117,7 +121,7 @@ def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path):
     for name in ("mesh.2dm", "breaklines.gpkg"):
         assert (tmp_path / "tiled" / name).read_bytes() == \
             (tmp_path / "single" / name).read_bytes(), name
-    # slope and breakpoints went file to file for the tiles, in memory for the one file
+    # slope and breakpoints went file to file for the tiles on Dask, in memory otherwise
     for name in ("slope.tif", "breakpoints.tif"):
         with rasterio.open(tmp_path / "tiled" / name) as a, \
                 rasterio.open(tmp_path / "single" / name) as b:
@@ -188,8 +192,8 @@ def test_a_tile_in_another_crs_or_none_is_refused_by_name(survey, tmp_path):
 def test_grid_command_on_its_own_local_cluster_with_progress_and_cancel(survey, tmp_path):
     out = tmp_path / "dem.tif"
     result = subprocess.run([FLOODMESH, "grid", str(survey / "tiles" / "*.laz"), "--cell-size",
-                             "1", "--holdout", "0.01", "--workers", "2", "--out", str(out)],
-                            capture_output=True, text=True, timeout=600)
+                             "1", "--holdout", "0.01", "--workers", "2", "--scheduler", "local",
+                             "--out", str(out)], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     assert "DEM of 4 tiles" in result.stdout and (tmp_path / "holdout.gpkg").exists()
     assert np.isfinite(io.read_raster(out).values).mean() > 0.99
@@ -199,6 +203,43 @@ def test_grid_command_on_its_own_local_cluster_with_progress_and_cancel(survey, 
                          out_path=tmp_path / "cancelled.tif", progress=seen.append,
                          cancelled=lambda: len(seen) >= 1)
     assert seen and not (tmp_path / "cancelled.tif").exists()
+
+
+def test_tiles_that_fit_in_memory_are_read_without_a_cluster_to_the_same_dem(survey, tmp_path):
+    """By default tiles that fit in memory with their grid are read on threads and gridded at
+    once, as one file, with no cluster to start: the local cluster's DEM and check points; a
+    cancel between tiles stops the reading."""
+    local = tmp_path / "local"
+    local.mkdir()
+    grid = [FLOODMESH, "grid", str(survey / "tiles"), "--cell-size", "0.5", "--holdout", "0.01"]
+    said = []
+    for folder, route in ((tmp_path, []), (local, ["--scheduler", "local"])):
+        result = subprocess.run([*grid, *route, "--out", str(folder / "dem.tif")],
+                                capture_output=True, text=True, timeout=600)
+        assert result.returncode == 0, result.stderr
+        said.append(result.stdout)
+    assert "m from 4 tiles (288,000 points) written" in said[0]
+    assert "DEM of 4 tiles (288,000 points) written" in said[1]
+    in_memory, on_dask = io.read_raster(tmp_path / "dem.tif"), io.read_raster(local / "dem.tif")
+    assert in_memory.transform == on_dask.transform
+    np.testing.assert_array_equal(in_memory.values, on_dask.values)
+    held = []
+    for folder in (tmp_path, local):  # read by GDAL (fiona), as QGIS reads them
+        with fiona.open(folder / "holdout.gpkg") as layer:
+            held.append(sorted(f.geometry.coordinates for f in layer))
+    assert len(held[0]) == 2880 and held[0] == held[1]
+    read = read_point_tiles(survey / "tiles", 1.0, holdout=0.01, seed=5, workers=2)
+    kept = [_tile_points(str(p), CRS.from_epsg(25832).to_wkt(), None, 0.01, 5)
+            for p in sorted((survey / "tiles").glob("*.laz"))]
+    np.testing.assert_array_equal(read.gridding, np.concatenate([k[0] for k in kept]))
+    np.testing.assert_array_equal(read.holdout, np.concatenate([k[1] for k in kept]))
+    assert (read.n_tiles, read.n_points) == (4, len(read.gridding) + len(read.holdout))
+    polls = []
+    with pytest.raises(Cancelled):
+        read_point_tiles(survey / "tiles", 1.0, workers=1,
+                         cancelled=lambda: polls.append(1) or len(polls) > 1)
+    # where they would not fit, None: the caller grids them on Dask
+    assert read_point_tiles(survey / "tiles", 1.0, memory=1) is None
 
 
 def test_dem_tiles_are_read_as_one_grid(tmp_path):
