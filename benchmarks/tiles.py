@@ -1,6 +1,8 @@
 """A river reach as 1 km² LAZ tiles: wall time and peak memory of gridding it tile by tile on a
-local Dask cluster as the area grows, and one file against tiles of the same 4 km² (identical
-DEMs). Prints a table.
+local Dask cluster as the area grows, one file against tiles of the same 4 km² (identical
+DEMs), the whole chain on the same 4 km² as tiles read in memory (the default where they fit)
+against one file, and the 100 km² survey projected from the largest area measured. Prints a
+table.
 
     nice .venv/bin/python benchmarks/tiles.py [--areas 1,4,16,36] [--run 1,4]
                  [--data /var/tmp/floodmesh-bench] [--workers 2] [--density 9] [--clean]
@@ -9,8 +11,10 @@ The synthetic floodplain (9 ground points/m², 5 cm noise: a sinuous river with 
 1 km band, a road embankment every 2 km, undulating ground) is generated once into ``--data``
 (outside the repository; about 60 MB per 1 km² tile, 2.2 GB for 36 km²) and kept there, so a
 rerun measures the chain, not the generator; ``--clean`` removes it at the end. Each area is
-gridded (``floodmesh grid``); the areas of ``--run`` also go through the whole chain
-(``floodmesh run``), whose report's step times are printed too. Peak memory is the largest sum
+gridded on a local cluster (``floodmesh grid --scheduler local``); the areas of ``--run`` also
+go through the whole chain (``floodmesh run --scheduler local``), whose report's step times are
+printed too. With 4 km² in ``--run``, ``floodmesh run`` of its tiles by default (read in memory)
+and of one LAZ file of the same points are timed in turn. Peak memory is the largest sum
 of the resident memory of the command and its Dask worker processes, sampled every 0.1 s, and
 the command's own peak beside it (the part that grows with the area: after gridding it holds
 the whole-raster state); CPU seconds are theirs too (user + system), the measure of work when
@@ -34,6 +38,7 @@ FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
 CRS = "EPSG:25832"
 ORIGIN = (600_000.0, 5_700_000.0)
 TILE = 1000.0
+LOCAL = ["--scheduler", "local"]  # the tile rows measure the local cluster, whatever fits
 
 
 def ground(x, y):
@@ -111,6 +116,39 @@ def tile_folder(data: Path, area_km2: int, tiles: list[Path]) -> Path:
     return folder
 
 
+def one_file(data: Path, tiles: list[Path]) -> Path:
+    """The tiles' points as one LAZ file (written once, kept with the tiles)."""
+    import laspy
+
+    single = data / "single_4km2.laz"
+    if not single.exists():
+        with laspy.open(tiles[0]) as first:
+            header = first.header
+        with laspy.open(single, mode="w", header=header) as writer:
+            for path in tiles:
+                with laspy.open(path) as reader:
+                    for chunk in reader.chunk_iterator(2_000_000):
+                        writer.write_points(chunk)
+    return single
+
+
+def project(rows: list, area: int = 100) -> None:
+    """The survey of ``area`` km² (1 km² tiles) projected from the two largest areas measured of
+    each kind on a local cluster: wall and CPU linear in the area, the workers' peak flat (the
+    largest measured), the command's own memory linear through the two."""
+    for kind in ("grid tiles", "run tiles"):
+        measured_rows = sorted((r for r in rows if r[0] == kind), key=lambda r: r[1])
+        if len(measured_rows) < 2:
+            continue
+        (_, a0, _, w0, c0, p0, o0), (_, a1, n1, w1, c1, p1, o1) = measured_rows[-2:]
+        own = o1 + (o1 - o0) / (a1 - a0) * (area - a1)
+        print(f"{kind} projected to {area} km² ({area} tiles, {n1 / a1 * area / 1e6:,.0f} M "
+              "points) "
+              f"from {a0} and {a1} km² (the largest measured): wall {w1 / a1 * area:,.0f} s, "
+              f"CPU {c1 / a1 * area:,.0f} s, the command {own:,.0f} MB, command and workers "
+              f"{max(p1 - o1 + own, p1):,.0f} MB")
+
+
 def measured(command: list[str]) -> tuple[float, float, float, float, str]:
     """(wall seconds, CPU seconds of the command and its workers, peak MB of the process tree's
     summed RSS, peak MB of the command's own RSS, stdout) of a command. The command's own peak
@@ -170,14 +208,14 @@ def main():
             if area in areas:
                 seconds, cpu, peak, own, _ = measured([FLOODMESH, "grid", folder, "--cell-size",
                                                   "1", "--workers", str(args.workers),
-                                                  "--out", str(out / f"dem_{area}.tif")])
+                                                  *LOCAL, "--out", str(out / f"dem_{area}.tif")])
                 rows.append(("grid tiles", area, points, seconds, cpu, peak, own))
                 print(f"  grid {area} km²: {seconds:.0f} s, {peak:.0f} MB", file=sys.stderr,
                       flush=True)
             if area in chain:
                 seconds, cpu, peak, own, _ = measured([FLOODMESH, "run", folder,
-                                                  "--workers", str(args.workers), "--out",
-                                                  str(out / f"run_{area}")])
+                                                  "--workers", str(args.workers), *LOCAL,
+                                                  "--out", str(out / f"run_{area}")])
                 rows.append(("run tiles", area, points, seconds, cpu, peak, own))
                 report = json.loads((out / f"run_{area}" / "report.json").read_text())
                 steps.append((area, report["seconds"], report["triangles"]))
@@ -186,19 +224,18 @@ def main():
                       flush=True)
         # one file against tiles: the same 4 km², the same DEM
         compare = None
+        if 4 in chain:  # the whole chain: tiles in memory (the default) against one file
+            single = one_file(data, tiles_for(data, 4, args.density))
+            folder = str(tile_folder(data, 4, tiles_for(data, 4, args.density)))
+            for what, source in (("run tiles, in memory", folder), ("run one file (peer)",
+                                                                   str(single))):
+                seconds, cpu, peak, own, _ = measured([FLOODMESH, "run", source, "--workers",
+                                                      str(args.workers), "--out",
+                                                      str(out / "run_pair")])
+                rows.append((what, 4, int(args.density * 4e6), seconds, cpu, peak, own))
+                shutil.rmtree(out / "run_pair")
         if 4 in areas:  # needs the tiles' DEM of 4 km²
-            import laspy
-
-            tiles = tiles_for(data, 4, args.density)
-            single = data / "single_4km2.laz"
-            if not single.exists():
-                with laspy.open(tiles[0]) as first:
-                    header = first.header
-                with laspy.open(single, mode="w", header=header) as writer:
-                    for path in tiles:
-                        with laspy.open(path) as reader:
-                            for chunk in reader.chunk_iterator(2_000_000):
-                                writer.write_points(chunk)
+            single = one_file(data, tiles_for(data, 4, args.density))
             seconds, cpu, peak, own, _ = measured([FLOODMESH, "grid", str(single), "--cell-size",
                                               "1", "--out", str(out / "dem_single_4.tif")])
             rows.append(("grid one file (peer)", 4, int(args.density * 4e6), seconds, cpu,
@@ -226,6 +263,7 @@ def main():
     for area, seconds, triangles in steps:
         print(f"run {area} km² ({triangles:,} triangles), seconds per step: " + ", ".join(
             f"{name} {value:.0f}" for name, value in seconds.items() if value >= 0.5))
+    project(rows)
     if compare:
         same_transform, same_nan, diff, shape = compare
         print(f"4 km² one file vs tiles: DEM {shape[1]} x {shape[0]} cells, same georeference "

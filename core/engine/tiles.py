@@ -611,6 +611,25 @@ def _round_one(client, tiles: list, crs_wkt: str, classes, holdout: float, seed:
     return meta, edges
 
 
+def _overlaps(tiles: list) -> list[str]:
+    """A note on tiles whose points' bounds overlap (a buffered delivery), for a cluster, which
+    cannot tell their shared points apart as ``read_point_tiles`` does in memory."""
+    pairs = []
+    for i, a in enumerate(tiles):
+        for b in tiles[i + 1:]:
+            (ax0, ay0, ax1, ay1), (bx0, by0, bx1, by1) = a["bounds"], b["bounds"]
+            if min(ax1, bx1) > max(ax0, bx0) and min(ay1, by1) > max(ay0, by0):
+                pairs.append(f"{Path(a['path']).name} and {Path(b['path']).name}")
+    if not pairs:
+        return []
+    named = "; ".join(pairs[:3]) + (f"; {len(pairs) - 3} more" if len(pairs) > 3 else "")
+    return [f"{len(pairs)} pair{'s' * (len(pairs) > 1)} of tiles overlap ({named}): "
+            "on a cluster a point both hold is gridded once (the TIN keeps one) but counted "
+            "twice, and may be held out from one and gridded from the other; give the tiles "
+            "without their buffer (lastile -remove_buffer), or run without --scheduler where "
+            "they fit in memory, which counts them once"]
+
+
 @dataclass
 class _Layout:
     """Round two's layout of the DEM over the tiles that count (``_tile_layout``)."""
@@ -643,6 +662,7 @@ def _tile_layout(meta: list, classes, holdout: float, cell_size: float, max_gap:
     if classes is None and any(m["kind"] == "ground" for m in counted):
         classes = (GROUND_CLASS,)  # round two re-reads tiles with ground: their ground
     check_holdout_count(holdout, n_points)
+    notes += _overlaps([meta[i] for i in gridded])
     bounds = (min(meta[i]["bounds"][0] for i in gridded),
               min(meta[i]["bounds"][1] for i in gridded),
               max(meta[i]["bounds"][2] for i in gridded),
@@ -806,12 +826,58 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
             for read in reads:
                 read.cancel()
     counted = _tiles_counted(meta, classes, skip_unreadable, notes)
-    gridding = [points[i] for i in counted if meta[i]["n_gridding"]]
-    _check_enough(sum(len(p) for p in gridding), len(meta), classes)
-    check_holdout_count(holdout, sum(meta[i]["n_points"] for i in counted))
-    return TilePoints(np.concatenate(gridding), np.concatenate([meta[i]["holdout"]
-                                                                for i in counted]),
-                      sum(meta[i]["n_points"] for i in counted), len(counted), notes, tile_crs)
+    gridding = [points[i] for i in counted]
+    held = [meta[i]["holdout"] for i in counted]
+    _count_repeats_once(gridding, held, [Path(meta[i]["path"]).name for i in counted], notes)
+    n_gridding = sum(len(p) for p in gridding)
+    n_points = n_gridding + sum(len(h) for h in held)
+    _check_enough(n_gridding, len(meta), classes)
+    check_holdout_count(holdout, n_points)
+    return TilePoints(np.concatenate(gridding), np.concatenate(held), n_points, len(counted),
+                      notes, tile_crs)
+
+
+def _count_repeats_once(gridding: list, held: list, names: list, notes: list) -> None:
+    """Points that overlapping tiles both hold (a buffered delivery, a tile cut again with a
+    margin) counted once: each point identical to 0.1 mm in x, y and z to one of an earlier
+    tile is dropped from the later tile's points to grid (``gridding``) or held out (``held``),
+    in place, with a note naming both tiles. Only points within another tile's bounds are
+    compared, so tiles that meet without overlapping cost nothing. A point held out in one tile
+    and gridded in another stays held out: the check stays independent of the grid."""
+    parts = [np.concatenate([g, h]) for g, h in zip(gridding, held)]
+    boxes = [(p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()) if len(p) else None
+             for p in parts]
+    keys, owners, rows = [], [], []
+    for i, (xyz, box) in enumerate(zip(parts, boxes)):
+        near = np.zeros(len(xyz), bool)
+        for j, other in enumerate(boxes):
+            if j != i and box is not None and other is not None and (
+                    other[0] <= box[2] and box[0] <= other[2] and other[1] <= box[3]
+                    and box[1] <= other[3]):
+                near |= _within(xyz, other)
+        index = np.flatnonzero(near)
+        keys.append(np.rint(xyz[index] * 1e4).astype(np.int64))
+        owners.append(np.full(len(index), i))
+        rows.append(index)
+    if not sum(len(r) for r in rows):
+        return
+    keys, owners, rows = np.concatenate(keys), np.concatenate(owners), np.concatenate(rows)
+    order = np.lexsort((owners, keys[:, 2], keys[:, 1], keys[:, 0]))
+    keys, owners, rows = keys[order], owners[order], rows[order]
+    starts = np.ones(len(keys), bool)
+    starts[1:] = (keys[1:] != keys[:-1]).any(axis=1)
+    first = owners[np.maximum.accumulate(np.where(starts, np.arange(len(keys)), 0))]
+    repeat = owners != first  # a later tile's copy of an earlier tile's point
+    for i in np.unique(owners[repeat]):
+        mine = repeat & (owners == i)
+        for j, n in zip(*np.unique(first[mine], return_counts=True)):
+            n = int(n)
+            notes.append(f"tile {names[i]} repeats {n:,} point{'s' * (n > 1)} of tile "
+                         f"{names[j]} where the two overlap: they are counted once")
+        drop = rows[mine]
+        n_grid = len(gridding[i])
+        gridding[i] = np.delete(gridding[i], drop[drop < n_grid], axis=0)
+        held[i] = np.delete(held[i], drop[drop >= n_grid] - n_grid, axis=0)
 
 
 def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,

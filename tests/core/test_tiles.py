@@ -302,3 +302,51 @@ def test_tiles_whose_points_exceed_memory_fit_the_dem_cells_with_a_note(survey, 
     report = run_pipeline(survey / "tiles", tmp_path / "out", RunOptions(scheduler=scheduler))
     assert report["terrain_fit"]["points"] == "DEM cell centres"
     assert any("more than memory holds" in n and "cell centres" in n for n in report["notes"])
+
+
+def test_overlapping_tiles_count_their_shared_points_once(survey, tmp_path):
+    """A buffered delivery: each tile carries its neighbours' points 10 m beyond its edge. Read
+    in memory (the default where they fit), every point is counted once, with a note naming the
+    tiles that overlap, the DEM is the one file's, and no check point is a copy of a point
+    gridded."""
+    whole = io.read_points(survey / "single.laz")
+    xyz = whole.xyz
+    (tmp_path / "buffered").mkdir()
+    for xs in (0, 150):
+        for ys in (0, 120):
+            inside = ((xyz[:, 0] >= X0 + xs - 10) & (xyz[:, 0] < X0 + xs + 160)
+                      & (xyz[:, 1] >= Y0 + ys - 10) & (xyz[:, 1] < Y0 + ys + 130))
+            io.write_points_las(tmp_path / "buffered" / f"tile_{xs}_{ys}.laz",
+                                PointCloud(xyz[inside], whole.crs))
+    read = read_point_tiles(tmp_path / "buffered", 1.0, holdout=0.01, seed=3)
+    assert read.n_points == len(xyz) == len(read.gridding) + len(read.holdout)
+    overlap = [n for n in read.notes if "where the two overlap: they are counted once" in n]
+    assert len(overlap) == 5, read.notes  # 3 later tiles meet the first; 2 more pairs
+    assert any("tile_150_120.laz repeats" in n and "of tile tile_0_0.laz" in n for n in overlap)
+    keys = {tuple(p) for p in np.rint(read.gridding * 1e4).astype(np.int64)}
+    assert not any(tuple(p) in keys for p in np.rint(read.holdout * 1e4).astype(np.int64))
+    assert len(keys) == len(read.gridding)
+    report = run_pipeline(tmp_path / "buffered", tmp_path / "out", RunOptions(holdout=0.0))
+    single = run_pipeline(survey / "single.laz", tmp_path / "single", RunOptions(holdout=0.0))
+    assert report["n_points"] == single["n_points"] == len(xyz)
+    np.testing.assert_array_equal(io.read_raster(tmp_path / "out" / "dem.tif").values,
+                                  io.read_raster(tmp_path / "single" / "dem.tif").values)
+    assert any("counted once" in n for n in report["notes"])
+
+
+def test_overlapping_tiles_on_a_cluster_are_named_in_a_note(survey, scheduler, tmp_path):
+    """On a cluster the shared points of overlapping tiles cannot be told apart: the note names
+    the tiles and the way to count them once; tiles that only meet get no such note."""
+    whole = io.read_points(survey / "single.laz")
+    xyz = whole.xyz
+    (tmp_path / "buffered").mkdir()
+    for xs in (0, 150):
+        inside = (xyz[:, 0] >= X0 + xs - 10) & (xyz[:, 0] < X0 + xs + 160)
+        io.write_points_las(tmp_path / "buffered" / f"strip_{xs}.laz",
+                            PointCloud(xyz[inside], whole.crs))
+    tiled = grid_point_tiles(tmp_path / "buffered", 1.0, scheduler=scheduler)
+    overlap = [n for n in tiled.notes if "of tiles overlap" in n]
+    assert len(overlap) == 1 and "strip_0.laz and strip_150.laz" in overlap[0], tiled.notes
+    assert "without --scheduler" in overlap[0]
+    alone = grid_point_tiles(survey / "tiles", 1.0, scheduler=scheduler)
+    assert not any("of tiles overlap" in n for n in alone.notes), alone.notes
