@@ -7,7 +7,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..engine.tiles import TileSet, expand_tiles, is_tile_set, tile_kind
+from ..engine.tiles import TileSet, expand_tiles, is_large_copc, is_tile_set, tile_kind
 from ..errors import FloodMeshError
 from ..io import RASTER_EXTENSIONS, require_file
 from ..options import is_point_source
@@ -48,7 +48,8 @@ def open_source(given, *, skip_unreadable: bool = False) -> Source:
     """The ``Source`` of a file, folder, glob pattern or list of these (or a ``Source``, as it
     is): a folder, pattern or several files are tiles (``tiles.expand_tiles``; with
     ``skip_unreadable`` an unreadable tile is left out with a note), one file a point file
-    (LAS/LAZ, COPC, EPT, XYZ/CSV) or a DEM raster by its name."""
+    (LAS/LAZ, COPC, EPT, XYZ/CSV) or a DEM raster by its name; a COPC file whose points would
+    not fit in memory is read in windows, as tiles (``tiles.is_large_copc``)."""
     if isinstance(given, Source):
         if given.tiled and skip_unreadable:
             return Source(given.kind, expand_tiles(given.paths, skip_unreadable=True),
@@ -62,6 +63,8 @@ def open_source(given, *, skip_unreadable: bool = False) -> Source:
     if path.suffix.lower() in RASTER_EXTENSIONS:
         return Source(DEM, (path,), given)
     if is_point_source(path):
+        if is_large_copc(path):  # read in windows, as tiles
+            return Source(POINT_TILES, TileSet([path], (), skip_unreadable), given)
         return Source(POINTS, (path,), given)
     require_file(path, "input")
     raise FloodMeshError(f"{path.name}: unknown input type '{path.suffix.lower()}'; give a "

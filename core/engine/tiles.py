@@ -193,14 +193,79 @@ def _unreadable_note(exc: _Unreadable, skip: bool) -> str:
     return f"{exc}: the tile was left out ({SKIP_UNREADABLE})"
 
 
-def _tile_header(path: Path) -> tuple[int, object, tuple | None]:
-    """(points in the file, its CRS or None, its bounds (m) or None); for text, the count is an
-    estimate from its size and the bounds are unknown."""
+# A COPC file (cloud-optimised LAZ) of more points than this is read in windows of about as
+# many, each a tile of its own (``copc_windows``): a reach larger than memory needs no re-tiling
+WINDOW_POINTS = 10_000_000
+_WINDOW = "#window="  # a COPC window's tile path: FILE#window=XMIN,YMIN,XMAX,YMAX (whole metres)
+
+
+def is_copc(header) -> bool:
+    """Whether a LAS header (laspy's) is a COPC file's: its first VLR is COPC's info record."""
+    return bool(header.vlrs) and (header.vlrs[0].user_id, header.vlrs[0].record_id) == ("copc", 1)
+
+
+def copc_windows(path: str, count: int, bounds: tuple) -> list[PointTile]:
+    """The windows of a COPC file of ``count`` points over ``bounds`` (m): a grid of squares
+    about ``WINDOW_POINTS`` points each (by the mean density), half-open on whole metres so
+    that every point lies in one; each a ``PointTile`` whose path names the window."""
+    xmin, ymin, xmax, ymax = bounds
+    side = math.sqrt((xmax - xmin) * (ymax - ymin) * WINDOW_POINTS / max(count, 1)) or 1.0
+    cols = max(1, math.ceil((xmax - xmin) / side))
+    rows = max(1, math.ceil((ymax - ymin) / side))
+    xs = np.linspace(math.floor(xmin), math.floor(xmax) + 1, cols + 1).round()
+    ys = np.linspace(math.floor(ymin), math.floor(ymax) + 1, rows + 1).round()
+    share = count / (cols * rows)
+    return [PointTile(f"{path}{_WINDOW}{xs[c]:.0f},{ys[r]:.0f},{xs[c + 1]:.0f},{ys[r + 1]:.0f}",
+                      math.ceil(share), (float(xs[c]), float(ys[r]), float(xs[c + 1]),
+                                         float(ys[r + 1])))
+            for r in range(rows) for c in range(cols)]
+
+
+def is_large_copc(path: Path) -> bool:
+    """Whether ``path`` is a COPC file of more than ``WINDOW_POINTS`` points, more than memory
+    holds (``limits.fits_in_memory``): read in windows as tiles, not whole."""
+    # lazy: laspy loads only when this runs
+    import laspy
+
+    if path.suffix.lower() != ".laz" or not path.is_file():
+        return False
+    try:
+        with laspy.open(path) as reader:
+            count = int(reader.header.point_count)
+            return (is_copc(reader.header) and count > WINDOW_POINTS
+                    and not fits_in_memory(points=count))
+    except Exception:  # read and named as one file
+        return False
+
+
+def _read_window(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """(xyz, LAS classes) of the points of a COPC window (``copc_windows``): the octree nodes
+    that reach it decoded, their points within it kept."""
+    # lazy: laspy loads only when this runs
+    import laspy
+
+    file, box = path.split(_WINDOW)
+    x0, y0, x1, y1 = map(float, box.split(","))
+    try:
+        with laspy.CopcReader.open(file) as reader:
+            points = reader.query(bounds=laspy.Bounds(mins=np.array([x0, y0]),
+                                                      maxs=np.array([x1, y1])))
+    except Exception as exc:
+        raise _Unreadable(f"tile {Path(file).name} is not a readable COPC file ({exc})") from None
+    x, y = np.asarray(points.x), np.asarray(points.y)
+    inside = (x >= x0) & (x < x1) & (y >= y0) & (y < y1)
+    xyz = np.column_stack([x[inside], y[inside], np.asarray(points.z)[inside]])
+    return xyz, np.asarray(points.classification)[inside]
+
+
+def _tile_header(path: Path) -> tuple[int, object, tuple | None, bool]:
+    """(points in the file, its CRS or None, its bounds (m) or None, whether it is COPC); for
+    text, the count is an estimate from its size and the bounds are unknown."""
     # lazy: laspy loads only when this runs
     import laspy
 
     if path.suffix.lower() not in LAS_EXTENSIONS:
-        return max(1, path.stat().st_size // 20), None, None
+        return max(1, path.stat().st_size // 20), None, None, False
     if file_format(path) != "las":
         raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file (it does not begin "
                           "with the LAS signature 'LASF')")
@@ -213,7 +278,7 @@ def _tile_header(path: Path) -> tuple[int, object, tuple | None]:
             header = reader.header
             return int(header.point_count), file_crs, (
                 float(header.mins[0]), float(header.mins[1]), float(header.maxs[0]),
-                float(header.maxs[1]))
+                float(header.maxs[1])), is_copc(header)
     except Exception as exc:
         raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file ({exc})") from None
 
@@ -222,13 +287,14 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
                       ) -> tuple[list[PointTile], CRS, list[str]]:
     """Read every tile's header; refuse, naming the tile, one that is unreadable (or leave it out
     with a note, ``skip_unreadable``), without a CRS (unless ``crs`` is given), in a CRS not in
-    metres, or in another CRS than the first. An empty tile is left out with a note. Returns the
+    metres, or in another CRS than the first. An empty tile is left out with a note; a COPC file
+    of more than ``WINDOW_POINTS`` points becomes its windows (``copc_windows``). Returns the
     tiles, their CRS and the notes."""
     tiles, first, notes = [], None, []
     for path in map(Path, paths):
         name = path.name
         try:
-            count, file_crs, bounds = _tile_header(path)
+            count, file_crs, bounds, copc = _tile_header(path)
         except _Unreadable as exc:
             notes.append(_unreadable_note(exc, skip_unreadable))
             continue
@@ -244,7 +310,10 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
                 f"tile {name} is in {tile_crs.name}, but tile {first[0]} is in {first[1].name}: "
                 f"all tiles must share one CRS; reproject {name} to the others' CRS first (pdal "
                 "translate IN OUT -f filters.reprojection --filters.reprojection.out_srs=EPSG:XXXX)")
-        tiles.append(PointTile(str(path), count, bounds))
+        if copc and count > WINDOW_POINTS:
+            tiles += copc_windows(str(path), count, bounds)
+        else:
+            tiles.append(PointTile(str(path), count, bounds))
     if not tiles:
         raise FloodMeshError(f"none of the {len(paths)} tiles holds points that can be read: "
                              "check the tiles")
@@ -270,6 +339,8 @@ def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     # lazy: laspy loads only when this runs
     import laspy
 
+    if _WINDOW in str(path):
+        return _read_window(str(path))
     if path.suffix.lower() not in LAS_EXTENSIONS:
         try:
             return read_xyz(path), None
