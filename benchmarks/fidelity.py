@@ -3,12 +3,14 @@ analytic floodplains whose true surface and true break lines are known.
 
     nice .venv/bin/python benchmarks/fidelity.py [--quick] [--chains landed,default,no-join,no-spacing]
 
-For each terrain (the demo's geometry with a seed it never saw, and an oblique one: a straight
-river at 32° to the grid, a tributary, a levee and a road), noise (5, 15 cm) and density
-(9, 2 ground points/m²), the whole chain (``run_pipeline``, reference-case options) runs once per
-chain of options; its mesh is scored against the TRUE surface (RMSE over 100,000 random points)
+For each terrain of the corpus (``benchmarks/corpus.py``: the demo's geometry with a seed it
+never saw, an oblique one, lines at every angle to the grid, crossings and a junction, narrow
+embankments; ``--terrains``), noise (``--noise``, 5 and 15 cm by default) and density
+(``--density``, 9 and 2 ground points/m²), the whole chain (``run_pipeline``, reference-case
+options) runs once per chain of options; its mesh is scored against the TRUE surface (RMSE over 100,000 random points)
 and its break lines against the true ones (recall, precision within 2 m, pieces per true line,
-where the pieces of each true line meet: junction or crossing, mid-run, second line in the band)
+where the pieces of each true line meet: junction or crossing, mid-run, second line in the band;
+recall and pieces per feature)
 and the whole segments the PSLG left out for the angle bound and the line ends snapped onto
 another line (T-junctions) are counted.
 Peers, in the same run: uniform 25° Triangle meshes without break lines whose nodes carry the
@@ -31,7 +33,9 @@ import numpy as np
 import shapely
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from corpus import TERRAINS  # noqa: E402  (benchmarks/corpus.py)
 from floodmesh.core.frontends import demo
 from floodmesh.core import io  # noqa: E402
 from floodmesh.core.steps.accuracy import tin_elevation  # noqa: E402
@@ -40,15 +44,6 @@ from floodmesh.core.options import RunOptions  # noqa: E402
 from floodmesh.core.chain.pipeline import run_pipeline  # noqa: E402
 from floodmesh.core.steps.validation import score_breaklines  # noqa: E402
 
-_river = shapely.LineString([(-20, 28), (320, 238)])
-OBLIQUE = demo.Floodplain({
-    "river": (_river, demo.Profile(-2.0, 5.0, 9.0)),
-    "tributary": (shapely.LineString([(30, 260), (70, 190), (120, 114)]),
-                  demo.Profile(-1.5, 2.5, 5.5)),
-    "levee": (_river.offset_curve(-32.0), demo.Profile(1.2, 1.5, 5.1)),
-    "road": (shapely.LineString([(175, -10), (240, 50), (320, 90)]), demo.Profile(2.0, 3.5, 6.5)),
-}, terrace=None)
-TERRAINS = {"demo geometry, seed 7": (demo.DEMO, 7), "oblique geometry, seed 11": (OBLIQUE, 11)}
 # option sets of the chain: "landed" is the chain before issue 18's steps (no localisation, node
 # z from the DEM, conforming Delaunay), "default" today's
 CHAINS = {
@@ -172,7 +167,13 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
         mesh = Mesh(nodes, triangles, points.crs)
         traced = io.read_lines_gpkg(out / "breaklines.gpkg")
         score = score_breaklines(traced, reference, 2.0)
-        score["breaks"] = breaks(traced, reference, feature_of_lines(floodplain))
+        features = feature_of_lines(floodplain)
+        score["breaks"] = breaks(traced, reference, features)
+        score["features"] = {f: (score_breaklines(traced, [r for r, g in zip(reference, features)
+                                                           if g == f], 2.0)["recall"],
+                                 float(np.mean([p for p, g in zip(score["pieces"], features)
+                                                if g == f])))
+                             for f in dict.fromkeys(features)}
         # whole break-line segments the PSLG left out for the angle bound (see build_pslg)
         score["t_junctions"] = report["terrain_fit"].get("t_junctions_snapped", 0)
         score["dropped"] = sum(int(m) for n in report["notes"]
@@ -196,6 +197,9 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
               f"{score['recall']:>8.3f}{score['precision']:>10.3f}{score['mean_pieces']:>8.2f}"
               f"{angle:>10.1f}°{seconds:>6.0f}  {'/'.join(map(str, score['breaks'].values()))}")
         results.append((chain, ratio, score))
+    for chain, n, rmse, score, angle, seconds in rows:
+        print(f"{chain}, per feature (recall, pieces per true line): " + "; ".join(
+            f"{f} {r:.2f}, {p:.1f}" for f, (r, p) in score["features"].items()))
     print("uniform 25° (exact z): " + ", ".join(f"{n:,} nodes {100 * r:.2f} cm"
                                                 for n, r in uniform[2::2]))
     if delatin:
@@ -209,11 +213,20 @@ def main():
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
                         help="only the reference case (demo geometry, 9 points/m², 5 cm)")
+    parser.add_argument("--terrains", default="all",
+                        help="terrains of benchmarks/corpus.py by the start of their names, "
+                             "comma-separated (default all: " + "; ".join(TERRAINS) + ")")
+    parser.add_argument("--noise", default="0.05,0.15", help="noise (m), comma-separated")
+    parser.add_argument("--density", default="9,2",
+                        help="ground points per m², comma-separated (the corpus: 1 to 16)")
     parser.add_argument("--chains", default="landed,default,no-join,no-spacing",
                         help=f"option sets to run, of {', '.join(CHAINS)}")
     args = parser.parse_args()
     chains = args.chains.split(",")
-    cases = [(t, n, d) for t in TERRAINS for n in (0.05, 0.15) for d in (9.0, 2.0)]
+    chosen = [t for t in TERRAINS if args.terrains == "all"
+              or any(t.startswith(w.strip()) for w in args.terrains.split(","))]
+    cases = [(t, float(n), float(d)) for t in chosen for n in args.noise.split(",")
+             for d in args.density.split(",")]
     if args.quick:
         cases = cases[:1]
     summary = []
