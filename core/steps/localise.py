@@ -30,6 +30,12 @@ from .joining import join_pieces, snap_t_junctions
 from .simplify import douglas_peucker_mask
 
 
+# The fit window's least area, in cells: about the window of the reference survey (9 points/m²,
+# 5 cm noise: 8.9 cells, left as it is), which denser or cleaner points no longer shrink (chosen
+# on the corpus of benchmarks/corpus.py: RESULTS.md, "The evaluation corpus")
+MIN_WINDOW_CELLS = 8.0
+
+
 @dataclass(frozen=True)
 class FitWindow:
     """Window of the terrain fits: hinge fits ``half_width`` (m) across a line and
@@ -53,7 +59,9 @@ def fit_window(points: np.ndarray, area: float, cell_size: float, *,
                              "--node-elevation dem)")
     density = len(points) / area
     noise = estimate_noise(points, density, seed=seed, index=index)
-    wanted = (40 + 800 * noise) / density  # m² of window
+    # m² of window: 40 + 800·noise points, and no less than MIN_WINDOW_CELLS cells (dense or
+    # clean points would otherwise shrink it below what places a hinge reliably)
+    wanted = max((40 + 800 * noise) / density, MIN_WINDOW_CELLS * cell_size ** 2)
     half_width = float(np.clip(np.sqrt(wanted) / 2, cell_size, 1.5 * cell_size))
     half_length = float(np.clip(wanted / (4 * half_width), half_width, 6 * cell_size))
     if node_radius is None:

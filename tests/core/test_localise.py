@@ -166,3 +166,21 @@ def test_a_loop_without_a_kink_keeps_its_course():
     [out], _, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0))
     assert counts["vertices_localised"] == 0
     assert out.length == pytest.approx(line.length, rel=1e-6)
+
+
+@pytest.mark.parametrize("density, noise", [(16.0, 0.05), (9.0, 0.0), (25.0, 0.0)])
+def test_dense_or_clean_points_do_not_shrink_the_fit_window_below_eight_cells(density, noise):
+    # the window holds 40 + 800·noise points but covers at least 8 cells: with fewer (2.5 cells
+    # at 16 points/m², 4.4 at 9 points/m² without noise) the corpus's meshes lost up to a third
+    # of their efficiency (benchmarks/RESULTS.md, "The evaluation corpus")
+    window = fit_window(noisy_points(hinge, density=density, noise=noise), 100 * 100, 1.0)
+    assert 4 * window.half_width * window.half_length >= 8.0 - 1e-9
+    assert window.node_radius >= np.sqrt(8.0 / np.pi) - 1e-9
+
+
+def test_the_reference_survey_keeps_its_own_window():
+    # 9 points/m² and 5 cm: (40 + 800·σ)/9 ≈ 8.9 cells, above the least window: unchanged
+    window = fit_window(noisy_points(hinge, density=9.0, noise=0.05), 100 * 100, 1.0)
+    wanted = (40 + 800 * window.noise) / window.density
+    assert wanted > 8.0
+    assert window.half_width == pytest.approx(min(1.5, np.sqrt(wanted) / 2))
