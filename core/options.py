@@ -68,6 +68,9 @@ def parse_formats(text) -> tuple[str, ...]:
 
 MAX_MIN_ANGLE = 34.0  # Triangle's refinement stops terminating reliably above about 33.8 degrees
 DEFAULT_MAX_TRIANGLES = 5_000_000
+# localised break-line pieces are joined across gaps of up to this many cell sizes (--join-gap);
+# chosen on the evaluation corpus (benchmarks/RESULTS.md, "The evaluation corpus")
+JOIN_GAP_CELLS = 10.0
 # The FEMA/NSSDA test wants at least 20 check points (FGDC-STD-007.3-1998, 3.2.1).
 MIN_CHECK_POINTS = 20
 
@@ -288,7 +291,7 @@ class RunOptions:
     localise: bool = True           # break-line vertices onto a two-plane (hinge) fit's kink
     node_elevation: str = "plane"   # NODE_ELEVATIONS: other nodes' z from a local plane fit
     node_radius: float | None = None  # m, the plane fit's radius; default from density, noise
-    join_gap: float | None = None   # m: localised pieces joined across gaps; default 6 d, 0 off
+    join_gap: float | None = None   # m: localised pieces joined across gaps; default 10 d, 0 off
     conforming: bool = False        # conforming Delaunay (Triangle's switch D)
     far_field_area: float | None = None  # m², larger triangles away from the break lines
     flow_area: float | None = None  # m², smaller triangles on low ground by drainage lines
@@ -343,7 +346,7 @@ class RunOptions:
         if self.join_gap is not None and not (math.isfinite(self.join_gap)
                                               and self.join_gap >= 0):
             raise FloodMeshError(f"the join gap must be 0 (off) or more metres, got "
-                                 f"{self.join_gap}; six cell sizes is the default")
+                                 f"{self.join_gap}; ten cell sizes is the default")
         if self.flow_area is not None and not (math.isfinite(self.flow_area)
                                                and self.flow_area >= 0):
             raise FloodMeshError(f"the flow area must be 0 (off) or more m², got "

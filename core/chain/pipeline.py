@@ -23,7 +23,8 @@ from ..io.layer_definition import QLR_NAME, write_layer_definition
 from ..io.outputs import check_output_folder, scratch_folder, staged_folder
 from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_pngs
 from ..io.report_html import HTML_NAME, write_report_html
-from ..options import EXPORT_EXTENSIONS, EXPORT_FORMATS, RunOptions, check_sigma_fits
+from ..options import (EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS, RunOptions,
+                       check_sigma_fits)
 from ..points import PointCloud, split_holdout
 from ..raster import Grid
 from ..steps.accuracy import accuracy_statistics, residuals
@@ -225,7 +226,8 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
             node_radius=options.node_radius, seed=options.seed)
         fits.counts.update(asdict(fits.window))
     if options.localise:
-        join_gap = 6 * dem.cell_size if options.join_gap is None else options.join_gap
+        join_gap = (JOIN_GAP_CELLS * dem.cell_size if options.join_gap is None
+                    else options.join_gap)
         lines, confidence, counts = steps.run(
             "localise", localise_traced, lines, front.measured, fits.window,
             s_crit=options.s_crit, tolerance=dem.cell_size / 10, max_gap=20 * dem.cell_size,

@@ -139,7 +139,7 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
                         "density and noise)")
     p.add_argument("--join-gap", type=float,
                    help="join localised break-line pieces whose ends face each other across at "
-                        "most this gap, m (default 6 cell sizes; 0: off)")
+                        "most this gap, m (default 10 cell sizes; 0: off)")
     p.add_argument("--far-field-area", type=float,
                    help="larger triangles, up to this many m², away from the break lines where "
                         "the terrain is plane (default: max area everywhere)")

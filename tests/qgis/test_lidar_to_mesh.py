@@ -140,7 +140,7 @@ def test_terrain_fit_options_reach_the_chain(processing, demo_points_file, tmp_p
     assert fitted["options"]["far_field_area"] == 400.0 and not fitted["options"]["conforming"]
     assert fitted["terrain_fit"]["node_radius"] > 0 and fitted["terrain_fit"]["vertices_localised"]
     # localised pieces are joined in QGIS too (the default gap: six cells)
-    assert fitted["terrain_fit"]["join_gap_m"] == 6.0 and fitted["terrain_fit"]["pieces_joined"] >= 0
+    assert fitted["terrain_fit"]["join_gap_m"] == 10.0 and fitted["terrain_fit"]["pieces_joined"] >= 0
     assert not plain["options"]["localise"] and plain["options"]["node_elevation"] == "dem"
     assert plain["options"]["conforming"] and "node_radius" not in plain["terrain_fit"]
     lines = QgsVectorLayer(str(runs["fitted"][1] / "breaklines.gpkg"), "lines", "ogr")
