@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import shapely
-from numba import njit
+from numba import njit, prange
 
 from ..engine.nearest import nearest_line, point_index
 from ..errors import FloodMeshError
@@ -132,7 +132,7 @@ def _plane_fits_chunk(index, points, centres, radius):
     return z, rms, count
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _solve4(a, b):
     """Gaussian elimination with partial pivoting of a 4x4 system (a, b are overwritten)."""
     n = 4
@@ -160,28 +160,41 @@ def _solve4(a, b):
     return True
 
 
-@njit(cache=True)
-def _hinge_sse(u, v, z, m, u0, beta):
+@njit(cache=True, nogil=True)
+def _hinge_sse(u, v, z, m, u0, beta, a, b):
     """SSE of the hinge z = a + b·v + c1·min(u-u0, 0) + c2·max(u-u0, 0) over the first m points,
-    its coefficients into ``beta``; inf with fewer than 4 points on a side."""
-    a = np.zeros((4, 4))
-    b = np.zeros(4)
-    row = np.empty(4)
+    its coefficients into ``beta``; inf with fewer than 4 points on a side. ``a`` (4, 4) and
+    ``b`` (4,) are scratch for the normal equations, whose sums run in scalars (each the same
+    additions in the same order as the products of a design row)."""
+    s1 = sv = slo = shi = svv = svlo = svhi = slolo = slohi = shihi = 0.0
+    z1 = zv = zlo = zhi = 0.0
     left = 0
     for k in range(m):
         w = u[k] - u0
-        row[0] = 1.0
-        row[1] = v[k]
-        row[2] = min(w, 0.0)
-        row[3] = max(w, 0.0)
+        lo, hi, vk, zk = min(w, 0.0), max(w, 0.0), v[k], z[k]
         if w < 0:
             left += 1
-        for i in range(4):
-            b[i] += row[i] * z[k]
-            for j in range(4):
-                a[i, j] += row[i] * row[j]
+        s1 += 1.0
+        sv += vk
+        slo += lo
+        shi += hi
+        svv += vk * vk
+        svlo += vk * lo
+        svhi += vk * hi
+        slolo += lo * lo
+        slohi += lo * hi
+        shihi += hi * hi
+        z1 += zk
+        zv += vk * zk
+        zlo += lo * zk
+        zhi += hi * zk
     if left < 4 or m - left < 4:
         return np.inf
+    a[0, 0], a[0, 1], a[0, 2], a[0, 3] = s1, sv, slo, shi
+    a[1, 0], a[1, 1], a[1, 2], a[1, 3] = sv, svv, svlo, svhi
+    a[2, 0], a[2, 1], a[2, 2], a[2, 3] = slo, svlo, slolo, slohi
+    a[3, 0], a[3, 1], a[3, 2], a[3, 3] = shi, svhi, slohi, shihi
+    b[0], b[1], b[2], b[3] = z1, zv, zlo, zhi
     for i in range(4):
         a[i, i] += 1e-9
     if not _solve4(a, b):
@@ -196,45 +209,52 @@ def _hinge_sse(u, v, z, m, u0, beta):
     return sse
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _hinge_fits(px, py, pz, indptr, indices, vx, vy, tx, ty, half_width, half_length):
-    """Per vertex: hinge offset across (m, + to the left of the tangent), z at the hinge, the
-    hinge's RMS residual, slope change across it, the single plane's SSE over the hinge's SSE,
-    the point count (NaN offsets where no fit)."""
+    """Per vertex (on all cores): hinge offset across (m, + to the left of the tangent), z at
+    the hinge, the hinge's RMS residual, slope change across it, the single plane's SSE over
+    the hinge's SSE, the point count (NaN offsets where no fit)."""
     n = len(vx)
     out = np.full((n, 6), np.nan)
-    steps = 24
-    for i in range(n):
-        u, v, z, m = _window_points(px, py, pz, indices[indptr[i]:indptr[i + 1]], vx[i], vy[i],
-                                    tx[i], ty[i], half_width, half_length)
-        if m < 12:
-            continue
-        zmean = 0.0
-        for k in range(m):
-            zmean += z[k]
-        zmean /= m
-        for k in range(m):
-            z[k] -= zmean
-        # one plane z = a + b·v + c·u: the hinge with c1 = c2, at any u0
-        beta = np.zeros(4)
-        u0, best_j = _hinge_offset(u, v, z, m, half_width, steps, beta)
-        if best_j < 0:
-            continue
-        sse = _hinge_sse(u, v, z, m, u0, beta)
-        if not np.isfinite(sse):
-            continue
-        plane = _plane_sse(u, v, z, m)
-        edge = best_j == 0 or best_j == steps
-        out[i, 0] = np.nan if edge else u0
-        out[i, 1] = zmean + beta[0]
-        out[i, 2] = np.sqrt(sse / max(m - 4, 1))
-        out[i, 3] = beta[3] - beta[2]
-        out[i, 4] = (plane - sse) / max(sse / max(m - 4, 1), 1e-12)
-        out[i, 5] = m
+    for i in prange(n):
+        _hinge_fit(px, py, pz, indices[indptr[i]:indptr[i + 1]], vx[i], vy[i], tx[i], ty[i],
+                   half_width, half_length, out[i])
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
+def _hinge_fit(px, py, pz, near, x, y, tx, ty, half_width, half_length, out):
+    """``_hinge_fits`` of one vertex at (x, y), tangent (tx, ty), into ``out`` (6,) (left as
+    it is where no fit)."""
+    steps = 24
+    u, v, z, m = _window_points(px, py, pz, near, x, y, tx, ty, half_width, half_length)
+    if m < 12:
+        return
+    zmean = 0.0
+    for k in range(m):
+        zmean += z[k]
+    zmean /= m
+    for k in range(m):
+        z[k] -= zmean
+    # one plane z = a + b·v + c·u: the hinge with c1 = c2, at any u0
+    beta, a, b = np.zeros(4), np.empty((4, 4)), np.empty(4)
+    u0, best_j = _hinge_offset(u, v, z, m, half_width, steps, beta, a, b)
+    if best_j < 0:
+        return
+    sse = _hinge_sse(u, v, z, m, u0, beta, a, b)
+    if not np.isfinite(sse):
+        return
+    plane = _plane_sse(u, v, z, m)
+    edge = best_j == 0 or best_j == steps
+    out[0] = np.nan if edge else u0
+    out[1] = zmean + beta[0]
+    out[2] = np.sqrt(sse / max(m - 4, 1))
+    out[3] = beta[3] - beta[2]
+    out[4] = (plane - sse) / max(sse / max(m - 4, 1), 1e-12)
+    out[5] = m
+
+
+@njit(cache=True, nogil=True)
 def _window_points(px, py, pz, near, x, y, tx, ty, half_width, half_length):
     """The points ``near`` a vertex at (x, y) with unit tangent (tx, ty) that lie in its fit
     window: their offsets across (u, + to the left) and along (v) and their z, in the first m
@@ -254,18 +274,18 @@ def _window_points(px, py, pz, near, x, y, tx, ty, half_width, half_length):
     return u, v, z, m
 
 
-@njit(cache=True)
-def _hinge_offset(u, v, z, m, half_width, steps, beta):
+@njit(cache=True, nogil=True)
+def _hinge_offset(u, v, z, m, half_width, steps, beta, a, b):
     """The hinge's offset across the line: the least SSE of ``steps`` + 1 offsets evenly over
     ±0.7·``half_width``, refined by a parabola through its neighbours' SSE. Returns the offset
     and the best step's index (-1: no offset fits; 0 or ``steps``: at the window's edge).
-    ``beta`` is scratch for the fits' coefficients."""
+    ``beta``, ``a`` and ``b`` are scratch for the fits (``_hinge_sse``)."""
     reach = 0.7 * half_width
     best, best_j = np.inf, -1
     sses = np.full(steps + 1, np.inf)
     for j in range(steps + 1):
         u0 = -reach + 2 * reach * j / steps
-        sses[j] = _hinge_sse(u, v, z, m, u0, beta)
+        sses[j] = _hinge_sse(u, v, z, m, u0, beta, a, b)
         if sses[j] < best:
             best, best_j = sses[j], j
     h = 2 * reach / steps
@@ -277,7 +297,7 @@ def _hinge_offset(u, v, z, m, half_width, steps, beta):
     return u0, best_j
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _plane_sse(u, v, z, m):
     """SSE of the single plane z = a + b·v + c·u fitted by least squares to the first m points;
     inf where the fit is singular."""
