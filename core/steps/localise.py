@@ -95,6 +95,7 @@ def _chunks(n: int):
 def _plane_fits(index, points, centres, radius):
     """Least-squares planes of the points within ``radius`` (one per centre) of each centre:
     (z at the centre, RMS residual, point count); NaN where fewer than 4 points."""
+    points = np.asarray(points, float)
     parts = [_plane_fits_chunk(index, points, centres[a:b], radius[a:b])
              for a, b in _chunks(len(centres))]
     if not parts:
@@ -110,26 +111,62 @@ def _plane_fits_chunk(index, points, centres, radius):
     fit = count >= 4
     if not fit.any():
         return z, rms, count
-    owner = np.repeat(np.arange(len(centres)), count)
-    p = points[indices]
-    dx, dy = p[:, 0] - centres[owner, 0], p[:, 1] - centres[owner, 1]
-    zmean = np.bincount(owner, p[:, 2], len(centres)) / np.maximum(count, 1)
-    dz = p[:, 2] - zmean[owner]
-    design = np.stack([np.ones_like(dx), dx, dy], axis=1)
-    ata = np.zeros((len(centres), 3, 3))
-    atz = np.zeros((len(centres), 3))
-    for i in range(3):
-        atz[:, i] = np.bincount(owner, design[:, i] * dz, len(centres))
-        for j in range(3):
-            ata[:, i, j] = np.bincount(owner, design[:, i] * design[:, j], len(centres))
+    zmean, ata, atz = _plane_equations(points, indptr, indices, centres)
     ata[~fit] = np.eye(3)
     ata += np.eye(3) * 1e-9
     beta = np.linalg.solve(ata, atz[..., None])[..., 0]
-    resid = dz - (design * beta[owner]).sum(axis=1)
-    sse = np.bincount(owner, resid ** 2, len(centres))
+    sse = _plane_residuals(points, indptr, indices, centres, zmean, beta)
     z[fit] = zmean[fit] + beta[fit, 0]
     rms[fit] = np.sqrt(sse[fit] / np.maximum(count[fit] - 3, 1))
     return z, rms, count
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _plane_equations(points, indptr, indices, centres):
+    """Per centre (on all cores), of its points ``indices[indptr[i]:indptr[i + 1]]``: their
+    mean z and the normal equations (AᵀA (3, 3), Aᵀdz (3,)) of the plane
+    dz = a + b·dx + c·dy, with dx, dy from the centre and dz from that mean, summed point by
+    point."""
+    m = centres.shape[0]
+    zmean, ata, atz = np.empty(m), np.empty((m, 3, 3)), np.empty((m, 3))
+    for i in prange(m):
+        total = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            total += points[indices[k], 2]
+        zmean[i] = total / max(indptr[i + 1] - indptr[i], 1)
+        s1 = sx = sy = sxx = sxy = syy = t1 = tx = ty = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            dx, dy, dz = _offsets(points, indices[k], centres[i], zmean[i])
+            s1, sx, sy = s1 + 1.0, sx + dx, sy + dy
+            sxx, sxy, syy = sxx + dx * dx, sxy + dx * dy, syy + dy * dy
+            t1, tx, ty = t1 + dz, tx + dx * dz, ty + dy * dz
+        ata[i, 0, 0], ata[i, 0, 1], ata[i, 0, 2] = s1, sx, sy
+        ata[i, 1, 0], ata[i, 1, 1], ata[i, 1, 2] = sx, sxx, sxy
+        ata[i, 2, 0], ata[i, 2, 1], ata[i, 2, 2] = sy, sxy, syy
+        atz[i, 0], atz[i, 1], atz[i, 2] = t1, tx, ty
+    return zmean, ata, atz
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _plane_residuals(points, indptr, indices, centres, zmean, beta):
+    """Per centre (on all cores): the SSE of its points about its plane (``beta``: a, b, c of
+    ``_plane_equations``' plane)."""
+    m = centres.shape[0]
+    sse = np.empty(m)
+    for i in prange(m):
+        total = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            dx, dy, dz = _offsets(points, indices[k], centres[i], zmean[i])
+            r = dz - (beta[i, 0] + dx * beta[i, 1] + dy * beta[i, 2])
+            total += r * r
+        sse[i] = total
+    return sse
+
+
+@njit(cache=True, nogil=True)
+def _offsets(points, q, centre, zmean):
+    """Point q's x, y from ``centre`` and z from ``zmean``."""
+    return points[q, 0] - centre[0], points[q, 1] - centre[1], points[q, 2] - zmean
 
 
 @njit(cache=True, nogil=True)
@@ -174,20 +211,10 @@ def _hinge_sse(u, v, z, m, u0, beta, a, b):
         lo, hi, vk, zk = min(w, 0.0), max(w, 0.0), v[k], z[k]
         if w < 0:
             left += 1
-        s1 += 1.0
-        sv += vk
-        slo += lo
-        shi += hi
-        svv += vk * vk
-        svlo += vk * lo
-        svhi += vk * hi
-        slolo += lo * lo
-        slohi += lo * hi
-        shihi += hi * hi
-        z1 += zk
-        zv += vk * zk
-        zlo += lo * zk
-        zhi += hi * zk
+        s1, sv, slo, shi = s1 + 1.0, sv + vk, slo + lo, shi + hi
+        svv, svlo, svhi = svv + vk * vk, svlo + vk * lo, svhi + vk * hi
+        slolo, slohi, shihi = slolo + lo * lo, slohi + lo * hi, shihi + hi * hi
+        z1, zv, zlo, zhi = z1 + zk, zv + vk * zk, zlo + lo * zk, zhi + hi * zk
     if left < 4 or m - left < 4:
         return np.inf
     a[0, 0], a[0, 1], a[0, 2], a[0, 3] = s1, sv, slo, shi
@@ -210,24 +237,24 @@ def _hinge_sse(u, v, z, m, u0, beta, a, b):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _hinge_fits(px, py, pz, indptr, indices, vx, vy, tx, ty, half_width, half_length):
+def _hinge_fits(points, indptr, indices, vx, vy, tx, ty, half_width, half_length):
     """Per vertex (on all cores): hinge offset across (m, + to the left of the tangent), z at
     the hinge, the hinge's RMS residual, slope change across it, the single plane's SSE over
     the hinge's SSE, the point count (NaN offsets where no fit)."""
     n = len(vx)
     out = np.full((n, 6), np.nan)
     for i in prange(n):
-        _hinge_fit(px, py, pz, indices[indptr[i]:indptr[i + 1]], vx[i], vy[i], tx[i], ty[i],
+        _hinge_fit(points, indices[indptr[i]:indptr[i + 1]], vx[i], vy[i], tx[i], ty[i],
                    half_width, half_length, out[i])
     return out
 
 
 @njit(cache=True, nogil=True)
-def _hinge_fit(px, py, pz, near, x, y, tx, ty, half_width, half_length, out):
+def _hinge_fit(points, near, x, y, tx, ty, half_width, half_length, out):
     """``_hinge_fits`` of one vertex at (x, y), tangent (tx, ty), into ``out`` (6,) (left as
     it is where no fit)."""
     steps = 24
-    u, v, z, m = _window_points(px, py, pz, near, x, y, tx, ty, half_width, half_length)
+    u, v, z, m = _window_points(points, near, x, y, tx, ty, half_width, half_length)
     if m < 12:
         return
     zmean = 0.0
@@ -255,21 +282,21 @@ def _hinge_fit(px, py, pz, near, x, y, tx, ty, half_width, half_length, out):
 
 
 @njit(cache=True, nogil=True)
-def _window_points(px, py, pz, near, x, y, tx, ty, half_width, half_length):
-    """The points ``near`` a vertex at (x, y) with unit tangent (tx, ty) that lie in its fit
-    window: their offsets across (u, + to the left) and along (v) and their z, in the first m
-    places of each; returns u, v, z and m."""
+def _window_points(points, near, x, y, tx, ty, half_width, half_length):
+    """The ``points`` (n, 3) ``near`` a vertex at (x, y) with unit tangent (tx, ty) that lie
+    in its fit window: their offsets across (u, + to the left) and along (v) and their z, in
+    the first m places of each; returns u, v, z and m."""
     u = np.empty(near.size)
     v = np.empty(near.size)
     z = np.empty(near.size)
     m = 0
     for k in range(near.size):
         q = near[k]
-        dx, dy = px[q] - x, py[q] - y
+        dx, dy = points[q, 0] - x, points[q, 1] - y
         along = dx * tx + dy * ty
         across = -dx * ty + dy * tx
         if abs(along) <= half_length and abs(across) <= half_width:
-            u[m], v[m], z[m] = across, along, pz[q]
+            u[m], v[m], z[m] = across, along, points[q, 2]
             m += 1
     return u, v, z, m
 
@@ -347,7 +374,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     if not lines:
         return [], [], []
     index = index if index is not None else point_index(points)
-    px, py, pz = (np.ascontiguousarray(points[:, k], dtype=float) for k in range(3))
+    points = np.asarray(points, float)  # its rows: a point's x, y, z in one cache line
     min_kink = 0.5 * np.tan(np.radians(s_crit))
     sizes = [len(c) for c in lines]
     coords = np.concatenate([np.asarray(c, float)[:, :3] for c in lines])
@@ -357,7 +384,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     reach = float(np.hypot(window.half_width, window.half_length))
     for _ in range(iterations):
         tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
-        fits = np.concatenate([_hinge_fits(px, py, pz, *index.neighbours(coords[a:b, :2], reach),
+        fits = np.concatenate([_hinge_fits(points, *index.neighbours(coords[a:b, :2], reach),
                                            coords[a:b, 0].copy(), coords[a:b, 1].copy(),
                                            tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
                                            window.half_width, window.half_length)
