@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import FloodMeshError
 from .outputs import atomic_output, require_file
-from .vectors import RECORD_CHUNK, gpkg_field_type, gpkg_records, write_gpkg
+from .vectors import write_gpkg_layer
 
 
 def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: int = 1,
@@ -151,15 +151,13 @@ def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, laye
     """Write the mesh's triangles as PolygonZ features (id, area_m2, min_angle_deg, and any
     per-triangle ``attributes``)."""
     # lazy: PROJ and GEOS load only when this runs
+    import shapely
+
     from ..steps.mesh import triangle_angles, triangle_areas
 
     areas = triangle_areas(nodes, triangles)
     min_angles = triangle_angles(nodes, triangles).min(axis=1)
     columns = {"id": np.arange(1, len(triangles) + 1), "area_m2": areas,
                "min_angle_deg": min_angles, **(attributes or {})}
-    geometries = ({"type": "Polygon", "coordinates": [[*map(tuple, c), tuple(c[0])]]}
-                  for start in range(0, len(triangles), RECORD_CHUNK)
-                  for c in nodes[triangles[start:start + RECORD_CHUNK]].tolist())
-    props = {name: gpkg_field_type(v) for name, v in columns.items()}
-    write_gpkg(path, layer, "3D Polygon", props, gpkg_records(geometries, columns), crs,
-                atomic=atomic)
+    write_gpkg_layer(path, layer, "3D Polygon", shapely.polygons(nodes[triangles]), columns, crs,
+                     atomic=atomic)

@@ -364,6 +364,225 @@ def test_points_gpkg_attributes_round_trip(tmp_path):
     np.testing.assert_allclose(io.read_points_vector(path), xyz, rtol=0, atol=1e-9)
 
 
+# the GeoPackage writer adds features in bulk by SQLite: what it writes is read back by OGR
+# (fiona, ogrinfo, the spatial filter on the R-tree) and checked by SQLite itself
+def _grid_mesh(n, origin=(412_000.0, 5_652_000.0)):
+    """A square grid of n × n cells of 2 m, each two triangles: (nodes (m, 3), triangles)."""
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    nodes = np.column_stack([origin[0] + 2.0 * i.ravel(), origin[1] + 2.0 * j.ravel(),
+                             10.0 + 0.1 * i.ravel() - 0.05 * j.ravel()])
+    corner = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
+    triangles = np.concatenate([np.column_stack([corner, corner + n + 1, corner + 1]),
+                                np.column_stack([corner + 1, corner + n + 1, corner + n + 2])])
+    return nodes, triangles
+
+
+def _ogr_reference(path, layer, geometry_type, properties, geometries, columns):
+    """The layer as OGR writes it one feature at a time (fiona's writerecords)."""
+    import shapely.geometry
+
+    from floodmesh.core.io.vectors import GPKG_TIMESTAMP
+
+    records = [{"geometry": None if g is None else shapely.geometry.mapping(g),
+                "properties": {name: values[k] for name, values in columns.items()}}
+               for k, g in enumerate(geometries)]
+    with fiona.Env(OGR_CURRENT_DATE=GPKG_TIMESTAMP):
+        with fiona.open(path, "w", driver="GPKG", layer=layer, crs_wkt=UTM32.to_wkt(),
+                        schema={"geometry": geometry_type, "properties": properties}) as dst:
+            dst.writerecords(records)
+
+
+def _tables(path, layer):
+    """What a GeoPackage holds apart from its R-tree's nodes: the layer's rows, the GeoPackage
+    tables on it, the schema."""
+    import sqlite3
+
+    con = sqlite3.connect(path)
+    try:
+        return {query: con.execute(query).fetchall() for query in (
+            f'SELECT * FROM "{layer}" ORDER BY fid', "SELECT * FROM gpkg_contents",
+            "SELECT * FROM gpkg_ogr_contents", "SELECT * FROM gpkg_geometry_columns",
+            "SELECT * FROM gpkg_extensions", "SELECT * FROM gpkg_spatial_ref_sys",
+            "SELECT * FROM sqlite_sequence",
+            "SELECT type, name, tbl_name, sql FROM sqlite_master ORDER BY name")}
+    finally:
+        con.close()
+
+
+def _rtree(path, layer):
+    """The R-tree's boxes (id, minx, maxx, miny, maxy) and SQLite's checks of the file."""
+    import sqlite3
+
+    con = sqlite3.connect(path)
+    try:
+        boxes = np.array(con.execute(f'SELECT * FROM "rtree_{layer}_geom" ORDER BY id')
+                         .fetchall()).reshape(-1, 5)
+        checks = (con.execute("PRAGMA integrity_check").fetchone()[0],
+                  con.execute(f"SELECT rtreecheck('rtree_{layer}_geom')").fetchone()[0])
+        return boxes, checks
+    finally:
+        con.close()
+
+
+def test_gpkg_layers_hold_what_ogr_writes_itself(tmp_path):
+    """Points, lines (one 2-D in the 3-D layer) and triangles with int, bool, float (NaN
+    among them) and text fields, and a null geometry through write_gpkg's records: the rows
+    (geometry blobs byte for byte), the GeoPackage tables (extent, feature count) and the
+    schema with its triggers are those OGR writes feature by feature; the R-tree holds each
+    feature's box, rounded outwards to 32-bit floats."""
+    import shapely
+
+    rng = np.random.default_rng(5)
+    nodes, triangles = _grid_mesh(8)
+    lines = [np.column_stack([412_000 + np.cumsum(rng.uniform(0, 3, k)),
+                              5_652_000 + np.cumsum(rng.uniform(-2, 2, k)),
+                              rng.uniform(10, 12, k)]) for k in (2, 7, 30)]
+    lines.append(lines[0][:, :2] + 5.0)
+    n_pts = 70
+    cases = {
+        "pts": ("3D Point", shapely.points(nodes[:n_pts]),
+                {"count": np.arange(n_pts) - 7, "flag": np.arange(n_pts) % 3 == 0,
+                 "value": np.where(np.arange(n_pts) % 5 == 0, np.nan, np.linspace(-2, 3, n_pts)),
+                 "label": np.array([f"p{i}" for i in range(n_pts)])}),
+        "lines": ("3D LineString", [shapely.linestrings(line) for line in lines],
+                  {"kind": np.array(["open", "land", "open", "land"]),
+                   "n": np.array([len(line) for line in lines])}),
+        "tris": ("3D Polygon", shapely.polygons(nodes[triangles]),
+                 {"id": np.arange(1, len(triangles) + 1), "z": nodes[triangles, 2].mean(axis=1)}),
+    }
+    for layer, (geometry_type, geometries, columns) in cases.items():
+        properties = {name: io.vectors.gpkg_field_type(v) for name, v in columns.items()}
+        ours, theirs = tmp_path / f"{layer}.gpkg", tmp_path / f"{layer}_ogr.gpkg"
+        io.vectors.write_gpkg_layer(ours, layer, geometry_type, geometries, columns, UTM32)
+        _ogr_reference(theirs, layer, geometry_type, properties, geometries,
+                       {name: v.tolist() for name, v in columns.items()})
+        assert _tables(ours, layer) == _tables(theirs, layer), layer
+        (boxes, checks), (ogr_boxes, _) = _rtree(ours, layer), _rtree(theirs, layer)
+        assert checks == ("ok", "ok")
+        bounds = shapely.bounds(np.asarray(geometries))[:, [0, 2, 1, 3]]
+        assert boxes[:, 0].tolist() == list(range(1, len(bounds) + 1))
+        assert (boxes[:, [1, 3]] <= bounds[:, [0, 2]]).all()
+        assert (boxes[:, [2, 4]] >= bounds[:, [1, 3]]).all()
+        assert (boxes[:, 1:] == boxes[:, 1:].astype(np.float32)).all()
+        # as tight as OGR's, which rounds a float32-exact bound one step further
+        assert (boxes[:, [1, 3]] >= ogr_boxes[:, [1, 3]]).all()
+        assert (boxes[:, [2, 4]] <= ogr_boxes[:, [2, 4]]).all()
+
+    zone = [{"geometry": None, "properties": {"id": 1}},
+            {"geometry": shapely.geometry.mapping(shapely.box(412_000, 5_652_000, 412_010,
+                                                              5_652_005)),
+             "properties": {"id": 2}}]
+    io.write_gpkg(tmp_path / "zone.gpkg", "zone", "Polygon", {"id": "int"}, zone, UTM32)
+    _ogr_reference(tmp_path / "zone_ogr.gpkg", "zone", "Polygon", {"id": "int"},
+                   [None, shapely.geometry.shape(zone[1]["geometry"])], {"id": [1, 2]})
+    assert _tables(tmp_path / "zone.gpkg", "zone") == _tables(tmp_path / "zone_ogr.gpkg", "zone")
+    assert _rtree(tmp_path / "zone.gpkg", "zone")[0][:, 0].tolist() == [2]
+
+
+def test_gpkg_mesh_read_back_by_ogr_its_rtree_filter_and_an_append(tmp_path):
+    """A mesh of 20 000 triangles (an R-tree three levels deep) written twice gives the same
+    bytes; fiona reads every feature and attribute back, ogrinfo gives its feature count and
+    extent, GDAL's spatial filter (answered by the R-tree: with the tree emptied it finds
+    nothing) returns the triangles in its box, SQLite finds the file and tree sound, and a
+    triangle appended through OGR updates the tree and the count (its triggers are intact)."""
+    import shutil
+    import sqlite3
+    import subprocess
+
+    import shapely
+
+    nodes, triangles = _grid_mesh(100)
+    path = tmp_path / "mesh.gpkg"
+    io.write_mesh_gpkg(path, nodes, triangles, UTM32, attributes={"material": np.arange(
+        len(triangles)) % 4 + 1})
+    io.write_mesh_gpkg(tmp_path / "again.gpkg", nodes, triangles, UTM32,
+                       attributes={"material": np.arange(len(triangles)) % 4 + 1})
+    assert path.read_bytes() == (tmp_path / "again.gpkg").read_bytes()
+
+    with fiona.open(path) as src:
+        assert src.schema == {"geometry": "3D Polygon", "properties": {
+            "id": "int", "area_m2": "float", "min_angle_deg": "float", "material": "int"}}
+        feats = list(src)
+    assert [int(f.id) for f in feats] == list(range(1, len(triangles) + 1))
+    got = np.array([f["geometry"]["coordinates"][0] for f in feats])
+    np.testing.assert_array_equal(got[:, :3], nodes[triangles])
+    np.testing.assert_array_equal(got[:, 3], got[:, 0])
+    assert [f["properties"]["id"] for f in feats] == list(range(1, len(triangles) + 1))
+    assert {f["properties"]["area_m2"] for f in feats} == {2.0}
+    assert [f["properties"]["material"] for f in feats] == (np.arange(len(triangles)) % 4
+                                                            + 1).tolist()
+    assert {round(f["properties"]["min_angle_deg"], 9) for f in feats} == {45.0}
+
+    if shutil.which("ogrinfo"):
+        info = subprocess.run(["ogrinfo", "-al", "-so", str(path)], capture_output=True,
+                              text=True, check=True).stdout
+        assert f"Feature Count: {len(triangles)}" in info
+        assert "Extent: (412000.000000, 5652000.000000) - (412200.000000, 5652200.000000)" in info
+
+    box = (412_031.0, 5_652_047.0, 412_058.0, 5_652_063.0)
+    polygons = shapely.polygons(nodes[triangles])
+    bounds = shapely.bounds(polygons)
+    near = set(np.flatnonzero((bounds[:, 0] <= box[2]) & (bounds[:, 2] >= box[0])
+                              & (bounds[:, 1] <= box[3]) & (bounds[:, 3] >= box[1])) + 1)
+    touching = set(np.flatnonzero(shapely.intersects(polygons, shapely.box(*box))) + 1)
+    with fiona.open(path) as src:
+        found = {int(f.id) for f in src.filter(bbox=box)}
+    assert touching <= found <= near and len(touching) > 100
+
+    con = sqlite3.connect(path)
+    assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+    assert con.execute("SELECT rtreecheck('rtree_triangles_geom')").fetchone()[0] == "ok"
+    root = con.execute("SELECT data FROM rtree_triangles_geom_node WHERE nodeno = 1").fetchone()
+    assert int.from_bytes(root[0][:2], "big") == 2  # depth: root, one level, leaves
+    con.close()
+
+    far = [[412_500.0, 5_652_500.0, 1.0], [412_504.0, 5_652_500.0, 1.0],
+           [412_500.0, 5_652_503.0, 1.0], [412_500.0, 5_652_500.0, 1.0]]
+    with fiona.open(path, "a") as dst:
+        dst.write({"geometry": {"type": "Polygon", "coordinates": [far]},
+                   "properties": {"id": 0, "area_m2": 6.0, "min_angle_deg": 36.9,
+                                  "material": 9}})
+    with fiona.open(path) as src:
+        assert len(src) == len(triangles) + 1
+        assert [f["properties"]["material"] for f in src.filter(
+            bbox=(412_499.0, 5_652_499.0, 412_501.0, 5_652_501.0))] == [9]
+    con = sqlite3.connect(path)
+    assert con.execute("SELECT id FROM rtree_triangles_geom WHERE minx > 412400").fetchall() \
+        == [(len(triangles) + 1,)]
+    assert con.execute("SELECT feature_count FROM gpkg_ogr_contents").fetchone()[0] \
+        == len(triangles) + 1
+    assert con.execute("SELECT rtreecheck('rtree_triangles_geom')").fetchone()[0] == "ok"
+    con.execute("DELETE FROM rtree_triangles_geom")
+    con.commit()
+    con.close()
+    with fiona.open(path) as src:
+        assert list(src.filter(bbox=box)) == []
+
+
+def test_gpkg_layers_added_to_one_file(tmp_path):
+    """Layers written with atomic=False into one GeoPackage (as the solver export does) each
+    get their rows, R-tree and count; the file stays sound."""
+    import sqlite3
+
+    nodes, triangles = _grid_mesh(30)
+    path = tmp_path / "all.gpkg"
+    io.write_mesh_gpkg(path, nodes, triangles, UTM32, atomic=False)
+    io.write_points_gpkg(path, nodes, UTM32, layer="nodes", atomic=False,
+                         attributes={"z": nodes[:, 2]})
+    io.write_lines_gpkg(path, [nodes[:31], nodes[31:62]], UTM32, layer="edges", atomic=False)
+    assert fiona.listlayers(path) == ["triangles", "nodes", "edges"]
+    con = sqlite3.connect(path)
+    counts = dict(con.execute("SELECT table_name, feature_count FROM gpkg_ogr_contents"))
+    assert counts == {"triangles": len(triangles), "nodes": len(nodes), "edges": 2}
+    for layer, n in counts.items():
+        assert con.execute(f"SELECT count(*) FROM rtree_{layer}_geom").fetchone()[0] == n
+        assert con.execute(f"SELECT rtreecheck('rtree_{layer}_geom')").fetchone()[0] == "ok"
+    assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+    con.close()
+    with fiona.open(path, layer="nodes") as src:
+        np.testing.assert_array_equal([f["geometry"]["coordinates"] for f in src], nodes)
+
+
 def test_an_ept_index_reads_as_the_laz_it_was_built_from(real_data, tmp_path):
     """Every node of an Entwine Point Tile index, each point in exactly one: the same ground
     points (class 2) and CRS as the LAZ."""
