@@ -12,31 +12,137 @@ def nearest_line(xy: np.ndarray, lines: list) -> tuple[np.ndarray, np.ndarray]:
     """(index of the nearest of ``lines`` ((k, 2+) arrays, k ≥ 2), horizontal distance in m)
     for each point of ``xy`` (n, 2+); where two lines are equally near, the lower index.
 
-    The STR tree holds the lines' segments, not the lines: a long line's bounding box reaches
-    far, so a tree of whole lines computes the exact distance to most lines for most points
-    (4.4 s of CPU for 140,000 points and 558 lines, against 0.8 s). The distance to a line is the
-    least distance to its segments (GEOS computes it so), so the distances are the same."""
-    # lazy: GEOS loads only when this runs
-    import shapely
-
+    The distance to a line is the least distance to its segments, each by GEOS's formula
+    (``Distance::pointToSegment``, as an STR tree of the lines answers, to the last bit). The
+    segments are bucketed in square cells; each point reads the cells in rings around its own
+    until the next ring lies farther than the nearest found (on all cores: 0.01 s for 27,000
+    mesh nodes and 500 lines, where GEOS's STR tree of the segments took 0.17 s)."""
     if not len(lines):
         raise ValueError("nearest_line needs at least one line")
     sizes = np.array([len(c) for c in lines])
     vertices = np.concatenate([np.asarray(c, float)[:, :2] for c in lines])
     starts = np.r_[0, np.cumsum(sizes)]
     first = np.setdiff1d(np.arange(len(vertices) - 1), starts[1:-1] - 1)  # segment starts
+    if not len(first):
+        raise ValueError("nearest_line needs a line of two vertices or more")
     owner = np.searchsorted(starts, first, side="right") - 1
-    segments = shapely.linestrings(np.stack([vertices[first], vertices[first + 1]], axis=1))
-    (point, segment), distance = shapely.STRtree(segments).query_nearest(
-        shapely.points(np.asarray(xy, float)[:, :2]), return_distance=True, all_matches=True)
-    # every tie is listed: per point, the lowest line index among its nearest segments
-    order = np.lexsort((owner[segment], point))
-    point, line, distance = point[order], owner[segment][order], distance[order]
-    pick = np.r_[True, point[1:] != point[:-1]]
-    nearest = np.empty(len(xy), np.int64)
-    found = np.empty(len(xy))
-    nearest[point[pick]], found[point[pick]] = line[pick], distance[pick]
+    return _nearest_segment(np.ascontiguousarray(np.asarray(xy, float)[:, :2]),
+                            np.ascontiguousarray(vertices[first]),
+                            np.ascontiguousarray(vertices[first + 1]), owner)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _nearest_segment(p, a, b, owner):
+    """(owner of the nearest segment a–b, its distance) per point of ``p``, the lowest owner
+    among equally near segments."""
+    lo = np.array([min(a[:, 0].min(), b[:, 0].min()), min(a[:, 1].min(), b[:, 1].min())])
+    span_x = max(a[:, 0].max(), b[:, 0].max()) - lo[0]
+    span_y = max(a[:, 1].max(), b[:, 1].max()) - lo[1]
+    count = a.shape[0]
+    length = 0.0
+    for s in range(count):
+        length += np.hypot(b[s, 0] - a[s, 0], b[s, 1] - a[s, 1])
+    # some one segment a cell, and no cell shorter than the mean segment
+    cell = max(np.sqrt(span_x * span_y / count), max(span_x, span_y) / count,
+               length / count, 1e-9)
+    cols, rows = int(span_x // cell) + 1, int(span_y // cell) + 1
+    room = np.zeros(rows * cols + 1, np.int64)
+    _bucket(a, b, lo, cell, cols, rows, room, np.empty(0, np.int64))
+    bounds = np.cumsum(room)
+    held = np.empty(bounds[-1], np.int64)
+    _bucket(a, b, lo, cell, cols, rows, bounds[:-1].copy(), held)
+    nearest = np.empty(p.shape[0], np.int64)
+    found = np.empty(p.shape[0])
+    for i in prange(p.shape[0]):
+        x, y = p[i, 0], p[i, 1]
+        ci, cj = _cell_at(y, lo[1], cell), _cell_at(x, lo[0], cell)
+        # the rings that reach the grid: from the grid's nearest cell to its farthest
+        near = max(0, -ci, ci - (rows - 1), -cj, cj - (cols - 1))
+        far = max(abs(ci), abs(ci - (rows - 1)), abs(cj), abs(cj - (cols - 1)))
+        best, line = np.inf, -1
+        # the bounds below less the round-off of bucketing and of themselves
+        slack = 1e-6 * cell + 1e-12 * (abs(x) + abs(y) + abs(lo[0]) + abs(lo[1]))
+        for r in range(near, far + 1):
+            inside = min(x - (lo[0] + (cj - r + 1) * cell), lo[0] + (cj + r) * cell - x,
+                         y - (lo[1] + (ci - r + 1) * cell), lo[1] + (ci + r) * cell - y)
+            if inside - slack > best:
+                break  # every cell beyond ring r - 1 lies farther than the nearest found
+            for row in range(max(ci - r, 0), min(ci + r, rows - 1) + 1):
+                edge = row == ci - r or row == ci + r  # the ring's whole row, else its ends
+                for col in range(max(cj - r, 0) if edge else cj - r,
+                                 (min(cj + r, cols - 1) if edge else cj + r) + 1,
+                                 1 if edge else 2 * r):
+                    if (col < 0 or col >= cols
+                            or _off_cell(x, y, lo, cell, col, row) - slack > best):
+                        continue
+                    k = row * cols + col
+                    for h in range(bounds[k], bounds[k + 1]):
+                        s = held[h]
+                        d = _point_segment(x, y, a[s, 0], a[s, 1], b[s, 0], b[s, 1])
+                        if d < best or (d == best and owner[s] < line):
+                            best, line = d, owner[s]
+        nearest[i], found[i] = line, best
     return nearest, found
+
+
+@njit(cache=True, nogil=True)
+def _off_cell(x, y, lo, cell, col, row):
+    """The distance from (x, y) to the cell at ``col``, ``row``."""
+    dx = max(lo[0] + col * cell - x, x - (lo[0] + (col + 1) * cell), 0.0)
+    dy = max(lo[1] + row * cell - y, y - (lo[1] + (row + 1) * cell), 0.0)
+    return np.sqrt(dx * dx + dy * dy)
+
+
+@njit(cache=True, nogil=True)
+def _bucket(a, b, lo, cell, cols, rows, room, held):
+    """Each segment a–b put in the cells that its pieces (a cell long at most) reach: counted
+    into ``room[k + 1]`` of cell k where ``held`` is empty, else its number written into
+    ``held`` at ``room[k]`` (then advanced)."""
+    for s in range(a.shape[0]):
+        dx, dy = b[s, 0] - a[s, 0], b[s, 1] - a[s, 1]
+        pieces = max(1, int(np.ceil(np.hypot(dx, dy) / cell)))
+        for t in range(pieces):
+            x0, x1 = a[s, 0] + dx * t / pieces, a[s, 0] + dx * (t + 1) / pieces
+            y0, y1 = a[s, 1] + dy * t / pieces, a[s, 1] + dy * (t + 1) / pieces
+            for row in range(_cell_of(min(y0, y1), lo[1], cell, rows),
+                             _cell_of(max(y0, y1), lo[1], cell, rows) + 1):
+                for col in range(_cell_of(min(x0, x1), lo[0], cell, cols),
+                                 _cell_of(max(x0, x1), lo[0], cell, cols) + 1):
+                    k = row * cols + col
+                    if held.size:
+                        held[room[k]] = s
+                        room[k] += 1
+                    else:
+                        room[k + 1] += 1
+
+
+@njit(cache=True, nogil=True)
+def _cell_at(v, v0, cell):
+    """The cell of coordinate ``v`` in cells of ``cell`` from ``v0``, on or off the grid
+    (within ±10¹⁵ cells)."""
+    return int(np.floor(min(max((v - v0) / cell, -1e15), 1e15)))
+
+
+@njit(cache=True, nogil=True)
+def _cell_of(v, v0, cell, cells):
+    """The cell (0 to ``cells`` - 1) of coordinate ``v`` in cells of ``cell`` from ``v0``."""
+    return min(max(int((v - v0) // cell), 0), cells - 1)
+
+
+@njit(cache=True, nogil=True)
+def _point_segment(px, py, ax, ay, bx, by):
+    """Distance from (px, py) to segment a–b as GEOS computes it (``Distance::pointToSegment``,
+    the same operations in the same order)."""
+    if ax == bx and ay == by:
+        return np.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+    len2 = (bx - ax) * (bx - ax) + (by - ay) * (by - ay)
+    r = ((px - ax) * (bx - ax) + (py - ay) * (by - ay)) / len2
+    if r <= 0.0:
+        return np.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+    if r >= 1.0:
+        return np.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
+    s = ((ay - py) * (bx - ax) - (ax - px) * (by - ay)) / len2
+    return abs(s) * np.sqrt(len2)
 
 
 def point_index(points: np.ndarray) -> "PointIndex":

@@ -416,13 +416,12 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     if usable:
         geoms = np.array([shapely.LineString(c[:, :3] if c.shape[1] >= 3 else c[:, :2])
                           for c in usable], dtype=object)
-        where = shapely.points(xy)
         nearest, distance = nearest_line(xy, usable)
         on = distance <= on_line
         with_z = np.array([c.shape[1] >= 3 for c in usable])
         pick = np.nonzero(on)[0]
         pick = pick[with_z[nearest[pick]]]
-        along = shapely.line_locate_point(geoms[nearest[pick]], where[pick])
+        along = shapely.line_locate_point(geoms[nearest[pick]], shapely.points(xy[pick]))
         z[pick] = shapely.get_z(shapely.line_interpolate_point(geoms[nearest[pick]], along))
     off = ~on
     r = np.clip(0.9 * distance[off], min(radius, 10 * on_line), radius)

@@ -24,6 +24,17 @@ def test_nearest_line_is_the_whole_line_tree_answer():
     lines = _random_lines(rng)
     lines.append(lines[0].copy())  # the same line twice: a tie wherever line 0 is nearest
     xy = np.vstack([rng.uniform(-20, 220, (3000, 2)), lines[5][:, :2]])
+    lowest, least = _whole_line_tree(xy, lines)
+
+    nearest, found = nearest_line(xy, lines)
+
+    assert np.array_equal(found, least)
+    assert np.array_equal(nearest, lowest)
+    assert (nearest != len(lines) - 1).all()  # the copy of line 0 never wins over line 0
+
+
+def _whole_line_tree(xy, lines):
+    """(lowest index of the nearest lines, distance) by an STR tree of whole lines."""
     geoms = [shapely.LineString(c[:, :2]) for c in lines]
     (point, line), distance = shapely.STRtree(geoms).query_nearest(
         shapely.points(xy), return_distance=True, all_matches=True)
@@ -31,12 +42,27 @@ def test_nearest_line_is_the_whole_line_tree_answer():
     np.minimum.at(least, point, distance)
     lowest = np.full(len(xy), len(lines))
     np.minimum.at(lowest, point, line)
+    return lowest, least
+
+
+def test_nearest_line_far_off_and_long_segments_at_utm_magnitudes():
+    """Points far off the lines (10 km), long diagonal segments among short ones, a line of
+    one repeated vertex and coordinates of UTM magnitude: the tree's answer to the last bit."""
+    rng = np.random.default_rng(7)
+    origin = np.array([400_000.0, 5_600_000.0])
+    lines = [origin + np.cumsum(rng.normal(0, 0.5, (int(rng.integers(2, 20)), 2)), axis=0)
+             + rng.uniform(0, 300, 2) for _ in range(30)]
+    lines += [origin + np.array([[0.0, 0.0], [900.0, 700.0]]),
+              origin + np.array([[50.0, 800.0], [850.0, -20.0], [851.0, -20.5]]),
+              np.repeat(origin[None] + 5.0, 2, axis=0)]
+    xy = np.vstack([origin + rng.uniform(-100, 1000, (3000, 2)),
+                    origin + rng.uniform(-1e4, 1e4, (200, 2)), lines[31]])
 
     nearest, found = nearest_line(xy, lines)
 
+    lowest, least = _whole_line_tree(xy, lines)
     assert np.array_equal(found, least)
     assert np.array_equal(nearest, lowest)
-    assert (nearest != len(lines) - 1).all()  # the copy of line 0 never wins over line 0
 
 
 def _same_as_ckdtree(points, centres, radius):
