@@ -159,5 +159,6 @@ def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, laye
     min_angles = triangle_angles(nodes, triangles).min(axis=1)
     columns = {"id": np.arange(1, len(triangles) + 1), "area_m2": areas,
                "min_angle_deg": min_angles, **(attributes or {})}
-    write_gpkg_layer(path, layer, "3D Polygon", shapely.polygons(nodes[triangles]), columns, crs,
-                     atomic=atomic)
+    write_gpkg_layer(path, layer, "3D Polygon", len(triangles),
+                     lambda start, stop: shapely.polygons(nodes[triangles[start:stop]]), columns,
+                     crs, atomic=atomic)

@@ -25,19 +25,21 @@ def write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, 
     import shapely.geometry
 
     records = list(records)
-    geometries = [None if r["geometry"] is None else shapely.geometry.shape(r["geometry"])
-                  for r in records]
+    geometries = np.array([None if r["geometry"] is None
+                           else shapely.geometry.shape(r["geometry"]) for r in records], object)
     columns = {name: [r["properties"].get(name) for r in records] for name in properties}
-    write_gpkg_layer(path, layer, geometry_type, geometries, columns, crs,
+    write_gpkg_layer(path, layer, geometry_type, len(records),
+                     lambda start, stop: geometries[start:stop], columns, crs,
                      properties=properties, atomic=atomic)
 
 
-def write_gpkg_layer(path, layer: str, geometry_type: str, geometries, columns: dict, crs, *,
-                     properties: dict | None = None, atomic: bool = True) -> None:
-    """Write one layer of shapely ``geometries`` with one value per feature from each of
-    ``columns`` (name → sequence), fields typed by ``properties`` (name → fiona type; from the
-    columns' dtypes by default). ``atomic=False`` adds the layer to ``path`` as it is (a
-    GeoPackage being assembled under a temporary name, see ``atomic_output``).
+def write_gpkg_layer(path, layer: str, geometry_type: str, n: int, geometries, columns: dict,
+                     crs, *, properties: dict | None = None, atomic: bool = True) -> None:
+    """Write one layer of ``n`` features: ``geometries(start, stop)`` gives the shapely
+    geometries of features ``start`` to ``stop`` − 1, ``columns`` (name → sequence) one value
+    per feature for each field, typed by ``properties`` (name → fiona type; from the columns'
+    dtypes by default). ``atomic=False`` adds the layer to ``path`` as it is (a GeoPackage
+    being assembled under a temporary name, see ``atomic_output``).
 
     OGR creates the layer empty (schema, CRS, spatial index and its triggers); the features go
     in by ``fill_gpkg_layer``, in one SQLite transaction: a mesh of 53 000 triangles in 0.27 s
@@ -53,10 +55,8 @@ def write_gpkg_layer(path, layer: str, geometry_type: str, geometries, columns: 
             with fiona.open(target, "w", driver="GPKG", layer=layer, schema=schema,
                             crs_wkt=crs.to_wkt()):
                 pass
-        if len(geometries):
-            fill_gpkg_layer(target, layer, geometries,
-                            {name: field_values(columns[name], kind)
-                             for name, kind in properties.items()})
+        if n:
+            fill_gpkg_layer(target, layer, n, geometries, columns, properties)
 
 
 def gpkg_field_type(values) -> str:
@@ -79,10 +79,17 @@ def quoted(name: str) -> str:
     return '"' + name.replace('"', '""') + '"'
 
 
-def fill_gpkg_layer(path, layer: str, geometries, columns: dict) -> None:
-    """Add features 1, 2, … to the empty layer ``layer`` of the GeoPackage ``path`` in one
-    transaction: its rows (geometries as ``gpkg_blobs``, fields from ``columns``, name → list),
-    their boxes in the layer's R-tree, its feature count and extent.
+# features converted at a time: as shapely geometries, WKB and rows of Python objects a
+# triangle takes some 1 kB, so a mesh of millions converted at once would take gigabytes
+GPKG_CHUNK = 100_000
+
+
+def fill_gpkg_layer(path, layer: str, n: int, geometries, columns: dict,
+                    properties: dict) -> None:
+    """Add features 1 to ``n`` to the empty layer ``layer`` of the GeoPackage ``path`` in one
+    transaction, ``GPKG_CHUNK`` at a time (``write_gpkg_layer`` says what the arguments are):
+    its rows (geometries as ``gpkg_blobs``), their boxes in the layer's R-tree, its feature
+    count and extent.
 
     The layer's triggers (the R-tree's call ``ST_MinX``, …, which only OGR's SQLite has) are
     dropped for the insert and re-created from their own SQL after it, so that features OGR
@@ -90,10 +97,7 @@ def fill_gpkg_layer(path, layer: str, geometries, columns: dict) -> None:
     # lazy: GEOS loads only when this runs
     import shapely
 
-    geometries = np.asarray(geometries, dtype=object)
-    bounds = shapely.bounds(geometries)  # minx, miny, maxx, maxy; NaN where null or empty
-    boxed = np.flatnonzero(np.isfinite(bounds).all(axis=1))
-    fids = np.arange(1, len(geometries) + 1)
+    bounds = np.empty((n, 4))  # minx, miny, maxx, maxy; NaN where null or empty
     con = sqlite3.connect(path, isolation_level=None)
     try:
         table, column, srs_id = con.execute(
@@ -101,7 +105,9 @@ def fill_gpkg_layer(path, layer: str, geometries, columns: dict) -> None:
             "WHERE lower(table_name) = lower(?)", (layer,)).fetchone()
         fid = next(row[1] for row in con.execute(f"PRAGMA table_info({quoted(table)})")
                    if row[5])  # the primary key
-        fields = [fid, column, *columns]
+        names = ", ".join(map(quoted, [fid, column, *properties]))
+        insert = (f"INSERT INTO {quoted(table)} ({names}) "
+                  f"VALUES ({', '.join('?' * (len(properties) + 2))})")
         triggers = con.execute("SELECT name, sql FROM sqlite_master WHERE type = 'trigger' "
                                "AND tbl_name = ? ORDER BY rowid", (table,)).fetchall()
         indexed = con.execute("SELECT 1 FROM gpkg_extensions WHERE table_name = ? AND "
@@ -109,16 +115,21 @@ def fill_gpkg_layer(path, layer: str, geometries, columns: dict) -> None:
         con.execute("BEGIN")
         for name, _ in triggers:
             con.execute(f"DROP TRIGGER {quoted(name)}")
-        con.executemany(
-            f"INSERT INTO {quoted(table)} ({', '.join(map(quoted, fields))}) "
-            f"VALUES ({', '.join('?' * len(fields))})",
-            zip(fids.tolist(), gpkg_blobs(geometries, srs_id, bounds), *columns.values()))
+        for start in range(0, n, GPKG_CHUNK):
+            stop = min(n, start + GPKG_CHUNK)
+            chunk = np.asarray(geometries(start, stop), dtype=object)
+            bounds[start:stop] = shapely.bounds(chunk)
+            con.executemany(insert, zip(range(start + 1, stop + 1),
+                                        gpkg_blobs(chunk, srs_id, bounds[start:stop]),
+                                        *(field_values(columns[name][start:stop], kind)
+                                          for name, kind in properties.items())))
+        boxed = np.flatnonzero(np.isfinite(bounds).all(axis=1))
         if indexed:
-            fill_rtree(con, f"rtree_{table}_{column}", fids[boxed], bounds[boxed])
+            fill_rtree(con, f"rtree_{table}_{column}", boxed + 1, bounds[boxed])
         for _, sql in triggers:
             con.execute(sql)
         con.execute("UPDATE gpkg_ogr_contents SET feature_count = ? "
-                    "WHERE lower(table_name) = lower(?)", (len(fids), table))
+                    "WHERE lower(table_name) = lower(?)", (n, table))
         if len(boxed):
             extent = [*bounds[boxed, :2].min(axis=0).tolist(),
                       *bounds[boxed, 2:].max(axis=0).tolist()]
@@ -130,6 +141,13 @@ def fill_gpkg_layer(path, layer: str, geometries, columns: dict) -> None:
         con.execute("COMMIT")
     finally:
         con.close()
+
+
+def python_rows(*columns):
+    """The rows of equal-length arrays as tuples of Python numbers, ``GPKG_CHUNK`` converted
+    at a time."""
+    for start in range(0, len(columns[0]), GPKG_CHUNK):
+        yield from zip(*(c[start:start + GPKG_CHUNK].tolist() for c in columns))
 
 
 # a cell of an SQLite R-tree node: the entry's id (or child node's number), then its box
@@ -148,30 +166,28 @@ def fill_rtree(con, name: str, ids: np.ndarray, bounds: np.ndarray) -> None:
     fanout = (size - 4) // RTREE_CELL.itemsize
     box = np.column_stack([float32_rounded(bounds[:, 0], -1), float32_rounded(bounds[:, 2], 1),
                            float32_rounded(bounds[:, 1], -1), float32_rounded(bounds[:, 3], 1)])
-    nodes, links, depth, number = [], [], 0, 2  # node 1 is the root
+    # the table that maps the level being packed to its nodes: entries (leaves), then nodes
+    mapping, depth, number = quoted(name + "_rowid"), 0, 2  # node 1 is the root
     while len(ids) > fanout:
         order = str_order(box, fanout)
         ids, box = ids[order], box[order]
         starts = np.arange(0, len(ids), fanout)
         numbers = np.arange(number, number + len(starts))
         number += len(starts)
-        links.append((ids, np.repeat(numbers, np.diff(np.append(starts, len(ids))))))
-        nodes += [(n, node_blob(ids[a:a + fanout], box[a:a + fanout], size))
-                  for n, a in zip(numbers.tolist(), starts.tolist())]
-        ids = numbers
+        con.executemany(f"INSERT INTO {quoted(name + '_node')} VALUES (?, ?)",
+                        ((node, node_blob(ids[a:a + fanout], box[a:a + fanout], size))
+                         for node, a in zip(numbers.tolist(), starts.tolist())))
+        con.executemany(f"INSERT INTO {mapping} VALUES (?, ?)",
+                        python_rows(ids, numbers[np.arange(len(ids)) // fanout]))
+        ids, mapping, depth = numbers, quoted(name + "_parent"), depth + 1
         box = np.column_stack([np.minimum.reduceat(box[:, 0], starts),
                                np.maximum.reduceat(box[:, 1], starts),
                                np.minimum.reduceat(box[:, 2], starts),
                                np.maximum.reduceat(box[:, 3], starts)])
-        depth += 1
-    links.append((ids, np.ones(len(ids), np.int64)))
     con.execute(f"UPDATE {quoted(name + '_node')} SET data = ? WHERE nodeno = 1",
                 (node_blob(ids, box, size, depth),))
-    con.executemany(f"INSERT INTO {quoted(name + '_node')} VALUES (?, ?)", nodes)
-    con.executemany(f"INSERT INTO {quoted(name + '_rowid')} VALUES (?, ?)",
-                    zip(*(column.tolist() for column in links[0])))
-    con.executemany(f"INSERT INTO {quoted(name + '_parent')} VALUES (?, ?)",
-                    zip(*(np.concatenate(column).tolist() for column in zip(*links[1:]))))
+    con.executemany(f"INSERT INTO {mapping} VALUES (?, ?)",
+                    python_rows(ids, np.ones(len(ids), np.int64)))
 
 
 def float32_rounded(values: np.ndarray, direction: int) -> np.ndarray:
@@ -242,7 +258,8 @@ def write_lines_gpkg(path, lines, crs, *, layer="breaklines", attributes=None,
     # lazy: GEOS loads only when this runs
     import shapely
 
-    write_gpkg_layer(path, layer, "3D LineString", [shapely.linestrings(line) for line in lines],
+    write_gpkg_layer(path, layer, "3D LineString", len(lines),
+                     lambda start, stop: [shapely.linestrings(v) for v in lines[start:stop]],
                      attributes or {}, crs, atomic=atomic)
 
 
@@ -272,7 +289,8 @@ def write_points_gpkg(path, xyz: np.ndarray, crs, *, layer="points", attributes=
     # lazy: GEOS loads only when this runs
     import shapely
 
-    write_gpkg_layer(path, layer, "3D Point", shapely.points(xyz), attributes or {}, crs,
+    write_gpkg_layer(path, layer, "3D Point", len(xyz),
+                     lambda start, stop: shapely.points(xyz[start:stop]), attributes or {}, crs,
                      atomic=atomic)
 
 
