@@ -300,6 +300,22 @@ def test_2dm_round_trip(tmp_path):
     np.testing.assert_array_equal(back_tris, triangles)
 
 
+def test_2dm_rows_are_those_of_savetxt():
+    """write_rows, a chunk of rows formatted at a time, writes what np.savetxt wrote: ids of
+    integer and of float arrays, coordinates to 0.1 mm."""
+    import io as text_io
+
+    rng = np.random.default_rng(2)
+    elements = np.column_stack([np.arange(1, 24), rng.integers(1, 99, (23, 4))])
+    nodes = np.column_stack([np.arange(1, 24), rng.uniform(-1e6, 1e6, (23, 3))])
+    for fmt, rows in (("E3T %d %d %d %d %d", elements), ("ND %d %.4f %.4f %.4f", nodes),
+                      ("E3T %d %d %d %d %d %.4f", np.column_stack([elements, nodes[:, 1]]))):
+        ours, numpys = text_io.StringIO(), text_io.StringIO()
+        io.meshes.write_rows(ours, fmt, rows, chunk=5)
+        np.savetxt(numpys, rows, fmt=fmt)
+        assert ours.getvalue() == numpys.getvalue()
+
+
 def test_2dm_without_header(tmp_path):
     """A file not starting with MESH2D is refused."""
     path = tmp_path / "mesh.2dm"
