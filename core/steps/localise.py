@@ -198,29 +198,29 @@ def _solve4(a, b):
 
 
 @njit(cache=True, nogil=True)
-def _hinge_sse(u, v, z, m, u0, beta, a, b):
+def _hinge_sse(u, v, z, m, u0, fixed, beta, a, b):
     """SSE of the hinge z = a + b·v + c1·min(u-u0, 0) + c2·max(u-u0, 0) over the first m points,
-    its coefficients into ``beta``; inf with fewer than 4 points on a side. ``a`` (4, 4) and
-    ``b`` (4,) are scratch for the normal equations, whose sums run in scalars (each the same
-    additions in the same order as the products of a design row)."""
-    s1 = sv = slo = shi = svv = svlo = svhi = slolo = slohi = shihi = 0.0
-    z1 = zv = zlo = zhi = 0.0
+    its coefficients into ``beta``; inf with fewer than 4 points on a side. ``fixed``: the sums
+    that do not depend on u0 (``_hinge_fixed``); ``a`` (4, 4) and ``b`` (4,) are scratch for
+    the normal equations, whose sums run in scalars (each the same additions in the same order
+    as the products of a design row)."""
+    s1, sv, svv, z1, zv = fixed
+    slo = shi = svlo = svhi = slolo = shihi = zlo = zhi = 0.0
     left = 0
     for k in range(m):
         w = u[k] - u0
         lo, hi, vk, zk = min(w, 0.0), max(w, 0.0), v[k], z[k]
         if w < 0:
             left += 1
-        s1, sv, slo, shi = s1 + 1.0, sv + vk, slo + lo, shi + hi
-        svv, svlo, svhi = svv + vk * vk, svlo + vk * lo, svhi + vk * hi
-        slolo, slohi, shihi = slolo + lo * lo, slohi + lo * hi, shihi + hi * hi
-        z1, zv, zlo, zhi = z1 + zk, zv + vk * zk, zlo + lo * zk, zhi + hi * zk
+        slo, shi, svlo, svhi = slo + lo, shi + hi, svlo + vk * lo, svhi + vk * hi
+        slolo, shihi, zlo, zhi = slolo + lo * lo, shihi + hi * hi, zlo + lo * zk, zhi + hi * zk
+    # every min(w, 0)·max(w, 0) is ±0: their sum is 0.0
     if left < 4 or m - left < 4:
         return np.inf
     a[0, 0], a[0, 1], a[0, 2], a[0, 3] = s1, sv, slo, shi
     a[1, 0], a[1, 1], a[1, 2], a[1, 3] = sv, svv, svlo, svhi
-    a[2, 0], a[2, 1], a[2, 2], a[2, 3] = slo, svlo, slolo, slohi
-    a[3, 0], a[3, 1], a[3, 2], a[3, 3] = shi, svhi, slohi, shihi
+    a[2, 0], a[2, 1], a[2, 2], a[2, 3] = slo, svlo, slolo, 0.0
+    a[3, 0], a[3, 1], a[3, 2], a[3, 3] = shi, svhi, 0.0, shihi
     b[0], b[1], b[2], b[3] = z1, zv, zlo, zhi
     for i in range(4):
         a[i, i] += 1e-9
@@ -234,6 +234,16 @@ def _hinge_sse(u, v, z, m, u0, beta, a, b):
     for i in range(4):
         beta[i] = b[i]
     return sse
+
+
+@njit(cache=True, nogil=True)
+def _hinge_fixed(v, z, m):
+    """The hinge's sums over the first m points that no offset changes: (count, Σv, Σv²,
+    Σz, Σv·z)."""
+    s1 = sv = svv = z1 = zv = 0.0
+    for k in range(m):
+        s1, sv, svv, z1, zv = s1 + 1.0, sv + v[k], svv + v[k] * v[k], z1 + z[k], zv + v[k] * z[k]
+    return s1, sv, svv, z1, zv
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -264,11 +274,11 @@ def _hinge_fit(points, near, x, y, tx, ty, half_width, half_length, out):
     for k in range(m):
         z[k] -= zmean
     # one plane z = a + b·v + c·u: the hinge with c1 = c2, at any u0
-    beta, a, b = np.zeros(4), np.empty((4, 4)), np.empty(4)
-    u0, best_j = _hinge_offset(u, v, z, m, half_width, steps, beta, a, b)
+    beta, a, b, fixed = np.zeros(4), np.empty((4, 4)), np.empty(4), _hinge_fixed(v, z, m)
+    u0, best_j = _hinge_offset(u, v, z, m, half_width, steps, fixed, beta, a, b)
     if best_j < 0:
         return
-    sse = _hinge_sse(u, v, z, m, u0, beta, a, b)
+    sse = _hinge_sse(u, v, z, m, u0, fixed, beta, a, b)
     if not np.isfinite(sse):
         return
     plane = _plane_sse(u, v, z, m)
@@ -302,17 +312,17 @@ def _window_points(points, near, x, y, tx, ty, half_width, half_length):
 
 
 @njit(cache=True, nogil=True)
-def _hinge_offset(u, v, z, m, half_width, steps, beta, a, b):
+def _hinge_offset(u, v, z, m, half_width, steps, fixed, beta, a, b):
     """The hinge's offset across the line: the least SSE of ``steps`` + 1 offsets evenly over
     ±0.7·``half_width``, refined by a parabola through its neighbours' SSE. Returns the offset
     and the best step's index (-1: no offset fits; 0 or ``steps``: at the window's edge).
-    ``beta``, ``a`` and ``b`` are scratch for the fits (``_hinge_sse``)."""
+    ``fixed``, ``beta``, ``a`` and ``b``: as ``_hinge_sse`` takes them."""
     reach = 0.7 * half_width
     best, best_j = np.inf, -1
     sses = np.full(steps + 1, np.inf)
     for j in range(steps + 1):
         u0 = -reach + 2 * reach * j / steps
-        sses[j] = _hinge_sse(u, v, z, m, u0, beta, a, b)
+        sses[j] = _hinge_sse(u, v, z, m, u0, fixed, beta, a, b)
         if sses[j] < best:
             best, best_j = sses[j], j
     h = 2 * reach / steps
