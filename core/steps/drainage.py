@@ -30,7 +30,7 @@ def flow_area_for(flow_area: float | None, cell_size: float) -> float | None:
     return float(flow_area) if flow_area > 0 else None
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _priority_flood(z, index_type):
     """(order, parent, filled): cells in the order they leave the heap (lowest first), the
     flat index each drains to (-1: an outlet at the edge), both of ``index_type`` (int32 where
@@ -79,7 +79,7 @@ def _priority_flood(z, index_type):
     return order[:count], parent, filled
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _hand(z, order, parent, cell_area, channel_area):
     n = z.size
     flat = z.ravel()
