@@ -82,9 +82,10 @@ def estimate_noise(points: np.ndarray, density: float, *, samples: int = 400,
     return float(np.median(rms[good])) if good.any() else 0.0
 
 
-# Centres fitted at a time: the vectorised fits hold some 130 B for each (centre, neighbour)
-# pair, 490 MB for the 130,000 nodes of a 4 km² mesh at once; a chunk holds a few tens of MB,
-# whatever the mesh (each centre's fit is its own: the same numbers).
+# Centres fitted at a time: their neighbour query holds some 36 B for each (centre, neighbour)
+# pair (room for every point of the cells it reads, then the CSR), 140 MB for the 130,000 nodes
+# of a 4 km² mesh at once; a chunk holds some 80 MB at most (the hinge fits' 110 points a
+# vertex), whatever the mesh (each centre's fit is its own: the same numbers).
 FIT_CHUNK = 20_000
 
 
