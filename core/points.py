@@ -40,7 +40,7 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
     if note and not finite.all():
         note(f"{source}: {int((~finite).sum()):,} points without a finite x, y and z (empty or "
              "NaN values) were left out")
-    xyz = xyz[finite]
+    xyz = xyz if finite.all() else xyz[finite]
     if len(xyz) < 3:
         raise FloodMeshError(f"{source} has {len(xyz)} usable points (finite x, y, z); at least 3 "
                              "are needed to make a terrain model. Check the file and its classes")
@@ -67,28 +67,15 @@ def _check_area(xy: np.ndarray, source: str) -> None:
 
 def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
     """Say how many points repeat another's x, y (to 0.1 mm) with a different z, and by how
-    much. One integer key per point, sorted: a few seconds for 10 million points."""
+    much."""
     # lazy: numba loads only when this runs
-    from ._kernels.points import position_keys
+    from ._kernels.points import repeated_positions
 
-    key = position_keys(xyz[:, 0], xyz[:, 1], 1e-4)
-    if len(key) < len(xyz):  # over ~400 km across: not checked
-        return
-    # sorting the keys alone finds the repeated ones (few); only their points are then ordered
-    # (an argsort of all keys took 2-3x as long)
-    ordered = np.sort(key)
-    repeated = np.unique(ordered[1:][ordered[1:] == ordered[:-1]])
-    if not repeated.size:
-        return
-    index = np.flatnonzero(repeated[np.searchsorted(repeated, key) % repeated.size] == key)
-    index = index[np.argsort(key[index], kind="stable")]
-    same = key[index][1:] == key[index][:-1]
-    dz = np.abs(np.diff(xyz[index, 2]))[same]
-    if dz.size and dz.max() > 0:
-        n = int((dz > 0).sum())
+    n, dz = repeated_positions(xyz[:, 0], xyz[:, 1], xyz[:, 2], 1e-4)
+    if n:
         note(f"{source}: {n:,} point{'s repeat' if n > 1 else ' repeats'} the x, y of another "
-             f"with a different z (up to {dz.max():.3g} m apart); the grid keeps one of each: check for "
-             "overlapping flight lines or tiles merged twice")
+             f"with a different z (up to {dz:.3g} m apart); the grid keeps one of each: check "
+             "for overlapping flight lines or tiles merged twice")
 
 
 def split_holdout(points: PointCloud, fraction: float, seed: int,
@@ -101,7 +88,11 @@ def split_holdout(points: PointCloud, fraction: float, seed: int,
     n = len(points)
     n_out = holdout_count(fraction, n, note)
     check_seed(seed)
+    # lazy: numba loads only where points are read
+    from ._kernels.points import rows_left
+
     rng = np.random.default_rng(seed)
     mask = np.zeros(n, dtype=bool)
     mask[rng.choice(n, size=n_out, replace=False)] = True
-    return (PointCloud(points.xyz[~mask], points.crs), PointCloud(points.xyz[mask], points.crs))
+    return (PointCloud(rows_left(points.xyz, mask), points.crs),
+            PointCloud(points.xyz[mask], points.crs))

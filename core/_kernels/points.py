@@ -41,26 +41,139 @@ def spread(x, y):
 
 
 @njit(cache=True, nogil=True)
-def position_keys(x, y, step):
-    """One int64 per point numbering its x, y rounded to ``step`` m (row-major over the
-    points' box), in one pass without the float temporaries of the numpy expression
-    ``round((xy − min) / step)``, which it equals; an empty array where the box has more
-    than 2⁶² such positions (over ~400 km across at 0.1 mm)."""
+def scaled_points(X, Y, Z, classification, keep, scales, offsets):
+    """(m, 3) x, y, z in metres of the points whose class ``keep`` marks (a 256-entry table),
+    from a LAS file's stored integers: ``stored · scale + offset``, as laspy scales them, in
+    one pass (laspy's three scaled arrays and their stacking took 1 s for 9 M points)."""
+    n = X.shape[0]
+    m = 0
+    for p in range(n):
+        if keep[classification[p]]:
+            m += 1
+    xyz = np.empty((m, 3))
+    k = 0
+    for p in range(n):
+        if keep[classification[p]]:
+            xyz[k, 0] = X[p] * scales[0] + offsets[0]
+            xyz[k, 1] = Y[p] * scales[1] + offsets[1]
+            xyz[k, 2] = Z[p] * scales[2] + offsets[2]
+            k += 1
+    return xyz
+
+
+@njit(cache=True, nogil=True)
+def repeated_positions(x, y, z, step):
+    """(how many points repeat the x, y of an earlier point, both rounded to ``step`` m, with
+    a different z; the largest such z difference in m), each point compared with the latest
+    earlier point at its position.
+
+    The rounded positions are counting-sorted, in the points' order, into about n / 8192
+    blocks (one sequential scatter), then within each block into cells of about four points,
+    where they are compared: 0.3 s for 9 M points in random order, where sorting one key per
+    point took 1.0 s.
+    """
     n = x.shape[0]
-    xmin, ymin = np.inf, np.inf
-    for k in range(n):
-        xmin, ymin = min(xmin, x[k]), min(ymin, y[k])
-    cx = np.empty(n, np.int64)
-    rows = 0
-    for k in range(n):
-        cx[k] = np.int64(np.rint((x[k] - xmin) / step))
-        rows = max(rows, np.int64(np.rint((y[k] - ymin) / step)))
-    rows += 1
-    cols = 0
-    for k in range(n):
-        cols = max(cols, cx[k])
-    if (cols + 1) * float(rows) >= 2.0 ** 62:
-        return np.empty(0, np.int64)
-    for k in range(n):
-        cx[k] = cx[k] * rows + np.int64(np.rint((y[k] - ymin) / step))
-    return cx
+    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
+    for p in range(n):
+        xmin, xmax = min(xmin, x[p]), max(xmax, x[p])
+        ymin, ymax = min(ymin, y[p]), max(ymax, y[p])
+    span_x = np.int64(np.rint((xmax - xmin) / step))
+    span_y = np.int64(np.rint((ymax - ymin) / step))
+    # cells of ``side`` steps, about four points each; blocks of ``group`` x ``group`` cells
+    side = np.int64(max(1.0, np.ceil(2.0 * math.sqrt((span_x + 1.0) * (span_y + 1.0) / n))))
+    cols, rows = span_x // side + 1, span_y // side + 1
+    group = 46  # cells along a block's side: about 8k points a block
+    block_cols = (cols + group - 1) // group
+    n_blocks = block_cols * ((rows + group - 1) // group)
+    starts = np.zeros(n_blocks + 1, np.int64)
+    for p in range(n):
+        cx = np.int64(np.rint((x[p] - xmin) / step)) // side
+        cy = np.int64(np.rint((y[p] - ymin) / step)) // side
+        starts[(cy // group) * block_cols + cx // group + 1] += 1
+    for b in range(n_blocks):
+        starts[b + 1] += starts[b]
+    kx, ky, kz = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n)
+    fill = starts[:-1].copy()
+    for p in range(n):
+        px = np.int64(np.rint((x[p] - xmin) / step))
+        py = np.int64(np.rint((y[p] - ymin) / step))
+        b = (py // side // group) * block_cols + px // side // group
+        kx[fill[b]], ky[fill[b]], kz[fill[b]] = px, py, z[p]
+        fill[b] += 1
+    largest_block = 0
+    for b in range(n_blocks):
+        largest_block = max(largest_block, starts[b + 1] - starts[b])
+    cell_starts = np.empty(group * group + 1, np.int64)
+    order = np.empty(largest_block, np.int64)
+    repeats, largest = 0, 0.0
+    for b in range(n_blocks):
+        first, last = starts[b], starts[b + 1]
+        if last - first < 2:
+            continue
+        cx0, cy0 = (b % block_cols) * group, (b // block_cols) * group
+        cell_starts[:] = 0
+        for p in range(first, last):
+            cell = (ky[p] // side - cy0) * group + kx[p] // side - cx0
+            cell_starts[cell + 1] += 1
+        for c in range(group * group):
+            cell_starts[c + 1] += cell_starts[c]
+        for p in range(first, last):
+            cell = (ky[p] // side - cy0) * group + kx[p] // side - cx0
+            order[cell_starts[cell]] = p
+            cell_starts[cell] += 1
+        cell_first = 0  # cell_starts[c] is now where cell c ends
+        for c in range(group * group):
+            cell_last = cell_starts[c]
+            k = cell_last - cell_first
+            if k > 32:  # many points in one cell: sorted by position there
+                members = order[cell_first:cell_last]
+                local = np.empty(k, np.int64)
+                for i in range(k):
+                    local[i] = (kx[members[i]] % side) * side + ky[members[i]] % side
+                ranked = np.argsort(local, kind="mergesort")  # stable: in the points' order
+                for i in range(1, k):
+                    p, q = members[ranked[i]], members[ranked[i - 1]]
+                    if local[ranked[i]] == local[ranked[i - 1]] and kz[p] != kz[q]:
+                        repeats += 1
+                        largest = max(largest, abs(kz[p] - kz[q]))
+            else:
+                for i in range(cell_first + 1, cell_last):
+                    p = order[i]
+                    for j in range(i - 1, cell_first - 1, -1):
+                        q = order[j]
+                        if kx[p] == kx[q] and ky[p] == ky[q]:
+                            if kz[p] != kz[q]:
+                                repeats += 1
+                                largest = max(largest, abs(kz[p] - kz[q]))
+                            break
+            cell_first = cell_last
+    return repeats, largest
+
+
+@njit(cache=True, nogil=True)
+def occupied_bins(x, y, x0, y0, size, cols, rows):
+    """How many of the ``cols`` x ``rows`` square bins of ``size`` m from (x0, y0) hold a
+    point (the points lie inside)."""
+    occupied = np.zeros(cols * rows, np.bool_)
+    count = 0
+    for p in range(x.shape[0]):
+        b = np.int64((y[p] - y0) / size) * cols + np.int64((x[p] - x0) / size)
+        if not occupied[b]:
+            occupied[b] = True
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
+def rows_left(xyz, dropped):
+    """``xyz`` without the rows that ``dropped`` marks, in order (numpy's boolean indexing of
+    an (n, 3) array took 0.6 s for 9 M points)."""
+    n = xyz.shape[0]
+    m = n - np.count_nonzero(dropped)
+    out = np.empty((m, xyz.shape[1]))
+    k = 0
+    for p in range(n):
+        if not dropped[p]:
+            out[k] = xyz[p]
+            k += 1
+    return out

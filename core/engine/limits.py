@@ -127,14 +127,15 @@ def footprint(xy: np.ndarray) -> tuple[float, float]:
     bins' area leaves out large voids (water, buildings), so the spacing is that of the data,
     not of the box.
     """
+    # lazy: numba loads only where points are read
+    from .._kernels.points import occupied_bins
+
     n = len(xy)
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     span = np.maximum(hi - lo, 1e-9)
     size = max(4.0 * math.sqrt(span[0] * span[1] / n), float(span.max()) / 4096, 1e-9)
     cols = int(span[0] / size) + 1
     rows = int(span[1] / size) + 1
-    # true division and truncation (the offsets are ≥ 0): float floor division is 8x slower
-    cells = ((xy[:, 1] - lo[1]) / size).astype(np.int64) * cols \
-        + ((xy[:, 0] - lo[0]) / size).astype(np.int64)
-    area = float(np.count_nonzero(np.bincount(cells, minlength=rows * cols))) * size * size
+    area = occupied_bins(xy[:, 0], xy[:, 1], float(lo[0]), float(lo[1]), size, cols,
+                         rows) * size * size
     return area, math.sqrt(area / n)

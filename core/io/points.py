@@ -66,36 +66,49 @@ def _read_las(path: Path, classes, note=None):
         file_crs = las.header.parse_crs()
     except Exception:
         file_crs = None
-    xyz = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
-    return classes_kept(xyz, np.asarray(las.classification), classes, path.name, note), file_crs
+    # lazy: numba loads only when points are read
+    from .._kernels.points import scaled_points
+
+    cls = np.ascontiguousarray(las.classification)  # one compiled variant for every format
+    keep = classes_table(np.bincount(cls, minlength=256), classes, path.name, note)
+    stored, header = las.points.array, las.header
+    return scaled_points(stored["X"], stored["Y"], stored["Z"], cls, keep, header.scales,
+                         header.offsets), file_crs
 
 
 def classes_kept(xyz, cls, classes, name: str, note=None):
     """The points of ``classes``, or of the ground class (2) when classified, or all of an
     unclassified cloud (with a note)."""
-    def present() -> str:  # for the messages alone: np.unique sorts every point's class
-        return ", ".join(str(c) for c in np.unique(cls)) or "none"
+    keep = classes_table(np.bincount(cls, minlength=256), classes, name, note)[cls]
+    return xyz if keep.all() else xyz[keep]  # a ground-only file needs no copy
 
+
+def classes_table(counts: np.ndarray, classes, name: str, note=None) -> np.ndarray:
+    """Which of the 256 LAS classes to keep (a bool per class), from the points' ``counts`` per
+    class: ``classes``, or the ground class (2) when classified, or all of an unclassified
+    cloud (with a note); refused when that keeps no point."""
+    present = ", ".join(str(c) for c in np.flatnonzero(counts)) or "none"
+    keep = np.zeros(256, bool)
     if classes is None:
-        if np.any(cls == GROUND_CLASS):
-            keep = cls == GROUND_CLASS
-        elif np.isin(cls, UNCLASSIFIED).all():
-            keep = np.ones(len(cls), bool)
+        if counts[GROUND_CLASS]:
+            keep[GROUND_CLASS] = True
+        elif counts.sum() == counts[list(UNCLASSIFIED)].sum():
+            keep[:] = True
             if note:
-                note(f"{name} is not classified (classes {present()} only): all {len(cls):,} "
-                     "points are used as ground; classify the ground first (e.g. pdal "
-                     "filters.smrf) if they include vegetation or buildings")
+                note(f"{name} is not classified (classes {present} only): all "
+                     f"{int(counts.sum()):,} points are used as ground; classify the ground "
+                     "first (e.g. pdal filters.smrf) if they include vegetation or buildings")
         else:
             raise FloodMeshError(
                 f"{name} is classified but has no ground points (class 2; classes present: "
-                f"{present()}): give the classes to grid (--classes, 'LAS classes' in QGIS), or "
+                f"{present}): give the classes to grid (--classes, 'LAS classes' in QGIS), or "
                 "classify the ground first (e.g. pdal translate with filters.smrf)")
     else:
-        keep = np.isin(cls, list(classes))
-        if not keep.any():
+        keep[[c for c in classes if 0 <= c < 256]] = True
+        if not counts[keep].any():
             raise FloodMeshError(f"{name} has no points of classes {sorted(classes)} "
-                                 f"(classes present: {present()}); choose other classes")
-    return xyz if keep.all() else xyz[keep]  # a ground-only file needs no copy
+                                 f"(classes present: {present}); choose other classes")
+    return keep
 
 
 def _read_ept(path: Path, classes, note=None):

@@ -30,16 +30,37 @@ def test_spread_is_the_numpy_definition(case):
     assert ours[2] == pytest.approx(expected[2], abs=1e-6)
 
 
-def test_position_keys_are_the_numpy_keys():
-    """The keys of the duplicate check equal the numpy expression they replaced."""
-    from floodmesh.core._kernels.points import position_keys
+def _numpy_repeats(xyz, step):
+    """The definition (points._note_duplicates before it was compiled): one key per rounded
+    position, a stable sort, the z of consecutive points at one position compared."""
+    cell = np.round((xyz[:, :2] - xyz[:, :2].min(axis=0)) / step).astype(np.int64)
+    key = cell[:, 0] * (int(cell[:, 1].max()) + 1) + cell[:, 1]
+    order = np.argsort(key, kind="stable")
+    dz = np.abs(np.diff(xyz[order, 2]))[key[order][1:] == key[order][:-1]]
+    return int((dz > 0).sum()), float(dz.max()) if dz.size else 0.0
 
-    rng = np.random.default_rng(2)
-    xy = np.column_stack([400_000 + rng.uniform(0, 900, 20000),
-                          5_600_000 + rng.uniform(0, 700, 20000)])
-    xy[:2000:2] = xy[1:2000:2].round(4)  # some at 0.1 mm positions and repeated
-    cell = np.round((xy - xy.min(axis=0)) / 1e-4).astype(np.int64)
-    expected = cell[:, 0] * (int(cell[:, 1].max()) + 1) + cell[:, 1]
-    assert np.array_equal(position_keys(xy[:, 0], xy[:, 1], 1e-4), expected)
-    far = np.array([[0.0, 0.0], [1e9, 1e9], [5.0, 5.0]])
-    assert len(position_keys(far[:, 0], far[:, 1], 1e-4)) == 0
+
+@pytest.mark.parametrize("case", ["scattered", "clustered", "one place", "a line"])
+def test_repeated_positions_are_the_numpy_definition(case):
+    """Points repeating an earlier point's x, y (to 0.1 mm) with another z: counted as the
+    sort of one key per point counted them, in cells of a few points and in crowded ones."""
+    from floodmesh.core._kernels.points import repeated_positions
+
+    rng = np.random.default_rng(7)
+    n = 30_000
+    xy = rng.uniform(0, 500, (n, 2))
+    if case == "clustered":  # thousands of points within a few cells
+        xy[: n // 2] = rng.uniform(0, 0.01, (n // 2, 2)).round(3)
+    elif case == "one place":
+        xy[:] = 0.25
+    elif case == "a line":
+        xy[:, 1] = 3.0
+    xy += [400_000, 5_600_000]
+    repeat = rng.integers(0, n, 3000)
+    xy[rng.integers(0, n, 3000)] = xy[repeat] + rng.uniform(-4e-5, 4e-5, (3000, 2))
+    z = rng.choice([10.0, 10.0, 10.25, 11.5], n)
+    xyz = np.column_stack([xy, z])
+    expected = _numpy_repeats(xyz, 1e-4)
+    assert expected[0] > 0
+    count, largest = repeated_positions(xyz[:, 0], xyz[:, 1], xyz[:, 2], 1e-4)
+    assert (count, largest) == expected
