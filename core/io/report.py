@@ -7,6 +7,7 @@ import contextlib
 import math
 import signal
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -39,10 +40,28 @@ def new_figure(width_in: float, height_in: float):
 
 
 def save_png(fig, path) -> Path:
-    """Write ``fig`` as PNG to ``path`` under a temporary name, renamed when complete."""
+    """Write ``fig`` as PNG to ``path``: ``write_png`` of it ``rendered``."""
+    return write_png(*rendered(fig), path)
+
+
+def rendered(fig) -> tuple[np.ndarray, float]:
+    """``fig`` drawn by Agg: a copy of its RGBA pixels, (rows, columns, 4) bytes from the top,
+    and its dots per inch."""
+    fig.canvas.draw()
+    return np.array(fig.canvas.buffer_rgba()), fig.dpi
+
+
+def write_png(pixels: np.ndarray, dpi: float, path) -> Path:
+    """RGBA ``pixels`` as PNG at ``path`` under a temporary name, renamed when complete, as
+    matplotlib's ``savefig`` writes them but at zlib's fastest level: a 1080 × 1020 map in
+    0.05 s instead of 0.15 s, its file 3 % smaller to 5 % larger."""
+    # lazy: matplotlib loads only when this runs
+    from matplotlib.image import imsave
+
     path = Path(path)
     with io.atomic_output(path) as tmp:
-        fig.savefig(tmp, format="png")
+        imsave(tmp, pixels, format="png", origin="upper", dpi=dpi,
+               pil_kwargs={"compress_level": 1})
     return path
 
 
@@ -57,6 +76,11 @@ def histogram_bins_cm(res_cm: np.ndarray) -> np.ndarray:
 
 
 def write_residual_histogram(path, res: np.ndarray) -> Path:
+    """Write ``residual_histogram`` as PNG to ``path``."""
+    return save_png(residual_histogram(res), path)
+
+
+def residual_histogram(res: np.ndarray):
     """Histogram of residuals ``res`` (m; NaN = outside the mesh, counted in the title) in cm,
     bars coloured by class, the class edges ±10 and ±25 cm dashed, RMSE, mean and n in the title.
     Residuals beyond the outer bins are counted in the end bins; the title gives the largest."""
@@ -91,7 +115,7 @@ def write_residual_histogram(path, res: np.ndarray) -> Path:
     ax.set_xlim(edges[0], edges[-1])
     ax.legend(loc="upper right")
     fig.tight_layout()
-    return save_png(fig, path)
+    return fig
 
 
 def mesh_edges(triangles: np.ndarray) -> np.ndarray:
@@ -100,19 +124,21 @@ def mesh_edges(triangles: np.ndarray) -> np.ndarray:
     return unique_rows(np.sort(pairs, axis=1))
 
 
-# the most mesh edges the residual map draws: a collection holds some 300 B an edge, and
-# beyond this many the edges are denser than the map's 900 pixels anyway
+# the most mesh edges the residual map draws: beyond this many the edges are denser than the
+# map's 900 pixels anyway
 MAP_EDGES = 200_000
 
 
 def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray,
                        res: np.ndarray) -> Path:
+    """Write ``residual_map`` as PNG to ``path``."""
+    return save_png(residual_map(nodes, triangles, xyz, res), path)
+
+
+def residual_map(nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray, res: np.ndarray):
     """Map of the mesh's edges (faint grey, up to ``MAP_EDGES``) and the held-out points ``xyz``
     (m) coloured by the class of ``res`` (m): <10 cm green, 10–25 cm orange, >25 cm red,
     outside the mesh grey; equal aspect, easting and northing in metres."""
-    # lazy: matplotlib loads only when this runs
-    from matplotlib.collections import LineCollection
-
     res = np.asarray(res, float)
     cls = residual_class(res)
     lo, hi = nodes[:, :2].min(axis=0), nodes[:, :2].max(axis=0)
@@ -123,8 +149,11 @@ def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.n
     edges = mesh_edges(np.asarray(triangles))
     drawn = len(edges) <= MAP_EDGES
     if drawn:
-        ax.add_collection(LineCollection(nodes[edges][:, :, :2], colors="0.6", linewidths=0.3,
-                                         alpha=0.6, zorder=1))
+        # one line broken by NaN between the edges: Agg strokes it as one path, where a
+        # collection of 80 000 two-point paths took 0.5 s to build
+        xy = np.full((len(edges), 3, 2), np.nan)
+        xy[:, :2] = nodes[edges][:, :, :2]
+        ax.plot(*xy.reshape(-1, 2).T, color="0.6", linewidth=0.3, alpha=0.6, zorder=1)
     size = float(np.clip(4000.0 / max(len(xyz), 1), 6.0, 25.0))
     classes = [(-1, "outside the mesh", OUTSIDE_MESH_COLOUR)] + [
         (k, label, colour) for k, (label, colour)
@@ -132,8 +161,10 @@ def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.n
     for k, label, colour in classes:
         pick = cls == k
         if pick.any():
-            ax.scatter(xyz[pick, 0], xyz[pick, 1], s=size, c=colour, edgecolors="none",
-                       label=f"{label} ({int(pick.sum())})", zorder=2 + (k >= 0) + k)
+            # markers, stamped by Agg, not a scatter's collection of paths: 4x as fast
+            ax.plot(xyz[pick, 0], xyz[pick, 1], linestyle="none", marker="o",
+                    markersize=math.sqrt(size), color=colour, markeredgewidth=0,
+                    label=f"{label} ({int(pick.sum())})", zorder=2 + (k >= 0) + k)
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
@@ -146,7 +177,7 @@ def write_residual_map(path, nodes: np.ndarray, triangles: np.ndarray, xyz: np.n
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
                   title="|residual|")
     fig.tight_layout()
-    return save_png(fig, path)
+    return fig
 
 
 def hillshade(values: np.ndarray, cell_size: float, *, azimuth: float = 315.0,
@@ -156,7 +187,7 @@ def hillshade(values: np.ndarray, cell_size: float, *, azimuth: float = 315.0,
     central-difference gradients, and the sun ``azimuth`` degrees clockwise from north,
     ``altitude`` degrees above the horizon; 0 in the shadow, NaN where the cell or a neighbour
     is NaN."""
-    values = np.asarray(values, float)
+    values = np.asarray(values, np.float32)  # ample for a picture, and twice as fast
     if min(values.shape) < 2:  # no gradient: a flat, fully lit surface
         return np.where(np.isfinite(values), math.sin(math.radians(altitude)), np.nan)
     down, east = np.gradient(values, cell_size)  # dz per metre southwards, eastwards
@@ -189,6 +220,11 @@ def sampled_hillshade(dem, max_cells: int = HILLSHADE_CELLS):
 
 
 def write_breaklines_map(path, dem, lines) -> Path:
+    """Write ``breaklines_map`` as PNG to ``path``."""
+    return save_png(breaklines_map(dem, lines), path)
+
+
+def breaklines_map(dem, lines):
     """Map of the break lines ``lines`` ((k, 2+) coordinate arrays, m) in magenta on a white
     halo (their QGIS style) over a grey hillshade of ``dem`` (a ``raster.Grid``; sun from the
     north-west, 315°, 45° high; nodata white); equal aspect, easting and northing in metres."""
@@ -224,7 +260,7 @@ def write_breaklines_map(path, dem, lines) -> Path:
     ax.set_title(f"{len(segments)} break lines, {length:,.0f} m, over the DEM's hillshade "
                  "(sun 315°, 45°)", fontsize="medium")
     fig.tight_layout()
-    return save_png(fig, path)
+    return fig
 
 
 # signals whose Python handlers raise (Ctrl-C's KeyboardInterrupt, a caller's own alarm or term)
@@ -261,12 +297,18 @@ def write_report_pngs(folder, nodes: np.ndarray, triangles: np.ndarray, xyz: np.
                       res: np.ndarray, *, dem=None, lines=None) -> list[Path]:
     """``residual_histogram.png`` and ``residual_map.png`` in ``folder``, and with the ``dem``
     (a ``raster.Grid``) ``breaklines_map.png`` of ``lines`` (coordinate arrays) over its
-    hillshade; returns their paths. An interrupt waits until all are drawn
-    (``signals_deferred``)."""
+    hillshade; returns their paths. An interrupt waits until all are written
+    (``signals_deferred``).
+
+    Each picture is compressed on a second thread while the next is drawn, the largest first:
+    the three of the 9 M-point benchmark in 0.37 s once matplotlib is loaded (0.2 s)."""
     folder = Path(folder)
-    with signals_deferred():
-        paths = [write_residual_histogram(folder / HISTOGRAM_PNG, res),
-                 write_residual_map(folder / MAP_PNG, nodes, triangles, xyz, res)]
+    with signals_deferred(), ThreadPoolExecutor(1) as encoder:
+        def written(fig, name):
+            return encoder.submit(write_png, *rendered(fig), folder / name)
+
+        pending = [written(residual_map(nodes, triangles, xyz, res), MAP_PNG)]
         if dem is not None:
-            paths.append(write_breaklines_map(folder / BREAKLINES_PNG, dem, lines or []))
-        return paths
+            pending.append(written(breaklines_map(dem, lines or []), BREAKLINES_PNG))
+        pending.insert(0, written(residual_histogram(res), HISTOGRAM_PNG))
+        return [future.result() for future in pending]

@@ -155,6 +155,51 @@ def test_write_report_pngs(tmp_path, classes_mix):
     assert all(imread(p).ndim == 3 for p in paths)
 
 
+def test_report_pngs_are_those_savefig_writes(tmp_path, classes_mix):
+    """The pictures, drawn here and compressed on a second thread, are byte for byte those the
+    figures give through matplotlib's savefig (at zlib's fastest level) one after another."""
+    from affine import Affine
+
+    from floodmesh.core.raster import Grid
+
+    nodes, triangles = hole_mesh()
+    xyz = check_points(classes_mix)
+    rows, cols = np.mgrid[0:60, 0:100]
+    dem = Grid(np.sin(cols / 7.0) + 0.02 * rows, Affine(1.0, 0, UTM_ORIGIN[0], 0, -1.0,
+                                                        UTM_ORIGIN[1] + 60), None)
+    lines = [xyz[:5, :2], xyz[5:12, :2]]
+    report.write_report_pngs(tmp_path, nodes, triangles, xyz, classes_mix, dem=dem, lines=lines)
+    for name, fig in ((report.HISTOGRAM_PNG, report.residual_histogram(classes_mix)),
+                      (report.MAP_PNG, report.residual_map(nodes, triangles, xyz, classes_mix)),
+                      (report.BREAKLINES_PNG, report.breaklines_map(dem, lines))):
+        fig.savefig(tmp_path / "savefig.png", format="png", pil_kwargs={"compress_level": 1})
+        assert (tmp_path / name).read_bytes() == (tmp_path / "savefig.png").read_bytes(), name
+
+
+def test_map_draws_the_mesh_as_one_line():
+    """The mesh's edges are one line broken between the edges and the points are markers: no
+    collection of a path per edge or per point, which made the map slow."""
+    nodes, triangles = hole_mesh()
+    fig = report.residual_map(nodes, triangles, check_points([0.0, 0.2, 0.5]),
+                              np.array([0.0, 0.2, 0.5]))
+    ax = fig.axes[0]
+    assert not ax.collections and not ax.patches
+    edges = len(report.mesh_edges(triangles))
+    assert sorted(len(line.get_xdata()) for line in ax.lines) == [1, 1, 1, 3 * edges]
+
+
+def test_a_picture_failing_on_the_encoder_thread_fails_the_call(tmp_path, classes_mix):
+    """An error writing a picture (its name taken by a folder) reaches the caller; the other
+    pictures are written, no temporary file is left."""
+    nodes, triangles = hole_mesh()
+    (tmp_path / report.MAP_PNG).mkdir()
+    with pytest.raises(OSError):
+        report.write_report_pngs(tmp_path, nodes, triangles, check_points(classes_mix),
+                                 classes_mix)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([report.MAP_PNG,
+                                                                report.HISTOGRAM_PNG])
+
+
 def test_an_interrupt_while_drawing_waits_until_the_pictures_are_written(tmp_path, classes_mix):
     """Ctrl-C inside matplotlib left broken paths that crashed a later draw (SIGSEGV on Debian
     13): the interrupt comes just after both pictures instead, and the handler is restored."""
