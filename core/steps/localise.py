@@ -469,6 +469,16 @@ def _hops_cut(keep: np.ndarray, kink: np.ndarray) -> list[np.ndarray]:
     return np.split(keep, cuts)
 
 
+def _median(values: np.ndarray) -> float:
+    """``np.median`` of a few ``values`` (the middle one, or the mean of the middle two; NaN
+    where any is NaN or none) without its overhead (some 20 µs a call, 1,500 calls a run)."""
+    ordered = np.sort(values)
+    n = len(ordered)
+    if not n or np.isnan(ordered[-1]):
+        return float("nan")
+    return float(ordered[n // 2] if n % 2 else (ordered[n // 2 - 1] + ordered[n // 2]) / 2)
+
+
 def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5, index=None):
     """A check for ``join_pieces``: whether the measured points between two line ends (x, y, z)
     follow the straight line between them, i.e. the median z of the points near each of the
@@ -486,7 +496,7 @@ def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5,
         at = a[None, :3] * (1 - t) + b[None, :3] * t
         indptr, indices = index.neighbours(at[:, :2], radius)
         near = np.split(indices, indptr[1:-1])
-        off = [abs(np.median(points[k, 2]) - z) for k, z in zip(near, at[:, 2]) if len(k) >= 3]
+        off = [abs(_median(points[k, 2]) - z) for k, z in zip(near, at[:, 2]) if len(k) >= 3]
         return not off or float(np.mean(off)) <= tolerance
 
     return follows
@@ -522,7 +532,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
         hops -= 1
     chains = [[(k, False, 0, len(p[0]))] for k, p in enumerate(pieces)]
     if join_gap:
-        kinds = [np.sign(np.nanmedian(p[4])) if np.isfinite(p[4]).any() else 0 for p in pieces]
+        kinds = [np.sign(_median(p[4][~np.isnan(p[4])])) if np.isfinite(p[4]).any() else 0
+                 for p in pieces]
         chains = join_pieces([p[0] for p in pieces], kinds, max_gap=join_gap,
                              lateral=join_lateral, ground=_ground_follows(points, window,
                                                                      index=index))
@@ -532,7 +543,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                  for p, reverse, first, stop in ((pieces[k], *rest) for k, *rest in chain)]
         coords, slopes, fit = (np.concatenate([part[j] for part in parts]) for j in range(3))
         out.append(BreakLine(coords, slopes, min(pieces[k][2] for k, *_ in chain)))
-        per_line.append(float(np.nanmedian(fit)) if np.isfinite(fit).any() else float("nan"))
+        per_line.append(_median(fit[~np.isnan(fit)]) if np.isfinite(fit).any() else float("nan"))
     t_junctions = 0
     if join_gap and out:
         snapped, takes, t_junctions = snap_t_junctions(
