@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import FloodMeshError
 from .outputs import atomic_output, require_file
-from .vectors import write_gpkg_layer
+from .vectors import triangle_features, write_gpkg_layer
 
 
 def write_mesh_2dm(path, nodes: np.ndarray, triangles: np.ndarray, *, material: int = 1,
@@ -160,8 +160,6 @@ def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, laye
     """Write the mesh's triangles as PolygonZ features (id, area_m2, min_angle_deg, and any
     per-triangle ``attributes``)."""
     # lazy: PROJ and GEOS load only when this runs
-    import shapely
-
     from ..steps.mesh import triangle_angles, triangle_areas
 
     areas = triangle_areas(nodes, triangles)
@@ -169,5 +167,4 @@ def write_mesh_gpkg(path, nodes: np.ndarray, triangles: np.ndarray, crs, *, laye
     columns = {"id": np.arange(1, len(triangles) + 1), "area_m2": areas,
                "min_angle_deg": min_angles, **(attributes or {})}
     write_gpkg_layer(path, layer, "3D Polygon", len(triangles),
-                     lambda start, stop: shapely.polygons(nodes[triangles[start:stop]]), columns,
-                     crs, atomic=atomic)
+                     triangle_features(nodes, triangles), columns, crs, atomic=atomic)

@@ -29,17 +29,19 @@ def write_gpkg(path, layer: str, geometry_type: str, properties: dict, records, 
                            else shapely.geometry.shape(r["geometry"]) for r in records], object)
     columns = {name: [r["properties"].get(name) for r in records] for name in properties}
     write_gpkg_layer(path, layer, geometry_type, len(records),
-                     lambda start, stop: geometries[start:stop], columns, crs,
+                     shapely_features(lambda start, stop: geometries[start:stop]), columns, crs,
                      properties=properties, atomic=atomic)
 
 
-def write_gpkg_layer(path, layer: str, geometry_type: str, n: int, geometries, columns: dict,
+def write_gpkg_layer(path, layer: str, geometry_type: str, n: int, features, columns: dict,
                      crs, *, properties: dict | None = None, atomic: bool = True) -> None:
-    """Write one layer of ``n`` features: ``geometries(start, stop)`` gives the shapely
-    geometries of features ``start`` to ``stop`` − 1, ``columns`` (name → sequence) one value
-    per feature for each field, typed by ``properties`` (name → fiona type; from the columns'
-    dtypes by default). ``atomic=False`` adds the layer to ``path`` as it is (a GeoPackage
-    being assembled under a temporary name, see ``atomic_output``).
+    """Write one layer of ``n`` features: ``features(start, stop, srs_id)`` gives the
+    GeoPackage geometry blobs and the bounds ((k, 4): minx, miny, maxx, maxy; NaN where none)
+    of features ``start`` to ``stop`` − 1 (``shapely_features``, ``triangle_features``),
+    ``columns`` (name → sequence) one value per feature for each field, typed by
+    ``properties`` (name → fiona type; from the columns' dtypes by default). ``atomic=False``
+    adds the layer to ``path`` as it is (a GeoPackage being assembled under a temporary name,
+    see ``atomic_output``).
 
     OGR creates the layer empty (schema, CRS, spatial index and its triggers); the features go
     in by ``fill_gpkg_layer``, in one SQLite transaction: a mesh of 53 000 triangles in 0.27 s
@@ -56,7 +58,7 @@ def write_gpkg_layer(path, layer: str, geometry_type: str, n: int, geometries, c
                             crs_wkt=crs.to_wkt()):
                 pass
         if n:
-            fill_gpkg_layer(target, layer, n, geometries, columns, properties)
+            fill_gpkg_layer(target, layer, n, features, columns, properties)
 
 
 def gpkg_field_type(values) -> str:
@@ -84,20 +86,16 @@ def quoted(name: str) -> str:
 GPKG_CHUNK = 100_000
 
 
-def fill_gpkg_layer(path, layer: str, n: int, geometries, columns: dict,
+def fill_gpkg_layer(path, layer: str, n: int, features, columns: dict,
                     properties: dict) -> None:
     """Add features 1 to ``n`` to the empty layer ``layer`` of the GeoPackage ``path`` in one
     transaction, ``GPKG_CHUNK`` at a time (``write_gpkg_layer`` says what the arguments are):
-    its rows (geometries as ``gpkg_blobs``), their boxes in the layer's R-tree, its feature
-    count and extent.
+    its rows, their boxes in the layer's R-tree, its feature count and extent.
 
     The layer's triggers (the R-tree's call ``ST_MinX``, …, which only OGR's SQLite has) are
     dropped for the insert and re-created from their own SQL after it, so that features OGR
     adds later still update the index."""
-    # lazy: GEOS loads only when this runs
-    import shapely
-
-    bounds = np.empty((n, 4))  # minx, miny, maxx, maxy; NaN where null or empty
+    bounds = np.empty((n, 4))
     con = sqlite3.connect(path, isolation_level=None)
     try:
         table, column, srs_id = con.execute(
@@ -117,10 +115,8 @@ def fill_gpkg_layer(path, layer: str, n: int, geometries, columns: dict,
             con.execute(f"DROP TRIGGER {quoted(name)}")
         for start in range(0, n, GPKG_CHUNK):
             stop = min(n, start + GPKG_CHUNK)
-            chunk = np.asarray(geometries(start, stop), dtype=object)
-            bounds[start:stop] = shapely.bounds(chunk)
-            con.executemany(insert, zip(range(start + 1, stop + 1),
-                                        gpkg_blobs(chunk, srs_id, bounds[start:stop]),
+            blobs, bounds[start:stop] = features(start, stop, srs_id)
+            con.executemany(insert, zip(range(start + 1, stop + 1), blobs,
                                         *(field_values(columns[name][start:stop], kind)
                                           for name, kind in properties.items())))
         boxed = np.flatnonzero(np.isfinite(bounds).all(axis=1))
@@ -222,6 +218,46 @@ GPKG_HEADER = np.dtype([("magic", "S2"), ("version", "u1"), ("flags", "u1"), ("s
                         ("envelope", "<f8", (6,))])
 
 
+def shapely_features(geometries):
+    """``write_gpkg_layer``'s features of shapely geometries: ``geometries(start, stop)`` those
+    of features ``start`` to ``stop`` − 1, None where null."""
+    # lazy: GEOS loads only when this runs
+    import shapely
+
+    def features(start, stop, srs_id):
+        chunk = np.asarray(geometries(start, stop), dtype=object)
+        bounds = shapely.bounds(chunk)
+        return gpkg_blobs(chunk, srs_id, bounds), bounds
+    return features
+
+
+# a triangle's GeoPackage blob: header with envelope (x, y, z), then its ISO WKB PolygonZ of
+# one ring of four points, the first repeated
+GPKG_TRIANGLE = np.dtype(GPKG_HEADER.descr + [
+    ("order", "u1"), ("type", "<u4"), ("rings", "<u4"), ("points", "<u4"),
+    ("ring", "<f8", (4, 3))])
+
+
+def triangle_features(nodes: np.ndarray, triangles: np.ndarray):
+    """``write_gpkg_layer``'s features of a mesh's ``triangles`` (node indices) on ``nodes``
+    ((n, 3), m) as PolygonZ, the blobs OGR writes built by NumPy: 53 000 in 0.02 s, through
+    shapely 0.1 s."""
+    def features(start, stop, srs_id):
+        corners = nodes[triangles[start:stop]]
+        lo, hi = corners.min(axis=1), corners.max(axis=1)
+        blobs = np.zeros(len(corners), GPKG_TRIANGLE)
+        blobs["magic"], blobs["flags"], blobs["srs_id"] = b"GP", 5, srs_id  # 5: LE, xyz box
+        blobs["envelope"] = np.column_stack([lo[:, 0], hi[:, 0], lo[:, 1], hi[:, 1],
+                                             lo[:, 2], hi[:, 2]])
+        blobs["order"], blobs["type"], blobs["rings"], blobs["points"] = 1, 1003, 1, 4
+        blobs["ring"][:, :3] = corners
+        blobs["ring"][:, 3] = corners[:, 0]
+        raw, size = blobs.tobytes(), GPKG_TRIANGLE.itemsize
+        return ([raw[a:a + size] for a in range(0, len(raw), size)],
+                np.column_stack([lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]]))
+    return features
+
+
 def gpkg_blobs(geometries: np.ndarray, srs_id: int, bounds: np.ndarray) -> list:
     """GeoPackage geometry blobs of shapely ``geometries`` (None stays None), as OGR writes
     them: little-endian, the envelope (minx, maxx, miny, maxy, and minz, maxz where the
@@ -258,9 +294,10 @@ def write_lines_gpkg(path, lines, crs, *, layer="breaklines", attributes=None,
     # lazy: GEOS loads only when this runs
     import shapely
 
-    write_gpkg_layer(path, layer, "3D LineString", len(lines),
-                     lambda start, stop: [shapely.linestrings(v) for v in lines[start:stop]],
-                     attributes or {}, crs, atomic=atomic)
+    features = shapely_features(
+        lambda start, stop: [shapely.linestrings(line) for line in lines[start:stop]])
+    write_gpkg_layer(path, layer, "3D LineString", len(lines), features, attributes or {}, crs,
+                     atomic=atomic)
 
 
 def write_breaklines(path, lines, crs, *, fit_rms=None) -> None:
@@ -290,8 +327,8 @@ def write_points_gpkg(path, xyz: np.ndarray, crs, *, layer="points", attributes=
     import shapely
 
     write_gpkg_layer(path, layer, "3D Point", len(xyz),
-                     lambda start, stop: shapely.points(xyz[start:stop]), attributes or {}, crs,
-                     atomic=atomic)
+                     shapely_features(lambda start, stop: shapely.points(xyz[start:stop])),
+                     attributes or {}, crs, atomic=atomic)
 
 
 def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:

@@ -470,7 +470,9 @@ def test_gpkg_layers_hold_what_ogr_writes_itself(tmp_path):
         properties = {name: io.vectors.gpkg_field_type(v) for name, v in columns.items()}
         ours, theirs = tmp_path / f"{layer}.gpkg", tmp_path / f"{layer}_ogr.gpkg"
         io.vectors.write_gpkg_layer(ours, layer, geometry_type, len(geometries),
-                                    lambda start, stop: geometries[start:stop], columns, UTM32)
+                                    io.vectors.shapely_features(
+                                        lambda start, stop: geometries[start:stop]),
+                                    columns, UTM32)
         _ogr_reference(theirs, layer, geometry_type, properties, geometries,
                        {name: v.tolist() for name, v in columns.items()})
         assert _tables(ours, layer) == _tables(theirs, layer), layer
@@ -484,6 +486,15 @@ def test_gpkg_layers_hold_what_ogr_writes_itself(tmp_path):
         # as tight as OGR's, which rounds a float32-exact bound one step further
         assert (boxes[:, [1, 3]] >= ogr_boxes[:, [1, 3]]).all()
         assert (boxes[:, [2, 4]] <= ogr_boxes[:, [2, 4]]).all()
+
+    # the mesh's triangles, their blobs built by NumPy, are those too, and so is the extent
+    io.write_mesh_gpkg(tmp_path / "mesh.gpkg", nodes, triangles, UTM32)
+    ours, theirs = _tables(tmp_path / "mesh.gpkg", "triangles"), _tables(
+        tmp_path / "tris_ogr.gpkg", "tris")
+    assert [row[:2] for row in ours['SELECT * FROM "triangles" ORDER BY fid']] \
+        == [row[:2] for row in theirs['SELECT * FROM "tris" ORDER BY fid']]
+    assert ours["SELECT * FROM gpkg_contents"][0][5:] \
+        == theirs["SELECT * FROM gpkg_contents"][0][5:]
 
     zone = [{"geometry": None, "properties": {"id": 1}},
             {"geometry": shapely.geometry.mapping(shapely.box(412_000, 5_652_000, 412_010,
