@@ -40,52 +40,28 @@ def thin_vertices(coords: np.ndarray, spacing, *, firm: float | None = None,
     the end). With ``firm`` (m) and ``tolerance`` (plan m, height m), a vertex closer than its
     spacing but not than ``firm`` gives way only where the chord from the previous kept vertex
     to the next one passes within ``tolerance`` of it."""
+    # lazy: numba loads only when this runs (the flood command imports this module)
+    from .._kernels.lines import thinned
+
     coords = np.asarray(coords, float)
     if len(coords) <= 2:
         return coords
-    spacing = np.broadcast_to(np.asarray(spacing, float), (len(coords),))
-    keep = [0]
-    for i in range(1, len(coords) - 1):
-        gap = np.hypot(*(coords[i, :2] - coords[keep[-1], :2]))
-        if gap >= spacing[i] or (tolerance is not None and gap >= firm and not _holds(
-                coords[[keep[-1], i, i + 1]], 0, 2, tolerance)):
-            keep.append(i)
-    while len(keep) > 1 and np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])) < max(
-            spacing[-1], spacing[keep[-1]]):
-        keep.pop()
-    keep.append(len(coords) - 1)
-    return coords[keep]
-
-
-def _holds(coords, a: int, b: int, tolerance) -> bool:
-    """Whether the chord from vertex a to vertex b passes within ``tolerance`` (plan m,
-    height m) of every vertex between them."""
-    inner = coords[a + 1:b]
-    ab = coords[b, :2] - coords[a, :2]
-    t = np.clip((inner[:, :2] - coords[a, :2]) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
-    plan = np.hypot(*(coords[a, :2] + t[:, None] * ab - inner[:, :2]).T)
-    height = (np.abs(coords[a, 2] + t * (coords[b, 2] - coords[a, 2]) - inner[:, 2])
-              if coords.shape[1] > 2 else np.zeros(len(inner)))
-    return bool((plan <= tolerance[0]).all() and (height <= tolerance[1]).all())
+    spacing = np.ascontiguousarray(np.broadcast_to(np.asarray(spacing, float), (len(coords),)))
+    plan, height = tolerance if tolerance is not None else (0.0, 0.0)
+    return coords[thinned(np.ascontiguousarray(coords), spacing, tolerance is not None,
+                          float(firm or 0.0), float(plan), float(height))]
 
 
 def drop_spikes(coords: np.ndarray, where=None, min_angle: float = 60.0) -> np.ndarray:
     """``coords`` (k, 2+) without the inner vertices (of those ``where`` is true) at which the
     line folds back, its two segments meeting at less than ``min_angle`` degrees."""
+    # lazy: numba loads only when this runs (the flood command imports this module)
+    from .._kernels.lines import unspiked
+
     coords = np.asarray(coords, float)
     where = np.ones(len(coords), bool) if where is None else np.asarray(where, bool)
-    keep = list(range(len(coords)))
-    i = 1
-    while i < len(keep) - 1:
-        a, b, c = (coords[keep[j], :2] for j in (i - 1, i, i + 1))
-        u, v = a - b, c - b
-        cos = u @ v / max(np.hypot(*u) * np.hypot(*v), 1e-12)
-        if where[keep[i]] and cos > np.cos(np.radians(min_angle)):
-            del keep[i]
-            i = max(1, i - 1)
-        else:
-            i += 1
-    return coords[keep]
+    return coords[unspiked(np.ascontiguousarray(coords), np.ascontiguousarray(where),
+                           float(np.cos(np.radians(min_angle))))]
 
 
 def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | None = None,

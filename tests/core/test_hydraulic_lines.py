@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import shapely
 
-from floodmesh.core.steps.hydraulic_lines import lines_for_hydraulics, thin_vertices
+from floodmesh.core.steps.hydraulic_lines import drop_spikes, lines_for_hydraulics, thin_vertices
 from floodmesh.core.options import RunOptions
 from floodmesh.core.chain.pipeline import run_pipeline
 
@@ -141,3 +141,58 @@ def test_drop_spikes_removes_sharp_turns_only_where_asked():
     assert [10, 0] not in out.tolist() and [20, 2] in out.tolist()
     assert out[0].tolist() == [0, 0] and out[-1].tolist() == [20, 10]
     assert len(drop_spikes(line, where=np.zeros(5, bool))) == 5
+
+
+def _numpy_thin(coords, spacing, firm=None, tolerance=None):
+    """thin_vertices as NumPy defined it before its loop was compiled: the reference."""
+    spacing = np.broadcast_to(np.asarray(spacing, float), (len(coords),))
+    keep = [0]
+    for i in range(1, len(coords) - 1):
+        gap = np.hypot(*(coords[i, :2] - coords[keep[-1], :2]))
+        if gap >= spacing[i] or (tolerance is not None and gap >= firm and not _numpy_holds(
+                coords[[keep[-1], i, i + 1]], tolerance)):
+            keep.append(i)
+    while len(keep) > 1 and np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])) < max(
+            spacing[-1], spacing[keep[-1]]):
+        keep.pop()
+    return coords[keep + [len(coords) - 1]]
+
+
+def _numpy_holds(abc, tolerance):
+    ab = abc[2, :2] - abc[0, :2]
+    t = np.clip((abc[1:2, :2] - abc[0, :2]) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
+    plan = np.hypot(*(abc[0, :2] + t[:, None] * ab - abc[1:2, :2]).T)
+    height = np.abs(abc[0, 2] + t * (abc[2, 2] - abc[0, 2]) - abc[1:2, 2])
+    return bool((plan <= tolerance[0]).all() and (height <= tolerance[1]).all())
+
+
+def _numpy_unspiked(coords, where, min_angle=60.0):
+    keep, i = list(range(len(coords))), 1
+    while i < len(keep) - 1:
+        a, b, c = (coords[keep[j], :2] for j in (i - 1, i, i + 1))
+        u, v = a - b, c - b
+        cos = u @ v / max(np.hypot(*u) * np.hypot(*v), 1e-12)
+        if where[keep[i]] and cos > np.cos(np.radians(min_angle)):
+            del keep[i]
+            i = max(1, i - 1)
+        else:
+            i += 1
+    return coords[keep]
+
+
+def test_compiled_thinning_and_spikes_are_the_numpy_definitions_to_the_bit():
+    """Random walks at UTM magnitudes with steps from centimetres to metres, spacings per
+    vertex, with and without the chord tolerance; spikes with and without ``where``."""
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        n = int(rng.integers(2, 80))
+        coords = (np.array([400_000.0, 5_600_000.0, 30.0])
+                  + np.cumsum(rng.normal(0, 10 ** rng.uniform(-2, 0.5), (n, 3)), axis=0))
+        spacing = rng.uniform(0.2, 3.0, n)
+        tolerance = (float(rng.uniform(0.05, 0.5)), float(rng.uniform(0.01, 0.1)))
+        assert np.array_equal(thin_vertices(coords, spacing), _numpy_thin(coords, spacing))
+        assert np.array_equal(thin_vertices(coords, spacing, firm=0.3, tolerance=tolerance),
+                              _numpy_thin(coords, spacing, 0.3, tolerance))
+        where = rng.random(n) < 0.7
+        assert np.array_equal(drop_spikes(coords, where), _numpy_unspiked(coords, where))
+        assert np.array_equal(drop_spikes(coords), _numpy_unspiked(coords, np.ones(n, bool)))
