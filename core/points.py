@@ -35,12 +35,16 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
     receives what was left out or found doubtful (points without x, y or z, points at one x, y
     with different z)."""
     crs = require_metric_crs(crs, source, kind)
+    # lazy: numba loads only where points are read
+    from ._kernels.points import finite_rows
+
     xyz = np.asarray(xyz, dtype=np.float64)
-    finite = np.isfinite(xyz).all(axis=1)
-    if note and not finite.all():
-        note(f"{source}: {int((~finite).sum()):,} points without a finite x, y and z (empty or "
-             "NaN values) were left out")
-    xyz = xyz if finite.all() else xyz[finite]
+    finite = finite_rows(xyz)
+    if finite is not None:
+        if note:
+            note(f"{source}: {int((~finite).sum()):,} points without a finite x, y and z "
+                 "(empty or NaN values) were left out")
+        xyz = xyz[finite]
     if len(xyz) < 3:
         raise FloodMeshError(f"{source} has {len(xyz)} usable points (finite x, y, z); at least 3 "
                              "are needed to make a terrain model. Check the file and its classes")

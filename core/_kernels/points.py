@@ -177,3 +177,29 @@ def rows_left(xyz, dropped):
             out[k] = xyz[p]
             k += 1
     return out
+
+
+@njit(cache=True, nogil=True)
+def extent(x, y):
+    """(xmin, ymin, xmax, ymax) of the points, in one pass."""
+    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
+    for p in range(x.shape[0]):
+        xmin, xmax = min(xmin, x[p]), max(xmax, x[p])
+        ymin, ymax = min(ymin, y[p]), max(ymax, y[p])
+    return xmin, ymin, xmax, ymax
+
+
+@njit(cache=True, nogil=True)
+def finite_rows(xyz):
+    """Which rows of ``xyz`` are finite throughout; None where all are (no mask made)."""
+    n, m = xyz.shape
+    for p in range(n):
+        for k in range(m):
+            if not np.isfinite(xyz[p, k]):
+                finite = np.ones(n, np.bool_)
+                for q in range(p, n):
+                    for j in range(m):
+                        if not np.isfinite(xyz[q, j]):
+                            finite[q] = False
+                return finite
+    return None

@@ -120,18 +120,20 @@ def check_memory(*, points: int = 0, cells: int = 0, triangles: int = 0,
     return need
 
 
-def footprint(xy: np.ndarray) -> tuple[float, float]:
-    """(area in m², mean point spacing in m) of the ground the points cover.
+def footprint(xy: np.ndarray, bounds=None) -> tuple[float, float]:
+    """(area in m², mean point spacing in m) of the ground the points cover; ``bounds``: their
+    (xmin, ymin, xmax, ymax) where known.
 
     The points are binned at four times the spacing their bounding box would give; the occupied
     bins' area leaves out large voids (water, buildings), so the spacing is that of the data,
     not of the box.
     """
     # lazy: numba loads only where points are read
-    from .._kernels.points import occupied_bins
+    from .._kernels.points import extent, occupied_bins
 
     n = len(xy)
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    xmin, ymin, xmax, ymax = extent(xy[:, 0], xy[:, 1]) if bounds is None else bounds
+    lo, hi = np.array([xmin, ymin]), np.array([xmax, ymax])
     span = np.maximum(hi - lo, 1e-9)
     size = max(4.0 * math.sqrt(span[0] * span[1] / n), float(span.max()) / 4096, 1e-9)
     cols = int(span[0] / size) + 1

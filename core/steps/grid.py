@@ -20,6 +20,7 @@ import numpy as np
 from affine import Affine
 
 from .._kernels.delaunay import delaunay
+from .._kernels.points import extent
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_cell_size, check_max_gap
@@ -117,8 +118,8 @@ def check_grid(points: PointCloud, cell_size: float, max_gap: float | None = Non
     (``rows``, ``cols``, ``x0``, ``y1``, ``max_gap``) and the points' ``area`` (m²) and
     ``spacing`` (m)."""
     xyz = points.xyz
-    bounds = (xyz[:, 0].min(), xyz[:, 1].min(), xyz[:, 0].max(), xyz[:, 1].max())
-    area, _ = footprint(xyz[:, :2])
+    bounds = extent(xyz[:, 0], xyz[:, 1])
+    area, _ = footprint(xyz[:, :2], bounds)
     return check_layout(bounds, len(xyz), area, cell_size, max_gap, memory=memory)
 
 
