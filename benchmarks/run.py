@@ -9,7 +9,8 @@ slopefile: `floodmesh slope` file to file vs `gdaldem slope` on the same DEM fil
            processes (start-up included), alternating, best of 3, with peak RSS of both.
 gridfile:  `floodmesh grid` vs `gdal_grid -a linear` on the same CSV points and 1 m grid.
 run:       `floodmesh run` on one LAZ (9 M points: 1 km² at 9 points/m²), per step and whole,
-           with peak RSS.
+           with peak RSS, against laspy reading the file (the floor) and two peers' TIN
+           gridding of it (whitebox_workflows, startinpy).
 codec:     GeoTIFF codecs and predictors on DEM, slope and breakpoints (how the output codec
            was chosen).
 grid:  FloodMesh TIN gridding vs scipy.interpolate.griddata (linear, the same Qhull TIN).
@@ -339,40 +340,129 @@ def bench_grid_file(n_points, repeat=3):
           "TIN: scipy griddata's to 1e-7 m, see `grid`; gdal_grid's linear surface is not)")
 
 
-def bench_run(n_points):
-    """``floodmesh run`` on one LAZ of ``n_points`` (9 per m²: 1 km² for 9 M), whole process with
-    peak RSS, and the report's seconds per step."""
+READ_FLOOR = """
+import sys, time
+import laspy, numpy as np
+start = time.perf_counter()
+las = laspy.read(sys.argv[1])  # lazrs, in parallel where installed (laspy's default)
+xyz = [np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)]
+print(time.perf_counter() - start)
+"""
+
+PEER_WHITEBOX = """
+import sys, time
+import whitebox_workflows as wbw
+start = time.perf_counter()
+wbe = wbw.WbEnvironment()
+wbe.verbose = False
+grid = wbe.lidar.interpolation_gridding.lidar_tin_gridding(
+    input=wbe.read_lidar(sys.argv[1]), resolution=1.0, max_triangle_edge_length=10.0,
+    excluded_classes=[c for c in range(32) if c != 2])
+wbe.write_raster(grid, sys.argv[2])
+print(time.perf_counter() - start)
+"""
+
+PEER_STARTIN = """
+import sys, time
+import laspy, numpy as np, startinpy
+start = time.perf_counter()
+las = laspy.read(sys.argv[1])
+ground = np.asarray(las.classification) == 2
+pts = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])[ground]
+# inserted in 10 m bands (its walk to each new point is short then: 8x faster than file order)
+pts = pts[np.lexsort((pts[:, 0], np.floor(pts[:, 1] / 10.0)))]
+dt = startinpy.DT()
+dt.insert(pts)
+x0, y1 = np.floor(pts[:, 0].min()), np.ceil(pts[:, 1].max())
+cols, rows = int(np.ceil(pts[:, 0].max() - x0)), int(np.ceil(y1 - pts[:, 1].min()))
+yy, xx = np.mgrid[0:rows, 0:cols]
+z = dt.interpolate({"method": "TIN"}, np.column_stack([x0 + xx.ravel() + 0.5,
+                                                       y1 - yy.ravel() - 0.5]))
+print(time.perf_counter() - start)
+"""
+
+
+def timed_script(script, *args):
+    """(seconds the script prints, whole-process wall s, CPU s, peak RSS MB) of ``script`` run
+    by this Python in a process of its own."""
+    import os
+    import subprocess
+
+    start = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-c", script, *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    out = proc.stdout.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - start
+    if os.waitstatus_to_exitcode(status):
+        return None
+    return (float(out.split()[-1]), wall, usage.ru_utime + usage.ru_stime,
+            usage.ru_maxrss / 1024)
+
+
+def bench_run(n_points, repeat=2, peers=True):
+    """``floodmesh run`` on one LAZ of ``n_points`` (9 per m²: 1 km² for 9 M) against the floor
+    of reading it (laspy with lazrs: the file decompressed and x, y, z scaled), alternating,
+    best of ``repeat`` each, with peak RSS and the report's seconds per step; then the TIN
+    gridding alone of two peers on the same file, once (whitebox_workflows, startinpy: ``make
+    bench`` installs them)."""
     import json
     import os
 
     import laspy
 
-    from floodmesh.core import io
-    from floodmesh.core.points import PointCloud
-
     # the LAZ takes minutes to write: kept in build/ (ignored by git) for the next run
     laz = Path(__file__).resolve().parent.parent / "build" / "bench" / f"points_{n_points}.laz"
     if not laz.exists() or laspy.open(laz).header.point_count != n_points:
         laz.parent.mkdir(parents=True, exist_ok=True)
-        io.write_points_las(laz, PointCloud(synthetic_points(n_points), CRS_M))
+        in_child("write_points_laz", laz, n_points)
     load = os.getloadavg()[0]
+    floors, runs = [], []
     with tempfile.TemporaryDirectory(dir=Path.cwd()) as tmp:
         tmp = Path(tmp)
-        wall, cpu, rss = run_process(floodmesh_command() + ["run", laz, "--out", tmp / "out"])
-        report = json.loads((tmp / "out" / "report.json").read_text())
+        for _ in range(repeat):
+            floors.append(timed_script(READ_FLOOR, laz))
+            runs.append(run_process(floodmesh_command() + ["run", laz, "--out", tmp / "out"]))
+            report = json.loads((tmp / "out" / "report.json").read_text())
+            runs[-1] += (report,)
+        peer_rows = []
+        for name, script in (("whitebox_workflows lidar_tin_gridding", PEER_WHITEBOX),
+                             ("startinpy DT + TIN interpolation", PEER_STARTIN)) if peers else ():
+            peer_rows.append((name, timed_script(script, laz, tmp / "peer.tif")))
+    floor = min(floors, key=lambda f: f[0])
+    wall, cpu, rss, report = min(runs, key=lambda r: r[0])
     area = n_points / 9.0 / 1e6
     print(f"\n## floodmesh run, one LAZ of {n_points:,} points ({area:.2f} km², 9 points/m²), "
-          f"reference case (goal: 10 s end to end); load average {load:.1f} at the start, "
+          f"reference case, against reading the file (goal: at most 6x, at most 3 GB); best of "
+          f"{repeat}, alternating; load average {load:.1f} at the start, "
           f"{os.getloadavg()[0]:.1f} at the end")
-    cpu_steps = report.get("cpu_seconds", {})
-    print(f"{'step':<16}{'wall s':>9}{'CPU s':>9}")
-    for step, seconds in report["seconds"].items():
-        print(f"{step:<16}{seconds:>9.2f}{cpu_steps.get(step, float('nan')):>9.2f}")
-    print(f"{'sum of steps':<16}{sum(report['seconds'].values()):>9.2f}"
-          f"{sum(cpu_steps.values()):>9.2f}")
-    print(f"{'whole process':<16}{wall:>9.2f}{cpu:>9.2f}   peak RSS {rss:,.0f} MB; "
-          f"{report['grid']['cols']} x {report['grid']['rows']} cells, "
-          f"{report['n_breaklines']} break lines, {report['nodes']:,} nodes")
+    print(f"{'':<44}{'wall s':>8}{'CPU s':>8}{'peak MB':>9}{'x floor':>9}")
+    print(f"{'floor: laspy + lazrs reading x, y, z':<44}{floor[0]:>8.2f}{'':>8}{floor[3]:>9,.0f}"
+          f"{1.0:>9.2f}   (whole process {floor[1]:.2f} s)")
+    print(f"{'floodmesh run (whole process)':<44}{wall:>8.2f}{cpu:>8.2f}{rss:>9,.0f}"
+          f"{wall / floor[0]:>9.2f}")
+    for name, result in peer_rows:
+        if result is None:
+            print(f"{name + ' (gridding only)':<44}  not installed or failed (make bench installs it)")
+        else:
+            print(f"{name + ' (gridding only)':<44}{result[1]:>8.2f}{result[2]:>8.2f}"
+                  f"{result[3]:>9,.0f}{result[1] / floor[0]:>9.2f}")
+    cpu_steps, seconds = report.get("cpu_seconds", {}), report["seconds"]
+    total = sum(seconds.values())
+    print(f"\n{'step of the best run':<20}{'wall s':>8}{'CPU s':>8}{'share':>8}")
+    for step, value in seconds.items():
+        print(f"{step:<20}{value:>8.2f}{cpu_steps.get(step, float('nan')):>8.2f}"
+              f"{value / wall:>8.0%}")
+    print(f"{'start-up and between':<20}{wall - total:>8.2f}{'':>8}{(wall - total) / wall:>8.0%}")
+    print(f"{report['grid']['cols']} x {report['grid']['rows']} cells, {report['n_breaklines']} "
+          f"break lines, {report['nodes']:,} nodes")
+
+
+def write_points_laz(path, n_points):
+    from floodmesh.core import io
+    from floodmesh.core.points import PointCloud
+
+    io.write_points_las(path, PointCloud(synthetic_points(int(n_points)), CRS_M))
 
 
 def bench_trace(n_breakpoints):
@@ -533,6 +623,8 @@ def main():
                         default="slopefile,gridfile,run,codec,grid,slope,trace,lines,mesh")
     parser.add_argument("--grid-points", type=int, default=1_000_000,
                         help="points for gridding against gdal_grid")
+    parser.add_argument("--no-peers", action="store_true",
+                        help="run: leave out the peers' gridding (minutes and GBs at 9 M points)")
     parser.add_argument("--run-points", type=int, default=9_000_000,
                         help="points of the end-to-end run (9 M: 1 km² at 9 points/m²)")
     parser.add_argument("--codec-size", type=int, default=4000,
@@ -550,7 +642,7 @@ def main():
     benches = {
         "slopefile": lambda: bench_slope_file([int(n) for n in args.file_sizes.split(",")]),
         "gridfile": lambda: bench_grid_file(args.grid_points),
-        "run": lambda: bench_run(args.run_points),
+        "run": lambda: bench_run(args.run_points, peers=not args.no_peers),
         "codec": lambda: bench_codec(args.codec_size),
         "grid": lambda: bench_grid(args.points), "slope": lambda: bench_slope(args.size),
         "trace": lambda: bench_trace(args.breakpoints), "lines": bench_lines, "mesh": bench_mesh,
