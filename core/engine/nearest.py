@@ -3,9 +3,31 @@ index of the measured points that every terrain fit of a run queries (LiDAR poin
 cell centres)."""
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 import numba
 from numba import njit, prange
+
+# Tasks (centres, points) below which a parallel kernel runs on one thread: waking the others
+# costs more than they save (345 queries of 10 centres: 0.09 s on two threads, 0.03 s on one;
+# on a busy machine each wake-up can wait a scheduler's time slice)
+PARALLEL_MIN = 2000
+
+
+@contextmanager
+def threads_for(tasks: int):
+    """Numba's threads for the parallel kernels called inside: one for fewer than
+    ``PARALLEL_MIN`` tasks, else all (numba's setting is the calling thread's own)."""
+    if tasks >= PARALLEL_MIN:
+        yield
+        return
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
 
 
 def nearest_line(xy: np.ndarray, lines: list) -> tuple[np.ndarray, np.ndarray]:
@@ -26,9 +48,10 @@ def nearest_line(xy: np.ndarray, lines: list) -> tuple[np.ndarray, np.ndarray]:
     if not len(first):
         raise ValueError("nearest_line needs a line of two vertices or more")
     owner = np.searchsorted(starts, first, side="right") - 1
-    return _nearest_segment(np.ascontiguousarray(np.asarray(xy, float)[:, :2]),
-                            np.ascontiguousarray(vertices[first]),
-                            np.ascontiguousarray(vertices[first + 1]), owner)
+    with threads_for(len(xy)):
+        return _nearest_segment(np.ascontiguousarray(np.asarray(xy, float)[:, :2]),
+                                np.ascontiguousarray(vertices[first]),
+                                np.ascontiguousarray(vertices[first + 1]), owner)
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -181,8 +204,9 @@ class PointIndex:
         """CSR (indptr, indices) of the points within ``radius`` (m, one or one per centre) of
         each of ``centres`` (k, 2+), each centre's indices ascending."""
         centres, radius = _queries(centres, radius)
-        return _ball_csr(self.xy, self.order, self.bounds, self.lo[0], self.lo[1], self.cell,
-                         self.cols, self.rows, centres, radius)
+        with threads_for(len(centres)):
+            return _ball_csr(self.xy, self.order, self.bounds, self.lo[0], self.lo[1],
+                             self.cell, self.cols, self.rows, centres, radius)
 
 
 def _queries(centres, radius) -> tuple[np.ndarray, np.ndarray]:
@@ -215,8 +239,9 @@ class CellIndex:
         """CSR (indptr, indices) of the points within ``radius`` (m, one or one per centre) of
         each of ``centres`` (k, 2+), each centre's indices ascending."""
         centres, radius = _queries(centres, radius)
-        return _cells_csr(self.rank, self.rows, self.cols, self.a, self.c, self.e, self.f,
-                          centres, radius)
+        with threads_for(len(centres)):
+            return _cells_csr(self.rank, self.rows, self.cols, self.a, self.c, self.e, self.f,
+                              centres, radius)
 
 
 @njit(cache=True, nogil=True, parallel=True)

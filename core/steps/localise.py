@@ -23,7 +23,7 @@ import numpy as np
 import shapely
 from numba import njit, prange
 
-from ..engine.nearest import nearest_line, point_index
+from ..engine.nearest import nearest_line, point_index, threads_for
 from ..errors import FloodMeshError
 from .breaklines import BreakLine
 from .joining import join_pieces, snap_t_junctions
@@ -112,11 +112,12 @@ def _plane_fits_chunk(index, points, centres, radius):
     fit = count >= 4
     if not fit.any():
         return z, rms, count
-    zmean, ata, atz = _plane_equations(points, indptr, indices, centres)
-    ata[~fit] = np.eye(3)
-    ata += np.eye(3) * 1e-9
-    beta = np.linalg.solve(ata, atz[..., None])[..., 0]
-    sse = _plane_residuals(points, indptr, indices, centres, zmean, beta)
+    with threads_for(len(centres)):
+        zmean, ata, atz = _plane_equations(points, indptr, indices, centres)
+        ata[~fit] = np.eye(3)
+        ata += np.eye(3) * 1e-9
+        beta = np.linalg.solve(ata, atz[..., None])[..., 0]
+        sse = _plane_residuals(points, indptr, indices, centres, zmean, beta)
     z[fit] = zmean[fit] + beta[fit, 0]
     rms[fit] = np.sqrt(sse[fit] / np.maximum(count[fit] - 3, 1))
     return z, rms, count
@@ -395,11 +396,12 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     reach = float(np.hypot(window.half_width, window.half_length))
     for _ in range(iterations):
         tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
-        fits = np.concatenate([_hinge_fits(points, *index.neighbours(coords[a:b, :2], reach),
-                                           coords[a:b, 0].copy(), coords[a:b, 1].copy(),
-                                           tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
-                                           window.half_width, window.half_length)
-                               for a, b in _chunks(len(coords))])
+        with threads_for(len(coords)):
+            fits = np.concatenate([_hinge_fits(points, *index.neighbours(coords[a:b, :2], reach),
+                                               coords[a:b, 0].copy(), coords[a:b, 1].copy(),
+                                               tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
+                                               window.half_width, window.half_length)
+                                   for a, b in _chunks(len(coords))])
         good = (np.isfinite(fits[:, 0]) & (np.abs(fits[:, 3]) >= min_kink)
                 & (fits[:, 4] >= min_f_ratio))
         normal = np.column_stack([-tangents[:, 1], tangents[:, 0]])
