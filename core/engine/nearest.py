@@ -142,14 +142,15 @@ def _bucket(a, b, lo, cell, cols, rows, room, held):
 @njit(cache=True, nogil=True)
 def _cell_at(v, v0, cell):
     """The cell of coordinate ``v`` in cells of ``cell`` from ``v0``, on or off the grid
-    (within ±10¹⁵ cells)."""
+    (within ±10¹⁵ cells): the floor of the rounded quotient, monotonic in ``v`` (points and
+    queries bucketed by it agree), where Python's exact ``//`` took 5 ns."""
     return int(np.floor(min(max((v - v0) / cell, -1e15), 1e15)))
 
 
 @njit(cache=True, nogil=True)
 def _cell_of(v, v0, cell, cells):
     """The cell (0 to ``cells`` - 1) of coordinate ``v`` in cells of ``cell`` from ``v0``."""
-    return min(max(int((v - v0) // cell), 0), cells - 1)
+    return min(max(_cell_at(v, v0, cell), 0), cells - 1)
 
 
 @njit(cache=True, nogil=True)
@@ -324,8 +325,8 @@ def _cell_sort(x, y, x0, y0, cell, cols, rows, index_type, blocks):
     counts = np.zeros((blocks, cells), np.int64)
     for t in prange(blocks):
         for p in range(t * n // blocks, (t + 1) * n // blocks):
-            c = min(int((x[p] - x0) // cell), cols - 1)
-            r = min(int((y[p] - y0) // cell), rows - 1)
+            c = min(_cell_at(x[p], x0, cell), cols - 1)
+            r = min(_cell_at(y[p], y0, cell), rows - 1)
             key[p] = r * cols + c
             counts[t, key[p]] += 1
     bounds = np.zeros(cells + 1, np.int64)
@@ -355,10 +356,10 @@ def _ball_csr(xy, order, bounds, x0, y0, cell, cols, rows, centres, radius):
     for i in prange(m):
         cx, cy, r = centres[i, 0], centres[i, 1], radius[i]
         # clipped so that a centre off the points indexes no cell (an empty range)
-        span[i, 0] = min(max(int((cx - r - x0) // cell), 0), cols)
-        span[i, 1] = max(min(int((cx + r - x0) // cell), cols - 1), -1)
-        span[i, 2] = max(int((cy - r - y0) // cell), 0)
-        span[i, 3] = min(int((cy + r - y0) // cell), rows - 1)
+        span[i, 0] = min(max(_cell_at(cx - r, x0, cell), 0), cols)
+        span[i, 1] = max(min(_cell_at(cx + r, x0, cell), cols - 1), -1)
+        span[i, 2] = max(_cell_at(cy - r, y0, cell), 0)
+        span[i, 3] = min(_cell_at(cy + r, y0, cell), rows - 1)
         for row in range(span[i, 2], span[i, 3] + 1):  # room for every point of the cells
             room[i + 1] += (bounds[row * cols + span[i, 1] + 1]
                             - bounds[row * cols + span[i, 0]])
