@@ -49,26 +49,15 @@ def douglas_peucker_mask(coords: np.ndarray, tolerance: float,
     than ``tolerance`` (m) from its chord is split at the farthest of its vertices of the lowest
     rank it holds rather than at its farthest vertex: the kept line bends at preferred vertices
     where it can, and every dropped vertex still lies within ``tolerance`` of it."""
-    n = len(coords)
-    keep = np.zeros(n, bool)
-    keep[0] = keep[-1] = True
-    stack = [(0, n - 1)]
-    while stack:
-        i, j = stack.pop()
-        if j - i < 2:
-            continue
-        horizontal, vertical = _deviation(coords[i], coords[j], coords[i + 1:j])
-        worst = np.maximum(horizontal, vertical)
-        k = int(np.argmax(worst))
-        if worst[k] > tolerance:
-            if rank is not None:
-                inner = rank[i + 1:j]
-                k = int(np.argmax(np.where(inner == inner.min(), worst, -1.0)))
-            m = i + 1 + k
-            keep[m] = True
-            stack.append((i, m))
-            stack.append((m, j))
-    return keep
+    # lazy: numba loads only where lines are simplified
+    from .._kernels.simplify import douglas_peucker_keep
+
+    coords = np.ascontiguousarray(coords, dtype=np.float64)
+    if len(coords) < 2:
+        return np.ones(len(coords), bool)
+    ranked = rank is not None
+    rank = np.ascontiguousarray(rank, dtype=np.int64) if ranked else np.zeros(1, np.int64)
+    return douglas_peucker_keep(coords, float(tolerance), rank, ranked)
 
 
 def _deviation(a, b, pts):
