@@ -253,3 +253,49 @@ def test_simplify_breaklines_refuses_bad_arguments():
         simplify_breaklines(lines, "keep-every", 0)
     with pytest.raises(FloodMeshError, match="minimum distance"):
         simplify_breaklines(lines, "keep-every", 2, min_distance=-1)
+
+
+def _numpy_douglas_peucker(coords, tolerance, rank=None):
+    """The definition (simplify.douglas_peucker_mask before it was compiled)."""
+    keep = np.zeros(len(coords), bool)
+    keep[0] = keep[-1] = True
+    stack = [(0, len(coords) - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        a, b, pts = coords[i], coords[j], coords[i + 1:j]
+        ab = b[:2] - a[:2]
+        length2 = float(ab @ ab)
+        t = (np.zeros(len(pts)) if length2 == 0
+             else np.clip(((pts[:, :2] - a[:2]) @ ab) / length2, 0.0, 1.0))
+        horizontal = np.hypot(*(pts[:, :2] - (a[:2] + t[:, None] * ab)).T)
+        vertical = np.abs(pts[:, 2] - (a[2] + t * (b[2] - a[2])))
+        worst = np.maximum(horizontal, np.where(np.isfinite(vertical), vertical, 0.0))
+        k = int(np.argmax(worst))
+        if worst[k] > tolerance:
+            if rank is not None:
+                inner = rank[i + 1:j]
+                k = int(np.argmax(np.where(inner == inner.min(), worst, -1.0)))
+            keep[i + 1 + k] = True
+            stack += [(i, i + 1 + k), (i + 1 + k, j)]
+    return keep
+
+
+def test_compiled_douglas_peucker_is_the_numpy_definition():
+    """The same vertices kept as the NumPy version on random walks, lines at UTM magnitudes,
+    rounded grids (ties), lines with missing z, with and without ranks."""
+    rng = np.random.default_rng(0)
+    for trial in range(3000):
+        n = int(rng.integers(2, 200))
+        coords = np.cumsum(rng.normal(0, 1, (n, 3)), axis=0)
+        if trial % 4 == 1:
+            coords[:, :2] = coords[:, :2].round(1) + [400_000, 5_600_000]
+        elif trial % 4 == 2:
+            coords = np.column_stack([rng.uniform(0, 20, (n, 2)).round(1), rng.normal(0, 1, n)])
+        elif trial % 4 == 3:
+            coords[rng.integers(0, n, 3), 2] = np.nan
+        tolerance = float(rng.choice([0.1, 0.25, 0.5, 1.0]))
+        rank = rng.integers(0, 3, n) if trial % 2 else None
+        assert np.array_equal(douglas_peucker_mask(coords, tolerance, rank),
+                              _numpy_douglas_peucker(coords, tolerance, rank)), trial
