@@ -20,6 +20,7 @@ from ..options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS
                        NODE_ELEVATIONS, RunOptions, parse_formats)
 from .console import ProgressBar, print_note, print_notes
 from .flood_cli import add_flood_commands
+from .process import end_process
 
 DEFAULTS = RunOptions()
 
@@ -584,30 +585,15 @@ def main(argv=None) -> int:
     return 0
 
 
-# Steps that end with every file closed and no thread, child process or temporary left for the
-# interpreter's exit handlers to clean up: ``command`` skips the teardown after them.
-_QUICK_EXIT = ("slope", "breakpoints")
-
-
 def command() -> None:
-    """The ``floodmesh`` console command: ``main``, then the exit. After the quick raster steps
-    (``_QUICK_EXIT``) the process ends as soon as the output is in place and the streams are
-    flushed, without the interpreter's teardown of every module (0.03-0.06 s, 5 % of ``floodmesh
-    slope`` on a 6000² DEM); other commands exit normally, running their exit handlers."""
-    argv = sys.argv[1:]
+    """The ``floodmesh`` console command: ``main``, then the exit, without the interpreter's
+    teardown of every module (``process.end_process``)."""
     try:
-        code = main(argv)
+        code = main(sys.argv[1:])
     except BrokenPipeError:  # `floodmesh assess … | head`: the reader is gone, so are we
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         sys.exit(141)
-    if not argv or argv[0] not in _QUICK_EXIT:
-        sys.exit(code)
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except (BrokenPipeError, ValueError):  # a closed stream: nothing more can reach it
-        code = code or 1
-    os._exit(code)
+    end_process(code)
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ from ..errors import Cancelled, FloodMeshError, Terminated, terminate_as_interru
 from ..flood.model import load_scenario, run_flood
 from ..options import RunOptions
 from .dependencies import install_hint, missing_dependencies
+from .process import end_process
 
 PARTIAL_GLOB = ".*.partial*"  # the temporary names io.atomic_output writes under
 
@@ -173,4 +174,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    end_process(main())
