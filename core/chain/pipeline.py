@@ -3,6 +3,7 @@ with every intermediate written to an output folder and a report of figures and 
 from __future__ import annotations
 
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -314,7 +315,21 @@ def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected,
 def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, res, confidence,
                    *, group: str) -> list:
     """The run's files into ``out`` (``OUTPUT_FILES`` but the report's two); returns the solver
-    exports written."""
+    exports written. The pictures are drawn on a thread of their own meanwhile (matplotlib's
+    import and drawing, about half a second, beside GDAL's and SQLite's writing, which let go
+    of the interpreter)."""
+    dem, holdout = front.dem, front.holdout
+    with ThreadPoolExecutor(max_workers=1) as pictures:
+        drawn = pictures.submit(write_report_pngs, out, mesh.nodes, mesh.triangles, holdout.xyz,
+                                res, dem=dem, lines=[line.coords for line in lines])
+        exported = _write_files(out, front, options, mesh, lines, res, confidence, group=group)
+        drawn.result()
+    return exported
+
+
+def _write_files(out: Path, front: Front, options: RunOptions, mesh, lines, res, confidence,
+                 *, group: str) -> list:
+    """``_write_outputs``' files but the pictures."""
     dem, holdout = front.dem, front.holdout
     io.write_raster(out / "dem.tif", dem)
     if front.files:
@@ -331,8 +346,6 @@ def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, re
     io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
     write_layer_definition(out, group=group, crs_wkt=dem.crs.to_wkt(),
                            elevation_range=(mesh.nodes[:, 2].min(), mesh.nodes[:, 2].max()))
-    write_report_pngs(out, mesh.nodes, mesh.triangles, holdout.xyz, res, dem=dem,
-                      lines=[line.coords for line in lines])
     return (export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
                            crs=dem.crs, breaklines=[line.coords for line in lines])
             if options.formats else [])
