@@ -39,6 +39,25 @@ def new_figure(width_in: float, height_in: float):
     return fig
 
 
+# a map's margins (inches): tick labels and axis title on the left, axis title below, title
+# above, the legend on the right (outside the map, so that it hides no data)
+MAP_MARGINS = {"left": 1.15, "bottom": 0.65, "top": 0.45, "right": 2.3}
+
+
+def map_figure(span):
+    """(figure, axes) for an equal-aspect map ``span`` (width, height, m) across, 9 inches on
+    its longer side (at least 3), with fixed margins for its labels and the legend beside it:
+    tight_layout ignored the legend and the equal aspect, and cut both off."""
+    scale = 9.0 / max(span)
+    width, height = max(3.0, span[0] * scale), max(3.0, span[1] * scale)
+    m = MAP_MARGINS
+    fig = new_figure(width + m["left"] + m["right"], height + m["bottom"] + m["top"])
+    full_width, full_height = fig.get_size_inches()
+    fig.subplots_adjust(left=m["left"] / full_width, right=1 - m["right"] / full_width,
+                        bottom=m["bottom"] / full_height, top=1 - m["top"] / full_height)
+    return fig, fig.add_subplot()
+
+
 def save_png(fig, path) -> Path:
     """Write ``fig`` as PNG to ``path``: ``write_png`` of it ``rendered``."""
     return write_png(*rendered(fig), path)
@@ -142,10 +161,7 @@ def residual_map(nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray, res:
     res = np.asarray(res, float)
     cls = residual_class(res)
     lo, hi = nodes[:, :2].min(axis=0), nodes[:, :2].max(axis=0)
-    span = np.maximum(hi - lo, 1e-9)
-    scale = 9.0 / max(span)
-    fig = new_figure(max(3.0, span[0] * scale) + 1.8, max(3.0, span[1] * scale) + 1.2)
-    ax = fig.add_subplot()
+    fig, ax = map_figure(np.maximum(hi - lo, 1e-9))
     edges = mesh_edges(np.asarray(triangles))
     drawn = len(edges) <= MAP_EDGES
     if drawn:
@@ -176,7 +192,6 @@ def residual_map(nodes: np.ndarray, triangles: np.ndarray, xyz: np.ndarray, res:
     if len(xyz):
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small",
                   title="|residual|")
-    fig.tight_layout()
     return fig
 
 
@@ -233,10 +248,7 @@ def breaklines_map(dem, lines):
     from matplotlib.lines import Line2D
 
     shade, (left, right, bottom, top) = sampled_hillshade(dem)
-    span = np.maximum([right - left, top - bottom], 1e-9)
-    scale = 9.0 / max(span)
-    fig = new_figure(max(3.0, span[0] * scale) + 1.8, max(3.0, span[1] * scale) + 1.2)
-    ax = fig.add_subplot()
+    fig, ax = map_figure(np.maximum([right - left, top - bottom], 1e-9))
     ax.imshow(np.ma.masked_invalid(shade), cmap="gray", vmin=0.0, vmax=1.0,
               extent=(left, right, bottom, top), origin="upper", interpolation="nearest",
               zorder=0)
@@ -259,7 +271,6 @@ def breaklines_map(dem, lines):
     ax.set_ylabel("northing (m)")
     ax.set_title(f"{len(segments)} break lines, {length:,.0f} m, over the DEM's hillshade "
                  "(sun 315°, 45°)", fontsize="medium")
-    fig.tight_layout()
     return fig
 
 

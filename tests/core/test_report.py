@@ -460,3 +460,39 @@ def test_report_html_without_holdout(tmp_path):
     assert page.cells["nodes"] == [f"{written['nodes']:,}"]
     assert len(_png_images(page)) == 2  # the mesh map and the break lines; no histogram
     assert "breaklines_map" in page.ids and "residual_histogram" not in page.ids
+
+
+@pytest.mark.parametrize("shape", ["square", "wide", "tall"])
+def test_the_maps_legends_and_axis_titles_are_inside_the_picture(shape, classes_mix):
+    """The legend beside each map and the northing axis title were cut off at the picture's
+    edges (tight_layout ignored the legend outside the equal-aspect map): every label of both
+    maps lies inside the figure, whatever the map's shape, with counts in the thousands."""
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.raster import Grid
+
+    width, height = {"square": (1000, 1000), "wide": (1000, 300), "tall": (300, 1000)}[shape]
+    nodes = np.array([[0, 0, 0], [width, 0, 0], [width, height, 0], [0, height, 0]], float)
+    nodes[:, :2] += UTM_ORIGIN
+    triangles = np.array([[0, 1, 2], [0, 2, 3]])
+    rng = np.random.default_rng(0)
+    xyz = np.column_stack([rng.uniform(0, width, 3000), rng.uniform(0, height, 3000),
+                           np.zeros(3000)])
+    xyz[:, :2] += UTM_ORIGIN
+    res = np.resize(np.append(classes_mix, np.nan), 3000)
+    dem = Grid(np.zeros((height // 2, width // 2)), Affine(2.0, 0, UTM_ORIGIN[0], 0, -2.0,
+                                                          UTM_ORIGIN[1] + height),
+               CRS.from_epsg(25832))
+    line = np.array([[0.1, 0.5], [0.9, 0.5]]) * [width, height] + UTM_ORIGIN
+    for fig in (report.residual_map(nodes, triangles, xyz, res),
+                report.breaklines_map(dem, [line] * 1200)):
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        inside = fig.bbox
+        ax = fig.axes[0]
+        for artist in (ax.get_legend(), ax.yaxis.label, ax.xaxis.label, ax.title,
+                       *ax.get_yticklabels()):
+            box = artist.get_window_extent(renderer)
+            assert (box.x0 >= inside.x0 and box.x1 <= inside.x1 and box.y0 >= inside.y0
+                    and box.y1 <= inside.y1), (artist, box, inside)
