@@ -140,3 +140,65 @@ def test_ctrl_c_in_qgis_process_stops_the_first_run_setup(tmp_path, real_data):
     assert run.returncode == 1 and "Cancelled while FloodMesh set up" in output, output
     assert "Traceback" not in output
     assert not _alive(pip) and not venv.exists()
+
+
+class _Said(QgsProcessingFeedback):
+    """A feedback that keeps what the dialog would show: progress text, info and warnings."""
+
+    def __init__(self):
+        super().__init__()
+        self.lines = []
+
+    def setProgressText(self, text):
+        self.lines.append(("progress", text))
+
+    def pushInfo(self, info):
+        self.lines.append(("info", info))
+
+    def reportError(self, error, fatalError=False):
+        self.lines.append(("error", error))
+
+
+def _project_python():
+    return str(REPO / ".venv" / "bin" / "python")
+
+
+def test_the_install_compiles_the_kernels_in_a_step_of_its_own_so_the_first_run_waits_for_none(
+        tmp_path, monkeypatch):
+    """A fresh install's numba cache is empty (here an empty NUMBA_CACHE_DIR): the setup's last
+    step compiles the kernels, said as a progress step with its real duration, and the first
+    run that follows compiles nothing and says nothing of compiling."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba-cache"))
+    feedback = _Said()
+    seconds = child.compile_kernels(_project_python(), feedback)
+    assert seconds is not None and seconds > 5  # a real compile, not a cache load
+    assert feedback.lines[0] == ("progress", "Compiling FloodMesh's kernels (once, about 2 "
+                                             "minutes)"), feedback.lines
+    assert feedback.lines[-1] == ("info", f"compiled FloodMesh's kernels in {seconds:.0f} s "
+                                          "(once)"), feedback.lines
+    assert any((tmp_path / "numba-cache").rglob("*.nbc"))
+    points = tmp_path / "points.laz"
+    made = subprocess.run([_project_python(), "-c", (
+        "import sys; from floodmesh.core import io; "
+        "from floodmesh.core.frontends.demo import synthetic_floodplain; "
+        "io.write_points_las(sys.argv[1], synthetic_floodplain(density=1.0)[0])"), str(points)],
+        capture_output=True, text=True, env=child._child_env())
+    assert made.returncode == 0, made.stderr
+    run = subprocess.run([_project_python(), "-m", "floodmesh.core.frontends.cli", "run",
+                          str(points), "--out", str(tmp_path / "out"), "--cell-size", "2"],
+                         capture_output=True, text=True, env=child._child_env())
+    assert run.returncode == 0, run.stderr
+    assert "compil" not in run.stderr.lower(), run.stderr
+
+
+def test_cancel_stops_the_kernels_compile_at_once(tmp_path, monkeypatch):
+    """Cancel while the install's compile runs ends it within a second, with the message that
+    the next run compiles what is left."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba-cache"))
+    feedback = _Said()
+    timer = threading.Timer(3.0, feedback.cancel)
+    timer.start()
+    started = time.monotonic()
+    with pytest.raises(QgsProcessingException, match="Cancelled while FloodMesh compiled"):
+        child.compile_kernels(_project_python(), feedback)
+    assert time.monotonic() - started < 4.5
