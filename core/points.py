@@ -30,10 +30,11 @@ class PointCloud:
 
 
 def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
-                 note=None) -> PointCloud:
+                 note=None, *, repeats: bool = True) -> PointCloud:
     """Drop non-finite points and check what is left is usable terrain data; ``note``
     receives what was left out or found doubtful (points without x, y or z, points at one x, y
-    with different z)."""
+    with different z: ``repeats=False`` leaves that check to the caller,
+    ``repeated_positions_note``)."""
     crs = require_metric_crs(crs, source, kind)
     # lazy: numba loads only where points are read
     from ._kernels.points import finite_rows
@@ -49,8 +50,9 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
         raise FloodMeshError(f"{source} has {len(xyz)} usable points (finite x, y, z); at least 3 "
                              "are needed to make a terrain model. Check the file and its classes")
     _check_area(xyz[:, :2], source)
-    if note:
-        _note_duplicates(xyz, source, note)
+    message = repeated_positions_note(xyz, source) if note and repeats else None
+    if message:
+        note(message)
     return PointCloud(xyz, crs)
 
 
@@ -69,17 +71,18 @@ def _check_area(xy: np.ndarray, source: str) -> None:
                              "an area: check the file's x and y columns")
 
 
-def _note_duplicates(xyz: np.ndarray, source: str, note) -> None:
-    """Say how many points repeat another's x, y (to 0.1 mm) with a different z, and by how
-    much."""
+def repeated_positions_note(xyz: np.ndarray, source: str) -> str | None:
+    """What to say of the points that repeat another's x, y (to 0.1 mm) with a different z:
+    how many and by how much (None: none do)."""
     # lazy: numba loads only when this runs
     from ._kernels.points import repeated_positions
 
     n, dz = repeated_positions(xyz[:, 0], xyz[:, 1], xyz[:, 2], 1e-4)
-    if n:
-        note(f"{source}: {n:,} point{'s repeat' if n > 1 else ' repeats'} the x, y of another "
-             f"with a different z (up to {dz:.3g} m apart); the grid keeps one of each: check "
-             "for overlapping flight lines or tiles merged twice")
+    if not n:
+        return None
+    return (f"{source}: {n:,} point{'s repeat' if n > 1 else ' repeats'} the x, y of another "
+            f"with a different z (up to {dz:.3g} m apart); the grid keeps one of each: check "
+            "for overlapping flight lines or tiles merged twice")
 
 
 def split_holdout(points: PointCloud, fraction: float, seed: int,

@@ -26,7 +26,7 @@ from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_png
 from ..io.report_html import HTML_NAME, write_report_html
 from ..options import (EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS, RunOptions,
                        check_sigma_fits)
-from ..points import PointCloud, split_holdout
+from ..points import PointCloud, repeated_positions_note, split_holdout
 from ..raster import Grid
 from ..steps.accuracy import accuracy_statistics, residuals
 from ..steps.breaklines import trace_breaklines
@@ -54,11 +54,37 @@ OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "m
 class _Steps:
     """Times each step, reports overall progress and checks for cancellation between steps."""
 
-    def __init__(self, weights: dict, progress, cancelled, log):
+    def __init__(self, weights: dict, progress, cancelled, log, background=None):
         self.weights, self.total = weights, float(sum(weights.values()))
         self.progress, self.cancelled, self.log = progress, cancelled, log
         self.done, self.seconds, self.cpu_seconds = 0.0, {}, {}
         self.compiles = CompileWatch(log)  # numba's first-run compile, said when it happens
+        self.background = background  # an executor of one thread, or None: no work ahead
+
+    def ahead(self, name: str, func: Callable, *args, **kwargs):
+        """Start step ``name`` on the background thread, for ``collect``: compiled work that
+        lets go of the interpreter, overlapping the single-threaded steps between on the core
+        they leave idle. Without a background thread it is run at ``collect``."""
+        if self.background is None:
+            return lambda: self.run(name, func, *args, **kwargs)
+
+        def timed():
+            start, cpu = time.perf_counter(), time.thread_time()
+            result = func(*args, **kwargs)
+            return result, time.perf_counter() - start, time.thread_time() - cpu
+
+        future = self.background.submit(timed)
+
+        def collect():
+            if self.cancelled and self.cancelled():
+                raise Cancelled()
+            result, seconds, cpu = future.result()
+            self.seconds[name], self.cpu_seconds[name] = round(seconds, 3), round(cpu, 3)
+            self.done += self.weights.get(name, 0.0)
+            if self.progress:
+                self.progress(self.done / self.total)
+            return result
+        return collect
 
     def run(self, name: str, func: Callable, *args, **kwargs):
         if self.cancelled and self.cancelled():
@@ -115,7 +141,14 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out, source = Path(out_dir), open_source(input_path)
     inputs = run_inputs(source, options)
     check_output_folder(out, inputs, run_outputs(options.formats))
-    steps = _Steps(_step_weights(options), progress, cancelled, log)
+    with ThreadPoolExecutor(max_workers=1) as background:
+        steps = _Steps(_step_weights(options), progress, cancelled, log, background)
+        return _run(source, out, inputs, options, steps, started, notes, note, cancelled, log)
+
+
+def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps, started: float, notes,
+         note, cancelled, log) -> dict:
+    """``run_pipeline``'s chain, its steps timed by ``steps``."""
     front = trace_front(source, options, steps, cancelled=cancelled, note=note)
     n_breakpoints = int(front.breakpoints.values.sum())
     if front.files:  # traced, and on disk for the output: only the size fields may read them
@@ -124,8 +157,11 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         if options.far_field_area is None:
             front.breakpoints = None
     fits = _TerrainFits(front, options)
+    flow_area = flow_area_for(options.flow_area, front.dem.cell_size)
+    hand = None if flow_area is None else steps.ahead(  # resolution where water flows
+        "flow zone", height_above_drainage, front.dem, channel_area=CHANNEL_AREA)
     simplified, lines, confidence = _break_lines(front, options, steps, fits)
-    size, max_area, hand, flow_area = _size_fields(front, options, steps, fits.window)
+    size, max_area, hand = _size_fields(front, options, steps, fits.window, hand, flow_area)
     domain = (front.domain if front.domain is not None else domain_from_dem(
         front.dem, tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size)))
     detected, line_stats = _lines_for_flood(front, options, steps, lines, domain, hand,
@@ -140,15 +176,11 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     # the terrain fits are done: their points and index go before the assessment and writing
     size = fits.index = front.measured = None
     res = steps.run("assess", residuals, mesh, front.holdout.xyz)
-    deviation, quality, stats, hydraulics = steps.run(
-        "figures", _figures, front, options, simplified, mesh, res, detected, max_area)
-    figures = {"n_breakpoints": n_breakpoints, "deviation": deviation, "quality": quality,
-               "stats": stats, "rounds": rounds, "terrain_fit": fits.record(),
-               "line_stats": line_stats, "hydraulics": hydraulics, "notes": notes}
 
-    def write_all(stage):
+    def write_all(stage, figures, pictures):
         exported = _write_outputs(stage, front, options, mesh, lines, res, confidence,
                                   group=out.name)
+        pictures.result()
         report = _report(source, front, options, simplified, lines, exported, figures,
                          steps)
         # the page of report.json, written inside the step: "write" is its last timing
@@ -156,8 +188,19 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
         return report
 
     # the folder is replaced as a whole: an interrupt leaves the old run's files or these
-    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage:
-        report = steps.run("write", write_all, stage)
+    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage, \
+            ThreadPoolExecutor(max_workers=1) as drawing:
+        # the pictures (matplotlib's import and drawing, about half a second) are drawn on a
+        # thread of their own meanwhile, beside the figures and the files' writing
+        pictures = drawing.submit(write_report_pngs, stage, mesh.nodes, mesh.triangles,
+                                  front.holdout.xyz, res, dem=front.dem,
+                                  lines=[line.coords for line in lines])
+        deviation, quality, stats, hydraulics = steps.run(
+            "figures", _figures, front, options, simplified, mesh, res, detected, max_area)
+        figures = {"n_breakpoints": n_breakpoints, "deviation": deviation, "quality": quality,
+                   "stats": stats, "rounds": rounds, "terrain_fit": fits.record(),
+                   "line_stats": line_stats, "hydraulics": hydraulics, "notes": notes}
+        report = steps.run("write", write_all, stage, figures, pictures)
         io.write_json(stage / "report.json", report)
     compiled = steps.compiles.summary()
     if compiled and log:
@@ -217,14 +260,18 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
     onto the terrain's kinks by the hinge fits (``localise``) where asked."""
     dem, (method, amount) = front.dem, options.simplification()
     min_distance = dem.cell_size / 2 if options.min_distance is None else options.min_distance
+    fitting = options.localise or options.node_elevation == "plane"
+    index = (steps.ahead("point index", point_index, front.measured)
+             if fitting and front.measured is not None else None)
     simplified = lines = steps.run("simplify", simplify_breaklines, front.traced, method, amount,
                                    min_distance=min_distance)
     confidence = None
-    if options.localise or options.node_elevation == "plane":
+    if fitting:
         area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
+        points, built = fits.measured()
         fits.index, fits.window = steps.run(
-            "fit window", _fit_window, *fits.measured(), area, dem.cell_size,
-            node_radius=options.node_radius, seed=options.seed)
+            "fit window", _fit_window, points, index() if index else built, area,
+            dem.cell_size, node_radius=options.node_radius, seed=options.seed)
         fits.counts.update(asdict(fits.window))
     if options.localise:
         join_gap = (JOIN_GAP_CELLS * dem.cell_size if options.join_gap is None
@@ -238,10 +285,10 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
     return simplified, lines, confidence
 
 
-def _size_fields(front: Front, options: RunOptions, steps: _Steps, window):
-    """(size field or None, the largest area, height above drainage or None, flow area or
-    None): the user's size field, finer off the lines where asked (far field) and where water
-    flows (flow zone)."""
+def _size_fields(front: Front, options: RunOptions, steps: _Steps, window, hand, flow_area):
+    """(size field or None, the largest area, height above drainage or None): the user's size
+    field, finer off the lines where asked (far field) and where water flows (``flow_area``,
+    with the height above drainage that ``hand`` collects: see drainage)."""
     dem, max_area = front.dem, options.max_area
     size = size_field(options.size_field, dem, front.slope_grid, max_area=max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
@@ -251,11 +298,10 @@ def _size_fields(front: Front, options: RunOptions, steps: _Steps, window):
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
         size = finer(size, far)
         max_area = options.far_field_area
-    hand, flow_area = None, flow_area_for(options.flow_area, dem.cell_size)
-    if flow_area is not None:  # resolution where water flows (see drainage)
-        hand, _ = steps.run("flow zone", height_above_drainage, dem, channel_area=CHANNEL_AREA)
+    if hand is not None:
+        hand, _ = hand()
         size = finer(size, flow_size(dem, flow_area=flow_area, hand=hand))
-    return size, max_area, hand, flow_area
+    return size, max_area, hand
 
 
 def _lines_for_flood(front: Front, options: RunOptions, steps: _Steps, lines, domain, hand,
@@ -314,22 +360,8 @@ def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected,
 
 def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, res, confidence,
                    *, group: str) -> list:
-    """The run's files into ``out`` (``OUTPUT_FILES`` but the report's two); returns the solver
-    exports written. The pictures are drawn on a thread of their own meanwhile (matplotlib's
-    import and drawing, about half a second, beside GDAL's and SQLite's writing, which let go
-    of the interpreter)."""
-    dem, holdout = front.dem, front.holdout
-    with ThreadPoolExecutor(max_workers=1) as pictures:
-        drawn = pictures.submit(write_report_pngs, out, mesh.nodes, mesh.triangles, holdout.xyz,
-                                res, dem=dem, lines=[line.coords for line in lines])
-        exported = _write_files(out, front, options, mesh, lines, res, confidence, group=group)
-        drawn.result()
-    return exported
-
-
-def _write_files(out: Path, front: Front, options: RunOptions, mesh, lines, res, confidence,
-                 *, group: str) -> list:
-    """``_write_outputs``' files but the pictures."""
+    """The run's files into ``out`` (``OUTPUT_FILES`` but the report's two and the pictures);
+    returns the solver exports written; the pictures are drawn apart (``write_report_pngs``)."""
     dem, holdout = front.dem, front.holdout
     io.write_raster(out / "dem.tif", dem)
     if front.files:
@@ -487,10 +519,17 @@ def _read_points(source: Source, options: RunOptions, steps: _Steps, *, cancelle
                  note) -> _Terrain:
     """One point file, gridded in memory with ``options.holdout`` of its points held out."""
     data = steps.run("read", io.read_points, source.path, crs=options.crs,
-                     classes=options.classes, note=note)
+                     classes=options.classes, note=note, repeats=False)
+    # the check of repeated positions (a compiled pass, single-threaded) beside the gridding
+    repeats = steps.ahead("repeated points", repeated_positions_note, data.xyz,
+                          io.point_file_name(source.path))
     gridding, holdout = split_holdout(data, options.holdout, options.seed, note=note)
-    return _grid_in_memory(gridding, holdout, "LiDAR points withheld from gridding", len(data),
-                           options, steps, cancelled=cancelled)
+    terrain = _grid_in_memory(gridding, holdout, "LiDAR points withheld from gridding",
+                              len(data), options, steps, cancelled=cancelled)
+    message = repeats()
+    if message and note:
+        note(message)
+    return terrain
 
 
 def _grid_in_memory(gridding: PointCloud, holdout: PointCloud, holdout_source: str,

@@ -18,17 +18,24 @@ GROUND_CLASS = 2
 UNCLASSIFIED = (0, 1)  # LAS "created, never classified" and "unclassified"
 
 
-def read_points(path, *, crs=None, classes=None, note=None) -> PointCloud:
+def read_points(path, *, crs=None, classes=None, note=None, repeats: bool = True) -> PointCloud:
     """Read ground points from LAS/LAZ or an EPT index (class 2 when classified, or ``classes``)
     or XYZ/CSV text.
 
     ``crs`` overrides the file's own CRS (needed for text files, which carry none). ``note``
-    receives what was assumed on the user's behalf (e.g. an unclassified file used whole).
+    receives what was assumed on the user's behalf (e.g. an unclassified file used whole), and
+    what was found doubtful (``points.clean_points``; ``repeats=False`` leaves the check of
+    repeated positions to the caller).
     """
     path = require_file(path, "point file")
     xyz, file_crs = read_point_file(path, classes, note)
-    return clean_points(xyz, crs if crs is not None else file_crs, f"point file {path.name}",
-                        kind="points", note=note)
+    return clean_points(xyz, crs if crs is not None else file_crs, point_file_name(path),
+                        kind="points", note=note, repeats=repeats)
+
+
+def point_file_name(path) -> str:
+    """How notes and errors name a point file."""
+    return f"point file {Path(path).name}"
 
 
 def read_point_file(path: Path, classes=None, note=None):

@@ -31,7 +31,7 @@ def test_spread_is_the_numpy_definition(case):
 
 
 def _numpy_repeats(xyz, step):
-    """The definition (points._note_duplicates before it was compiled): one key per rounded
+    """The definition (the check of repeated positions before it was compiled): one key per rounded
     position, a stable sort, the z of consecutive points at one position compared."""
     cell = np.round((xyz[:, :2] - xyz[:, :2].min(axis=0)) / step).astype(np.int64)
     key = cell[:, 0] * (int(cell[:, 1].max()) + 1) + cell[:, 1]
