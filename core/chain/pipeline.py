@@ -22,7 +22,8 @@ from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tile
 from ..errors import Cancelled, FloodMeshError
 from ..io.layer_definition import QLR_NAME, write_layer_definition
 from ..io.outputs import check_output_folder, scratch_folder, staged_folder
-from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG, write_report_pngs
+from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
+from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
 from ..options import (EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS, RunOptions,
                        check_sigma_fits)
@@ -141,15 +142,17 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out, source = Path(out_dir), open_source(input_path)
     inputs = run_inputs(source, options)
     check_output_folder(out, inputs, run_outputs(options.formats))
-    with ThreadPoolExecutor(max_workers=1) as background:
+    with ThreadPoolExecutor(max_workers=1) as background, PicturesApart() as pictures:
         steps = _Steps(_step_weights(options), progress, cancelled, log, background)
-        return _run(source, out, inputs, options, steps, started, notes, note, cancelled, log)
+        return _run(source, out, inputs, options, steps, pictures, started, notes, note,
+                    cancelled, log)
 
 
-def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps, started: float, notes,
-         note, cancelled, log) -> dict:
-    """``run_pipeline``'s chain, its steps timed by ``steps``."""
+def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
+         pictures: PicturesApart, started: float, notes, note, cancelled, log) -> dict:
+    """``run_pipeline``'s chain, its steps timed by ``steps``, its pictures drawn apart."""
     front = trace_front(source, options, steps, cancelled=cancelled, note=note)
+    pictures.start()  # loads matplotlib beside the single-threaded steps that follow
     n_breakpoints = int(front.breakpoints.values.sum())
     if front.files:  # traced, and on disk for the output: only the size fields may read them
         if options.size_field != "slope":
@@ -180,7 +183,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps, started:
     def write_all(stage, figures, pictures):
         exported = _write_outputs(stage, front, options, mesh, lines, res, confidence,
                                   group=out.name)
-        pictures.result()
+        pictures.wait()
         report = _report(source, front, options, simplified, lines, exported, figures,
                          steps)
         # the page of report.json, written inside the step: "write" is its last timing
@@ -188,13 +191,10 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps, started:
         return report
 
     # the folder is replaced as a whole: an interrupt leaves the old run's files or these
-    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage, \
-            ThreadPoolExecutor(max_workers=1) as drawing:
-        # the pictures (matplotlib's import and drawing, about half a second) are drawn on a
-        # thread of their own meanwhile, beside the figures and the files' writing
-        pictures = drawing.submit(write_report_pngs, stage, mesh.nodes, mesh.triangles,
-                                  front.holdout.xyz, res, dem=front.dem,
-                                  lines=[line.coords for line in lines])
+    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage:
+        # drawn in the picture process meanwhile, beside the figures and the files' writing
+        pictures.draw(stage, mesh.nodes, mesh.triangles, front.holdout.xyz, res, dem=front.dem,
+                      lines=[line.coords for line in lines])
         deviation, quality, stats, hydraulics = steps.run(
             "figures", _figures, front, options, simplified, mesh, res, detected, max_area)
         figures = {"n_breakpoints": n_breakpoints, "deviation": deviation, "quality": quality,

@@ -3,6 +3,7 @@ each class are, NaN residuals, atomic writing; the hillshade and the break lines
 report.html (floodmesh.core.io.report_html) of a run: its figures those of report.json, its images
 embedded PNGs, its text escaped, the case without a holdout."""
 import json
+from pathlib import Path
 from html.parser import HTMLParser
 
 import numpy as np
@@ -496,3 +497,86 @@ def test_the_maps_legends_and_axis_titles_are_inside_the_picture(shape, classes_
             box = artist.get_window_extent(renderer)
             assert (box.x0 >= inside.x0 and box.x1 <= inside.x1 and box.y0 >= inside.y0
                     and box.y1 <= inside.y1), (artist, box, inside)
+
+
+def _pictures_case(classes_mix):
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.raster import Grid
+
+    nodes, triangles = hole_mesh()
+    xyz = check_points(classes_mix)
+    rows, cols = np.mgrid[0:60, 0:100]
+    dem = Grid(np.sin(cols / 7.0) + 0.02 * rows, Affine(1.0, 0, UTM_ORIGIN[0], 0, -1.0,
+                                                        UTM_ORIGIN[1] + 60), CRS.from_epsg(32633))
+    return nodes, triangles, xyz, classes_mix, dem, [xyz[:5], xyz[5:12]]
+
+
+def _picture_processes():
+    import subprocess
+
+    found = subprocess.run(["pgrep", "-f", "core.io.report_process"], capture_output=True,
+                           text=True)
+    return set(found.stdout.split())
+
+
+def test_pictures_drawn_in_their_own_process_are_those_drawn_here(tmp_path, classes_mix):
+    """The run's pictures, drawn by the picture process, are byte for byte those drawn in the
+    chain's own process; the process is gone and its arrays' file removed afterwards."""
+    from floodmesh.core.io.report_process import PicturesApart
+
+    nodes, triangles, xyz, res, dem, lines = _pictures_case(classes_mix)
+    (tmp_path / "apart").mkdir()
+    (tmp_path / "here").mkdir()
+    with PicturesApart() as pictures:
+        pictures.start()
+        assert pictures.child is not None
+        pictures.draw(tmp_path / "apart", nodes, triangles, xyz, res, dem=dem, lines=lines)
+        data = Path(pictures.data)
+        assert data.exists()
+        pictures.wait()
+        assert pictures.child.returncode == 0  # drawn there, not here after a failure
+    assert not data.exists()
+    report.write_report_pngs(tmp_path / "here", nodes, triangles, xyz, res, dem=dem,
+                             lines=lines)
+    for name in (report.HISTOGRAM_PNG, report.MAP_PNG, report.BREAKLINES_PNG):
+        assert (tmp_path / "apart" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
+
+
+def test_pictures_are_drawn_here_when_their_process_fails(tmp_path, classes_mix, monkeypatch):
+    """A picture process that cannot run (here a 'python' that fails at once) costs nothing
+    but the overlap: the pictures are drawn in the chain's process."""
+    import sys
+
+    from floodmesh.core.io.report_process import PicturesApart
+
+    broken = tmp_path / "python-broken"
+    broken.write_text("#!/bin/sh\nexit 3\n")
+    broken.chmod(0o755)
+    monkeypatch.setattr(sys, "executable", str(broken))
+    nodes, triangles, xyz, res, dem, lines = _pictures_case(classes_mix)
+    with PicturesApart() as pictures:
+        pictures.start()
+        pictures.draw(tmp_path, nodes, triangles, xyz, res, dem=dem, lines=lines)
+        pictures.wait()
+        assert pictures.child.returncode == 3
+    assert all((tmp_path / name).exists()
+               for name in (report.HISTOGRAM_PNG, report.MAP_PNG, report.BREAKLINES_PNG))
+
+
+def test_a_run_that_ends_early_ends_its_picture_process(tmp_path):
+    """An error or interrupt before the pictures are handed over ends the picture process: no
+    process is left waiting."""
+    import time
+
+    from floodmesh.core.io.report_process import PicturesApart
+
+    before = _picture_processes()
+    with pytest.raises(KeyboardInterrupt):
+        with PicturesApart() as pictures:
+            pictures.start()
+            time.sleep(0.5)
+            raise KeyboardInterrupt
+    assert pictures.child.poll() is not None
+    assert not _picture_processes() - before
