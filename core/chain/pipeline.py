@@ -61,6 +61,7 @@ class _Steps:
         self.done, self.seconds, self.cpu_seconds = 0.0, {}, {}
         self.compiles = CompileWatch(log)  # numba's first-run compile, said when it happens
         self.background = background  # an executor of one thread, or None: no work ahead
+        self.ahead_of_time = []  # the steps run on it, beside the others
 
     def ahead(self, name: str, func: Callable, *args, **kwargs):
         """Start step ``name`` on the background thread, for ``collect``: compiled work that
@@ -75,6 +76,7 @@ class _Steps:
             return result, time.perf_counter() - start, time.thread_time() - cpu
 
         future = self.background.submit(timed)
+        self.ahead_of_time.append(name)
 
         def collect():
             if self.cancelled and self.cancelled():
@@ -415,6 +417,7 @@ def _report(source: Source, front: Front, options: RunOptions, simplified, lines
         "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),
         "seconds": steps.seconds,
         "cpu_seconds": steps.cpu_seconds,
+        "steps_in_background": steps.ahead_of_time,
     }
 
 
