@@ -76,3 +76,34 @@ def test_sliver_domain_that_noding_collapses_is_refused_clearly():
     assert domain.is_valid
     with pytest.raises(FloodMeshError, match="vanishes on a 0.04 m grid"):
         build_pslg([], domain, snap=0.2)
+
+
+def test_vertices_closer_than_their_coordinates_resolve_are_refused():
+    """A raw PSLG with two vertices 2.2e-13 m apart in an 800 m ring, as the fuzz test's raw
+    cases found one: Triangle's mesh of it left a segment unrecovered in one test session and
+    not in another, so it is refused by name instead."""
+    from floodmesh.core.steps.mesh import PSLG
+
+    vertices = np.array([[0.0, 74.7709173], [10.0, 10.0 + 2.22044605e-13], [10.0, 10.0],
+                         [786.678260, 0.0], [741.948390, 305.351544], [774.716938, 440.405523],
+                         [208.510218, 360.922741], [0.0, 340.334071]])
+    ring = np.array([[i, (i + 1) % 8] for i in range(8)])
+    with pytest.raises(FloodMeshError, match="closer than a billionth of its extent"):
+        triangulate_pslg(PSLG(vertices, ring, np.empty((0, 2))), min_angle=30.0,
+                         max_area=471.5)
+
+
+def test_coordinates_that_underflow_the_exact_predicates_are_refused():
+    """Raw PSLG coordinates of 1e-309 to 1e-159 (the fuzz test's raw cases): their products
+    underflow in Triangle's exact arithmetic, and the case meshed in seconds in one test
+    session and ran past the 30 s bound in another, so it is refused by name instead."""
+    from floodmesh.core.steps.mesh import PSLG
+
+    vertices = np.array([[2.22507386e-309, 0.0889852388], [2.03936317e-84, 3.37549186e-159],
+                         [0.390954704, 9.35511806e-51], [0.523716070, 0.606830356],
+                         [0.538296925, 0.715769330], [0.553966000, 0.911421000],
+                         [9.98065928e-267, 0.916135173], [1.80591510e-68, 0.669191414]])
+    ring = np.array([[i, (i + 1) % 8] for i in range(8)] + [[6, 0]])
+    with pytest.raises(FloodMeshError, match="underflow in Triangle's exact arithmetic"):
+        triangulate_pslg(PSLG(vertices, ring, np.empty((0, 2))), min_angle=5.0,
+                         max_area=0.0002)
