@@ -513,19 +513,6 @@ def _pictures_case(classes_mix):
     return nodes, triangles, xyz, classes_mix, dem, [xyz[:5], xyz[5:12]]
 
 
-def _picture_processes():
-    """The picture processes running, by /proc (no pgrep in a minimal Debian root)."""
-    found = set()
-    for entry in Path("/proc").iterdir():
-        try:
-            if entry.name.isdigit() and b"core.io.report_process" in (
-                    entry / "cmdline").read_bytes():
-                found.add(entry.name)
-        except OSError:
-            continue
-    return found
-
-
 def test_pictures_drawn_in_their_own_process_are_those_drawn_here(tmp_path, classes_mix):
     """The run's pictures, drawn by the picture process, are byte for byte those drawn in the
     chain's own process; the process is gone and its arrays' file removed afterwards."""
@@ -577,11 +564,11 @@ def test_a_run_that_ends_early_ends_its_picture_process(tmp_path):
 
     from floodmesh.core.io.report_process import PicturesApart
 
-    before = _picture_processes()
     with pytest.raises(KeyboardInterrupt):
         with PicturesApart() as pictures:
             pictures.start()
             time.sleep(0.5)
+            assert Path(f"/proc/{pictures.child.pid}").exists()  # it waits for its arrays
             raise KeyboardInterrupt
     assert pictures.child.poll() is not None
-    assert not _picture_processes() - before
+    assert not Path(f"/proc/{pictures.child.pid}").exists()  # ended and reaped
