@@ -62,6 +62,16 @@ def scaled_points(X, Y, Z, classification, keep, scales, offsets):
 
 
 @njit(cache=True, nogil=True)
+def extent(x, y):
+    """(xmin, ymin, xmax, ymax) of the points, in one pass."""
+    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
+    for p in range(x.shape[0]):
+        xmin, xmax = min(xmin, x[p]), max(xmax, x[p])
+        ymin, ymax = min(ymin, y[p]), max(ymax, y[p])
+    return xmin, ymin, xmax, ymax
+
+
+@njit(cache=True, nogil=True)
 def repeated_positions(x, y, z, step):
     """(how many points repeat the x, y of an earlier point, both rounded to ``step`` m, with
     a different z; the largest such z difference in m), each point compared with the latest
@@ -73,10 +83,7 @@ def repeated_positions(x, y, z, step):
     point took 1.0 s.
     """
     n = x.shape[0]
-    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
-    for p in range(n):
-        xmin, xmax = min(xmin, x[p]), max(xmax, x[p])
-        ymin, ymax = min(ymin, y[p]), max(ymax, y[p])
+    xmin, ymin, xmax, ymax = extent(x, y)
     span_x = np.int64(np.rint((xmax - xmin) / step))
     span_y = np.int64(np.rint((ymax - ymin) / step))
     # cells of ``side`` steps, about four points each; blocks of ``group`` x ``group`` cells
@@ -177,16 +184,6 @@ def rows_left(xyz, dropped):
             out[k] = xyz[p]
             k += 1
     return out
-
-
-@njit(cache=True, nogil=True)
-def extent(x, y):
-    """(xmin, ymin, xmax, ymax) of the points, in one pass."""
-    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
-    for p in range(x.shape[0]):
-        xmin, xmax = min(xmin, x[p]), max(xmax, x[p])
-        ymin, ymax = min(ymin, y[p]), max(ymax, y[p])
-    return xmin, ymin, xmax, ymax
 
 
 @njit(cache=True, nogil=True)

@@ -82,12 +82,17 @@ class _Steps:
             if self.cancelled and self.cancelled():
                 raise Cancelled()
             result, seconds, cpu = future.result()
-            self.seconds[name], self.cpu_seconds[name] = round(seconds, 3), round(cpu, 3)
-            self.done += self.weights.get(name, 0.0)
-            if self.progress:
-                self.progress(self.done / self.total)
+            self._finished(name, seconds, cpu, self.weights.get(name, 0.0))
             return result
         return collect
+
+    def _finished(self, name: str, seconds: float, cpu: float, weight: float) -> None:
+        """Step ``name`` took ``seconds`` (wall) and ``cpu``: recorded, and its share of the
+        progress bar done."""
+        self.seconds[name], self.cpu_seconds[name] = round(seconds, 3), round(cpu, 3)
+        self.done += weight
+        if self.progress:
+            self.progress(self.done / self.total)
 
     def run(self, name: str, func: Callable, *args, **kwargs):
         if self.cancelled and self.cancelled():
@@ -112,11 +117,8 @@ class _Steps:
             if cause is not None:  # Ctrl-C, or SIGTERM taken as it (cli.Terminated)
                 raise cause.with_traceback(None) from None
             raise
-        self.seconds[name] = round(time.perf_counter() - start, 3)
-        self.cpu_seconds[name] = round(time.process_time() - cpu, 3)  # all threads
-        self.done += weight
-        if self.progress:
-            self.progress(self.done / self.total)
+        self._finished(name, time.perf_counter() - start,
+                       time.process_time() - cpu, weight)  # CPU: all threads
         return result
 
 
