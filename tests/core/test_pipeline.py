@@ -95,8 +95,12 @@ def test_report_pictures(demo_run):
 
 
 def test_progress_and_log(demo_run):
-    """Progress rises monotonically from above 0 to 1; the log names the steps in order."""
+    """Progress rises monotonically from above 0 to 1; the log names the steps in order (besides
+    numba's compile, said where the cache is cold: the first run of an install)."""
+    from floodmesh.core.engine.compiles import is_compile_message
+
     _, _, fractions, steps = demo_run
+    steps = [step for step in steps if not is_compile_message(step)]
     assert fractions and all(0 < f <= 1 + 1e-12 for f in fractions)
     assert all(b >= a - 1e-12 for a, b in zip(fractions, fractions[1:]))
     assert fractions[-1] == pytest.approx(1.0)
