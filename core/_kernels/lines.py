@@ -20,9 +20,13 @@ def thinned(coords, spacing, chords, firm, plan, height):
                                  and not _holds(coords, j, i, i + 1, plan, height)):
             keep[kept] = i
             kept += 1
-    while kept > 1 and np.hypot(coords[n - 1, 0] - coords[keep[kept - 1], 0],
-                                coords[n - 1, 1] - coords[keep[kept - 1], 1]) < max(
-            spacing[n - 1], spacing[keep[kept - 1]]):
+    while kept > 1:  # the last kept inner vertex gives way to the end on the same terms
+        j = keep[kept - 1]
+        gap = np.hypot(coords[n - 1, 0] - coords[j, 0], coords[n - 1, 1] - coords[j, 1])
+        if gap >= max(spacing[n - 1], spacing[j]) or (
+                chords and gap >= firm
+                and not _holds(coords, keep[kept - 2], j, j + 1, plan, height)):
+            break
         kept -= 1
     keep[kept] = n - 1
     return keep[:kept + 1]

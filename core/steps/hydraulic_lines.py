@@ -36,10 +36,11 @@ FLOW_HEIGHT_TOLERANCE = 0.05  # m: ... if its height is this close too (a flood'
 def thin_vertices(coords: np.ndarray, spacing, *, firm: float | None = None,
                   tolerance: tuple[float, float] | None = None) -> np.ndarray:
     """``coords`` (k, 2+) without vertices closer than ``spacing`` (m, one value or one per
-    vertex) to the previous kept one; both ends stay (the last kept inner vertex gives way to
-    the end). With ``firm`` (m) and ``tolerance`` (plan m, height m), a vertex closer than its
-    spacing but not than ``firm`` gives way only where the chord from the previous kept vertex
-    to the next one passes within ``tolerance`` of it."""
+    vertex) to the previous kept one; both ends stay (the last kept inner vertex closer than
+    its spacing to the end gives way to it). With ``firm`` (m) and ``tolerance`` (plan m,
+    height m), a vertex closer than its spacing but not than ``firm`` gives way, to the next
+    one or to the end, only where the chord from the previous kept vertex to the next one
+    passes within ``tolerance`` of it."""
     # lazy: numba loads only when this runs (the flood command imports this module)
     from .._kernels.lines import thinned
 

@@ -42,8 +42,9 @@ def test_thin_vertices_keeps_the_ends_and_the_spacing():
 def test_thinning_to_the_flow_spacing_keeps_what_the_terrain_needs():
     """Where water flows the lines thin to the flow spacing only where the chord past a vertex
     holds it within the tolerance (plan 0.25 m, height 5 cm here): an even straight line thins
-    fully, a kerb (a 15 cm step in its height) keeps the vertices at the step and a corner its
-    corner; a smooth bend, each vertex within the tolerance of its chord, thins."""
+    fully, a kerb (a 15 cm step in its height) keeps the vertices at the step, also near the
+    line's end, and a corner its corner; a smooth bend, each vertex within the tolerance of its
+    chord, thins."""
     x = np.arange(0, 41.0)
     even = np.column_stack([x, np.zeros_like(x), 0.01 * x])      # a plane rising 1 %
     args = dict(firm=1.0, tolerance=(0.25, 0.05))
@@ -52,6 +53,9 @@ def test_thinning_to_the_flow_spacing_keeps_what_the_terrain_needs():
     kerbed[20:, 2] += 0.15
     assert thin_vertices(kerbed, 8.0, **args)[:, 0].tolist() == [0, 8, 16, 19, 20, 28, 40]
     assert thin_vertices(kerbed, 8.0)[:, 0].tolist() == [0, 8, 16, 24, 32, 40]  # without it
+    # a step within the spacing of the line's end stays too (the end once took it away)
+    assert thin_vertices(kerbed[:23], 8.0, **args)[:, 0].tolist() == [0, 8, 16, 19, 20, 22]
+    assert thin_vertices(kerbed[:23], 8.0)[:, 0].tolist() == [0, 8, 22]
     corner = np.vstack([np.column_stack([x[:21], np.zeros(21)]),
                         np.column_stack([np.full(20, 20.0), x[1:21]])])
     kept = thin_vertices(corner, 8.0, **args)[:, :2].tolist()
@@ -152,8 +156,12 @@ def _numpy_thin(coords, spacing, firm=None, tolerance=None):
         if gap >= spacing[i] or (tolerance is not None and gap >= firm and not _numpy_holds(
                 coords[[keep[-1], i, i + 1]], tolerance)):
             keep.append(i)
-    while len(keep) > 1 and np.hypot(*(coords[-1, :2] - coords[keep[-1], :2])) < max(
-            spacing[-1], spacing[keep[-1]]):
+    while len(keep) > 1:
+        gap = np.hypot(*(coords[-1, :2] - coords[keep[-1], :2]))
+        if gap >= max(spacing[-1], spacing[keep[-1]]) or (
+                tolerance is not None and gap >= firm
+                and not _numpy_holds(coords[[keep[-2], keep[-1], keep[-1] + 1]], tolerance)):
+            break
         keep.pop()
     return coords[keep + [len(coords) - 1]]
 
