@@ -25,7 +25,9 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             "are kept as mesh edges. A size field raster (m², nodata: no limit) sets a local "
             "maximum area, and so does the flow area (m², default 23 cells; 0: off) on ground "
             "less than 1 m above a drainage line (height above the nearest drainage), where a "
-            "flood goes first. Writes SMS 2DM and, optionally, the triangles as PolygonZ.")
+            "flood goes first, wherever the mesh without it misses that ground's relief "
+            "(kerbs, gutters, swales; a plane floodplain keeps its larger triangles). Writes "
+            "SMS 2DM and, optionally, the triangles as PolygonZ.")
     DEM, BREAKLINES, MIN_ANGLE, MAX_AREA = "DEM", "BREAKLINES", "MIN_ANGLE", "MAX_AREA"
     SIZE_FIELD, MAX_TRIANGLES, FLOW_AREA = "SIZE_FIELD", "MAX_TRIANGLES", "FLOW_AREA"
     OUTPUT, TRIANGLES, NODES, TRIANGLE_COUNT = "OUTPUT", "TRIANGLES", "NODES", "TRIANGLE_COUNT"

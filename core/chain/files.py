@@ -21,7 +21,6 @@ from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_holdout, ch
 from ..points import PointCloud, split_holdout
 from ..raster import require_metric_crs
 from ..steps.breakpoints import breakpoints_file
-from ..steps.sizing import finer
 from ..steps.slope import slope_raster_file
 
 GEOTIFF = (".tif", ".tiff")
@@ -180,7 +179,7 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     no angle below ``min_angle`` degrees and no triangle above ``max_area`` m² (smaller where
     ``size_field`` or the flow zone, ``flow_area`` m², None: the default, 0: off, asks)."""
     # lazy: numba, PROJ and GEOS load only when this runs
-    from ..steps.drainage import flow_area_for, flow_size
+    from ..steps.drainage import flow_area_for, flow_refined, flow_size
     from ..steps.mesh import build_mesh, mesh_quality
     from .pipeline import size_field as size_from
 
@@ -192,11 +191,12 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
     size = size_from(size_field, terrain, max_area=max_area, min_area=min_area)
     flow_area = flow_area_for(flow_area, terrain.cell_size)
-    if flow_area is not None:  # smaller triangles where water flows (see drainage)
-        size = finer(size, flow_size(terrain, flow_area=flow_area))
-    result_mesh = build_mesh(terrain, lines, min_angle=min_angle, max_area=max_area,
-                             conforming=conforming, domain=domain, size_field=size,
-                             max_triangles=max_triangles, note=note)
+    # smaller triangles where water flows and the terrain needs them (see drainage)
+    flow = None if flow_area is None else flow_size(terrain, flow_area=flow_area)
+    result_mesh, _, _ = flow_refined(lambda size, _: build_mesh(
+        terrain, lines, min_angle=min_angle, max_area=max_area, conforming=conforming,
+        domain=domain, size_field=size, max_triangles=max_triangles, note=note),
+        size, flow, None, terrain)
     io.write_mesh_2dm(output, result_mesh.nodes, result_mesh.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "crs": terrain.crs.to_wkt()}
     if triangles:

@@ -32,8 +32,8 @@ from ..raster import Grid
 from ..steps.accuracy import accuracy_statistics, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
-from ..steps.drainage import (CHANNEL_AREA, flow_area_for, flow_size, flow_spacing,
-                              height_above_drainage)
+from ..steps.drainage import (CHANNEL_AREA, flow_area_for, flow_refined, flow_size,
+                              flow_spacing, height_above_drainage)
 from ..steps.export import export_formats
 from ..steps.grid import check_grid, grid_points_linear
 from ..steps.hydraulic_lines import lines_for_hydraulics
@@ -168,16 +168,26 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     hand = None if flow_area is None else steps.ahead(  # resolution where water flows
         "flow zone", height_above_drainage, front.dem, channel_area=CHANNEL_AREA)
     simplified, lines, confidence = _break_lines(front, options, steps, fits)
-    size, max_area, hand = _size_fields(front, options, steps, fits.window, hand, flow_area)
+    size, flow, max_area, hand = _size_fields(front, options, fits.window, hand, flow_area)
     domain = (front.domain if front.domain is not None else domain_from_dem(
         front.dem, tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size)))
-    detected, line_stats = _lines_for_flood(front, options, steps, lines, domain, hand,
-                                            flow_area)
-    hand = None  # the flow zone's work is in the size field and the lines now
+    spacing = None if hand is None else flow_spacing(front.dem, flow_area=flow_area, hand=hand)
+    hand = None  # the flow zone's work is in the size field and the spacing now
+    kept = {}
+
+    def build(size, spacing):
+        """The mesh of ``size``, its lines spaced for a flood model (see hydraulic_lines) and
+        thinned to the flow ``spacing`` (a Grid, or None)."""
+        kept["lines"], kept["stats"] = _lines_for_flood(front, options, lines, domain, spacing)
+        return build_mesh(front.dem, kept["lines"] + front.own_lines,
+                          min_angle=options.min_angle, max_area=max_area,
+                          conforming=options.conforming, domain=domain, size_field=size,
+                          max_triangles=options.max_triangles, note=note)
+
+    mesh, size, flow_zone = steps.run("mesh", flow_refined, build, size, flow, spacing,
+                                      front.dem)
+    detected, line_stats = kept["lines"], kept["stats"]
     mesh_lines = detected + front.own_lines
-    mesh = steps.run("mesh", build_mesh, front.dem, mesh_lines, min_angle=options.min_angle,
-                     max_area=max_area, conforming=options.conforming, domain=domain,
-                     size_field=size, max_triangles=options.max_triangles, note=note)
     mesh, rounds = _terrain_z(mesh, front, options, steps, fits, mesh_lines, domain, size,
                               max_area, cancelled)
     # the terrain fits are done: their points and index go before the assessment and writing
@@ -203,7 +213,8 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
             "figures", _figures, front, options, simplified, mesh, res, detected, max_area)
         figures = {"n_breakpoints": n_breakpoints, "deviation": deviation, "quality": quality,
                    "stats": stats, "rounds": rounds, "terrain_fit": fits.record(),
-                   "line_stats": line_stats, "hydraulics": hydraulics, "notes": notes}
+                   "line_stats": line_stats, "flow_zone": flow_zone, "hydraulics": hydraulics,
+                   "notes": notes}
         report = steps.run("write", write_all, stage, figures, pictures)
         io.write_json(stage / "report.json", report)
     compiled = steps.compiles.summary()
@@ -216,7 +227,7 @@ def _step_weights(options: RunOptions) -> dict:
     """The steps a run with ``options`` takes, each with its share of the progress bar."""
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
                "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
-               "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
+               "flow zone": 0.5, "mesh": 2, "refine": 4,
                "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
     del weights["node elevations" if options.refine else "refine"]
     if not options.localise:
@@ -289,10 +300,11 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
     return simplified, lines, confidence
 
 
-def _size_fields(front: Front, options: RunOptions, steps: _Steps, window, hand, flow_area):
-    """(size field or None, the largest area, height above drainage or None): the user's size
-    field, finer off the lines where asked (far field) and where water flows (``flow_area``,
-    with the height above drainage that ``hand`` collects: see drainage)."""
+def _size_fields(front: Front, options: RunOptions, window, hand, flow_area):
+    """(size field or None, flow size or None, the largest area, height above drainage or
+    None): the user's size field, finer off the lines where asked (far field), and the size
+    where water flows (``flow_area``, with the height above drainage that ``hand`` collects:
+    see drainage), which the mesh takes where its terrain needs it (``flow_refined``)."""
     dem, max_area = front.dem, options.max_area
     size = size_field(options.size_field, dem, front.slope_grid, max_area=max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
@@ -302,26 +314,24 @@ def _size_fields(front: Front, options: RunOptions, steps: _Steps, window, hand,
                              tolerance=max(0.01, window.noise / 2) if window else 0.02)
         size = finer(size, far)
         max_area = options.far_field_area
-    if hand is not None:
-        hand, _ = hand()
-        size = finer(size, flow_size(dem, flow_area=flow_area, hand=hand))
-    return size, max_area, hand
+    if hand is None:
+        return size, None, max_area, None
+    hand, _ = hand()
+    return size, flow_size(dem, flow_area=flow_area, hand=hand), max_area, hand
 
 
-def _lines_for_flood(front: Front, options: RunOptions, steps: _Steps, lines, domain, hand,
-                     flow_area):
+def _lines_for_flood(front: Front, options: RunOptions, lines, domain, spacing):
     """(the detected lines' coordinates, their statistics or None): lines a flood model can
-    afford (see hydraulic_lines), unless ``options.min_spacing`` is 0."""
-    detected, dem = [line.coords for line in lines], front.dem
-    spacing = dem.cell_size if options.min_spacing is None else options.min_spacing
-    if spacing <= 0:
+    afford (see hydraulic_lines), thinned to the flow ``spacing`` (a Grid) where given, unless
+    ``options.min_spacing`` is 0."""
+    detected = [line.coords for line in lines]
+    least = front.dem.cell_size if options.min_spacing is None else options.min_spacing
+    if least <= 0:
         return detected, None
     within = (shapely.union_all(io.read_boundary(options.flow_zone)) if options.flow_zone
               else None)
-    return steps.run("hydraulic lines", lines_for_hydraulics, detected, domain, spacing=spacing,
-                     own_lines=front.own_lines, within=within,
-                     flow_spacing=None if hand is None else flow_spacing(
-                         dem, flow_area=flow_area, hand=hand))
+    return lines_for_hydraulics(detected, domain, spacing=least, own_lines=front.own_lines,
+                                within=within, flow_spacing=spacing)
 
 
 def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits,
@@ -414,6 +424,7 @@ def _report(source: Source, front: Front, options: RunOptions, simplified, lines
         "refinement": [asdict(r) for r in figures["rounds"]],
         "terrain_fit": figures["terrain_fit"],
         "hydraulic_lines": figures["line_stats"],
+        "flow_zone": figures["flow_zone"],
         "hydraulics": figures["hydraulics"],
         "notes": figures["notes"],
         "files": sorted(set(OUTPUT_FILES) | {path.name for path in exported}),

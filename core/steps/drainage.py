@@ -3,6 +3,13 @@ Rennó et al. 2008; Nobre et al. 2011) on a DEM, and a size field that puts smal
 low ground near the drainage lines, the ground a flood reaches first (streets, valley floors,
 floodplains), and leaves dry hillsides to the break lines.
 
+The smaller triangles go only where the mesh without them misses the terrain of that low
+ground (``flow_refined``): a triangle whose DEM cells depart from its plane by more than
+``FLOW_TERRAIN_TOLERANCE`` beyond the DEM's own noise (a street's kerbs and gutters, a
+floodplain's swales: relief a shallow flood follows) is refined; low ground that the mesh
+already follows (a plane floodplain between its break lines) keeps its triangles, as extra
+nodes there change neither the terrain nor the flood.
+
 Drainage by priority flood (Barnes et al. 2014): cells leave a heap lowest first, starting from
 the grid's edge and the edge of its data; each cell drains to the neighbour that reached it, so
 depressions fill and drain over their rims. Cells draining ``channel_area`` m² or more are the
@@ -16,9 +23,13 @@ import numba
 import numpy as np
 
 from ..raster import Grid
+from .sizing import finer
 
 CHANNEL_AREA = 5000.0  # m²: a cell draining this much is on a drainage line
 FLOW_AREA_CELLS = 23.0  # the default flow area, in cells: 23 m² at 1 m (see flow_area_for)
+FLOW_TERRAIN_TOLERANCE = 0.015  # m: RMS relief within a triangle, noise taken out
+NOISE_MARGIN = 4.0  # standard errors of a triangle's mean square misfit that noise may reach
+MIN_CELLS = 12  # cells of a triangle to tell its relief from noise
 
 
 def flow_area_for(flow_area: float | None, cell_size: float) -> float | None:
@@ -138,3 +149,109 @@ def flow_spacing(dem: Grid, *, flow_area: float, height: float = 3.0,
                      hand=hand)
     return zone.with_values(np.sqrt(4 / np.sqrt(3) * np.asarray(zone.values, float))
                             .astype(np.float32))
+
+
+def dem_noise(dem: Grid, cells: np.ndarray | None = None) -> float:
+    """The DEM's noise (m, one standard deviation) from the departure of each cell from the
+    mean of its 3x3 neighbourhood (zero on a plane; (8/9)·σ² for independent noise), by the
+    median absolute departure over ``cells`` (a mask; all valid cells if None), so that real
+    relief in a few cells does not count as noise."""
+    # lazy: SciPy loads only when this runs
+    from scipy.ndimage import uniform_filter
+
+    z = np.asarray(dem.values, float)
+    valid = np.isfinite(z)
+    if not valid.any():
+        return 0.0
+    filled = np.where(valid, z, np.nanmean(z))
+    departure = np.abs(filled - uniform_filter(filled, 3, mode="nearest"))
+    keep = valid if cells is None else valid & cells
+    if not keep.any():
+        return 0.0
+    return float(1.4826 * np.median(departure[keep]) / np.sqrt(8 / 9))
+
+
+def misfit_triangles(dem: Grid, cells: np.ndarray, nodes: np.ndarray, triangles: np.ndarray, *,
+                     tolerance: float = FLOW_TERRAIN_TOLERANCE,
+                     margin: float = NOISE_MARGIN) -> tuple[np.ndarray, float]:
+    """(a mask of ``cells`` (a cell mask of ``dem``), true where the triangle of the mesh
+    (``nodes`` (n, 2+), ``triangles``) holding the cell has relief that no plane follows: its
+    cells of the mask depart from their least-squares plane by more than ``tolerance`` m RMS
+    beyond the DEM's noise σ; the noise, m). Beyond the noise: the triangle's mean square
+    departure (over n − 3 degrees of freedom) less σ² exceeds both ``tolerance``² and
+    ``margin`` standard errors of that mean (σ²·√(2/(n − 3))), so a noisy plane does not pass
+    by chance. The plane, not the triangle's own nodes: noise at a node is the node fit's to
+    take out, not a reason for smaller triangles."""
+    # lazy: numba loads only when this runs
+    from .._kernels.mesh import locate
+
+    rows, cols = np.nonzero(cells & np.isfinite(dem.values))
+    flagged = np.zeros(cells.shape, bool)
+    if not len(rows):
+        return flagged, 0.0
+    sigma = dem_noise(dem, cells)
+    x, y = dem.cell_centres(rows, cols)
+    tri = locate(np.asarray(nodes, float), triangles, np.column_stack([x, y]).astype(float))[0]
+    inside = tri >= 0
+    rows, cols, k = rows[inside], cols[inside], tri[inside]
+    centre = np.asarray(nodes, float)[triangles][:, :, :2].mean(axis=1)
+    u, v = x[inside] - centre[k, 0], y[inside] - centre[k, 1]
+    z = np.asarray(dem.values, float)[rows, cols]
+    z0 = np.bincount(k, z, minlength=len(triangles)) / np.maximum(
+        np.bincount(k, minlength=len(triangles)), 1)
+    z = z - z0[k]
+    terms = (np.ones_like(u), u, v)
+    sums = {(a, b): np.bincount(k, terms[a] * terms[b], minlength=len(triangles))
+            for a in range(3) for b in range(a, 3)}
+    normal = np.stack([np.stack([sums[min(a, b), max(a, b)] for b in range(3)], -1)
+                       for a in range(3)], -2)
+    right = np.stack([np.bincount(k, t * z, minlength=len(triangles)) for t in terms], -1)
+    n = normal[:, 0, 0]
+    # a plane and a mean square from at least MIN_CELLS cells (a triangle smaller than that
+    # is smaller than any flow area's too)
+    solvable = (n >= MIN_CELLS) & (np.abs(np.linalg.det(normal)) > 1e-9 * np.maximum(n, 1) ** 3)
+    coefficients = np.zeros((len(triangles), 3))
+    coefficients[solvable] = np.linalg.solve(normal[solvable], right[solvable][..., None])[..., 0]
+    departure = z - (coefficients[k] * np.stack(terms, -1)).sum(-1)
+    dof = np.maximum(n - 3, 1)
+    excess = np.bincount(k, departure ** 2, minlength=len(triangles)) / dof - sigma ** 2
+    rough = solvable & (excess > np.maximum(tolerance ** 2, margin * sigma ** 2 * np.sqrt(2 / dof)))
+    flagged[rows, cols] = rough[k]
+    return flagged, sigma
+
+
+def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | None, dem: Grid):
+    """(mesh, size field, figures or None): ``build(size, spacing)``, a Mesh of that size field
+    with its break lines thinned to the flow spacing ``spacing`` (a Grid, see ``flow_spacing``;
+    None: not thinned). Without a flow size ``flow`` (see ``flow_size``), that mesh without the
+    spacing; with one, first that mesh, whose triangles with relief that no plane follows
+    (``misfit_triangles`` on the flow zone) then take the flow size, and the lines the flow
+    spacing within a flow triangle's side of them, and only there. Figures: the shares of the
+    DEM's valid cells in the flow zone, refined and thinned, the DEM's noise and the tolerance
+    (m)."""
+    # lazy: SciPy loads only when this runs
+    from scipy.ndimage import binary_dilation
+
+    terrain = build(size, None)
+    if flow is None:
+        return terrain, size, None
+    zone = np.isfinite(np.asarray(flow.values, float))
+    flagged, sigma = misfit_triangles(dem, zone, terrain.nodes, terrain.triangles)
+    valid = max(int(np.isfinite(dem.values).sum()), 1)
+    figures = {"low_ground_share": float(zone.sum() / valid),
+               "refined_share": float(flagged.sum() / valid), "thinned_share": 0.0,
+               "dem_noise_m": sigma, "tolerance_m": FLOW_TERRAIN_TOLERANCE}
+    if not flagged.any():
+        return terrain, size, figures
+    size = finer(size, _only(flow, flagged))
+    if spacing is not None:
+        side = np.sqrt(4 / np.sqrt(3) * np.nanmax(flow.values)) / dem.cell_size
+        near = binary_dilation(flagged, iterations=max(1, int(round(side))))
+        spacing = _only(spacing, near)
+        figures["thinned_share"] = float((near & np.isfinite(spacing.values)).sum() / valid)
+    return build(size, spacing), size, figures
+
+
+def _only(grid: Grid, cells: np.ndarray) -> Grid:
+    """``grid`` on ``cells`` (a mask), NaN elsewhere."""
+    return grid.with_values(np.where(cells, grid.values, np.nan).astype(np.float32))
