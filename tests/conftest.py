@@ -116,3 +116,29 @@ def pytest_terminal_summary(terminalreporter):
     line = fuzz_stats.summary()
     if line:
         terminalreporter.write_line(line)
+
+
+def swaled(dem, amplitude=0.15, wavelength=6.0):
+    """``dem`` with swales (``amplitude`` m, ``wavelength`` m, across x) on its west half's
+    low ground (less than 1 m above a drainage line): relief a shallow flood follows that a
+    100 m² triangle does not; the east half's low ground stays as it was."""
+    from floodmesh.core.steps.drainage import height_above_drainage
+
+    hand, _ = height_above_drainage(dem, channel_area=5000.0)
+    rows, cols = np.indices(dem.shape)
+    x, _ = dem.cell_centres(rows, cols)
+    west = (cols < dem.shape[1] // 2) & (np.nan_to_num(hand.values, nan=9) <= 1.0)
+    return dem.with_values(np.where(west, dem.values + amplitude * np.sin(
+        2 * np.pi * x / wavelength), dem.values).astype(np.float32)), west
+
+
+def low_ground_triangles(mesh_2dm, dem, zone):
+    """The areas (m²) of the triangles of the mesh in ``mesh_2dm`` whose centre lies in
+    ``zone`` (a mask of the cells of ``dem``)."""
+    from floodmesh.core.steps.mesh import triangle_areas
+
+    nodes, tri = io.read_mesh_2dm(mesh_2dm)
+    centre = nodes[tri][:, :, :2].mean(axis=1)
+    cols, rows = ~dem.transform * (centre[:, 0], centre[:, 1])
+    inside = zone[rows.astype(int), cols.astype(int)]
+    return np.abs(triangle_areas(nodes, tri))[inside]

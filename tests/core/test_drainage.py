@@ -9,6 +9,8 @@ from floodmesh.core.steps.drainage import flow_area_for, flow_size, height_above
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.raster import Grid
 
+from ..conftest import low_ground_triangles, swaled
+
 
 def grid(z):
     return Grid(np.asarray(z, float), Affine(1.0, 0, 0, 0, -1.0, 100.0),
@@ -66,34 +68,6 @@ def test_the_flow_area_is_23_cells_by_default_and_0_turns_it_off():
         RunOptions(flow_area=-5.0)
 
 
-def swaled(dem, amplitude=0.15, wavelength=6.0):
-    """``dem`` with swales (``amplitude`` m, ``wavelength`` m, across x) on its west half's
-    low ground (less than 1 m above a drainage line): relief a shallow flood follows that a
-    100 m² triangle does not; the east half's low ground stays as it was."""
-    from floodmesh.core.steps.drainage import height_above_drainage
-
-    hand, _ = height_above_drainage(dem, channel_area=5000.0)
-    rows, cols = np.indices(dem.shape)
-    x, _ = dem.cell_centres(rows, cols)
-    west = (cols < dem.shape[1] // 2) & (np.nan_to_num(hand.values, nan=9) <= 1.0)
-    return dem.with_values(np.where(west, dem.values + amplitude * np.sin(
-        2 * np.pi * x / wavelength), dem.values).astype(np.float32)), west
-
-
-def low_ground_triangles(folder, zone):
-    """The areas (m²) of the mesh's triangles in ``folder`` whose centre lies in ``zone``
-    (a mask of the DEM's cells)."""
-    from floodmesh.core import io
-    from floodmesh.core.steps.mesh import triangle_areas
-
-    nodes, tri = io.read_mesh_2dm(folder / "mesh.2dm")
-    dem = io.read_raster(folder / "dem.tif")
-    centre = nodes[tri][:, :, :2].mean(axis=1)
-    cols, rows = ~dem.transform * (centre[:, 0], centre[:, 1])
-    inside = zone[rows.astype(int), cols.astype(int)]
-    return np.abs(triangle_areas(nodes, tri))[inside]
-
-
 def test_the_flow_area_refines_low_ground_where_the_terrain_needs_it_only(demo_points_file,
                                                                           tmp_path):
     """The user's side of issue 28 item 2: on the demo floodplain, whose low ground is a plane
@@ -125,9 +99,9 @@ def test_the_flow_area_refines_low_ground_where_the_terrain_needs_it_only(demo_p
                               RunOptions(flow_area=area))
         # nearly all swaled triangles (a few under coarse triangles too small to tell relief
         # from noise are left), and the largest plane one
-        largest[name] = (np.quantile(low_ground_triangles(tmp_path / f"swaled-{name}", west),
-                                     0.95),
-                         low_ground_triangles(tmp_path / f"swaled-{name}", east).max())
+        mesh = tmp_path / f"swaled-{name}" / "mesh.2dm"
+        largest[name] = (np.quantile(low_ground_triangles(mesh, dem, west), 0.95),
+                         low_ground_triangles(mesh, dem, east).max())
         if area is None:   # the lines thinned to the flow spacing near there only
             zone = report["flow_zone"]
             assert 0 < zone["refined_share"] < zone["low_ground_share"]
