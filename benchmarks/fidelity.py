@@ -2,6 +2,7 @@
 analytic floodplains whose true surface and true break lines are known.
 
     nice .venv/bin/python benchmarks/fidelity.py [--quick] [--chains landed,default,no-join,no-spacing]
+        [--terrains …] [--noise …] [--density …] [--real]
 
 For each terrain of the corpus (``benchmarks/corpus.py``: the demo's geometry with a seed it
 never saw, an oblique one, lines at every angle to the grid, crossings and a junction, narrow
@@ -18,7 +19,9 @@ exact elevation (the node count at FloodMesh's RMSE interpolated in log-log), an
 (greedy TIN, no angle bound) on the same DEM. Ratios are uniform nodes / FloodMesh nodes at the
 same true RMSE; pydelatin's "never" means no error bound brings its mesh of the noisy DEM down
 to FloodMesh's true RMSE. Bars (issue 18, reference case): ≥ 15x, < 2 pieces, recall and
-precision ≥ 0.95.
+precision ≥ 0.95. ``--real`` adds the real samples of ../shared/data/real, which have no true
+surface or lines: scored on a tenth of their points held out, against uniform meshes with the
+DEM's z on the same points (``--terrains none --real``: those alone).
 """
 from __future__ import annotations
 
@@ -31,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+from pyproj import CRS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -208,6 +212,60 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
     return results
 
 
+REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+REAL_HOLDOUT = 0.1  # a tenth of a real survey's ground points held out, the mesh's check
+
+
+def real_sources(work: Path) -> dict:
+    """The real samples of ../shared/data/real as the chain's inputs, each with the options it
+    needs: the Québec LiDAR (0.1 ground points/m², lakes), the Autzen LiDAR (Oregon, 0.4 ground
+    points/m², a river bank; its feet scaled to metres: EPSG:2994 and EPSG:2993 are the same
+    Lambert projection in feet and in metres) and the Merewether DEM (1 m, urban, held-out DEM
+    cells: not independent of the DEM)."""
+    import laspy
+
+    from floodmesh.core.points import PointCloud
+
+    sources = {"Québec LiDAR (Topography.laz)": (REAL / "Topography.laz", {}),
+               "Merewether DEM (1 m)": (REAL / "merewether_topography1.asc",
+                                        {"crs": "EPSG:32756"})}
+    las = laspy.read(REAL / "autzen_trim.laz")
+    ground = np.asarray(las.classification) == 2
+    xyz = 0.3048 * np.column_stack([las.x, las.y, las.z])[ground]
+    io.write_points_las(work / "autzen_m.laz", PointCloud(xyz, CRS.from_epsg(2993)))
+    sources["Autzen LiDAR (autzen_trim.laz, in metres)"] = (work / "autzen_m.laz", {})
+    return sources
+
+
+def run_real(name, source, extra, chains, work: Path):
+    """A real sample: the chain's nodes and held-out RMSE against uniform 25° meshes (node z
+    from the run's DEM) on the same held-out points, nodes per FloodMesh node at that RMSE."""
+    rows, dem, check = [], None, None
+    for chain in chains:
+        out = work / chain
+        report = run_pipeline(source, out, RunOptions(holdout=REAL_HOLDOUT, **extra,
+                                                      **CHAINS[chain]))
+        rows.append((chain, report["nodes"], report["rmse_m"]))
+        dem = io.read_raster(out / "dem.tif")
+        check = io.read_points_vector(out / "residuals.gpkg")
+    curve = []
+    for area in UNIFORM_AREAS:
+        mesh = build_mesh(dem, [], min_angle=25, max_area=area)
+        z = tin_elevation(mesh, check[:, 0], check[:, 1])
+        curve.append((len(mesh.nodes), float(np.sqrt(np.nanmean((z - check[:, 2]) ** 2)))))
+    print(f"\n## {name} (held-out RMSE on {len(check):,} points)")
+    print(f"{'chain':<14}{'nodes':>8}{'held-out RMSE cm':>18}{'uniform/ours':>14}")
+    results = []
+    for chain, n, rmse in rows:
+        ratio = nodes_at(rmse, curve, extrapolate=False) / n
+        print(f"{chain:<14}{n:>8,}{100 * rmse:>18.2f}" + (f"{ratio:>13.1f}x" if np.isfinite(ratio)
+                                                          else f"{'below uniform':>14}"))
+        results.append((chain, ratio))
+    print("uniform 25° (DEM z): " + ", ".join(f"{n:,} nodes {100 * r:.2f} cm"
+                                             for n, r in curve[::2]))
+    return results
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -219,6 +277,9 @@ def main():
     parser.add_argument("--noise", default="0.05,0.15", help="noise (m), comma-separated")
     parser.add_argument("--density", default="9,2",
                         help="ground points per m², comma-separated (the corpus: 1 to 16)")
+    parser.add_argument("--real", action="store_true",
+                        help="also the real samples of ../shared/data/real, scored on "
+                             "held-out points (no true lines)")
     parser.add_argument("--chains", default="landed,default,no-join,no-spacing",
                         help=f"option sets to run, of {', '.join(CHAINS)}")
     args = parser.parse_args()
@@ -236,9 +297,17 @@ def main():
             for chain, ratio, score in run_case(terrain, floodplain, seed, noise, density,
                                                 chains, Path(tmp)):
                 summary.append((terrain, noise, density, chain, ratio, score))
+    if args.real:
+        with tempfile.TemporaryDirectory() as tmp:
+            for name, (source, extra) in real_sources(Path(tmp)).items():
+                for chain, ratio in run_real(name, source, extra, chains, Path(tmp)):
+                    summary.append((name, np.nan, np.nan, chain, ratio, None))
     print("\n## Summary: nodes a uniform 25° mesh needs for the same true RMSE, per FloodMesh "
           "node (bars: 15x reference case, goal 30x and 10x at 15 cm)")
     for terrain, noise, density, chain, ratio, score in summary:
+        if score is None:  # a real sample: held-out RMSE, no true lines
+            print(f"{terrain:<28}  held-out     {chain:<10}{ratio:>6.1f}x")
+            continue
         print(f"{terrain:<28}{density:>4g}/m² {100 * noise:>3g} cm  {chain:<10}{ratio:>6.1f}x  "
               f"pieces {score['mean_pieces']:.2f}  recall {score['recall']:.3f}  "
               f"precision {score['precision']:.3f}  breaks {score['breaks']}  "
