@@ -45,7 +45,10 @@ def test_copc_tiles_grid_to_the_dem_of_their_las_tiles(survey, tmp_path):
     assert io.read_raster(tmp_path / "copc" / "dem.tif").values.tobytes() == \
         io.read_raster(tmp_path / "las" / "dem.tif").values.tobytes()
     # the same points in octree order: the terrain fits' draws differ, not the mesh's quality
-    assert abs(copc["nodes"] - las["nodes"]) <= 0.01 * las["nodes"]
+    # (1,287 against 1,263 nodes without the flow area, before the flow area went only where
+    # the terrain needs it and after; the flow area's nodes on every cell of low ground had
+    # diluted that to 0.7 %)
+    assert abs(copc["nodes"] - las["nodes"]) <= 0.025 * las["nodes"]
 
 
 def test_a_copc_file_that_fits_is_one_point_file(survey):
