@@ -85,6 +85,25 @@ def repeated_positions_note(xyz: np.ndarray, source: str) -> str | None:
             "for overlapping flight lines or tiles merged twice")
 
 
+SPARSE_POINTS_PER_CELL = 0.5  # fewer ground points a cell than this: the grid is finer than the survey
+
+
+def sparse_survey_note(n_points: int, valid_cells: int, cell_size: float) -> str | None:
+    """What to say of ``n_points`` ground points gridded onto ``valid_cells`` cells of
+    ``cell_size`` m when they are fewer than ``SPARSE_POINTS_PER_CELL`` a cell (None
+    otherwise): most cells then lie inside TIN facets whose edges slope breaks and break lines
+    follow; a cell of about the points' spacing (one point a cell), to the half metre, suits
+    the survey."""
+    if n_points <= 0 or valid_cells <= 0 or n_points >= SPARSE_POINTS_PER_CELL * valid_cells:
+        return None
+    density = n_points / (valid_cells * cell_size ** 2)
+    suggested = max(float(np.round(2 / np.sqrt(density)) / 2), cell_size)
+    return (f"the survey has {density:.2g} ground points/m², {n_points / valid_cells:.2g} a "
+            f"cell of the {cell_size:g} m grid: most cells are interpolated inside TIN facets, "
+            f"whose edges the break lines may follow; a cell size of about {suggested:g} m "
+            "(one point a cell) suits it (--cell-size, 'Grid cell size d' in QGIS)")
+
+
 def split_holdout(points: PointCloud, fraction: float, seed: int,
                   note=None) -> tuple[PointCloud, PointCloud]:
     """Split off a random ``fraction`` of the points for accuracy assessment (at least the 20

@@ -27,7 +27,7 @@ from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
 from ..options import (EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS, RunOptions,
                        check_sigma_fits)
-from ..points import PointCloud, repeated_positions_note, split_holdout
+from ..points import PointCloud, repeated_positions_note, sparse_survey_note, split_holdout
 from ..raster import Grid
 from ..steps.accuracy import accuracy_statistics, residuals
 from ..steps.breaklines import trace_breaklines
@@ -500,6 +500,10 @@ def trace_front(source, options: RunOptions, steps: "_Steps | None" = None, *,
     source = open_source(source)
     terrain = _READERS[source.kind](source, options, steps, cancelled=cancelled, note=note)
     dem = terrain.dem
+    sparse = sparse_survey_note(terrain.n_points, int(np.isfinite(dem.values).sum()),
+                                dem.cell_size)
+    if sparse and note:
+        note(sparse)
     domain, own_lines = steps.run("mesh inputs", mesh_constraints, dem, options.boundary,
                                   options.user_lines,
                                   tolerance=edge_tolerance(*options.simplification(),
