@@ -19,26 +19,41 @@ def locate(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray,
     """(index of the triangle holding each of ``points`` (k, 2+), -1 outside; with node
     elevations ``z`` (n,), the linear interpolation there, NaN outside). A point on an edge or
     a node takes the lowest-index triangle holding it."""
-    xy = np.asarray(xy, float)[:, :2]
-    triangles = np.ascontiguousarray(triangles, np.int64)
-    points = np.asarray(points, float)
-    found = np.full(len(points), -1, np.int64)
-    values = None if z is None else np.full(len(points), np.nan)
-    if not len(points) or not len(triangles):
+    return Locator(xy, triangles)(points, z)
+
+
+class Locator:
+    """``locate`` with its buckets built once, for points given in parts (``locator(points,
+    z=None)``: the same answer as ``locate(xy, triangles, points, z)``)."""
+
+    def __init__(self, xy: np.ndarray, triangles: np.ndarray):
+        xy = np.asarray(xy, float)[:, :2]
+        self.triangles = np.ascontiguousarray(triangles, np.int64)
+        if not len(self.triangles):
+            return
+        self.origin = xy.min(axis=0)  # local coordinates: the tests keep their precision
+        self.local = np.ascontiguousarray(xy - self.origin)
+        span = self.local.max(axis=0)
+        self.cell = float(max(np.sqrt(span[0] * span[1] / max(len(self.triangles) / 2.0, 1.0)),
+                              span.max() / 4096.0, 1e-9))
+        self.cols, self.rows = int(span[0] // self.cell) + 1, int(span[1] // self.cell) + 1
+        self.bounds, self.members = _buckets(self.local, self.triangles, self.cell, self.cols,
+                                             self.rows)
+
+    def __call__(self, points: np.ndarray,
+                 z: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        points = np.asarray(points, float)
+        found = np.full(len(points), -1, np.int64)
+        values = None if z is None else np.full(len(points), np.nan)
+        if not len(points) or not len(self.triangles):
+            return found, values
+        px = np.ascontiguousarray(points[:, 0] - self.origin[0])
+        py = np.ascontiguousarray(points[:, 1] - self.origin[1])
+        _locate(self.local, self.triangles, self.bounds, self.members, self.cell, self.cols,
+                self.rows, px, py, found)
+        if z is not None:
+            _interpolate(self.local, self.triangles, np.asarray(z, float), px, py, found, values)
         return found, values
-    origin = xy.min(axis=0)  # local coordinates: the tests keep their precision
-    local = np.ascontiguousarray(xy - origin)
-    px = np.ascontiguousarray(points[:, 0] - origin[0])
-    py = np.ascontiguousarray(points[:, 1] - origin[1])
-    span = local.max(axis=0)
-    cell = float(max(np.sqrt(span[0] * span[1] / max(len(triangles) / 2.0, 1.0)),
-                     span.max() / 4096.0, 1e-9))
-    cols, rows = int(span[0] // cell) + 1, int(span[1] // cell) + 1
-    bounds, members = _buckets(local, triangles, cell, cols, rows)
-    _locate(local, triangles, bounds, members, cell, cols, rows, px, py, found)
-    if z is not None:
-        _interpolate(local, triangles, np.asarray(z, float), px, py, found, values)
-    return found, values
 
 
 @njit(cache=True, nogil=True)

@@ -172,8 +172,8 @@ def dem_noise(dem: Grid, cells: np.ndarray | None = None) -> float:
 
 
 def misfit_triangles(dem: Grid, cells: np.ndarray, nodes: np.ndarray, triangles: np.ndarray, *,
-                     tolerance: float = FLOW_TERRAIN_TOLERANCE,
-                     margin: float = NOISE_MARGIN) -> tuple[np.ndarray, float]:
+                     tolerance: float = FLOW_TERRAIN_TOLERANCE, margin: float = NOISE_MARGIN,
+                     block_cells: int = 1 << 20) -> tuple[np.ndarray, float]:
     """(a mask of ``cells`` (a cell mask of ``dem``), true where the triangle of the mesh
     (``nodes`` (n, 2+), ``triangles``) holding the cell has relief that no plane follows: its
     cells of the mask depart from their least-squares plane by more than ``tolerance`` m RMS
@@ -181,42 +181,55 @@ def misfit_triangles(dem: Grid, cells: np.ndarray, nodes: np.ndarray, triangles:
     departure (over n − 3 degrees of freedom) less σ² exceeds both ``tolerance``² and
     ``margin`` standard errors of that mean (σ²·√(2/(n − 3))), so a noisy plane does not pass
     by chance. The plane, not the triangle's own nodes: noise at a node is the node fit's to
-    take out, not a reason for smaller triangles."""
+    take out, not a reason for smaller triangles. The cells go in blocks of rows of about
+    ``block_cells``: the memory is ten sums a triangle and 12 B a cell of the mask."""
     # lazy: numba loads only when this runs
-    from .._kernels.mesh import locate
+    from .._kernels.mesh import Locator
 
-    rows, cols = np.nonzero(cells & np.isfinite(dem.values))
+    mask = cells & np.isfinite(dem.values)
     flagged = np.zeros(cells.shape, bool)
-    if not len(rows):
+    if not mask.any():
         return flagged, 0.0
     sigma = dem_noise(dem, cells)
-    x, y = dem.cell_centres(rows, cols)
-    tri = locate(np.asarray(nodes, float), triangles, np.column_stack([x, y]).astype(float))[0]
-    inside = tri >= 0
-    rows, cols, k = rows[inside], cols[inside], tri[inside]
-    centre = np.asarray(nodes, float)[triangles][:, :, :2].mean(axis=1)
-    u, v = x[inside] - centre[k, 0], y[inside] - centre[k, 1]
-    z = np.asarray(dem.values, float)[rows, cols]
-    z0 = np.bincount(k, z, minlength=len(triangles)) / np.maximum(
-        np.bincount(k, minlength=len(triangles)), 1)
-    z = z - z0[k]
-    terms = (np.ones_like(u), u, v)
-    sums = {(a, b): np.bincount(k, terms[a] * terms[b], minlength=len(triangles))
-            for a in range(3) for b in range(a, 3)}
-    normal = np.stack([np.stack([sums[min(a, b), max(a, b)] for b in range(3)], -1)
-                       for a in range(3)], -2)
-    right = np.stack([np.bincount(k, t * z, minlength=len(triangles)) for t in terms], -1)
-    n = normal[:, 0, 0]
+    nodes = np.asarray(nodes, float)
+    corners = nodes[triangles]
+    centre = corners[:, :, :2].mean(axis=1)
+    base = np.nan_to_num(corners[:, :, 2].mean(axis=1)) if nodes.shape[1] > 2 else np.zeros(
+        len(triangles))
+    locator = Locator(nodes, triangles)
+    # per triangle: n, Σu, Σv, Σuu, Σuv, Σvv, Σz, Σuz, Σvz, Σzz (u, v from its centre, z from
+    # its nodes' mean height: the sums stay small beside the departures they give)
+    sums = np.zeros((10, len(triangles)))
+    rows_per_block = max(1, block_cells // max(cells.shape[1], 1))
+    held = []
+    for r0 in range(0, cells.shape[0], rows_per_block):
+        rows, cols = np.nonzero(mask[r0:r0 + rows_per_block])
+        rows += r0
+        x, y = dem.cell_centres(rows, cols)
+        k = locator(np.column_stack([x, y]))[0]
+        inside = k >= 0
+        rows, cols, k = rows[inside], cols[inside], k[inside]
+        held.append((rows * cells.shape[1] + cols, k.astype(np.int32)))
+        u, v = x[inside] - centre[k, 0], y[inside] - centre[k, 1]
+        z = np.asarray(dem.values, float)[rows, cols] - base[k]
+        for i, w in enumerate((None, u, v, u * u, u * v, v * v, z, u * z, v * z, z * z)):
+            sums[i] += np.bincount(k, w, minlength=len(triangles))
+    n, su, sv, suu, suv, svv, sz, suz, svz, szz = sums
+    normal = np.stack([np.stack([n, su, sv], -1), np.stack([su, suu, suv], -1),
+                       np.stack([sv, suv, svv], -1)], -2)
+    right = np.stack([sz, suz, svz], -1)
     # a plane and a mean square from at least MIN_CELLS cells (a triangle smaller than that
     # is smaller than any flow area's too)
     solvable = (n >= MIN_CELLS) & (np.abs(np.linalg.det(normal)) > 1e-9 * np.maximum(n, 1) ** 3)
     coefficients = np.zeros((len(triangles), 3))
     coefficients[solvable] = np.linalg.solve(normal[solvable], right[solvable][..., None])[..., 0]
-    departure = z - (coefficients[k] * np.stack(terms, -1)).sum(-1)
+    # the least-squares plane's residual sum of squares: Σz² less the fitted part
+    residual = np.maximum(szz - (coefficients * right).sum(-1), 0.0)
     dof = np.maximum(n - 3, 1)
-    excess = np.bincount(k, departure ** 2, minlength=len(triangles)) / dof - sigma ** 2
+    excess = residual / dof - sigma ** 2
     rough = solvable & (excess > np.maximum(tolerance ** 2, margin * sigma ** 2 * np.sqrt(2 / dof)))
-    flagged[rows, cols] = rough[k]
+    for flat, k in held:
+        flagged.ravel()[flat] = rough[k]
     return flagged, sigma
 
 
