@@ -56,7 +56,7 @@ PARAMETER_HELP = {
     "MAX_AREA": "No triangle larger than this (m²).",
     "FLOW_AREA": "No triangle larger than this (m²) on ground less than 1 m above a "
                  "drainage line, where a flood goes first, wherever that ground has relief "
-                 "(more than 1.5 cm RMS beyond the DEM's noise) that a larger triangle's "
+                 "(more than 1 cm RMS beyond the DEM's noise) that a larger triangle's "
                  "plane misses (empty: 23 cells, 23 m² at 1 m; 0: off).",
     "MAX_TRIANGLES": "Refuse, before meshing, a mesh estimated above this many triangles.",
     "HOLDOUT": "Share of the points kept out of the grid to measure the mesh's error (at "

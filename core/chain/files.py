@@ -196,7 +196,7 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     result_mesh, _, _ = flow_refined(lambda size, _: build_mesh(
         terrain, lines, min_angle=min_angle, max_area=max_area, conforming=conforming,
         domain=domain, size_field=size, max_triangles=max_triangles, note=note),
-        size, flow, None, terrain)
+        size, flow, None, terrain, lines=lines)
     io.write_mesh_2dm(output, result_mesh.nodes, result_mesh.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "crs": terrain.crs.to_wkt()}
     if triangles:

@@ -173,19 +173,21 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
         front.dem, tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size)))
     spacing = None if hand is None else flow_spacing(front.dem, flow_area=flow_area, hand=hand)
     hand = None  # the flow zone's work is in the size field and the spacing now
+    plain = steps.run("hydraulic lines", _lines_for_flood, front, options, lines, domain, None)
     kept = {}
 
     def build(size, spacing):
         """The mesh of ``size``, its lines spaced for a flood model (see hydraulic_lines) and
         thinned to the flow ``spacing`` (a Grid, or None)."""
-        kept["lines"], kept["stats"] = _lines_for_flood(front, options, lines, domain, spacing)
+        kept["lines"], kept["stats"] = (plain if spacing is None else _lines_for_flood(
+            front, options, lines, domain, spacing))
         return build_mesh(front.dem, kept["lines"] + front.own_lines,
                           min_angle=options.min_angle, max_area=max_area,
                           conforming=options.conforming, domain=domain, size_field=size,
                           max_triangles=options.max_triangles, note=note)
 
     mesh, size, flow_zone = steps.run("mesh", flow_refined, build, size, flow, spacing,
-                                      front.dem)
+                                      front.dem, lines=plain[0] + front.own_lines)
     detected, line_stats = kept["lines"], kept["stats"]
     mesh_lines = detected + front.own_lines
     mesh, rounds = _terrain_z(mesh, front, options, steps, fits, mesh_lines, domain, size,
@@ -227,7 +229,7 @@ def _step_weights(options: RunOptions) -> dict:
     """The steps a run with ``options`` takes, each with its share of the progress bar."""
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
                "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
-               "flow zone": 0.5, "mesh": 2, "refine": 4,
+               "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
                "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
     del weights["node elevations" if options.refine else "refine"]
     if not options.localise:

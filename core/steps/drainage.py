@@ -27,7 +27,7 @@ from .sizing import finer
 
 CHANNEL_AREA = 5000.0  # m²: a cell draining this much is on a drainage line
 FLOW_AREA_CELLS = 23.0  # the default flow area, in cells: 23 m² at 1 m (see flow_area_for)
-FLOW_TERRAIN_TOLERANCE = 0.015  # m: RMS relief within a triangle, noise taken out
+FLOW_TERRAIN_TOLERANCE = 0.01  # m: RMS relief within a triangle, noise taken out
 NOISE_MARGIN = 4.0  # standard errors of a triangle's mean square misfit that noise may reach
 MIN_CELLS = 12  # cells of a triangle to tell its relief from noise
 
@@ -233,15 +233,17 @@ def misfit_triangles(dem: Grid, cells: np.ndarray, nodes: np.ndarray, triangles:
     return flagged, sigma
 
 
-def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | None, dem: Grid):
+def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | None, dem: Grid,
+                 *, lines=()):
     """(mesh, size field, figures or None): ``build(size, spacing)``, a Mesh of that size field
     with its break lines thinned to the flow spacing ``spacing`` (a Grid, see ``flow_spacing``;
     None: not thinned). Without a flow size ``flow`` (see ``flow_size``), that mesh without the
     spacing; with one, first that mesh, whose triangles with relief that no plane follows
-    (``misfit_triangles`` on the flow zone) then take the flow size, and the lines the flow
-    spacing within a flow triangle's side of them, and only there. Figures: the shares of the
-    DEM's valid cells in the flow zone, refined and thinned, the DEM's noise and the tolerance
-    (m)."""
+    (``misfit_triangles`` on the flow zone, but the cells a cell or less from one of its
+    ``lines``, (k, 2+) arrays, where the DEM rounds the kink the line carries) then take the
+    flow size, and the lines the flow spacing within a flow triangle's side of them, and only
+    there. Figures: the shares of the DEM's valid cells in the flow zone, refined and thinned,
+    the DEM's noise and the tolerance (m)."""
     # lazy: SciPy loads only when this runs
     from scipy.ndimage import binary_dilation
 
@@ -249,7 +251,8 @@ def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | No
     if flow is None:
         return terrain, size, None
     zone = np.isfinite(np.asarray(flow.values, float))
-    flagged, sigma = misfit_triangles(dem, zone, terrain.nodes, terrain.triangles)
+    flagged, sigma = misfit_triangles(dem, zone & ~_beside(lines, dem), terrain.nodes,
+                                      terrain.triangles)
     valid = max(int(np.isfinite(dem.values).sum()), 1)
     figures = {"low_ground_share": float(zone.sum() / valid),
                "refined_share": float(flagged.sum() / valid), "thinned_share": 0.0,
@@ -263,6 +266,21 @@ def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | No
         spacing = _only(spacing, near)
         figures["thinned_share"] = float((near & np.isfinite(spacing.values)).sum() / valid)
     return build(size, spacing), size, figures
+
+
+def _beside(lines, dem: Grid) -> np.ndarray:
+    """The cells of ``dem`` that ``lines`` ((k, 2+) arrays) touch, and their neighbours."""
+    # lazy: GDAL's rasteriser and SciPy load only when this runs
+    import shapely
+    from rasterio.features import rasterize
+    from scipy.ndimage import binary_dilation
+
+    shapes = [shapely.LineString(np.asarray(c, float)[:, :2]) for c in lines if len(c) >= 2]
+    if not shapes:
+        return np.zeros(dem.shape, bool)
+    touched = rasterize(((line, 1) for line in shapes), out_shape=dem.shape,
+                        transform=dem.transform, all_touched=True, dtype="uint8") > 0
+    return binary_dilation(touched)
 
 
 def _only(grid: Grid, cells: np.ndarray) -> Grid:
