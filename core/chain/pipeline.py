@@ -168,11 +168,10 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     hand = None if flow_area is None else steps.ahead(  # resolution where water flows
         "flow zone", height_above_drainage, front.dem, channel_area=CHANNEL_AREA)
     simplified, lines, confidence = _break_lines(front, options, steps, fits)
-    size, flow, max_area, hand = _size_fields(front, options, fits.window, hand, flow_area)
+    size, flow, spacing, max_area = _size_fields(front, options, fits.window, hand, flow_area)
+    hand = None  # the flow zone's work is in the flow size and spacing now
     domain = (front.domain if front.domain is not None else domain_from_dem(
         front.dem, tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size)))
-    spacing = None if hand is None else flow_spacing(front.dem, flow_area=flow_area, hand=hand)
-    hand = None  # the flow zone's work is in the size field and the spacing now
     plain = steps.run("hydraulic lines", _lines_for_flood, front, options, lines, domain, None)
     kept = {}
 
@@ -303,10 +302,11 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
 
 
 def _size_fields(front: Front, options: RunOptions, window, hand, flow_area):
-    """(size field or None, flow size or None, the largest area, height above drainage or
-    None): the user's size field, finer off the lines where asked (far field), and the size
-    where water flows (``flow_area``, with the height above drainage that ``hand`` collects:
-    see drainage), which the mesh takes where its terrain needs it (``flow_refined``)."""
+    """(size field or None, flow size or None, flow spacing or None, the largest area): the
+    user's size field, finer off the lines where asked (far field), and where water flows
+    (``flow_area``, with the height above drainage that ``hand`` collects: see drainage) the
+    triangles' size and the break lines' spacing, which the mesh takes where its terrain
+    needs them (``flow_refined``)."""
     dem, max_area = front.dem, options.max_area
     size = size_field(options.size_field, dem, front.slope_grid, max_area=max_area,
                       min_area=options.min_area, s_crit=options.s_crit)
@@ -317,9 +317,10 @@ def _size_fields(front: Front, options: RunOptions, window, hand, flow_area):
         size = finer(size, far)
         max_area = options.far_field_area
     if hand is None:
-        return size, None, max_area, None
+        return size, None, None, max_area
     hand, _ = hand()
-    return size, flow_size(dem, flow_area=flow_area, hand=hand), max_area, hand
+    return (size, flow_size(dem, flow_area=flow_area, hand=hand),
+            flow_spacing(dem, flow_area=flow_area, hand=hand), max_area)
 
 
 def _lines_for_flood(front: Front, options: RunOptions, lines, domain, spacing):

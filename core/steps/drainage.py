@@ -191,6 +191,7 @@ def misfit_triangles(dem: Grid, cells: np.ndarray, nodes: np.ndarray, triangles:
     if not mask.any():
         return flagged, 0.0
     sigma = dem_noise(dem, cells)
+    values = np.asarray(dem.values)
     nodes = np.asarray(nodes, float)
     corners = nodes[triangles]
     centre = corners[:, :, :2].mean(axis=1)
@@ -211,7 +212,7 @@ def misfit_triangles(dem: Grid, cells: np.ndarray, nodes: np.ndarray, triangles:
         rows, cols, k = rows[inside], cols[inside], k[inside]
         held.append((rows * cells.shape[1] + cols, k.astype(np.int32)))
         u, v = x[inside] - centre[k, 0], y[inside] - centre[k, 1]
-        z = np.asarray(dem.values, float)[rows, cols] - base[k]
+        z = values[rows, cols].astype(float) - base[k]
         for i, w in enumerate((None, u, v, u * u, u * v, v * v, z, u * z, v * z, z * z)):
             sums[i] += np.bincount(k, w, minlength=len(triangles))
     n, su, sv, suu, suv, svv, sz, suz, svz, szz = sums
@@ -260,8 +261,8 @@ def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | No
     if not flagged.any():
         return terrain, size, figures
     size = finer(size, _only(flow, flagged))
-    if spacing is not None:
-        side = np.sqrt(4 / np.sqrt(3) * np.nanmax(flow.values)) / dem.cell_size
+    if spacing is not None:  # the spacing is the flow triangle's side (see flow_spacing)
+        side = np.nanmax(spacing.values) / dem.cell_size
         near = binary_dilation(flagged, iterations=max(1, int(round(side))))
         spacing = _only(spacing, near)
         figures["thinned_share"] = float((near & np.isfinite(spacing.values)).sum() / valid)
