@@ -101,10 +101,11 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
         if taken and not line.is_empty:
             # only the lines whose buffer can reach this one: the union of all of them for
             # every line made the step quadratic in the number of lines
-            near = _near(taken, taken_bounds, shapely.bounds(line), spacing)
-            cut = shapely.difference(line, near)
-            stats["cut_near_other_lines"] += cut.length < line.length - 1e-9
-            line = cut
+            near = _near(taken, taken_bounds, line, spacing)
+            if near is not None:
+                cut = shapely.difference(line, near)
+                stats["cut_near_other_lines"] += cut.length < line.length - 1e-9
+                line = cut
         own_pieces = []  # a cut leaves pieces that may end a hair apart: keep them s apart too
         for part in _parts(line):
             if own_pieces:
@@ -123,16 +124,21 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     return out, stats
 
 
-def _near(lines: list, bounds: list, box, spacing: float):
-    """The union of those ``lines`` (with their ``bounds``) within ``spacing`` of the box
-    ``box`` (xmin, ymin, xmax, ymax), grown by ``spacing``."""
+def _near(lines: list, bounds: list, line, spacing: float):
+    """The union of those ``lines`` (with their ``bounds``) within ``spacing`` of ``line``,
+    grown by ``spacing``; None where none is that close (most lines: no union, buffer and
+    difference for them)."""
     # lazy: GEOS loads only when this runs
     import shapely
 
+    box = shapely.bounds(line)
     b = np.asarray(bounds, float).reshape(-1, 4)
-    close = ((b[:, 0] <= box[2] + spacing) & (b[:, 2] >= box[0] - spacing)
-             & (b[:, 1] <= box[3] + spacing) & (b[:, 3] >= box[1] - spacing))
-    return shapely.union_all([lines[k] for k in np.flatnonzero(close)]).buffer(spacing)
+    close = np.flatnonzero((b[:, 0] <= box[2] + spacing) & (b[:, 2] >= box[0] - spacing)
+                           & (b[:, 1] <= box[3] + spacing) & (b[:, 3] >= box[1] - spacing))
+    close = [lines[k] for k in close]
+    if not close or shapely.distance(line, close).min() > spacing:
+        return None
+    return shapely.union_all(close).buffer(spacing)
 
 
 def _spacing_at(flow_spacing, coords, spacing: float) -> np.ndarray:

@@ -278,20 +278,22 @@ def _shorten_small_angles(vertices, segments, fixed, limit, gap):
     ``limit`` degrees: the segment then starts where it lies ``gap`` from the other one (a new
     vertex on it), or is dropped where that would leave less than a fifth of it. Returns
     (vertices, segments, how many shortened, how many dropped)."""
-    vertices = [tuple(v) for v in np.asarray(vertices, float)]
-    segments = [list(map(int, ab)) for ab in segments]
+    cos_limit = np.cos(np.radians(limit))
+    candidates = _sharp_candidates(np.asarray(vertices, float), np.asarray(segments, np.int64),
+                                   cos_limit)
+    vertices = np.asarray(vertices, float).tolist()
+    segments = np.asarray(segments, np.int64).reshape(-1, 2).tolist()
     keep = [True] * len(segments)
     incident = {}
     for k, (a, b) in enumerate(segments):
         incident.setdefault(a, []).append(k)
         incident.setdefault(b, []).append(k)
-    cos_limit = np.cos(np.radians(limit))
     shortened = dropped = 0
 
     def far_end(k, v):
         return segments[k][1] if segments[k][0] == v else segments[k][0]
 
-    for v in list(incident):
+    for v in candidates:
         changed = True
         while changed:
             changed = False
@@ -319,7 +321,7 @@ def _shorten_small_angles(vertices, segments, fixed, limit, gap):
                         keep[k] = False
                         dropped += 1
                     else:
-                        vertices.append(tuple(here + cut * unit))
+                        vertices.append((here + cut * unit).tolist())
                         new = len(vertices) - 1
                         segments[k] = [new, far_end(k, v)]
                         incident[new] = [k]
@@ -330,6 +332,27 @@ def _shorten_small_angles(vertices, segments, fixed, limit, gap):
                     break
     segments = np.asarray(segments, np.int64).reshape(-1, 2)[np.asarray(keep, bool)]
     return np.asarray(vertices, float), segments, shortened, dropped
+
+
+def _sharp_candidates(vertices: np.ndarray, segments: np.ndarray, cos_limit: float) -> list:
+    """The vertices where ``_shorten_small_angles`` may act, in the order they first appear in
+    ``segments``: those with three or more segments, and those with two that meet at less than
+    the limit (the rest, most of a line's vertices, are passed by without a loop in Python;
+    shortening a segment keeps its direction, so no other vertex becomes one)."""
+    ends = segments.ravel()
+    degree = np.bincount(ends, minlength=len(vertices))
+    other = segments[:, ::-1].ravel()  # each segment end's far end
+    direction = vertices[other] - vertices[ends]
+    with np.errstate(invalid="ignore", divide="ignore"):  # a point segment: NaN, as there
+        direction /= np.hypot(*direction.T)[:, None]
+    order = np.argsort(ends, kind="stable")
+    pair = degree[ends[order]] == 2
+    first, second = order[pair][0::2], order[pair][1::2]
+    sharp = np.zeros(len(vertices), bool)
+    sharp[ends[first]] = ~((direction[first] * direction[second]).sum(axis=1) <= cos_limit)
+    wanted = (degree >= 3) | sharp
+    seen, at = np.unique(ends, return_index=True)
+    return [int(v) for v in seen[np.argsort(at, kind="stable")] if wanted[v]]
 
 
 def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
@@ -620,13 +643,8 @@ def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
     if points is not None and len(points):
         z[len(pslg.vertices):len(pslg.vertices) + len(points)] = points[:, 2]
-    known = _line_vertex_z(lines, precision=snap / 5)
-    if known:
-        keys = map(tuple, np.round(vertices / (snap / 5)).astype(np.int64).tolist())
-        for i, key in enumerate(keys):
-            value = known.get(key)
-            if value is not None and np.isfinite(value):
-                z[i] = value
+    at, value = _line_vertex_z(lines, vertices, precision=snap / 5)
+    z[at] = value
     if not np.isfinite(z).all():
         raise FloodMeshError(f"{int((~np.isfinite(z)).sum())} mesh nodes fall where the DEM has no "
                              "data; check the domain against the DEM's nodata")
@@ -675,16 +693,29 @@ def _points_apart(points: np.ndarray, vertices: np.ndarray, domain, snap: float,
     return points[keep]
 
 
-def _line_vertex_z(lines, precision):
-    known = {}
-    for c in lines:
-        c = np.asarray(c)
-        if c.shape[1] < 3:
-            continue
-        for key, zval in zip(map(tuple, np.round(c[:, :2] / precision).astype(np.int64).tolist()),
-                             c[:, 2]):
-            known[key] = zval
-    return known
+def _line_vertex_z(lines, vertices: np.ndarray, precision: float):
+    """(indices of ``vertices``, their z): the mesh vertices that are a vertex of one of
+    ``lines`` ((k, 3) arrays; (k, 2) ones carry no z) on the ``precision`` grid (m), with that
+    vertex's z where finite; where lines share a vertex, the last line's."""
+    with_z = [np.asarray(c, float) for c in lines if np.asarray(c).shape[1] >= 3]
+    if not with_z or not len(vertices):
+        return np.zeros(0, np.int64), np.zeros(0)
+    line_xyz = np.concatenate(with_z)
+    pair = np.dtype([("x", np.int64), ("y", np.int64)])
+
+    def keys(xy):
+        return np.ascontiguousarray(np.round(xy[:, :2] / precision).astype(np.int64)).view(
+            pair).ravel()
+
+    line_keys = keys(line_xyz)
+    order = np.argsort(line_keys, kind="stable")  # equal keys stay in line order ...
+    ordered = line_keys[order]
+    last = np.append(ordered[1:] != ordered[:-1], True)  # ... and the last of each wins
+    known, known_z = ordered[last], line_xyz[order[last], 2]
+    mesh_keys = keys(np.asarray(vertices, float))
+    pos = np.minimum(np.searchsorted(known, mesh_keys), len(known) - 1)
+    hit = (known[pos] == mesh_keys) & np.isfinite(known_z[pos])
+    return np.flatnonzero(hit), known_z[pos[hit]]
 
 
 def _counter_clockwise(xy, triangles):

@@ -164,13 +164,16 @@ def _repair_crossings(lines, positions, masks, max_rounds=1000):
     vertices, the original positions, until nothing crosses that the originals did not."""
     for _ in range(max_rounds):
         geoms = _kept_lines(positions, masks)
-        tree = shapely.STRtree(geoms)
-        pairs = set()
-        for predicate in ("crosses", "overlaps", "contains"):  # contains: collinear, inside
-            a, b = tree.query(geoms, predicate=predicate)
-            pairs |= {(int(i), int(j)) for i, j in zip(a, b) if i != j}
-            pairs |= {(int(j), int(i)) for i, j in zip(a, b) if i != j}
-        pairs |= {(i, i) for i, g in enumerate(geoms) if not g.is_empty and not g.is_simple}
+        # the pairs that touch, then those that cross, overlap or contain (collinear, inside)
+        # among them: one query instead of one per predicate
+        a, b = shapely.STRtree(geoms).query(geoms, predicate="intersects")
+        a, b = a[a != b], b[a != b]
+        ga, gb = geoms[a], geoms[b]
+        hit = shapely.crosses(ga, gb) | shapely.overlaps(ga, gb) | shapely.contains(ga, gb)
+        pairs = {(int(i), int(j)) for i, j in zip(a[hit], b[hit])}
+        pairs |= {(j, i) for i, j in pairs}
+        pairs |= {(int(i), int(i)) for i in np.flatnonzero(~shapely.is_empty(geoms)
+                                                           & ~shapely.is_simple(geoms))}
         changed = False
         for i, j in sorted(pairs):
             changed |= _refine_where(lines[i].coords, positions[i], masks[i],
@@ -216,12 +219,15 @@ def _separate(lines, positions, masks, min_distance) -> list[BreakLine]:
         rank = np.empty(len(geoms), int)
         rank[np.argsort(-shapely.length(geoms), kind="stable")] = \
             np.arange(len(geoms))
-        tree = shapely.STRtree(geoms)
-        for i, (p, m) in enumerate(zip(positions, masks)):
-            pts = shapely.points(p[m][:, :2])
-            v, j = tree.query(pts, predicate="dwithin", distance=min_distance)
-            longer = rank[j] < rank[i]
-            near[i][v[longer]] = True
+        # every line's kept vertices in one query (one per line was 0.2 s on 500 lines)
+        counts = [len(n) for n in near]
+        owner = np.repeat(np.arange(len(near)), counts)
+        kept = np.concatenate([p[m][:, :2] for p, m in zip(positions, masks)])
+        v, j = shapely.STRtree(geoms).query(shapely.points(kept), predicate="dwithin",
+                                            distance=min_distance)
+        merged = np.zeros(len(kept), bool)
+        merged[v[rank[j] < rank[owner[v]]]] = True
+        near = np.split(merged, np.cumsum(counts)[:-1])
     out = []
     for line, p, m, drop in zip(lines, positions, masks, near):
         idx = np.flatnonzero(m)
@@ -238,11 +244,16 @@ def _separate(lines, positions, masks, min_distance) -> list[BreakLine]:
 
 
 def _spaced(coords: np.ndarray, min_distance: float) -> np.ndarray:
-    """Mask dropping interior vertices closer than ``min_distance`` (plan) to the previous kept
-    one; both ends stay (the one before the last end gives way instead)."""
-    keep = np.ones(len(coords), bool)
-    if min_distance <= 0:
-        return keep
+    """The indices of the vertices kept when interior vertices closer than ``min_distance``
+    (plan) to the previous kept one are dropped; both ends stay (the last kept inner vertex
+    closer than that to the end gives way to it)."""
+    # lazy: numba loads only when this runs
+    from .._kernels.lines import thinned
+
+    coords = np.ascontiguousarray(coords, float)
+    if min_distance <= 0 or len(coords) <= 2:
+        return np.arange(len(coords))
+    return thinned(coords, np.full(len(coords), float(min_distance)), False, 0.0, 0.0, 0.0)
     last = coords[0, :2]
     for i in range(1, len(coords) - 1):
         if np.hypot(*(coords[i, :2] - last)) < min_distance:
