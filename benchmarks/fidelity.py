@@ -59,6 +59,7 @@ CHAINS = {
     "no-join": dict(join_gap=0),              # localised pieces left unjoined
     "conforming": dict(conforming=True),     # today's chain with Triangle's switch D
     "far-field": dict(far_field_area=400.0),  # today's chain, up to 400 m² where plane
+    "spacing-2": dict(min_spacing=2.0),      # lines and corners kept 2 m (α·Δ) apart, not d
 }
 UNIFORM_AREAS = (50, 20, 10, 5, 2.5, 1.2, 0.6, 0.3)
 DELATIN_ERRORS = (0.6, 0.4, 0.25, 0.15, 0.1, 0.07, 0.05)
@@ -182,6 +183,8 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
         score["t_junctions"] = report["terrain_fit"].get("t_junctions_snapped", 0)
         score["dropped"] = sum(int(m) for n in report["notes"]
                                for m in re.findall(r"\((\d+) too short were left out\)", n))
+        score["cfl"] = report["hydraulics"]["cfl_slowdown_vs_uniform"]
+        score["min_inradius"] = report["hydraulics"]["min_inradius_m"]
         rows.append((chain, len(nodes), true_rmse(mesh, floodplain, sample, truth), score,
                      report["min_angle_deg"], seconds))
         dem = io.read_raster(out / "dem.tif")
@@ -190,7 +193,7 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
     print(f"\n## {name}, {density:g} points/m², {100 * noise:g} cm noise")
     print(f"{'chain':<10}{'nodes':>8}{'true RMSE cm':>14}{'uniform/ours':>14}"
           f"{'delatin/ours':>14}{'recall':>8}{'precision':>10}{'pieces':>8}{'min angle':>11}"
-          f"{'s':>6}  breaks (junction/mid-run/second line)")
+          f"{'CFL':>6}{'s':>6}  breaks (junction/mid-run/second line)")
     results = []
     for chain, n, rmse, score, angle, seconds in rows:
         ratio = nodes_at(rmse, uniform) / n
@@ -199,7 +202,7 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
                 else f"{'n/a':>14}")  # n/a: pydelatin not installed (make bench installs it)
         print(f"{chain:<10}{n:>8,}{100 * rmse:>14.2f}{ratio:>13.1f}x{peer}"
               f"{score['recall']:>8.3f}{score['precision']:>10.3f}{score['mean_pieces']:>8.2f}"
-              f"{angle:>10.1f}°{seconds:>6.0f}  {'/'.join(map(str, score['breaks'].values()))}")
+              f"{angle:>10.1f}°{score['cfl']:>6.1f}{seconds:>6.0f}  {'/'.join(map(str, score['breaks'].values()))}")
         results.append((chain, ratio, score))
     for chain, n, rmse, score, angle, seconds in rows:
         print(f"{chain}, per feature (recall, pieces per true line): " + "; ".join(
@@ -311,7 +314,8 @@ def main():
         print(f"{terrain:<28}{density:>4g}/m² {100 * noise:>3g} cm  {chain:<10}{ratio:>6.1f}x  "
               f"pieces {score['mean_pieces']:.2f}  recall {score['recall']:.3f}  "
               f"precision {score['precision']:.3f}  breaks {score['breaks']}  "
-              f"segments dropped {score['dropped']}  T-junctions snapped {score['t_junctions']}")
+              f"segments dropped {score['dropped']}  T-junctions snapped {score['t_junctions']}  "
+              f"CFL {score['cfl']:.1f}x uniform (smallest inradius {score['min_inradius']:.2f} m)")
 
 
 if __name__ == "__main__":

@@ -183,7 +183,8 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
         return build_mesh(front.dem, kept["lines"] + front.own_lines,
                           min_angle=options.min_angle, max_area=max_area,
                           conforming=options.conforming, domain=domain, size_field=size,
-                          max_triangles=options.max_triangles, note=note)
+                          max_triangles=options.max_triangles,
+                          corner_gap=options.min_spacing or None, note=note)
 
     mesh, size, flow_zone = steps.run("mesh", flow_refined, build, size, flow, spacing,
                                       front.dem, lines=plain[0] + front.own_lines)

@@ -6,6 +6,8 @@ of the domain edge, where they cross or nearly touch the modeller's own lines or
 and where simplification left vertices closer together than the mesh can resolve. With a
 smallest spacing s (default: the cell size d):
 
+- a detected line that folds back (segments meeting at less than ``FOLD_ANGLE``) is cut there
+  into two lines;
 - detected lines are clipped back ``clearance`` (default 2 s) from the domain edge;
 - the parts of a detected line within s of an own line, or of a longer detected line, are cut
   away (near-parallel lines merge into the longer one; crossings keep one line through them);
@@ -31,6 +33,7 @@ import numpy as np
 
 FLOW_PLAN_TOLERANCE = 0.25   # cells: a vertex this close to the chord past it may give way
 FLOW_HEIGHT_TOLERANCE = 0.05  # m: ... if its height is this close too (a flood's wet depth)
+FOLD_ANGLE = 60.0  # degrees: a line whose segments meet at less folds back (the PSLG's corner)
 
 
 def thin_vertices(coords: np.ndarray, spacing, *, firm: float | None = None,
@@ -53,7 +56,7 @@ def thin_vertices(coords: np.ndarray, spacing, *, firm: float | None = None,
                           float(firm or 0.0), float(plan), float(height))]
 
 
-def drop_spikes(coords: np.ndarray, where=None, min_angle: float = 60.0) -> np.ndarray:
+def drop_spikes(coords: np.ndarray, where=None, min_angle: float = FOLD_ANGLE) -> np.ndarray:
     """``coords`` (k, 2+) without the inner vertices (of those ``where`` is true) at which the
     line folds back, its two segments meeting at less than ``min_angle`` degrees."""
     # lazy: numba loads only when this runs (the flood command imports this module)
@@ -63,6 +66,21 @@ def drop_spikes(coords: np.ndarray, where=None, min_angle: float = 60.0) -> np.n
     where = np.ones(len(coords), bool) if where is None else np.asarray(where, bool)
     return coords[unspiked(np.ascontiguousarray(coords), np.ascontiguousarray(where),
                            float(np.cos(np.radians(min_angle))))]
+
+
+def split_at_folds(coords: np.ndarray, min_angle: float = FOLD_ANGLE) -> list[np.ndarray]:
+    """``coords`` (k, 2+) cut into pieces at the inner vertices where the line folds back, its
+    two segments meeting at less than ``min_angle`` degrees (the vertex ends one piece and
+    starts the next)."""
+    coords = np.asarray(coords, float)
+    if len(coords) < 3:
+        return [coords]
+    back = coords[:-2, :2] - coords[1:-1, :2]
+    ahead = coords[2:, :2] - coords[1:-1, :2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = (back * ahead).sum(axis=1) / (np.hypot(*back.T) * np.hypot(*ahead.T))
+    folds = 1 + np.flatnonzero(cos > np.cos(np.radians(min_angle)))
+    return [coords[a:b + 1] for a, b in zip(np.r_[0, folds], np.r_[folds, len(coords) - 1])]
 
 
 def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | None = None,
@@ -82,13 +100,17 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     inner = domain.buffer(-clearance) if domain is not None else None
     if within is not None:
         inner = within if inner is None else shapely.intersection(inner, within)
+    # a line folding back on itself is two lines: the shorter's part within the spacing of
+    # the longer goes, as for any two lines (a fold's arms a fraction of a metre apart made
+    # the mesh's smallest triangles)
+    pieces = [piece for c in lines for piece in split_at_folds(c)]
     taken = [shapely.LineString(np.asarray(c)[:, :2]) for c in own_lines if len(c) >= 2]
     taken_bounds = [shapely.bounds(line) for line in taken]
-    order = sorted(range(len(lines)), key=lambda k: -_length(lines[k]))
+    order = sorted(range(len(pieces)), key=lambda k: -_length(pieces[k]))
     out, stats = [], {"lines_in": len(lines), "vertices_in": int(sum(len(c) for c in lines)),
                       "clipped_at_edge": 0, "cut_near_other_lines": 0}
     for k in order:
-        coords = np.asarray(lines[k], float)
+        coords = np.asarray(pieces[k], float)
         if flow_spacing is not None:  # thinned first, so the cuts below see the final chords
             coords = thin_vertices(coords, _spacing_at(flow_spacing, coords, spacing),
                                    **keep_terrain)

@@ -119,7 +119,8 @@ def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon",
 
 
 def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
-               drop_sharp_corners: bool = True, note=None) -> PSLG:
+               drop_sharp_corners: bool = True, corner_gap: float | None = None,
+               note=None) -> PSLG:
     """PSLG of break lines (x, y[, z] arrays) inside ``domain`` plus its boundary.
 
     Lines are clipped to the domain shrunk by ``snap`` (m) so that none ends on or near the
@@ -127,9 +128,10 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     (snap rounding), which also merges vertices closer than that and dissolves duplicate or
     overlapping lines. With ``drop_sharp_corners``, break-line segments that meet another
     segment at less than ``SHARP_CORNER`` degrees are shortened near the meeting point (to end
-    ``2·snap`` m off the other one; dropped only where that leaves too little): Triangle does
-    not refine the triangles in such a corner, so they would break the angle bound. ``note``
-    receives one line for each kind of repair made.
+    ``corner_gap`` m, default ``4·snap``, a cell at the chain's snap, off the other one; dropped
+    only where that leaves too little): Triangle does not refine the triangles in such a corner, so they would break the
+    angle bound; the gap is as wide as the smallest triangles there. ``note`` receives one line
+    for each kind of repair made.
     """
     if not snap > 0 or not np.isfinite(snap):
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")
@@ -144,7 +146,9 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     if not on_boundary.any():  # a sliver whose sides noding on the grid merged into one line
         raise _vanishes(domain, snap / 5)
     if drop_sharp_corners:
-        vertices, segments = _clear_sharp_corners(vertices, segments, on_boundary, snap, note)
+        vertices, segments = _clear_sharp_corners(vertices, segments, on_boundary,
+                                                  4 * snap if corner_gap is None else corner_gap,
+                                                  note)
     vertices, segments = _used_vertices(vertices, segments)
     return PSLG(vertices.astype(float), segments.astype(np.int32), _hole_points(domain, snap / 5))
 
@@ -205,12 +209,12 @@ def _grid_segments(coords: list[np.ndarray], grid: float):
     return vertices * grid, unique_rows(np.sort(segments, axis=1))
 
 
-def _clear_sharp_corners(vertices, segments, on_boundary, snap: float, note):
+def _clear_sharp_corners(vertices, segments, on_boundary, gap: float, note):
     """Break-line segments meeting another at less than ``SHARP_CORNER`` degrees shortened to
-    end ``2·snap`` m off it (``_shorten_small_angles``; boundary segments kept), said to
+    end ``gap`` m off it (``_shorten_small_angles``; boundary segments kept), said to
     ``note``: vertices (n, 2) and segments (s, 2)."""
     vertices, segments, shortened, dropped = _shorten_small_angles(
-        vertices, segments, on_boundary, SHARP_CORNER, 2 * snap)
+        vertices, segments, on_boundary, SHARP_CORNER, gap)
     if shortened or dropped:
         note(f"{shortened + dropped} break-line segments meeting another at less than "
              f"{SHARP_CORNER:g} degrees were shortened near the meeting point"
@@ -616,13 +620,16 @@ def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
                max_area: float = 100.0, conforming: bool = False, snap: float | None = None,
                domain=None, points: np.ndarray | None = None,
                local_areas: np.ndarray | None = None, size_field: Grid | None = None,
-               max_triangles: int = DEFAULT_MAX_TRIANGLES, note=None) -> Mesh:
+               max_triangles: int = DEFAULT_MAX_TRIANGLES, corner_gap: float | None = None,
+               note=None) -> Mesh:
     """Mesh the DEM's valid area honouring the break lines (``BreakLine``s or (n, 2|3) arrays);
     node z from the lines where a node is a break-line vertex, from ``points`` (k, 3:
     measurements put into the TIN) at theirs, else bilinear from the DEM. ``local_areas`` (x, y,
     m²) refine locally; ``size_field`` is a grid of local maximum areas (m², NaN: no limit; see
     ``size_from_slope``). A mesh estimated above ``max_triangles`` triangles is refused before
-    any work; ``note`` receives the repairs made to the lines."""
+    any work; ``note`` receives the repairs made to the lines. Lines meeting at a sharp corner
+    stop ``corner_gap`` m (default: 4 ``snap``, the cell size at the default snap: the spacing
+    ``lines_for_hydraulics`` keeps lines apart by) short of each other (see ``build_pslg``)."""
     min_angle = check_min_angle(min_angle)
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
@@ -630,7 +637,7 @@ def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
     check_triangles(domain.area, max_area, max_triangles)
-    pslg = build_pslg(lines, domain, snap=snap, note=note)
+    pslg = build_pslg(lines, domain, snap=snap, corner_gap=corner_gap, note=note)
     if points is not None and len(points):
         points = _points_apart(np.asarray(points, float), pslg.vertices, domain, snap,
                                segments=pslg.segments)

@@ -4,8 +4,14 @@ smallest triangle (and so the solver's time step) grows several times."""
 import numpy as np
 import pytest
 import shapely
+from affine import Affine
+from pyproj import CRS
 
-from floodmesh.core.steps.hydraulic_lines import drop_spikes, lines_for_hydraulics, thin_vertices
+from floodmesh.core.raster import Grid
+from floodmesh.core.steps.hydraulic_lines import (drop_spikes, lines_for_hydraulics,
+                                                  split_at_folds, thin_vertices)
+from floodmesh.core.steps.hydraulics import inradii
+from floodmesh.core.steps.mesh import build_mesh
 from floodmesh.core.options import RunOptions
 from floodmesh.core.chain.pipeline import run_pipeline
 
@@ -204,3 +210,27 @@ def test_compiled_thinning_and_spikes_are_the_numpy_definitions_to_the_bit():
         where = rng.random(n) < 0.7
         assert np.array_equal(drop_spikes(coords, where), _numpy_unspiked(coords, where))
         assert np.array_equal(drop_spikes(coords), _numpy_unspiked(coords, np.ones(n, bool)))
+
+
+def test_a_line_folding_back_on_itself_leaves_no_sliver():
+    """A traced line that runs out and back 0.4-0.6 m beside itself (a narrow embankment's crest
+    traced down and up again, found on the corpus) is two lines: the shorter arm merges into
+    the longer, as it would into any other line, and the mesh's smallest triangle (the flood
+    model's time step) is no longer a sliver between the arms."""
+    dem = Grid(np.zeros((60, 80)), Affine(1, 0, 0, 0, -1, 60), CRS.from_epsg(32633))
+    fold = np.array([[10, 30, 1], [25, 30, 1], [40, 30, 1], [25, 30.4, 1], [12, 30.6, 1]])
+    out, stats = lines_for_hydraulics([fold], None, spacing=1.0)
+    assert stats["lines_in"] == 1 and len(out) == 1
+    assert out[0][:, :2].tolist() == [[10, 30], [25, 30], [40, 30]]
+    as_traced, kept = (build_mesh(dem, lines, max_area=100) for lines in ([fold], out))
+    assert inradii(as_traced.nodes, as_traced.triangles).min() < 0.2
+    assert inradii(kept.nodes, kept.triangles).min() > 1.0
+
+
+def test_split_at_folds_cuts_only_where_a_line_turns_back():
+    zigzag = np.array([[0, 0], [10, 0], [0, 1], [10, 2], [20, 2], [20, 12]], float)
+    pieces = split_at_folds(zigzag)
+    assert [p.tolist() for p in pieces] == [[[0, 0], [10, 0]], [[10, 0], [0, 1]],
+                                            [[0, 1], [10, 2], [20, 2], [20, 12]]]
+    assert len(split_at_folds(zigzag, min_angle=3.0)) == 1
+    assert len(split_at_folds(zigzag[:2])) == 1

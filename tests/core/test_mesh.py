@@ -377,3 +377,18 @@ def test_triangle_is_handed_only_sound_pslgs(vertices, segments, problem):
                 np.empty((0, 2)))
     with pytest.raises(FloodMeshError, match=problem):
         triangulate_pslg(pslg, min_angle=25, max_area=1)
+
+
+def test_lines_meeting_at_a_sharp_corner_stop_a_cell_apart():
+    """Two break lines meeting at 20°: one is shortened to end a cell (the spacing the lines
+    are kept apart by elsewhere) off the other, not half a cell, so the smallest triangle in
+    the corner, which sets a flood model's time step, is twice as large."""
+    from floodmesh.core.steps.hydraulics import inradii
+
+    dem = Grid(np.zeros((60, 80)), Affine(1, 0, 0, 0, -1, 60), CRS.from_epsg(32633))
+    a = np.array([[40, 30, 1], [10, 30, 1]])
+    b = np.array([[40, 30, 1], [10, 30 + 30 * np.tan(np.radians(20)), 1]])
+    default, half = (build_mesh(dem, [a, b], corner_gap=gap) for gap in (None, 0.5))
+    assert inradii(default.nodes, default.triangles).min() > 0.4
+    assert inradii(half.nodes, half.triangles).min() < 0.25
+    assert mesh_quality(default, min_angle=25, max_area=100)["n_below_min_angle"] == 0
