@@ -164,10 +164,13 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
         if options.far_field_area is None:
             front.breakpoints = None
     fits = _TerrainFits(front, options)
+    # the background thread takes its work in order: the point index first, since the fits
+    # wait for it right after simplifying; the flow zone is wanted only after localising
+    index = _point_index_ahead(front, options, steps)
     flow_area = flow_area_for(options.flow_area, front.dem.cell_size)
     hand = None if flow_area is None else steps.ahead(  # resolution where water flows
         "flow zone", height_above_drainage, front.dem, channel_area=CHANNEL_AREA)
-    simplified, lines, confidence = _break_lines(front, options, steps, fits)
+    simplified, lines, confidence = _break_lines(front, options, steps, fits, index)
     size, flow, spacing, max_area = _size_fields(front, options, fits.window, hand, flow_area)
     hand = None  # the flow zone's work is in the flow size and spacing now
     domain = (front.domain if front.domain is not None else domain_from_dem(
@@ -272,14 +275,21 @@ class _TerrainFits:
         return {**self.counts, **({"nodes": self.node_counts} if self.node_counts else {})}
 
 
-def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits):
+def _point_index_ahead(front: Front, options: RunOptions, steps: _Steps):
+    """The terrain fits' point index started on the background thread (``_Steps.ahead``: call
+    it for the index), or None where no fit needs the points or they are not read yet."""
+    fitting = options.localise or options.node_elevation == "plane"
+    return (steps.ahead("point index", point_index, front.measured)
+            if fitting and front.measured is not None else None)
+
+
+def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits, index):
     """(simplified, final lines, their fit RMS or None): the traced lines simplified, then moved
-    onto the terrain's kinks by the hinge fits (``localise``) where asked."""
+    onto the terrain's kinks by the hinge fits (``localise``) where asked; ``index``: the
+    points' index from ``_point_index_ahead``."""
     dem, (method, amount) = front.dem, options.simplification()
     min_distance = dem.cell_size / 2 if options.min_distance is None else options.min_distance
     fitting = options.localise or options.node_elevation == "plane"
-    index = (steps.ahead("point index", point_index, front.measured)
-             if fitting and front.measured is not None else None)
     simplified = lines = steps.run("simplify", simplify_breaklines, front.traced, method, amount,
                                    min_distance=min_distance)
     confidence = None
