@@ -84,7 +84,7 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
     p.add_argument("--min-spacing", type=float,
                    help="smallest node spacing a flood model affords, m: detected lines kept "
                         "2x this from the domain edge and this from other lines, vertices "
-                        "this far apart (default d; 0: off)")
+                        "and lines meeting at a sharp corner this far apart (default d; 0: off)")
     p.add_argument("--flow-zone", help="polygon file (wet_zone.gpkg of floodmesh flood "
                    "--size-field-area): detected lines kept only inside it")
     _add_domain_options(p)
