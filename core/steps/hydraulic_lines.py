@@ -11,6 +11,9 @@ smallest spacing s (default: the cell size d):
 - detected lines are clipped back ``clearance`` (default 2 s) from the domain edge;
 - the parts of a detected line within s of an own line, or of a longer detected line, are cut
   away (near-parallel lines merge into the longer one; crossings keep one line through them);
+- an end left within s of a line it meets at ``JOIN_ANGLE`` or more is moved onto that line
+  (a junction; both pieces of a line cut at a crossing meet it at one point), so no gap of s
+  between an end and a line holds the mesh's smallest triangles;
 - vertices closer than s to the previous kept vertex are dropped (the end points stay);
 - what is left shorter than 2 s is dropped.
 
@@ -34,6 +37,7 @@ import numpy as np
 FLOW_PLAN_TOLERANCE = 0.25   # cells: a vertex this close to the chord past it may give way
 FLOW_HEIGHT_TOLERANCE = 0.05  # m: ... if its height is this close too (a flood's wet depth)
 FOLD_ANGLE = 60.0  # degrees: a line whose segments meet at less folds back (the PSLG's corner)
+JOIN_ANGLE = 60.0  # degrees: a line ending a spacing off another at this or more joins it
 
 
 def thin_vertices(coords: np.ndarray, spacing, *, firm: float | None = None,
@@ -104,11 +108,13 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     # the longer goes, as for any two lines (a fold's arms a fraction of a metre apart made
     # the mesh's smallest triangles)
     pieces = [piece for c in lines for piece in split_at_folds(c)]
-    taken = [shapely.LineString(np.asarray(c)[:, :2]) for c in own_lines if len(c) >= 2]
+    taken_xyz = [np.asarray(c, float) for c in own_lines if len(c) >= 2]
+    taken = [shapely.LineString(c[:, :2]) for c in taken_xyz]
     taken_bounds = [shapely.bounds(line) for line in taken]
+    junctions = []  # where line ends were snapped onto other lines: later ends meet them there
     order = sorted(range(len(pieces)), key=lambda k: -_length(pieces[k]))
     out, stats = [], {"lines_in": len(lines), "vertices_in": int(sum(len(c) for c in lines)),
-                      "clipped_at_edge": 0, "cut_near_other_lines": 0}
+                      "clipped_at_edge": 0, "cut_near_other_lines": 0, "ends_joined": 0}
     for k in order:
         coords = np.asarray(pieces[k], float)
         if flow_spacing is not None:  # thinned first, so the cuts below see the final chords
@@ -131,19 +137,85 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
         own_pieces = []  # a cut leaves pieces that may end a hair apart: keep them s apart too
         for part in _parts(line):
             if own_pieces:
-                part = shapely.difference(part, shapely.union_all(own_pieces).buffer(spacing))
+                part = shapely.difference(part, shapely.union_all(
+                    [shapely.LineString(c[:, :2]) for c in own_pieces]).buffer(spacing))
             for piece in _parts(part):
                 coords = shapely.get_coordinates(piece, include_z=True)
                 local = _spacing_at(flow_spacing, coords, spacing)
                 coords = thin_vertices(coords, local, **(keep_terrain or {}))
                 if _length(coords) >= max(2 * spacing, local.max()) and len(coords) >= 2:
                     out.append(coords)
-                    own_pieces.append(shapely.LineString(coords[:, :2]))
-        taken.extend(own_pieces)
-        taken_bounds.extend(shapely.bounds(piece) for piece in own_pieces)
+                    own_pieces.append(coords)
+        for i, coords in enumerate(own_pieces):  # ends a spacing off a line they meet, onto it
+            own_pieces[i], joined = _joined_ends(coords, taken, taken_xyz, taken_bounds,
+                                                 spacing, junctions)
+            stats["ends_joined"] += joined
+            out[len(out) - len(own_pieces) + i] = own_pieces[i]
+        taken_xyz.extend(own_pieces)
+        taken.extend(shapely.LineString(c[:, :2]) for c in own_pieces)
+        taken_bounds.extend(shapely.bounds(taken[-len(own_pieces) + i])
+                            for i in range(len(own_pieces)))
     stats.update(lines_out=len(out), vertices_out=int(sum(len(c) for c in out)),
                  spacing_m=spacing, clearance_m=clearance)
     return out, stats
+
+
+def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: list,
+                 spacing: float, junctions: list) -> tuple[np.ndarray, int]:
+    """(``coords`` with each end that lies within a ``spacing`` (m) of one of ``lines`` (shapely
+    lines; ``lines_xyz`` their (k, 2|3) coordinates, ``bounds`` their boxes) and meets it at
+    ``JOIN_ANGLE`` or more moved onto it, how many were). Cutting a line a spacing short of
+    the line it runs into leaves its end, the other line and the next line's end a spacing
+    apart, the triangles there the mesh's smallest; joined, the lines meet in one vertex: a
+    junction (``junctions``, points already made, taken within a spacing), else the other
+    line's vertex within a spacing, else the nearest point on it (z along it)."""
+    # lazy: GEOS loads only when this runs
+    import shapely
+
+    coords = coords.copy()
+    if not lines or len(coords) < 2:
+        return coords, 0
+    b = np.asarray(bounds, float).reshape(-1, 4)
+    joined = 0
+    for end, inner in ((0, 1), (-1, -2)):
+        e = coords[end, :2]
+        close = np.flatnonzero((b[:, 0] <= e[0] + spacing) & (b[:, 2] >= e[0] - spacing)
+                               & (b[:, 1] <= e[1] + spacing) & (b[:, 3] >= e[1] - spacing))
+        if not close.size:
+            continue
+        point = shapely.points(e)
+        gaps = shapely.distance(np.asarray([lines[k] for k in close], object), point)
+        k = close[int(np.argmin(gaps))]
+        if not 1e-9 < gaps.min() <= spacing * (1 + 1e-6):
+            continue
+        along = shapely.line_locate_point(lines[k], point)
+        target = np.asarray(shapely.get_coordinates(shapely.line_interpolate_point(
+            lines[k], along)))[0]
+        bar = lines_xyz[k]
+        lengths = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(bar[:, :2], axis=0).T))])
+        seg = int(np.clip(np.searchsorted(lengths, along) - 1, 0, len(bar) - 2))
+        tangent = bar[seg + 1, :2] - bar[seg, :2]
+        stem = e - coords[inner, :2]
+        sine = abs(np.cross(tangent, stem)) / max(np.hypot(*tangent) * np.hypot(*stem), 1e-12)
+        if sine < np.sin(np.radians(JOIN_ANGLE)):
+            continue  # a glancing meeting: the corner rule of the PSLG takes it
+        z = (float(np.interp(along, lengths, bar[:, 2])) if bar.shape[1] > 2
+             else coords[end, 2] if coords.shape[1] > 2 else None)
+        vertex = int(np.argmin(np.hypot(*(bar[:, :2] - target).T)))
+        made = [j for j in junctions if np.hypot(*(j[:2] - target)) <= spacing]
+        if made:
+            target, z = made[0][:2], made[0][2] if len(made[0]) > 2 else z
+        elif np.hypot(*(bar[vertex, :2] - target)) <= spacing:
+            target = bar[vertex, :2]
+            z = bar[vertex, 2] if bar.shape[1] > 2 else z
+        if np.hypot(*(coords[inner, :2] - target)) < spacing and len(coords) > 2:
+            coords = np.delete(coords, inner % len(coords), axis=0)  # no segment under it
+        coords[end, :2] = target
+        if coords.shape[1] > 2 and z is not None:
+            coords[end, 2] = z
+        junctions.append(np.array([*target, np.nan if z is None else z]))
+        joined += 1
+    return coords, joined
 
 
 def _near(lines: list, bounds: list, line, spacing: float):

@@ -27,12 +27,21 @@ def test_lines_keep_clear_of_the_edge_and_of_other_lines():
                                       spacing=1.0, own_lines=own)
     geoms = [shapely.LineString(c[:, :2]) for c in out]
     assert all(shapely.distance(g, domain.exterior) >= 2.0 - 1e-9 for g in geoms)
-    assert all(shapely.distance(g, shapely.LineString(own[0][:, :2])) >= 1.0 - 1e-9
-               for g in geoms)
-    # the crossing line is cut where it crosses the own line and the longer line (3 pieces);
-    # the parallel one is merged away into the longer, which stays whole
+    own_line = shapely.LineString(own[0][:, :2])
+    # a spacing off the own line, or meeting it with an end (a junction), never beside it
+    for g in geoms:
+        gap = shapely.distance(g, own_line)
+        ends = shapely.distance(shapely.points(np.asarray(g.coords)[[0, -1]]), own_line)
+        assert gap >= 1.0 - 1e-9 or (gap < 1e-9 and ends.min() < 1e-9
+                                     and shapely.length(shapely.intersection(g, own_line)) == 0)
+    # the crossing line is cut where it crosses the own line and the longer line (3 pieces),
+    # and its pieces' ends joined onto those lines, at the same points from either side; the
+    # parallel one is merged away into the longer, which stays whole
     assert stats["cut_near_other_lines"] >= 2 and stats["clipped_at_edge"] >= 1
-    assert sum(np.allclose(c[:, 0], 50) for c in out) == 3
+    crossing = [c for c in out if np.allclose(c[:, 0], 50)]
+    assert len(crossing) == 3 and stats["ends_joined"] == 4
+    assert sorted(float(y) for c in crossing for y in c[[0, -1], 1]) == pytest.approx(
+        [5, 20, 20, 30, 30, 45])
     assert not any(np.allclose(c[:, 1], 30.5) for c in out)
     assert any(np.allclose(c[:, 1], 30) and np.ptp(c[:, 0]) == pytest.approx(80) for c in out)
     assert all(c.shape[1] == 3 for c in out)   # z kept (interpolated at the cuts)
@@ -234,3 +243,25 @@ def test_split_at_folds_cuts_only_where_a_line_turns_back():
                                             [[0, 1], [10, 2], [20, 2], [20, 12]]]
     assert len(split_at_folds(zigzag, min_angle=3.0)) == 1
     assert len(split_at_folds(zigzag[:2])) == 1
+
+
+def test_a_line_running_into_another_ends_on_it_not_a_spacing_short():
+    """A line that runs into a longer one (a bank into a road embankment) is cut a spacing
+    short of it, and that gap between the cut end and the other line held the mesh's smallest
+    triangles (found on the corpus's crossings, where they set the flood model's time step);
+    the cut end now joins the other line, the z along it."""
+    dem = Grid(np.zeros((60, 80)), Affine(1, 0, 0, 0, -1, 60), CRS.from_epsg(32633))
+    bar = np.array([[5, 30, 2], [75, 30, 4]])
+    stem = np.array([[40, 5, 1], [40, 18, 1], [40, 29.6, 1]])
+    out, stats = lines_for_hydraulics([bar, stem], None, spacing=1.0)
+    joined = [c for c in out if np.allclose(c[:, 0], 40)][0]
+    assert stats["ends_joined"] == 1
+    assert joined[-1].tolist() == pytest.approx([40, 30, 3])
+    gap_left = [bar, np.array([[40, 5, 1], [40, 18, 1], [40, 29, 1]])]  # cut, as before
+    as_before, now = (build_mesh(dem, lines, max_area=100) for lines in (gap_left, out))
+    assert inradii(as_before.nodes, as_before.triangles).min() < 0.4
+    assert inradii(now.nodes, now.triangles).min() > 0.6
+    # a line meeting another at a glancing angle keeps its gap (the PSLG's corner rule)
+    glancing = np.array([[10, 20, 1], [40, 29.2, 1]])
+    _, stats = lines_for_hydraulics([bar, glancing], None, spacing=1.0)
+    assert stats["ends_joined"] == 0
