@@ -278,9 +278,13 @@ class _TerrainFits:
 def _point_index_ahead(front: Front, options: RunOptions, steps: _Steps):
     """The terrain fits' point index started on the background thread (``_Steps.ahead``: call
     it for the index), or None where no fit needs the points or they are not read yet."""
-    fitting = options.localise or options.node_elevation == "plane"
     return (steps.ahead("point index", point_index, front.measured)
-            if fitting and front.measured is not None else None)
+            if _fitting(options) and front.measured is not None else None)
+
+
+def _fitting(options: RunOptions) -> bool:
+    """Whether a run with ``options`` fits the terrain to the points (localisation, node z)."""
+    return options.localise or options.node_elevation == "plane"
 
 
 def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits, index):
@@ -289,11 +293,10 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
     points' index from ``_point_index_ahead``."""
     dem, (method, amount) = front.dem, options.simplification()
     min_distance = dem.cell_size / 2 if options.min_distance is None else options.min_distance
-    fitting = options.localise or options.node_elevation == "plane"
     simplified = lines = steps.run("simplify", simplify_breaklines, front.traced, method, amount,
                                    min_distance=min_distance)
     confidence = None
-    if fitting:
+    if _fitting(options):
         area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
         points, built = fits.measured()
         fits.index, fits.window = steps.run(

@@ -144,17 +144,17 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
                 local = _spacing_at(flow_spacing, coords, spacing)
                 coords = thin_vertices(coords, local, **(keep_terrain or {}))
                 if _length(coords) >= max(2 * spacing, local.max()) and len(coords) >= 2:
-                    out.append(coords)
                     own_pieces.append(coords)
-        for i, coords in enumerate(own_pieces):  # ends a spacing off a line they meet, onto it
-            own_pieces[i], joined = _joined_ends(coords, taken, taken_xyz, taken_bounds,
-                                                 spacing, junctions)
-            stats["ends_joined"] += joined
-            out[len(out) - len(own_pieces) + i] = own_pieces[i]
-        taken_xyz.extend(own_pieces)
-        taken.extend(shapely.LineString(c[:, :2]) for c in own_pieces)
-        taken_bounds.extend(shapely.bounds(taken[-len(own_pieces) + i])
-                            for i in range(len(own_pieces)))
+        joined = []  # ends a spacing off a line they meet, onto it (not onto each other)
+        for coords in own_pieces:
+            coords, count = _joined_ends(coords, taken, taken_xyz, taken_bounds, spacing,
+                                         junctions)
+            stats["ends_joined"] += count
+            joined.append(coords)
+        out.extend(joined)
+        taken_xyz.extend(joined)
+        taken.extend(shapely.LineString(c[:, :2]) for c in joined)
+        taken_bounds.extend(shapely.bounds(g) for g in taken[len(taken) - len(joined):])
     stats.update(lines_out=len(out), vertices_out=int(sum(len(c) for c in out)),
                  spacing_m=spacing, clearance_m=clearance)
     return out, stats
@@ -175,12 +175,10 @@ def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: list,
     coords = coords.copy()
     if not lines or len(coords) < 2:
         return coords, 0
-    b = np.asarray(bounds, float).reshape(-1, 4)
     joined = 0
     for end, inner in ((0, 1), (-1, -2)):
         e = coords[end, :2]
-        close = np.flatnonzero((b[:, 0] <= e[0] + spacing) & (b[:, 2] >= e[0] - spacing)
-                               & (b[:, 1] <= e[1] + spacing) & (b[:, 3] >= e[1] - spacing))
+        close = _boxes_near(bounds, (*e, *e), spacing)
         if not close.size:
             continue
         point = shapely.points(e)
@@ -204,7 +202,7 @@ def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: list,
         vertex = int(np.argmin(np.hypot(*(bar[:, :2] - target).T)))
         made = [j for j in junctions if np.hypot(*(j[:2] - target)) <= spacing]
         if made:
-            target, z = made[0][:2], made[0][2] if len(made[0]) > 2 else z
+            target, z = made[0][:2], made[0][2]
         elif np.hypot(*(bar[vertex, :2] - target)) <= spacing:
             target = bar[vertex, :2]
             z = bar[vertex, 2] if bar.shape[1] > 2 else z
@@ -225,14 +223,17 @@ def _near(lines: list, bounds: list, line, spacing: float):
     # lazy: GEOS loads only when this runs
     import shapely
 
-    box = shapely.bounds(line)
-    b = np.asarray(bounds, float).reshape(-1, 4)
-    close = np.flatnonzero((b[:, 0] <= box[2] + spacing) & (b[:, 2] >= box[0] - spacing)
-                           & (b[:, 1] <= box[3] + spacing) & (b[:, 3] >= box[1] - spacing))
-    close = [lines[k] for k in close]
+    close = [lines[k] for k in _boxes_near(bounds, shapely.bounds(line), spacing)]
     if not close or shapely.distance(line, close).min() > spacing:
         return None
     return shapely.union_all(close).buffer(spacing)
+
+
+def _boxes_near(bounds: list, box, spacing: float) -> np.ndarray:
+    """The indices of ``bounds`` (boxes xmin, ymin, xmax, ymax) within ``spacing`` of ``box``."""
+    b = np.asarray(bounds, float).reshape(-1, 4)
+    return np.flatnonzero((b[:, 0] <= box[2] + spacing) & (b[:, 2] >= box[0] - spacing)
+                          & (b[:, 1] <= box[3] + spacing) & (b[:, 3] >= box[1] - spacing))
 
 
 def _spacing_at(flow_spacing, coords, spacing: float) -> np.ndarray:

@@ -129,9 +129,9 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     overlapping lines. With ``drop_sharp_corners``, break-line segments that meet another
     segment at less than ``SHARP_CORNER`` degrees are shortened near the meeting point (to end
     ``corner_gap`` m, default ``4·snap``, a cell at the chain's snap, off the other one; dropped
-    only where that leaves too little): Triangle does not refine the triangles in such a corner, so they would break the
-    angle bound; the gap is as wide as the smallest triangles there. ``note`` receives one line
-    for each kind of repair made.
+    only where that leaves too little): Triangle does not refine the triangles in such a
+    corner, so they would break the angle bound; the gap is as wide as the smallest triangles
+    there. ``note`` receives one line for each kind of repair made.
     """
     if not snap > 0 or not np.isfinite(snap):
         raise FloodMeshError(f"snapping distance must be positive metres, got {snap}")

@@ -254,13 +254,3 @@ def _spaced(coords: np.ndarray, min_distance: float) -> np.ndarray:
     if min_distance <= 0 or len(coords) <= 2:
         return np.arange(len(coords))
     return thinned(coords, np.full(len(coords), float(min_distance)), False, 0.0, 0.0, 0.0)
-    last = coords[0, :2]
-    for i in range(1, len(coords) - 1):
-        if np.hypot(*(coords[i, :2] - last)) < min_distance:
-            keep[i] = False
-        else:
-            last = coords[i, :2]
-    prev = np.flatnonzero(keep[:-1])[-1]
-    if prev > 0 and np.hypot(*(coords[-1, :2] - coords[prev, :2])) < min_distance:
-        keep[prev] = False
-    return keep
