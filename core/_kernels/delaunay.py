@@ -846,7 +846,6 @@ def delaunay(xy: np.ndarray) -> np.ndarray:
         raise ValueError("point coordinates must be finite")
     if i2 == -1:
         return np.empty((0, 3), np.int64)
-    # the big arrays come from numpy, which asks for huge pages: fewer TLB misses
     pts = np.empty((n, 2))
     ids = np.empty(n, np.int32)
     _sort_by_distance(xy, cx, cy, pts, ids)

@@ -21,6 +21,7 @@ from affine import Affine
 
 from .._kernels.delaunay import delaunay
 from .._kernels.points import extent
+from ..engine.arrays import without_huge_pages
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_cell_size, check_max_gap
@@ -101,7 +102,7 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
             _rasterise_tin(local, local_z, triangles, values, r0, min(rows, r0 + side),
                            c0, min(cols, c0 + side), float(cell_size), float(max_gap))
 
-    with ThreadPoolExecutor(max_workers=workers) as pool:
+    with ThreadPoolExecutor(max_workers=workers) as pool, without_huge_pages():
         xy, z, bounds = _bucket_sort(xyz, float(x0), float(y1), bucket_size, n_brows, n_bcols,
                                      pool, workers)
         for done, _ in enumerate(pool.map(grid_tile, tiles), start=1):
