@@ -171,6 +171,9 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     hand = None if flow_area is None else steps.ahead(  # resolution where water flows
         "flow zone", height_above_drainage, front.dem, channel_area=CHANNEL_AREA)
     simplified, lines, confidence = _break_lines(front, options, steps, fits, index)
+    # the input's checks, which only add notes, beside the single-threaded meshing: the
+    # gridding and the terrain fits before it keep both cores busy
+    later = _say_later(front, steps, note)
     size, flow, spacing, max_area = _size_fields(front, options, fits.window, hand, flow_area)
     hand = None  # the flow zone's work is in the flow size and spacing now
     domain = (front.domain if front.domain is not None else domain_from_dem(
@@ -214,6 +217,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
         # drawn in the picture process meanwhile, beside the figures and the files' writing
         pictures.draw(stage, mesh.nodes, mesh.triangles, front.holdout.xyz, res, dem=front.dem,
                       lines=[line.coords for line in lines])
+        later()
         deviation, quality, stats, hydraulics = steps.run(
             "figures", _figures, front, options, simplified, mesh, res, detected, max_area)
         figures = {"n_breakpoints": n_breakpoints, "deviation": deviation, "quality": quality,
@@ -226,6 +230,20 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     if compiled and log:
         log(compiled)
     return report
+
+
+def _say_later(front: Front, steps: _Steps, note) -> Callable[[], None]:
+    """Start ``front.later``'s checks on the background thread (after the work already queued
+    there); the callable returned waits for them and gives their notes to ``note``."""
+    started = [steps.ahead(name, func, *args) for name, func, args in front.later]
+    front.later = []
+
+    def collect():
+        for result in started:
+            message = result()
+            if message and note:
+                note(message)
+    return collect
 
 
 def _step_weights(options: RunOptions) -> dict:
@@ -488,6 +506,9 @@ class Front:
     # (a DEM, or point tiles too many for memory), drawn from it when a fit needs them
     measured: np.ndarray | None = None
     files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
+    # checks of the input whose notes are said later, beside other steps (``_say_later``):
+    # (step name, function, arguments), the function giving a note or None
+    later: list = field(default_factory=list)
 
 
 TILE_HOLDOUT = "LiDAR points withheld from gridding, tile by tile"
@@ -503,6 +524,7 @@ class _Terrain:
     n_points: int
     measured: np.ndarray | None = None  # the points gridded (None: the DEM's cell centres)
     files: dict | None = None           # point tiles: the DEM, slope and breakpoints files
+    later: list = field(default_factory=list)  # checks left for later, as Front.later
 
 
 def trace_front(source, options: RunOptions, steps: "_Steps | None" = None, *,
@@ -534,7 +556,8 @@ def trace_front(source, options: RunOptions, steps: "_Steps | None" = None, *,
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, terrain.holdout, terrain.holdout_source, terrain.n_points, slope_grid,
-                 breakpoints, traced, domain, own_lines, terrain.measured, terrain.files)
+                 breakpoints, traced, domain, own_lines, terrain.measured, terrain.files,
+                 terrain.later)
 
 
 def _slope_and_breakpoints(dem: Grid, options: RunOptions, steps: _Steps, cancelled):
@@ -557,15 +580,12 @@ def _read_points(source: Source, options: RunOptions, steps: _Steps, *, cancelle
     """One point file, gridded in memory with ``options.holdout`` of its points held out."""
     data = steps.run("read", io.read_points, source.path, crs=options.crs,
                      classes=options.classes, note=note, repeats=False)
-    # the check of repeated positions (a compiled pass, single-threaded) beside the gridding
-    repeats = steps.ahead("repeated points", repeated_positions_note, data.xyz,
-                          io.point_file_name(source.path))
     gridding, holdout = split_holdout(data, options.holdout, options.seed, note=note)
     terrain = _grid_in_memory(gridding, holdout, "LiDAR points withheld from gridding",
                               len(data), options, steps, cancelled=cancelled)
-    message = repeats()
-    if message and note:
-        note(message)
+    if note:  # the check of repeated positions: a single-threaded pass, left for an idle core
+        terrain.later.append(("repeated points", repeated_positions_note,
+                              (data.xyz, io.point_file_name(source.path))))
     return terrain
 
 

@@ -3,6 +3,7 @@ are spelled, a holdout of 0 runs through, untagged nodata sentinels stay out of 
 the mesh exports refuse what solvers cannot read, their boundaries keep the sections drawn, and
 the messages name the real problem. Folder atomicity under interrupts is in test_interrupt.py."""
 import hashlib
+import json
 import os
 import subprocess
 import sys
@@ -256,6 +257,20 @@ def test_nan_rows_and_duplicate_points_with_other_z_get_a_note(tmp_path):
     assert any("5 points without a finite x, y and z" in n for n in notes)
     assert any("10 points repeat the x, y of another with a different z (up to 1 m" in n
                for n in notes)
+
+
+def test_a_run_says_the_repeated_points_in_its_report(tmp_path):
+    """The check of repeated positions runs beside the meshing, after the gridding: its note
+    still reaches the report and the command line, and its time the report's steps."""
+    xyz = plane_xyz()
+    xyz[100:110] = xyz[200:210] + [0, 0, 1.0]
+    path = write_xyz(tmp_path / "dups.xyz", xyz)
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--crs", "EPSG:32633",
+                 "--max-area", "50"]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    said = [n for n in report["notes"] if "10 points repeat the x, y of another" in n]
+    assert len(said) == 1 and "up to 1 m apart" in said[0]
+    assert "repeated points" in report["seconds"]
 
 
 def test_a_header_naming_the_columns_in_another_order_is_followed(tmp_path):
