@@ -19,7 +19,7 @@ import numba
 import numpy as np
 from affine import Affine
 
-from .._kernels.delaunay import delaunay
+from .._kernels.delaunay import delaunay_in_sweep_order
 from .._kernels.points import extent
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
@@ -97,9 +97,9 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
             min(n_bcols - 1, int(x_hi // bucket_size)), x_lo, x_hi, y_lo, y_hi)
         if len(local) < 3:
             return
-        triangles = delaunay(local)
+        swept, ids, triangles = delaunay_in_sweep_order(local)
         if len(triangles):
-            _rasterise_tin(local, local_z, triangles, values, r0, min(rows, r0 + side),
+            _rasterise_tin(swept, local_z[ids], triangles, values, r0, min(rows, r0 + side),
                            c0, min(cols, c0 + side), float(cell_size), float(max_gap))
 
     with ThreadPoolExecutor(max_workers=workers) as pool, without_huge_pages():

@@ -182,3 +182,15 @@ def test_exact_predicates():
         p = [r * np.array([np.cos(t), np.sin(t)]) for t in rng.uniform(0, 2 * np.pi, 4)]
         s = dl._incircle(*p[0], *p[1], *p[2], *p[3])
         assert np.sign(s) == np.sign(_incircle_fraction(*p))
+
+
+@pytest.mark.parametrize("n", [3, 50, 5000])
+def test_the_sweep_order_form_is_the_same_triangulation(n):
+    """``delaunay_in_sweep_order`` (what the gridding rasterises) gives delaunay's triangles:
+    its points are xy's in another order, its triangles clockwise over them."""
+    xy = np.random.default_rng(n).random((n, 2)) * 100
+    swept, ids, tri = dl.delaunay_in_sweep_order(xy)
+    np.testing.assert_array_equal(swept, xy[ids])
+    assert tri.dtype == np.int32 and np.all(_areas(swept, tri) < 0)
+    np.testing.assert_array_equal(_canonical(ids[tri]), _canonical(delaunay(xy)))
+    np.testing.assert_array_equal(_canonical(ids[tri]), _canonical(Delaunay(xy).simplices))
