@@ -14,6 +14,7 @@ from pyproj import CRS
 
 from .. import io
 from ..engine.compiles import CompileWatch
+from ..engine.arrays import without_huge_pages
 from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles, fits_in_memory
 from ..engine.nearest import CellIndex, point_index
 from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
@@ -146,7 +147,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out, source = Path(out_dir), open_source(input_path)
     inputs = run_inputs(source, options)
     check_output_folder(out, inputs, run_outputs(options.formats))
-    with ThreadPoolExecutor(max_workers=1) as background, PicturesApart() as pictures:
+    # every step makes its large arrays afresh: see without_huge_pages
+    with (ThreadPoolExecutor(max_workers=1) as background, PicturesApart() as pictures,
+          without_huge_pages()):
         steps = _Steps(_step_weights(options), progress, cancelled, log, background)
         return _run(source, out, inputs, options, steps, pictures, started, notes, note,
                     cancelled, log)
