@@ -219,14 +219,18 @@ def _separate(lines, positions, masks, min_distance) -> list[BreakLine]:
         rank = np.empty(len(geoms), int)
         rank[np.argsort(-shapely.length(geoms), kind="stable")] = \
             np.arange(len(geoms))
-        # every line's kept vertices in one query (one per line was 0.2 s on 500 lines)
+        # every line's kept vertices in one query (one per line was 0.2 s on 500 lines),
+        # against the lines' segments, each its own geometry: a point's distance to a segment
+        # is one formula, to a whole line a pass over all its vertices (0.24 s on 500 lines)
         counts = [len(n) for n in near]
         owner = np.repeat(np.arange(len(near)), counts)
         kept = np.concatenate([p[m][:, :2] for p, m in zip(positions, masks)])
-        v, j = shapely.STRtree(geoms).query(shapely.points(kept), predicate="dwithin",
-                                            distance=min_distance)
+        first = np.flatnonzero(owner[:-1] == owner[1:])  # segment starts
+        segments = shapely.linestrings(np.stack([kept[first], kept[first + 1]], axis=1))
+        v, s = shapely.STRtree(segments).query(shapely.points(kept), predicate="dwithin",
+                                               distance=min_distance)
         merged = np.zeros(len(kept), bool)
-        merged[v[rank[j] < rank[owner[v]]]] = True
+        merged[v[rank[owner[first[s]]] < rank[owner[v]]]] = True
         near = np.split(merged, np.cumsum(counts)[:-1])
     out = []
     for line, p, m, drop in zip(lines, positions, masks, near):
