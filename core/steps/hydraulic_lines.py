@@ -110,7 +110,8 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     pieces = [piece for c in lines for piece in split_at_folds(c)]
     taken_xyz = [np.asarray(c, float) for c in own_lines if len(c) >= 2]
     taken = [shapely.LineString(c[:, :2]) for c in taken_xyz]
-    taken_bounds = [shapely.bounds(line) for line in taken]
+    taken_bounds = shapely.bounds(taken).reshape(-1, 4)  # grown as lines are taken: an array
+    # made from a list of boxes at each look-up was a pass over all of them in Python
     junctions = []  # where line ends were snapped onto other lines: later ends meet them there
     order = sorted(range(len(pieces)), key=lambda k: -_length(pieces[k]))
     out, stats = [], {"lines_in": len(lines), "vertices_in": int(sum(len(c) for c in lines)),
@@ -154,13 +155,14 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
         out.extend(joined)
         taken_xyz.extend(joined)
         taken.extend(shapely.LineString(c[:, :2]) for c in joined)
-        taken_bounds.extend(shapely.bounds(g) for g in taken[len(taken) - len(joined):])
+        taken_bounds = np.concatenate([taken_bounds, shapely.bounds(
+            taken[len(taken) - len(joined):]).reshape(-1, 4)])
     stats.update(lines_out=len(out), vertices_out=int(sum(len(c) for c in out)),
                  spacing_m=spacing, clearance_m=clearance)
     return out, stats
 
 
-def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: list,
+def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: np.ndarray,
                  spacing: float, junctions: list) -> tuple[np.ndarray, int]:
     """(``coords`` with each end that lies within a ``spacing`` (m) of one of ``lines`` (shapely
     lines; ``lines_xyz`` their (k, 2|3) coordinates, ``bounds`` their boxes) and meets it at
@@ -216,7 +218,7 @@ def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: list,
     return coords, joined
 
 
-def _near(lines: list, bounds: list, line, spacing: float):
+def _near(lines: list, bounds: np.ndarray, line, spacing: float):
     """The union of those ``lines`` (with their ``bounds``) within ``spacing`` of ``line``,
     grown by ``spacing``; None where none is that close (most lines: no union, buffer and
     difference for them)."""
@@ -229,9 +231,9 @@ def _near(lines: list, bounds: list, line, spacing: float):
     return shapely.union_all(close).buffer(spacing)
 
 
-def _boxes_near(bounds: list, box, spacing: float) -> np.ndarray:
-    """The indices of ``bounds`` (boxes xmin, ymin, xmax, ymax) within ``spacing`` of ``box``."""
-    b = np.asarray(bounds, float).reshape(-1, 4)
+def _boxes_near(b: np.ndarray, box, spacing: float) -> np.ndarray:
+    """The indices of the boxes ``b`` ((n, 4): xmin, ymin, xmax, ymax) within ``spacing`` of
+    ``box``."""
     return np.flatnonzero((b[:, 0] <= box[2] + spacing) & (b[:, 2] >= box[0] - spacing)
                           & (b[:, 1] <= box[3] + spacing) & (b[:, 3] >= box[1] - spacing))
 
