@@ -9,7 +9,7 @@ from pyproj import CRS
 from scipy import ndimage
 
 from floodmesh.core.frontends import demo
-from floodmesh.core.steps.breaklines import trace_breaklines
+from floodmesh.core.steps.breaklines import narrow_crest_cells, trace_breaklines
 from floodmesh.core.steps.breakpoints import classify_breakpoints
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.raster import Grid
@@ -32,11 +32,12 @@ def _centres(rows, cols, d=1.0):
     return np.meshgrid(x, y)
 
 
-def _trace(z, *, d=1.0, mode="auto", method="one-over-distance", join=True):
+def _trace(z, *, d=1.0, mode="auto", method="one-over-distance", join=True, crests=True):
     dem = _grid(z, d)
     s = slope(dem, method)
     bp = classify_breakpoints(s, S_CRIT)
-    return dem, s, bp, trace_breaklines(bp, s, dem, S_CRIT, mode=mode, join=join)
+    return dem, s, bp, trace_breaklines(bp, s, dem, S_CRIT, mode=mode, join=join,
+                                        crests=crests)
 
 
 def _local(line):
@@ -224,9 +225,16 @@ def test_rules_hold_on_rough_terrain(seed, mode, roughness, join):
         z = ndimage.gaussian_filter(rng.normal(0, 1, (80, 90)), 2) * 20
     else:
         z = rng.normal(0, 0.3, (60, 70))
-    _, s, bp, lines = _trace(z, mode=mode, join=join)
+    dem, s, bp, lines = _trace(z, mode=mode, join=join, crests=False)
     assert int(bp.values.sum()) > 300
     _assert_tracing_rules(bp, s, lines, consecutive_turns=False, joined=join)
+    # the lines of narrow crests and troughs come after, traced by the same rules through
+    # their own cells
+    both = trace_breaklines(bp, s, dem, S_CRIT, mode=mode, join=join)
+    assert [line.coords.tolist() for line in both[:len(lines)]] == \
+        [line.coords.tolist() for line in lines]
+    crests = bp.with_values(narrow_crest_cells(dem, S_CRIT))
+    _assert_tracing_rules(crests, s, both[len(lines):], consecutive_turns=False, joined=join)
 
 
 def test_min_points_drops_short_lines():

@@ -1,0 +1,102 @@
+"""Narrow ridges and troughs (issue 28 item 3): an embankment whose crest and sides are each a
+cell or two wide has its slope breaks within a cell of one another, one band of breakpoints
+whose lines hopped between crest and toe; its crest is found as cells higher than their
+neighbours with both sides falling S_crit over two cells, and traced as a line of its own."""
+import numpy as np
+import pytest
+import shapely
+
+from floodmesh.core.steps.breaklines import narrow_crest_cells, trace_breaklines
+from floodmesh.core.steps.breakpoints import classify_breakpoints
+from floodmesh.core.steps.slope import slope
+
+from .test_breaklines import S_CRIT, _centres, _grid
+
+SIZE = 120
+
+
+def _embankment(angle, *, height=0.8, half_top=0.5, side=2.0, noise=0.0, seed=0):
+    """z of a straight embankment through the middle at ``angle``° to the x axis on a plane
+    rising 1 in 200, its profile as the corpus's (flat top ``half_top`` each side of the
+    centreline, then sides ``side`` m wide), with Gaussian ``noise`` (m); and its centreline
+    in the grid's local coordinates."""
+    x, y = _centres(SIZE, SIZE)
+    a = np.radians(angle)
+    across = np.abs(-(x - SIZE / 2) * np.sin(a) + (y - SIZE / 2) * np.cos(a))
+    z = 10 + 0.005 * x + height * np.clip((half_top + side - across) / side, 0, 1)
+    z += np.random.default_rng(seed).normal(0, noise, z.shape) if noise else 0
+    c = np.array([np.cos(a), np.sin(a)]) * SIZE
+    centre = shapely.LineString([SIZE / 2 - c, SIZE / 2 + c]).intersection(
+        shapely.box(0, 0, SIZE, SIZE))
+    return z, centre
+
+
+def _local_xy(dem, rows, cols):
+    x, y = dem.cell_centres(rows, cols)
+    return np.asarray(x) - dem.transform.c, np.asarray(y) - (dem.transform.f - SIZE)
+
+
+@pytest.mark.parametrize("angle", [0, 10, 37, 45, 80])
+@pytest.mark.parametrize("side", [1.0, 2.0, 3.0])
+def test_a_narrow_crest_is_found_along_its_whole_length_and_nowhere_else(angle, side):
+    z, centre = _embankment(angle, side=side, noise=0.05, seed=angle)
+    dem = _grid(z)
+    rows, cols = np.nonzero(narrow_crest_cells(dem, S_CRIT))
+    off = shapely.distance(centre, shapely.points(np.column_stack(_local_xy(dem, rows, cols))))
+    assert np.all(off <= 1.5)  # on the crest: a cell either side at most
+    inner = shapely.intersection(centre, shapely.box(4, 4, SIZE - 4, SIZE - 4))
+    along = shapely.line_locate_point(inner, shapely.points(np.column_stack(
+        _local_xy(dem, rows, cols))))
+    gaps = np.diff(np.sort(np.r_[0.0, along, inner.length]))
+    assert gaps[gaps > 2.0].sum() <= 0.25 * inner.length  # crest cells a grid step apart
+
+
+def _crest_lines_only(z):
+    """The lines ``trace_breaklines`` adds for narrow crests and troughs (no breakpoints)."""
+    dem = _grid(z)
+    s = slope(dem, "one-over-distance")
+    return trace_breaklines(s.with_values(np.zeros(s.shape, np.uint8)), s, dem, S_CRIT)
+
+
+@pytest.mark.parametrize("angle", [0, 15, 45, 90])
+def test_wide_crests_plain_slopes_and_noise_have_no_narrow_crest(angle):
+    """The corpus's levee (crest 3 m wide, 1.5 m high, sides 3 m), a channel's banks and 15 cm
+    of noise a cell: no crest along them (a stray piece of 5 cells at most); the levee's crest
+    edges are the breakpoints' lines."""
+    for z in (_embankment(angle, height=1.5, half_top=1.5, side=3.0, noise=0.05, seed=angle)[0],
+              _embankment(angle, height=-2.0, half_top=4.0, side=4.0, noise=0.05)[0],
+              _embankment(angle, height=0.0, noise=0.15, seed=angle)[0]):
+        assert narrow_crest_cells(_grid(z), S_CRIT).mean() < 0.003
+        assert sum(line.length for line in _crest_lines_only(z)) <= 0.05 * SIZE
+
+
+def test_a_narrow_trough_is_found_like_a_crest():
+    z, centre = _embankment(20, height=-0.8, side=1.5)
+    dem = _grid(z)
+    rows, cols = np.nonzero(narrow_crest_cells(dem, S_CRIT))
+    pts = shapely.points(np.column_stack(_local_xy(dem, rows, cols)))
+    assert len(rows) >= 0.9 * centre.length
+    assert np.all(shapely.distance(centre, pts) <= 1.5)
+
+
+@pytest.mark.parametrize("angle", [10, 80])
+def test_a_narrow_embankment_gets_one_line_along_its_crest(angle):
+    """Traced from its breakpoints alone, the lines hop between crest and toe; with the crest
+    cells traced too, one line follows the crest over most of its length."""
+    z, centre = _embankment(angle, side=2.0, noise=0.05, seed=angle)
+    dem = _grid(z)
+    s = slope(dem, "one-over-distance")
+    bp = classify_breakpoints(s, S_CRIT)
+
+    def longest_on_crest(crests):
+        best = 0.0
+        for line in trace_breaklines(bp, s, dem, S_CRIT, crests=crests):
+            x, y = line.coords[:, 0] - dem.transform.c, line.coords[:, 1] - (
+                dem.transform.f - SIZE)
+            on = shapely.distance(centre, shapely.points(np.column_stack([x, y]))) <= 1.0
+            if on.all():
+                best = max(best, line.length)
+        return best
+
+    assert longest_on_crest(True) >= 0.8 * centre.length
+    assert longest_on_crest(False) < 0.5 * centre.length
