@@ -64,3 +64,44 @@ def unspiked(coords, where, cos_min):
         else:
             i += 1
     return keep[:kept]
+
+
+@numba.njit(cache=True, nogil=True)
+def narrow_crests(z, rise, start, reach, out):
+    """``steps.breaklines.narrow_crest_cells`` into ``out`` (uint8): ``rise`` the least fall
+    a cell out on the axes (m), ``start`` the share of the fall under way at the mid reach,
+    ``reach`` the (mid, far) reaches in cells on the axes (row 0) and the diagonals (row 1).
+    Beyond the grid, and where a height is NaN, no crest."""
+    rows, cols = z.shape
+    k = reach.max() + 1  # the far reach and the crest's neighbour beyond it
+    padded = np.full((rows + 2 * k, cols + 2 * k), np.nan)
+    padded[k:k + rows, k:k + cols] = z
+    mean = np.full(padded.shape, np.nan)
+    out[:] = 0
+    for d in range(4):
+        dr, dc = _CREST_DR[d], _CREST_DC[d]
+        diagonal = dr != 0 and dc != 0
+        mid_k, far_k = reach[1 if diagonal else 0, 0], reach[1 if diagonal else 0, 1]
+        drop = rise * (np.sqrt(2.0) if diagonal else 1.0) * far_k
+        # the mean of each cell and its two neighbours along the crest (across dr, dc)
+        for i in range(1, padded.shape[0] - 1):
+            for j in range(1, padded.shape[1] - 1):
+                mean[i, j] = (padded[i, j] + padded[i - dc, j + dr] + padded[i + dc, j - dr]) / 3
+        for i in range(rows):
+            for j in range(cols):
+                p, q = i + k, j + k
+                here = mean[p, q]
+                for sign in (1.0, -1.0):  # crests, then troughs
+                    h = sign * here
+                    fall_a = h - sign * mean[p + far_k * dr, q + far_k * dc]
+                    fall_b = h - sign * mean[p - far_k * dr, q - far_k * dc]
+                    if (h >= sign * mean[p + dr, q + dc] and h > sign * mean[p - dr, q - dc]
+                            and fall_a >= drop and fall_b >= drop
+                            and h - sign * mean[p + mid_k * dr, q + mid_k * dc] >= start * fall_a
+                            and h - sign * mean[p - mid_k * dr, q - mid_k * dc] >= start * fall_b):
+                        out[i, j] = 1
+
+
+# the four directions across a crest, as (row, column) steps
+_CREST_DR = np.array([0, 1, 1, 1])
+_CREST_DC = np.array([1, 0, 1, -1])

@@ -95,10 +95,11 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
 # profile, noise loses 40 %. Chosen on crests a metre wide with sides of 1-3 m at seven angles
 # to the grid, plains of 10-20 cm of noise a cell and the corpus's levees and channels at four
 # angles (tests/core/test_narrow_crests.py), then checked on the whole evaluation corpus
-CREST_REACH = {False: (2, 3), True: (1, 2)}  # (mid, far) cells out: on the axes, diagonals
+CREST_REACH = ((2, 3), (1, 2))  # (mid, far) cells out: on the axes, on the diagonals
 CREST_FALL = 0.75
 CREST_START = 0.3
 CREST_MIN_LENGTH = 5  # cells: shorter crests are left to the breakpoints' lines
+CREST_STRIP = 1024  # rows looked at a time
 
 
 def narrow_crest_cells(dem: Grid, s_crit: float) -> np.ndarray:
@@ -110,44 +111,25 @@ def narrow_crest_cells(dem: Grid, s_crit: float) -> np.ndarray:
     heights averaged over the cell and its two neighbours across that direction.
     An embankment with a crest a metre wide and sides of 1-3 m has its slope breaks within a
     cell or two of one another: its breakpoints form one band, whose lines hop between crest
-    and toe. Block by block (``map_overlap``)."""
-    # lazy: the block engine loads only when this runs
-    from ..engine.blocks import map_overlap
+    and toe. In strips of ``CREST_STRIP`` rows (and their reach), so that the kernel's
+    float64 copies stay small whatever the DEM."""
+    # lazy: numba loads only when this runs
+    from .._kernels.lines import narrow_crests
 
     rise = CREST_FALL * np.tan(np.radians(check_s_crit(s_crit))) * dem.cell_size
-    halo = max(max(reach) for reach in CREST_REACH.values()) + 1
-
-    def block(z):
-        found = np.zeros(z.shape, bool)
-        with np.errstate(invalid="ignore"):
-            for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-                # the mean of the cell and its two neighbours along the crest (across dr, dc)
-                mean = (z + _shifted(z, -dc, dr) + _shifted(z, dc, -dr)) / 3
-                # two and three metres out on the axes; 1.4 and 2.8 on the diagonals
-                mid_k, far_k = CREST_REACH[dr != 0 and dc != 0]
-                drop = rise * np.hypot(dr, dc) * far_k
-                near = [_shifted(mean, step * dr, step * dc) for step in (1, -1)]
-                mid = [_shifted(mean, step * mid_k * dr, step * mid_k * dc) for step in (1, -1)]
-                far = [_shifted(mean, step * far_k * dr, step * far_k * dc) for step in (1, -1)]
-                for sign in (1.0, -1.0):  # crests, then troughs
-                    h = sign * mean
-                    crest = (h >= sign * near[0]) & (h > sign * near[1])
-                    for m, f in zip(mid, far):
-                        fall = h - sign * f
-                        crest &= (fall >= drop) & (h - sign * m >= CREST_START * fall)
-                    found |= crest
-        return found[halo:-halo, halo:-halo]
-
-    return map_overlap(np.asarray(dem.values), block, halo=halo, dtype=np.uint8)
-
-
-def _shifted(a: np.ndarray, dr: int, dc: int) -> np.ndarray:
-    """``a`` read (dr, dc) cells on: out[i, j] = a[i + dr, j + dc], NaN beyond its edges."""
-    out = np.full(a.shape, np.nan)
-    rows, cols = a.shape
-    out[max(0, -dr):rows - max(0, dr), max(0, -dc):cols - max(0, dc)] = \
-        a[max(0, dr):rows - max(0, -dr), max(0, dc):cols - max(0, -dc)]
-    return out
+    reach = np.array(CREST_REACH, np.int64)
+    halo = int(reach.max()) + 1
+    z = np.asarray(dem.values)
+    rows = z.shape[0]
+    found = np.empty(z.shape, np.uint8)
+    for top in range(0, rows, CREST_STRIP):
+        bottom = min(rows, top + CREST_STRIP)
+        first, last = max(0, top - halo), min(rows, bottom + halo)
+        strip = np.empty((last - first, z.shape[1]), np.uint8)
+        narrow_crests(np.ascontiguousarray(z[first:last], np.float64), rise, CREST_START, reach,
+                      strip)
+        found[top:bottom] = strip[top - first:bottom - first]
+    return found
 
 
 def _traced(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *, mode: str,

@@ -100,3 +100,14 @@ def test_a_narrow_embankment_gets_one_line_along_its_crest(angle):
 
     assert longest_on_crest(True) >= 0.8 * centre.length
     assert longest_on_crest(False) < 0.5 * centre.length
+
+
+def test_strips_give_the_whole_grids_crests(monkeypatch):
+    """The crests found a few rows at a time are those found on the whole grid at once."""
+    from floodmesh.core.steps import breaklines
+
+    z = np.maximum(_embankment(10, side=2.0, noise=0.05)[0], _embankment(80, side=1.0)[0])
+    whole = narrow_crest_cells(_grid(z), S_CRIT)
+    assert whole.sum() > SIZE
+    monkeypatch.setattr(breaklines, "CREST_STRIP", 7)
+    np.testing.assert_array_equal(narrow_crest_cells(_grid(z), S_CRIT), whole)
