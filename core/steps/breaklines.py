@@ -73,14 +73,28 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     bands oblique to the grid (see ``_join_fragments``); without it every line obeys the slope
     continuity rule strictly. ``seed`` settles ties that the 7x7 kernel leaves.
     """
-    lines = _traced(breakpoints, slope, dem, s_crit, mode=mode, min_points=min_points,
-                    min_length=min_length, join=join, seed=seed)
+    check_choice(mode, MODES, "tracing mode")
+    s_crit = check_s_crit(s_crit)
+    min_points = check_min_points(min_points)
+    min_length = check_min_length(min_length)
+    if breakpoints.shape != slope.shape or slope.shape != dem.shape:
+        raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
+                             f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")
+    if mode == "auto":
+        valid = slope.values[np.isfinite(slope.values)]  # a copy: the median may sort it
+        mode = "steep" if valid.size and np.median(valid, overwrite_input=True) >= s_crit \
+            else "flat"
+        del valid
+    # the tracer reads slope only at the cells it traces: breakpoints, where it is finite
+    # (slope >= S_crit), and crest cells, which have a height all round
+    slope_values = np.ascontiguousarray(slope.values, dtype=np.float64)
+    lines = _traced(breakpoints.values, slope, slope_values, dem, s_crit, mode == "steep",
+                    min_points, min_length, join, seed)
     if not crests:
         return lines
-    narrow = _traced(breakpoints.with_values(narrow_crest_cells(dem, s_crit)), slope, dem,
-                     s_crit, mode=mode, min_points=min_points,
-                     min_length=max(min_length, CREST_MIN_LENGTH * dem.cell_size), join=join,
-                     seed=seed)
+    narrow = _traced(narrow_crest_cells(dem, s_crit), slope, slope_values, dem, s_crit,
+                     mode == "steep", min_points,
+                     max(min_length, CREST_MIN_LENGTH * dem.cell_size), join, seed)
     first = 1 + max((line.component for line in lines), default=-1)
     for line in narrow:
         line.component += first
@@ -132,26 +146,15 @@ def narrow_crest_cells(dem: Grid, s_crit: float) -> np.ndarray:
     return found
 
 
-def _traced(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *, mode: str,
-            min_points: int, min_length: float, join: bool, seed: int) -> list[BreakLine]:
-    """``trace_breaklines`` of ``breakpoints`` alone."""
-    check_choice(mode, MODES, "tracing mode")
-    s_crit = check_s_crit(s_crit)
-    min_points = check_min_points(min_points)
-    min_length = check_min_length(min_length)
-    if breakpoints.shape != slope.shape or slope.shape != dem.shape:
-        raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
-                             f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")
-    if mode == "auto":
-        valid = slope.values[np.isfinite(slope.values)]  # a copy: the median may sort it
-        mode = "steep" if valid.size and np.median(valid, overwrite_input=True) >= s_crit \
-            else "flat"
-        del valid
-    bp = np.ascontiguousarray(breakpoints.values, dtype=np.bool_)
-    # the tracer reads slope only at breakpoints, where it is finite (slope >= S_crit)
-    slope_values = np.ascontiguousarray(slope.values, dtype=np.float64)
+def _traced(cells_traced: np.ndarray, slope: Grid, slope_values: np.ndarray, dem: Grid,
+            s_crit: float, steep: bool, min_points: int, min_length: float, join: bool,
+            seed: int) -> list[BreakLine]:
+    """``trace_breaklines``' lines through the marked cells ``cells_traced`` alone, its
+    arguments checked and its mode settled (``steep``); ``slope_values``: ``slope``'s values
+    as float64, which the tracer reads."""
+    bp = np.ascontiguousarray(cells_traced, dtype=np.bool_)
     cells, starts = _trace(bp, slope_values, _opening_order(bp, slope_values), float(s_crit),
-                           mode == "steep", np.uint64(seed & 0xFFFFFFFFFFFFFFFF))
+                           steep, np.uint64(seed & 0xFFFFFFFFFFFFFFFF))
     if join:
         cells, starts = _join_fragments(cells, starts, *bp.shape)
     cells, starts = _select(cells, starts, np.diff(starts) >= max(min_points, 2))
