@@ -67,13 +67,7 @@ def without_huge_pages():
     2.7-3.7 s where it spends 2.7 s without, the difference all in the kernel, and the
     triangulation gained nothing from the larger pages once warm. Same as running with
     ``NUMPY_MADVISE_HUGEPAGE=0``; the previous setting is restored on leaving."""
-    switch = None
-    for name in ("numpy._core.multiarray", "numpy.core.multiarray"):  # numpy 2, numpy 1
-        try:
-            switch = importlib.import_module(name)._set_madvise_hugepage
-            break
-        except (ImportError, AttributeError):
-            continue
+    switch = huge_page_switch()
     if switch is None:  # a numpy without the switch: nothing to change
         yield
         return
@@ -82,3 +76,14 @@ def without_huge_pages():
         yield
     finally:
         switch(before)
+
+
+def huge_page_switch():
+    """numpy's switch of its huge-page request (``switch(on)`` sets it and returns the setting
+    before), or None where this numpy has none."""
+    for name in ("numpy._core.multiarray", "numpy.core.multiarray"):  # numpy 2, numpy 1
+        try:
+            return importlib.import_module(name)._set_madvise_hugepage
+        except (ImportError, AttributeError):
+            continue
+    return None

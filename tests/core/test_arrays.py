@@ -54,22 +54,14 @@ def test_ctrl_c_inside_unique_rows_stays_a_keyboard_interrupt():
     assert set(outcomes) <= {"finished", "interrupted"} and "interrupted" in outcomes
 
 
-def _huge_pages_switch():
-    import importlib
-    for name in ("numpy._core.multiarray", "numpy.core.multiarray"):
-        try:
-            return importlib.import_module(name)._set_madvise_hugepage
-        except (ImportError, AttributeError):
-            continue
-    pytest.skip("this numpy has no huge-page switch")
-
-
 def test_without_huge_pages_turns_numpys_request_off_and_back():
     """Inside the block numpy asks for no transparent huge pages (the gridding's page faults
     stalled on compaction); on leaving, even by an exception, the setting is what it was."""
-    from floodmesh.core.engine.arrays import without_huge_pages
+    from floodmesh.core.engine.arrays import huge_page_switch, without_huge_pages
 
-    switch = _huge_pages_switch()
+    switch = huge_page_switch()
+    if switch is None:
+        pytest.skip("this numpy has no huge-page switch")
     initial = switch(True)
     for setting in (True, False):
         switch(setting)
