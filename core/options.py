@@ -71,6 +71,9 @@ DEFAULT_MAX_TRIANGLES = 5_000_000
 # localised break-line pieces are joined across gaps of up to this many cell sizes (--join-gap);
 # chosen on the evaluation corpus (benchmarks/RESULTS.md, "The evaluation corpus")
 JOIN_GAP_CELLS = 10.0
+# ... and bridged across crossings and junctions of up to this many, where the hinge fits find
+# the line's kink along the gap (localise.localise_traced; 0 join gap: neither)
+BRIDGE_GAP_CELLS = 30.0
 # The FEMA/NSSDA test wants at least 20 check points (FGDC-STD-007.3-1998, 3.2.1).
 MIN_CHECK_POINTS = 20
 

@@ -44,12 +44,16 @@ DC = np.array([1, 1, 0, -1, -1, -1, 0, 1], dtype=np.int64)
 
 class BreakLine:
     """One break line: ``coords`` (k, 3) x, y, z in metres, the slope (degrees) at each point,
-    and the connected break-line system it belongs to (lines that touch share a component)."""
+    and the connected break-line system it belongs to (lines that touch share a component);
+    ``bridged``, where localisation bridged a gap (see ``joining.bridges``), per vertex whether
+    it is one of a bridge's (a segment between two such vertices crosses the gap)."""
 
-    __slots__ = ("coords", "slopes", "component")
+    __slots__ = ("coords", "slopes", "component", "bridged")
 
-    def __init__(self, coords: np.ndarray, slopes: np.ndarray, component: int = 0):
+    def __init__(self, coords: np.ndarray, slopes: np.ndarray, component: int = 0,
+                 bridged: np.ndarray | None = None):
         self.coords, self.slopes, self.component = coords, slopes, component
+        self.bridged = bridged
 
     def __repr__(self):
         return f"BreakLine({len(self.coords)} points, component {self.component})"

@@ -11,6 +11,12 @@ both of one kind (a crest joins no toe), and, if ``ground`` is given, the ground
 following the straight line between the two ends' z (a channel cut through an embankment, a
 tributary's mouth in a river bank, breaks the line: there the terrain has no break to join).
 Cheapest joins (short, straight) first; no end joins twice and no chain closes on itself.
+Where a feature crosses a line (a road over a channel's banks, a levee meeting an embankment),
+the tracer stops the line on either side, where the breakpoints of both run together; the
+terrain there does not follow the straight line between the ends, but the line's kink runs on
+across the other feature. ``bridges`` offers such gaps, up to a longer ``max_gap``, to a
+terrain check of the caller's (localisation's hinge fits along the gap) that makes the line
+across them.
 After that, ``snap_t_junctions`` snaps an end that stops within about a cell of another line's
 interior, pointing at it at its height, onto it as a shared node (a T-junction); crossings are
 noded by ``mesh.build_pslg``.
@@ -53,6 +59,58 @@ def join_pieces(lines, kinds=None, *, max_gap: float, lateral: float, max_turn: 
     return _joined_chains(lines, partner, joint)
 
 
+def bridges(lines, kinds, *, max_gap: float, lateral: float, make, max_turn: float = 20.0,
+            reach: float | None = None) -> list[tuple]:
+    """Lines across the gaps where a crossing or a junction broke a line: for two ends of one
+    kind (crest or toe, not unknown) of different ``lines`` that face each other across at
+    most ``max_gap`` m (as ``join_pieces`` rules, with ``lateral`` and ``max_turn``),
+    ``make(gaps)`` gets every such gap as (a, b, kind) (the two end vertices (x, y, z), -1
+    crest or +1 toe) and gives for each the line from ``a`` to ``b`` where the terrain carries
+    the break across, else None. Cheapest gaps first, no end twice, no chain closed on itself.
+    Returns per bridge (what ``make`` gave, the end it starts at, the end it stops at), ends
+    numbered 2·line (a line's start) and 2·line + 1 (its end): ``chains_through``'s links."""
+    kinds = np.asarray(kinds, int)
+    reach = 2 * max_gap if reach is None else reach
+    points, directions, owners, ends = _line_ends(lines, reach)
+    if len(points) < 2:
+        return []
+    points, directions, owners = np.array(points), np.array(directions), np.array(owners)
+    gaps = [(a, b, kinds[owners[a] // 2] or kinds[owners[b] // 2])
+            for _, a, b, _ in _facing_ends(points, directions, owners, ends, kinds,
+                                           max_gap=max_gap, lateral=lateral,
+                                           max_turn=max_turn, ground=None)]
+    gaps = [(a, b, kind) for a, b, kind in gaps if kind]
+    made = make([(ends[a], ends[b], kind) for a, b, kind in gaps]) if gaps else []
+    root = list(range(len(lines)))
+
+    def find(i):
+        while root[i] != i:
+            root[i] = root[root[i]]
+            i = root[i]
+        return i
+
+    used, out = set(), []
+    for (a, b, _), line in zip(gaps, made):
+        ra, rb = find(owners[a] // 2), find(owners[b] // 2)
+        if line is None or owners[a] in used or owners[b] in used or ra == rb:
+            continue
+        root[max(ra, rb)] = min(ra, rb)
+        used.update((owners[a], owners[b]))
+        out.append((line, int(owners[a]), int(owners[b])))
+    return out
+
+
+def chains_through(lines, links) -> list[list[tuple[int, bool, int, int]]]:
+    """Chains of ``lines`` joined end to end where ``links`` say: pairs of ends that lie on one
+    vertex (ends numbered 2·line for a line's start, 2·line + 1 for its end), nothing trimmed.
+    Returns chains as ``join_pieces`` does."""
+    partner, joint = {}, {}
+    for a, b in links:
+        partner[a], partner[b] = b, a
+        joint[a] = joint[b] = (np.zeros(2), np.zeros(2))  # no direction: nothing beyond it
+    return _joined_chains(lines, partner, joint)
+
+
 def _line_ends(lines, reach: float):
     """The ends of ``lines`` that have a direction: per end, its point and outward direction
     (``_end_frame``), its owner (2·line for a line's start, 2·line + 1 for its end) and its
@@ -78,24 +136,23 @@ def _facing_ends(points, directions, owners, ends, kinds, *, max_gap: float, lat
     # lazy: SciPy loads only when this runs
     from scipy.spatial import cKDTree
 
-    cos_turn = np.cos(np.radians(max_turn))
-    candidates = []
-    for a, b in cKDTree(points).query_pairs(max_gap + lateral):
-        ea, eb = owners[a], owners[b]
-        if ea // 2 == eb // 2 or kinds[ea // 2] * kinds[eb // 2] < 0:
-            continue
-        da, db = directions[a], directions[b]
-        if -(da @ db) < cos_turn:
-            continue
-        mean = da - db
-        mean /= np.hypot(*mean)
-        chord = points[b] - points[a]
-        along, across = chord @ mean, abs(chord[0] * mean[1] - chord[1] * mean[0])
-        if along > max_gap or along < -max_gap / 2 or across > lateral + 0.1 * max(along, 0.0):
-            continue
-        if ground is not None and not ground(ends[a], ends[b]):
-            continue
-        candidates.append((max(along, 0.0) + 2 * across + (1 + da @ db) * max_gap, a, b, mean))
+    pairs = cKDTree(points).query_pairs(max_gap + lateral, output_type="ndarray")
+    a, b = pairs.T if len(pairs) else (np.zeros(0, int), np.zeros(0, int))
+    line_a, line_b = owners[a] // 2, owners[b] // 2
+    da, db = directions[a], directions[b]
+    facing = -(da * db).sum(axis=1)
+    ok = (line_a != line_b) & (kinds[line_a] * kinds[line_b] >= 0)
+    ok &= facing >= np.cos(np.radians(max_turn))
+    mean = da - db
+    mean /= np.maximum(np.hypot(*mean.T), 1e-12)[:, None]
+    chord = points[b] - points[a]
+    along = (chord * mean).sum(axis=1)
+    across = np.abs(chord[:, 0] * mean[:, 1] - chord[:, 1] * mean[:, 0])
+    ok &= (along <= max_gap) & (along >= -max_gap / 2)
+    ok &= across <= lateral + 0.1 * np.maximum(along, 0.0)
+    cost = np.maximum(along, 0.0) + 2 * across + (1 - facing) * max_gap
+    candidates = [(cost[k], a[k], b[k], mean[k]) for k in np.flatnonzero(ok)
+                  if ground is None or ground(ends[a[k]], ends[b[k]])]
     candidates.sort(key=lambda t: t[0])
     return candidates
 

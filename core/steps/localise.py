@@ -26,7 +26,7 @@ from numba import njit, prange
 from ..engine.nearest import nearest_line, point_index, threads_for
 from ..errors import FloodMeshError
 from .breaklines import BreakLine
-from .joining import join_pieces, snap_t_junctions
+from .joining import bridges, chains_through, join_pieces, snap_t_junctions
 from .simplify import douglas_peucker_mask
 
 
@@ -34,6 +34,11 @@ from .simplify import douglas_peucker_mask
 # 5 cm noise: 8.9 cells, left as it is), which denser or cleaner points no longer shrink (chosen
 # on the corpus of benchmarks/corpus.py: RESULTS.md, "The evaluation corpus")
 MIN_WINDOW_CELLS = 8.0
+# A gap in a line is bridged where this share of the hinge fits along it find the line's kink
+BRIDGE_HOLD = 0.6
+# A line is cut where it turns by more than CORNER_TURN degrees over CORNER_REACH hinge-window
+# half widths before and after a vertex (a corner, not a bend)
+CORNER_TURN, CORNER_REACH = 30.0, 4.0
 
 
 @dataclass(frozen=True)
@@ -487,7 +492,6 @@ def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5,
     gap's sample positions (every ``spacing`` m) lies on average within 0.05 m plus the noise
     of the line's z. Gaps under a metre pass unchecked."""
     index = index if index is not None else point_index(points)
-    radius = max(spacing, float(np.sqrt(8 / (np.pi * window.density))))
     tolerance = 0.05 + window.noise
 
     def follows(a, b) -> bool:
@@ -496,69 +500,208 @@ def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5,
             return True
         t = np.linspace(0, 1, max(3, int(gap / spacing)) + 2)[1:-1, None]
         at = a[None, :3] * (1 - t) + b[None, :3] * t
-        indptr, indices = index.neighbours(at[:, :2], radius)
-        near = np.split(indices, indptr[1:-1])
-        off = [abs(_median(points[k, 2]) - z) for k, z in zip(near, at[:, 2]) if len(k) >= 3]
-        return not off or float(np.mean(off)) <= tolerance
+        off = np.abs(_ground_z(points, window, at[:, :2], index, spacing) - at[:, 2])
+        return not np.isfinite(off).any() or float(np.nanmean(off)) <= tolerance
 
     return follows
+
+
+def _ground_z(points: np.ndarray, window: FitWindow, xy: np.ndarray, index,
+              spacing: float = 0.5) -> np.ndarray:
+    """The median z of the measured points within a ``spacing`` (m) of each of ``xy``, or of
+    the 8 or so nearest where they are sparser; NaN where fewer than 3 lie that close."""
+    radius = max(spacing, float(np.sqrt(8 / (np.pi * window.density))))
+    indptr, indices = index.neighbours(np.asarray(xy, float), radius)
+    return np.array([_median(points[k, 2]) if len(k) >= 3 else np.nan
+                     for k in np.split(indices, indptr[1:-1])])
+
+
+def _corners_cut(keep: np.ndarray, coords: np.ndarray, reach: float,
+                 max_turn: float) -> list[np.ndarray]:
+    """The kept vertex indices split where the line turns a corner: at the vertex where its
+    chords to the points ``reach`` m before and after it (or its ends, if nearer) turn most, by
+    more than ``max_turn`` degrees; then each part the same way (the vertex ends one part and
+    starts the next). At a crossing or a junction the tracer runs round the corner from one
+    feature's line onto the other's, or back onto its own; cut there, each arm can join the
+    rest of its own line."""
+    xy = coords[keep, :2]
+    if len(xy) < 3:
+        return [keep]
+    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+
+    def at(distance):  # the points ``distance`` m along the line (its ends beyond them)
+        return np.column_stack([np.interp(distance, along, xy[:, 0]),
+                                np.interp(distance, along, xy[:, 1])])
+
+    u, v = xy - at(along - reach), at(along + reach) - xy
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = (u * v).sum(axis=1) / (np.hypot(*u.T) * np.hypot(*v.T))
+    turn = np.degrees(np.arccos(np.clip(np.nan_to_num(cos, nan=1.0), -1.0, 1.0)))
+    turn[[0, -1]] = 0.0
+    i = int(np.argmax(turn))
+    if turn[i] <= max_turn:
+        return [keep]
+    return (_corners_cut(keep[:i + 1], coords, reach, max_turn)
+            + _corners_cut(keep[i:], coords, reach, max_turn))
+
+
+def _corners_left(pieces) -> list[tuple[int, int]]:
+    """Links (``joining.chains_through``) of the pieces' ends that lie on one point: the two
+    arms of a corner cut (``_corners_cut``) that are still free there."""
+    free, links = {}, []
+    for k, p in enumerate(pieces):
+        for side, vertex in ((0, p[0][0]), (1, p[0][-1])):
+            key = (float(vertex[0]), float(vertex[1]))
+            if key in free:
+                links.append((free.pop(key), 2 * k + side))
+            else:
+                free[key] = 2 * k + side
+    return links
+
+
+def _kinds(pieces) -> list[int]:
+    """Per piece (coords, slopes, component, fit RMS, kink, ...): -1 a crest, +1 a toe (the median
+    sign of its vertices' slope changes), 0 where no vertex was fitted."""
+    return [int(np.sign(_median(p[4][~np.isnan(p[4])]))) if np.isfinite(p[4]).any() else 0
+            for p in pieces]
+
+
+def _chained(pieces, chains) -> list[tuple]:
+    """The ``pieces`` (coords, slopes, component, fit RMS, kink, bridged) joined as
+    ``join_pieces``'s ``chains`` say: one piece per chain, its arrays the chain's parts end to
+    end (a vertex that repeats the one before it, where a bridge meets its line, once)."""
+    out = []
+    for chain in chains:
+        parts = [[(p[j][::-1] if reverse else p[j])[first:stop] for j in (0, 1, 3, 4, 5)]
+                 for p, reverse, first, stop in ((pieces[k], *rest) for k, *rest in chain)]
+        coords, slopes, fit, kink, bridged = (np.concatenate([part[j] for part in parts])
+                                              for j in range(5))
+        new = np.r_[True, (np.diff(coords[:, :2], axis=0) != 0).any(axis=1)]  # a bridge's end
+        repeated = np.flatnonzero(~new)
+        bridged[repeated - 1] |= bridged[repeated]
+        out.append((coords[new], slopes[new], min(pieces[k][2] for k, *_ in chain), fit[new],
+                    kink[new], bridged[new]))
+    return out
+
+
+def _bridges_fitted(points: np.ndarray, window: FitWindow, s_crit: float, index,
+                    tolerance: float, hold: float = BRIDGE_HOLD):
+    """A ``make`` for ``joining.bridges``: each gap's chord, a vertex every half a hinge
+    window along it, localised; a bridge where at least ``hold`` of those vertices find a kink
+    of the line's kind (a crest across a channel's bed, a bank's toe across an embankment's
+    slope), made of the ends and those vertices, thinned by Douglas–Peucker within
+    ``tolerance`` m, else None (a channel cut through a levee: no crest on the bed)."""
+    step = window.half_length
+
+    def make(gaps):
+        chords = []
+        for a, b, _ in gaps:  # the ends too, for the chord's direction at every vertex
+            n = max(1, int(np.hypot(*(b[:2] - a[:2])) / step))
+            t = np.arange(n + 2)[:, None] / (n + 1)
+            chords.append(a[None, :3] * (1 - t) + b[None, :3] * t)
+        moved, fits, kinks = localise_breaklines(chords, points, window, s_crit=s_crit,
+                                                 index=index)
+        out = []
+        for (a, b, kind), coords, fit, kink in zip(gaps, moved, fits, kinks):
+            coords, fit, kink = coords[1:-1], fit[1:-1], kink[1:-1]
+            ok = np.isfinite(fit) & (np.sign(kink) == kind)
+            if ok.mean() < hold:
+                out.append(None)
+                continue
+            # where the fit failed (another feature's break crosses the window), the vertex
+            # stays on the chord at the ground's height: a line left straight there would
+            # carry the chord's z across the other feature
+            coords[~ok, 2] = _ground_z(points, window, coords[~ok, :2], index)
+            keep = ok | np.isfinite(coords[:, 2])
+            fit[~ok] = kink[~ok] = np.nan
+            nan = np.full(1, np.nan)
+            coords = np.vstack([a[None, :3], coords[keep], b[None, :3]])
+            fit, kink = np.r_[nan, fit[keep], nan], np.r_[nan, kink[keep], nan]
+            # thinned as the traced lines are: a vertex every half window would hold the
+            # mesh's smallest triangles where the bridge runs under water
+            thin = douglas_peucker_mask(coords, tolerance)
+            out.append((coords[thin], fit[thin], kink[thin]))
+        return out
+
+    return make
 
 
 def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
                     max_gap: float = 12.0, join_gap: float | None = None,
-                    join_lateral: float = 1.0, index=None) -> tuple[list, list[float], dict]:
+                    join_lateral: float = 1.0, bridge_gap: float | None = None,
+                    index=None) -> tuple[list, list[float], dict]:
     """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
     move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within
     ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
-    are cut where they hop across a band from crest to toe (``_hops_cut``), and pieces of one
-    kind (crest or toe) whose ends face each other across at most ``join_gap`` m are joined
-    (``joining.join_pieces``, lateral offset ``join_lateral`` m; None or 0: no joining), and line
-    ends that stop within ``join_lateral`` plus a tenth of ``join_gap`` m of another line's
-    interior, pointing at it at its height (within ``tolerance`` m plus a rise at ``s_crit``),
-    are snapped onto it (``joining.snap_t_junctions``). Returns
+    are cut where they hop across a band from crest to toe (``_hops_cut``) and where they turn
+    a corner (``_corners_cut``), and pieces of one kind (crest or toe) whose ends face each
+    other across at most ``join_gap`` m are joined (``joining.join_pieces``, lateral offset
+    ``join_lateral`` m; None or 0: no joining); the gaps left of up to ``bridge_gap`` m where
+    the terrain carries the line's kink across (a crossing, a junction: ``joining.bridges``,
+    ``_bridges_fitted``) are bridged; line ends that stop within ``join_lateral`` plus a tenth
+    of ``join_gap`` m of another line's interior, pointing at it at its height (within
+    ``tolerance`` m plus a rise at ``s_crit``), are snapped onto it
+    (``joining.snap_t_junctions``). Returns
     the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
     where none moved) and counts. ``index``: ``nearest.point_index(points)`` if built."""
     index = index if index is not None else point_index(points)  # one for both uses below
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
                                                    window, s_crit=s_crit, index=index)
-    pieces, hops = [], 0  # (coords, slopes, component, fit RMS, kink) per piece
+    pieces, hops = [], 0  # (coords, slopes, component, fit RMS, kink, bridged) per piece
     for line, coords, fit, kink in zip(lines, moved, confidence, kinks):
         fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap)
         keep = np.nonzero(fitted)[0][douglas_peucker_mask(coords[fitted], tolerance)]
-        for piece in _hops_cut(keep, kink):
+        for piece in (corner for hop in _hops_cut(keep, kink)
+                      for corner in _corners_cut(hop, coords, CORNER_REACH * window.half_width,
+                                                   CORNER_TURN)):
             hops += 1
             if len(piece) >= 2:
                 pieces.append((coords[piece], line.slopes[piece], line.component, fit[piece],
-                               kink[piece]))
+                               kink[piece], np.zeros(len(piece), bool)))
         hops -= 1
-    chains = [[(k, False, 0, len(p[0]))] for k, p in enumerate(pieces)]
+    joined = len(pieces)
     if join_gap:
-        kinds = [np.sign(_median(p[4][~np.isnan(p[4])])) if np.isfinite(p[4]).any() else 0
-                 for p in pieces]
-        chains = join_pieces([p[0] for p in pieces], kinds, max_gap=join_gap,
-                             lateral=join_lateral, ground=_ground_follows(points, window,
-                                                                     index=index))
-    out, per_line = [], []
-    for chain in chains:
-        parts = [[(p[j][::-1] if reverse else p[j])[first:stop] for j in (0, 1, 3)]
-                 for p, reverse, first, stop in ((pieces[k], *rest) for k, *rest in chain)]
-        coords, slopes, fit = (np.concatenate([part[j] for part in parts]) for j in range(3))
-        out.append(BreakLine(coords, slopes, min(pieces[k][2] for k, *_ in chain)))
-        per_line.append(_median(fit[~np.isnan(fit)]) if np.isfinite(fit).any() else float("nan"))
+        pieces = _chained(pieces, join_pieces(
+            [p[0] for p in pieces], _kinds(pieces), max_gap=join_gap, lateral=join_lateral,
+            ground=_ground_follows(points, window, index=index)))
+    joined -= len(pieces)
+    bridged = 0
+    if join_gap and bridge_gap:
+        made = bridges([p[0] for p in pieces], _kinds(pieces), max_gap=bridge_gap,
+                       lateral=join_lateral,
+                       make=_bridges_fitted(points, window, s_crit, index, tolerance))
+        links = []
+        for (coords, fit, kink), start, stop in made:
+            m = len(pieces)  # the bridge runs from the end ``start`` to the end ``stop``
+            pieces.append((coords, np.full(len(coords), np.nan),
+                           min(pieces[start // 2][2], pieces[stop // 2][2]), fit, kink,
+                           np.ones(len(coords), bool)))
+            links += [(start, 2 * m), (2 * m + 1, stop)]
+        if made:
+            pieces = _chained(pieces, chains_through([p[0] for p in pieces], links))
+        bridged = len(made)
+    # a corner where neither arm joined or bridged anything is no use cut: the line as traced
+    pieces = _chained(pieces, chains_through([p[0] for p in pieces], _corners_left(pieces)))
+    out = [BreakLine(coords, slopes, component, bridged if bridged.any() else None)
+           for coords, slopes, component, _, _, bridged in pieces]
+    per_line = [_median(p[3][~np.isnan(p[3])]) if np.isfinite(p[3]).any() else float("nan")
+                for p in pieces]
     t_junctions = 0
     if join_gap and out:
         snapped, takes, t_junctions = snap_t_junctions(
             [line.coords for line in out], tolerance=join_lateral + 0.1 * join_gap,
             rise=tolerance, grade=float(np.tan(np.radians(s_crit))))
-        out = [BreakLine(c, line.slopes[take], line.component)
+        out = [BreakLine(c, line.slopes[take], line.component,
+                         None if line.bridged is None else line.bridged[take])
                for c, take, line in zip(snapped, takes, out)]
     every = np.concatenate(confidence) if confidence else np.zeros(0)
     done = np.isfinite(every)
     return out, per_line, {"vertices": int(every.size), "vertices_localised": int(done.sum()),
                            "vertices_kept": int(sum(len(line.coords) for line in out)),
                            "hop_segments_cut": hops,
-                           "pieces_joined": len(pieces) - len(chains),
+                           "pieces_joined": joined,
+                           "gaps_bridged": bridged,
                            "t_junctions_snapped": t_junctions,
                            "join_gap_m": join_gap or 0.0,
                            "thinning_tolerance_m": tolerance,
