@@ -26,7 +26,7 @@ from ..io.outputs import check_output_folder, scratch_folder, staged_folder
 from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
 from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
-from ..options import (EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS, RunOptions,
+from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS, RunOptions,
                        check_sigma_fits)
 from ..points import PointCloud, repeated_positions_note, sparse_survey_note, split_holdout
 from ..raster import Grid
@@ -37,7 +37,7 @@ from ..steps.drainage import (CHANNEL_AREA, flow_area_for, flow_refined, flow_si
                               flow_spacing, height_above_drainage)
 from ..steps.export import export_formats
 from ..steps.grid import check_grid, grid_points_linear
-from ..steps.hydraulic_lines import lines_for_hydraulics
+from ..steps.hydraulic_lines import lines_for_hydraulics, without_wet_bridges
 from ..steps.hydraulics import hydraulic_checks
 from ..steps.localise import fit_node_elevations, fit_window, localise_traced
 from ..steps.mesh import (build_mesh, domain_from_dem, edge_tolerance, mesh_quality,
@@ -178,17 +178,19 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     # gridding and the terrain fits before it keep both cores busy
     later = _say_later(front, steps, note)
     size, flow, spacing, max_area = _size_fields(front, options, fits.window, hand, flow_area)
+    low_ground = spacing  # finite on low ground (see drainage.flow_spacing)
     hand = None  # the flow zone's work is in the flow size and spacing now
     domain = (front.domain if front.domain is not None else domain_from_dem(
         front.dem, tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size)))
-    plain = steps.run("hydraulic lines", _lines_for_flood, front, options, lines, domain, None)
+    plain = steps.run("hydraulic lines", _lines_for_flood, front, options, lines, domain, None,
+                      spacing)
     kept = {}
 
     def build(size, spacing):
         """The mesh of ``size``, its lines spaced for a flood model (see hydraulic_lines) and
         thinned to the flow ``spacing`` (a Grid, or None)."""
         kept["lines"], kept["stats"] = (plain if spacing is None else _lines_for_flood(
-            front, options, lines, domain, spacing))
+            front, options, lines, domain, spacing, low_ground))
         return build_mesh(front.dem, kept["lines"] + front.own_lines,
                           min_angle=options.min_angle, max_area=max_area,
                           conforming=options.conforming, domain=domain, size_field=size,
@@ -330,7 +332,8 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
         lines, confidence, counts = steps.run(
             "localise", localise_traced, lines, front.measured, fits.window,
             s_crit=options.s_crit, tolerance=dem.cell_size / 10, max_gap=20 * dem.cell_size,
-            join_gap=join_gap, join_lateral=dem.cell_size, index=fits.index)
+            join_gap=join_gap, join_lateral=dem.cell_size,
+            bridge_gap=BRIDGE_GAP_CELLS * dem.cell_size if join_gap else None, index=fits.index)
         fits.counts.update(counts)
     fits.let_go()
     return simplified, lines, confidence
@@ -358,11 +361,13 @@ def _size_fields(front: Front, options: RunOptions, window, hand, flow_area):
             flow_spacing(dem, flow_area=flow_area, hand=hand), max_area)
 
 
-def _lines_for_flood(front: Front, options: RunOptions, lines, domain, spacing):
+def _lines_for_flood(front: Front, options: RunOptions, lines, domain, spacing, low_ground):
     """(the detected lines' coordinates, their statistics or None): lines a flood model can
-    afford (see hydraulic_lines), thinned to the flow ``spacing`` (a Grid) where given, unless
+    afford (see hydraulic_lines), without their bridges on ``low_ground`` (a Grid, finite there,
+    or None), thinned to the flow ``spacing`` (a Grid) where given, unless
     ``options.min_spacing`` is 0."""
-    detected = [line.coords for line in lines]
+    detected = without_wet_bridges([line.coords for line in lines],
+                                   [line.bridged for line in lines], low_ground)
     least = front.dem.cell_size if options.min_spacing is None else options.min_spacing
     if least <= 0:
         return detected, None

@@ -6,6 +6,8 @@ of the domain edge, where they cross or nearly touch the modeller's own lines or
 and where simplification left vertices closer together than the mesh can resolve. With a
 smallest spacing s (default: the cell size d):
 
+- a bridge that localisation laid across a crossing (``without_wet_bridges``) is left out
+  where it lies on low ground;
 - a detected line that folds back (segments meeting at less than ``FOLD_ANGLE``) is cut there
   into two lines;
 - detected lines are clipped back ``clearance`` (default 2 s) from the domain edge;
@@ -160,6 +162,30 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     stats.update(lines_out=len(out), vertices_out=int(sum(len(c) for c in out)),
                  spacing_m=spacing, clearance_m=clearance)
     return out, stats
+
+
+def without_wet_bridges(lines, bridged, low_ground) -> list[np.ndarray]:
+    """``lines`` ((k, 3) arrays) without the segments of their bridges (``bridged``: per line,
+    per vertex whether it is a bridge's, or None; see ``localise.localise_traced``) that lie on
+    low ground (``low_ground``: a Grid, finite there, e.g. ``drainage.flow_spacing``; None:
+    none). A bridge carries a line across a crossing; under water it adds little that a flood
+    feels, and its crossings with the other feature's lines hold the wet zone's smallest
+    triangles, which set the flood model's time step (RESULTS.md, "Crossings and junctions")."""
+    if low_ground is None:
+        return list(lines)
+    out = []
+    for coords, flags in zip(lines, bridged):
+        if flags is None or len(coords) < 2:
+            out.append(coords)
+            continue
+        middle = 0.5 * (coords[:-1, :2] + coords[1:, :2])
+        drop = flags[:-1] & flags[1:] & (_spacing_at(low_ground, middle, 0.0) > 0)
+        if not drop.any():
+            out.append(coords)
+            continue
+        edges = np.flatnonzero(np.diff(np.r_[0, (~drop).astype(np.int8), 0]))
+        out += [coords[a:b + 1] for a, b in zip(edges[::2], edges[1::2])]
+    return out
 
 
 def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: np.ndarray,

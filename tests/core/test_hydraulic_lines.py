@@ -265,3 +265,20 @@ def test_a_line_running_into_another_ends_on_it_not_a_spacing_short():
     glancing = np.array([[10, 20, 1], [40, 29.2, 1]])
     _, stats = lines_for_hydraulics([bar, glancing], None, spacing=1.0)
     assert stats["ends_joined"] == 0
+
+
+def test_a_bridge_on_low_ground_is_left_out_of_the_mesh_lines_and_kept_on_high_ground():
+    """A line bridged across a crossing (vertices 3-6 a bridge's) loses the bridge's segments
+    where they lie on low ground (x < 10 here) and keeps them, and the rest, elsewhere."""
+    from floodmesh.core.steps.hydraulic_lines import without_wet_bridges
+
+    x = np.arange(0.0, 20.0, 2.0)  # vertices at x = 0, 2, ..., 18
+    line = np.column_stack([x, np.full(len(x), 5.0), np.zeros(len(x))])
+    bridged = np.zeros(len(x), bool)
+    bridged[3:7] = True  # x = 6 … 12: segments 6-8, 8-10, 10-12 are the bridge's
+    values = np.full((10, 20), np.nan, np.float32)
+    values[:, :10] = 3.0  # low ground west of x = 10
+    low = Grid(values, Affine(1.0, 0, 0, 0, -1.0, 10.0), CRS.from_epsg(32633))
+    pieces = without_wet_bridges([line, line], [bridged, None], low)
+    assert [list(p[:, 0]) for p in pieces] == [[0, 2, 4, 6], [10, 12, 14, 16, 18], list(x)]
+    assert without_wet_bridges([line], [bridged], None)[0] is line  # no low ground known
