@@ -26,8 +26,8 @@ from ..io.outputs import check_output_folder, scratch_folder, staged_folder
 from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
 from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
-from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS, RunOptions,
-                       check_sigma_fits)
+from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS,
+                       RunOptions, check_sigma_fits)
 from ..points import PointCloud, repeated_positions_note, sparse_survey_note, split_holdout
 from ..raster import Grid
 from ..steps.accuracy import accuracy_statistics, residuals

@@ -75,29 +75,17 @@ def bridges(lines, kinds, *, max_gap: float, lateral: float, make, max_turn: flo
     if len(points) < 2:
         return []
     points, directions, owners = np.array(points), np.array(directions), np.array(owners)
-    gaps = [(a, b, kinds[owners[a] // 2] or kinds[owners[b] // 2])
-            for _, a, b, _ in _facing_ends(points, directions, owners, ends, kinds,
-                                           max_gap=max_gap, lateral=lateral,
-                                           max_turn=max_turn, ground=None)]
-    gaps = [(a, b, kind) for a, b, kind in gaps if kind]
-    made = make([(ends[a], ends[b], kind) for a, b, kind in gaps]) if gaps else []
-    root = list(range(len(lines)))
-
-    def find(i):
-        while root[i] != i:
-            root[i] = root[root[i]]
-            i = root[i]
-        return i
-
-    used, out = set(), []
-    for (a, b, _), line in zip(gaps, made):
-        ra, rb = find(owners[a] // 2), find(owners[b] // 2)
-        if line is None or owners[a] in used or owners[b] in used or ra == rb:
-            continue
-        root[max(ra, rb)] = min(ra, rb)
-        used.update((owners[a], owners[b]))
-        out.append((line, int(owners[a]), int(owners[b])))
-    return out
+    gaps = [(c, kinds[owners[c[1]] // 2] or kinds[owners[c[2]] // 2])
+            for c in _facing_ends(points, directions, owners, ends, kinds, max_gap=max_gap,
+                                  lateral=lateral, max_turn=max_turn, ground=None)]
+    gaps = [(c, kind) for c, kind in gaps if kind]
+    made = make([(ends[c[1]], ends[c[2]], kind) for c, kind in gaps]) if gaps else []
+    found = [(c, line) for (c, _), line in zip(gaps, made) if line is not None]
+    # the joins' own choice among the gaps the terrain bridges: cheapest first, no end twice,
+    # no chain closed on itself
+    partner, _ = _chosen_joins([c for c, _ in found], points, owners, len(lines))
+    return [(line, int(owners[a]), int(owners[b])) for (_, a, b, _), line in found
+            if partner.get(owners[a]) == owners[b]]
 
 
 def chains_through(lines, links) -> list[list[tuple[int, bool, int, int]]]:

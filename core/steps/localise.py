@@ -666,7 +666,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
             [p[0] for p in pieces], _kinds(pieces), max_gap=join_gap, lateral=join_lateral,
             ground=_ground_follows(points, window, index=index)))
     joined -= len(pieces)
-    bridged = 0
+    n_bridges = 0
     if join_gap and bridge_gap:
         made = bridges([p[0] for p in pieces], _kinds(pieces), max_gap=bridge_gap,
                        lateral=join_lateral,
@@ -680,9 +680,11 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
             links += [(start, 2 * m), (2 * m + 1, stop)]
         if made:
             pieces = _chained(pieces, chains_through([p[0] for p in pieces], links))
-        bridged = len(made)
+        n_bridges = len(made)
     # a corner where neither arm joined or bridged anything is no use cut: the line as traced
-    pieces = _chained(pieces, chains_through([p[0] for p in pieces], _corners_left(pieces)))
+    corners = _corners_left(pieces)
+    if corners:
+        pieces = _chained(pieces, chains_through([p[0] for p in pieces], corners))
     out = [BreakLine(coords, slopes, component, bridged if bridged.any() else None)
            for coords, slopes, component, _, _, bridged in pieces]
     per_line = [_median(p[3][~np.isnan(p[3])]) if np.isfinite(p[3]).any() else float("nan")
@@ -701,7 +703,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                            "vertices_kept": int(sum(len(line.coords) for line in out)),
                            "hop_segments_cut": hops,
                            "pieces_joined": joined,
-                           "gaps_bridged": bridged,
+                           "gaps_bridged": n_bridges,
                            "t_junctions_snapped": t_junctions,
                            "join_gap_m": join_gap or 0.0,
                            "thinning_tolerance_m": tolerance,
