@@ -11,7 +11,7 @@ a triangle, where matplotlib's trapezoid map took about 1 kB (and 6 s for 260,00
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 def locate(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray,
@@ -97,9 +97,10 @@ def _side(xy, i, j, x, y):
              - (xy[i, 1] - xy[j, 1]) * (x - xy[j, 0]))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _locate(xy, triangles, bounds, members, cell, cols, rows, px, py, found):
-    for p in range(px.shape[0]):
+    """Each point's triangle (on all cores: every point is its own search)."""
+    for p in prange(px.shape[0]):
         x, y = px[p], py[p]
         if not (x >= 0.0 and y >= 0.0):  # also NaN
             continue
@@ -119,10 +120,10 @@ def _locate(xy, triangles, bounds, members, cell, cols, rows, px, py, found):
                 break
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _interpolate(xy, triangles, z, px, py, found, values):
     """Barycentric interpolation of the node elevations in each point's triangle."""
-    for p in range(px.shape[0]):
+    for p in prange(px.shape[0]):
         t = found[p]
         if t < 0:
             continue
