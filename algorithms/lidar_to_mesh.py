@@ -57,7 +57,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
     SIMPLIFY, TOLERANCE, REFINE = "SIMPLIFY", "TOLERANCE", "REFINE"
     CLASSES, MAX_GAP, SIGMA, SENSITIVITY = "CLASSES", "MAX_GAP", "SIGMA", "SENSITIVITY"
     LOG_KERNEL, ZERO_CROSSINGS = "LOG_KERNEL", "ZERO_CROSSINGS"
-    LOCALISE, NODE_ELEVATION = "LOCALISE", "NODE_ELEVATION"
+    LOCALISE, NODE_ELEVATION, MISFIT_PASSES = "LOCALISE", "NODE_ELEVATION", "MISFIT_PASSES"
     CONFORMING, FAR_FIELD_AREA, FLOW_AREA = "CONFORMING", "FAR_FIELD_AREA", "FLOW_AREA"
     MIN_ANGLE = "MIN_ANGLE"
     MAX_AREA = "MAX_AREA"
@@ -150,7 +150,8 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             defaultValue=[]))
         self.addParameter(QgsProcessingParameterBoolean(
             self.REFINE, self.tr("Refine until no triangle's points misfit by more than 10 cm "
-                                 "RMS and none by more than 25 cm (step 9)"), defaultValue=False))
+                                 "RMS beyond their noise and none by more than 25 cm (step 9)"),
+            defaultValue=False))
         self.addParameter(QgsProcessingParameterBoolean(
             self.LOCALISE, self.tr("Move break lines onto the crest and toe of a two-plane fit to "
                                    "the points"), defaultValue=defaults.localise))
@@ -158,6 +159,10 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             self.NODE_ELEVATION, self.tr("Elevation of nodes off the break lines"),
             options=[self.tr("Local plane fit of the points"), self.tr("Bilinear from the DEM")],
             defaultValue=NODE_ELEVATIONS.index(defaults.node_elevation)))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MISFIT_PASSES, self.tr("Passes splitting triangles whose points misfit beyond "
+                                        "their noise (crossings, junctions; 0: off)"), INTEGER,
+            defaults.misfit_passes, minValue=0, maxValue=8))
         self.addParameter(QgsProcessingParameterBoolean(
             self.CONFORMING, self.tr("Conforming Delaunay mesh (Triangle's switch D)"),
             defaultValue=defaults.conforming))
@@ -216,6 +221,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             localise=self.parameterAsBool(parameters, self.LOCALISE, context),
             node_elevation=NODE_ELEVATIONS[self.parameterAsEnum(parameters, self.NODE_ELEVATION,
                                                                 context)],
+            misfit_passes=self.parameterAsInt(parameters, self.MISFIT_PASSES, context),
             conforming=self.parameterAsBool(parameters, self.CONFORMING, context),
             far_field_area=self.optional_number(parameters, self.FAR_FIELD_AREA, context),
             flow_area=self.optional_number(parameters, self.FLOW_AREA, context),

@@ -26,7 +26,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
             "round and never used for refinement.")
     DEM, BREAKLINES, POINTS, POINTS_FILE, CHECK = ("DEM", "BREAKLINES", "POINTS", "POINTS_FILE",
                                                    "CHECK")
-    MIN_ANGLE, MAX_AREA, LOWER, UPPER = "MIN_ANGLE", "MAX_AREA", "LOWER", "UPPER"
+    MIN_ANGLE, MAX_AREA, LOWER, UPPER, NOISE = ("MIN_ANGLE", "MAX_AREA", "LOWER", "UPPER",
+                                                "NOISE")
     TARGET_RMSE, TARGET_MAX, MAX_NODES, MAX_ROUNDS = ("TARGET_RMSE", "TARGET_MAX", "MAX_NODES",
                                                       "MAX_ROUNDS")
     OUTPUT, REPORT, NODES, RMSE = "OUTPUT", "REPORT", "NODES", "RMSE"
@@ -56,8 +57,11 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
 
         number(self.MIN_ANGLE, "Minimum angle (degrees)", 25.0, 0.01)
         number(self.MAX_AREA, "Maximum triangle area (m²)", 100.0, 0.0001)
-        number(self.LOWER, "Lower bound: refine where RMS residual exceeds (m)", 0.10, 0.0001)
+        number(self.LOWER, "Lower bound: refine where RMS residual exceeds the noise by (m, in "
+               "quadrature)", 0.10, 0.0001)
         number(self.UPPER, "Upper bound: insert points whose residual exceeds (m)", 0.25, 0.0001)
+        number(self.NOISE, "Vertical noise of the points (m; default estimated from them, 0: "
+               "exact)", None, 0.0, optional=True)
         number(self.TARGET_RMSE, "Target RMSE (m)", None, 0.0, optional=True)
         number(self.TARGET_MAX, "Target maximum residual (m)", None, 0.0, optional=True)
         number(self.MAX_NODES, "Node budget", 1_000_000, 3,
@@ -103,6 +107,7 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
             "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
             "lower": self.parameterAsDouble(parameters, self.LOWER, context),
             "upper": self.parameterAsDouble(parameters, self.UPPER, context),
+            "noise": self.optional_number(parameters, self.NOISE, context),
             "target_rmse": self.optional_number(parameters, self.TARGET_RMSE, context),
             "target_max": self.optional_number(parameters, self.TARGET_MAX, context),
             "max_nodes": self.parameterAsInt(parameters, self.MAX_NODES, context),

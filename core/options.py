@@ -74,6 +74,18 @@ JOIN_GAP_CELLS = 10.0
 # ... and bridged across crossings and junctions of up to this many, where the hinge fits find
 # the line's kink along the gap (localise.localise_traced; 0 join gap: neither)
 BRIDGE_GAP_CELLS = 30.0
+# misfit refinement (RunOptions.misfit_passes): a triangle whose points' mean square residual
+# exceeds their noise² by more than MISFIT_EXCESS² (m) is split, down to MISFIT_FLOOR_CELLS
+# cells² a quarter; chosen on the evaluation corpus (benchmarks/RESULTS.md, "Misfits split")
+MISFIT_EXCESS, MISFIT_FLOOR_CELLS = 0.05, 2.0
+MISFIT_DENSITY = 2.0  # points a m² the misfit pass measures (every k-th of denser surveys)
+# ... and no more than MISFIT_SHARE of the mesh's triangles a pass, the worst first (an urban
+# DEM misfits at every building: uncapped, Merewether's mesh tripled and flooded at 2.7x the CPU)
+MISFIT_SHARE = 0.02
+# on low ground (the flow zone's), where the smallest wet triangle sets a flood model's time
+# step, no split below MISFIT_LOW_FLOOR times that floor (the corpus floods: 1x took 21-43 %
+# more time steps, 2x within 5 % of none, 4x none and lost the crossings' gains)
+MISFIT_LOW_FLOOR = 2.0
 # The FEMA/NSSDA test wants at least 20 check points (FGDC-STD-007.3-1998, 3.2.1).
 MIN_CHECK_POINTS = 20
 
@@ -289,8 +301,11 @@ class RunOptions:
     formats: tuple[str, ...] = ()   # solver exports written beside mesh.2dm (EXPORT_FORMATS)
     max_triangles: int = DEFAULT_MAX_TRIANGLES  # refuse meshes estimated to be larger
     refine: bool = False            # refine until the residual bounds hold (step 9)
-    refine_lower: float = 0.10      # m: refine triangles whose points' RMS residual exceeds it
+    refine_lower: float = 0.10      # m: refine where points' RMS residual exceeds noise by it
     refine_upper: float = 0.25      # m: insert points whose residual exceeds it
+    # passes refining where the mesh misfits the points beyond their noise (a fold no line
+    # describes: crossings, junctions, rounded ends; refine.refine_mesh), without --refine
+    misfit_passes: int = 1
     localise: bool = True           # break-line vertices onto a two-plane (hinge) fit's kink
     node_elevation: str = "plane"   # NODE_ELEVATIONS: other nodes' z from a local plane fit
     node_radius: float | None = None  # m, the plane fit's radius; default from density, noise
@@ -338,6 +353,9 @@ class RunOptions:
             if lower > upper:
                 raise FloodMeshError(f"the refinement lower bound ({lower:g} m) is above the "
                                      f"upper bound ({upper:g} m); 0.10 and 0.25 are usual")
+        if not (isinstance(self.misfit_passes, int) and 0 <= self.misfit_passes <= 8):
+            raise FloodMeshError(f"the misfit refinement passes must be a whole number from 0 "
+                                 f"(off) to 8, got {self.misfit_passes}; 1 is the default")
         check_holdout(self.holdout)
         check_seed(self.seed)
         if self.workers is not None:

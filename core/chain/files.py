@@ -223,11 +223,12 @@ def measured_points(path, crs=None, fallback=None):
 def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=None, check=None,
            min_angle: float = 25.0, max_area: float = 100.0, lower: float = 0.10,
            upper: float = 0.25, target_rmse=None, target_max=None, max_nodes: int = 1_000_000,
-           max_rounds: int = 8, report=None, crs=None, progress=None, cancelled=None,
-           note=None) -> dict:
+           max_rounds: int = 8, noise=None, report=None, crs=None, progress=None,
+           cancelled=None, note=None) -> dict:
     """Step 9: refine the mesh with the measured ``points`` until no triangle's points misfit by
-    more than ``lower`` m RMS and none by more than ``upper`` m (or the targets are met);
-    ``check`` points are only measured, each round."""
+    more than ``lower`` m RMS beyond their ``noise`` (m; None: estimated from them) and none by
+    more than ``upper`` m (or the targets are met); ``check`` points are only measured, each
+    round."""
     # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import mesh_quality
     from ..steps.refine import refine_mesh
@@ -239,7 +240,8 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
     refined, rounds = refine_mesh(terrain, lines, measured, check=check_xyz, domain=domain,
                                   min_angle=min_angle, max_area=max_area, lower=lower,
                                   upper=upper, target_rmse=target_rmse, target_max=target_max,
-                                  max_nodes=max_nodes, max_rounds=max_rounds, progress=progress,
+                                  max_nodes=max_nodes, max_rounds=max_rounds, noise=noise,
+                                  progress=progress,
                                   cancelled=cancelled)
     io.write_mesh_2dm(output, refined.nodes, refined.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "NODES": len(refined.nodes), "RMSE": rounds[-1].rmse_m,

@@ -27,9 +27,11 @@ from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
 from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
 from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS,
-                       RunOptions, check_sigma_fits)
+                       MISFIT_DENSITY, MISFIT_EXCESS, MISFIT_FLOOR_CELLS, MISFIT_LOW_FLOOR,
+                       MISFIT_SHARE, RunOptions,
+                       check_sigma_fits)
 from ..points import PointCloud, repeated_positions_note, sparse_survey_note, split_holdout
-from ..raster import Grid
+from ..raster import Grid, nearest_value
 from ..steps.accuracy import accuracy_statistics, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
@@ -202,7 +204,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     detected, line_stats = kept["lines"], kept["stats"]
     mesh_lines = detected + front.own_lines
     mesh, rounds = _terrain_z(mesh, front, options, steps, fits, mesh_lines, domain, size,
-                              max_area, cancelled)
+                              max_area, cancelled, low_ground)
     # the terrain fits are done: their points and index go before the assessment and writing
     size = fits.index = front.measured = None
     res = steps.run("assess", residuals, mesh, front.holdout.xyz)
@@ -257,7 +259,7 @@ def _step_weights(options: RunOptions) -> dict:
                "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
                "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
                "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
-    del weights["node elevations" if options.refine else "refine"]
+    del weights["node elevations" if _refining(options) else "refine"]
     if not options.localise:
         del weights["localise"]
     if not (options.localise or options.node_elevation == "plane"):
@@ -377,8 +379,14 @@ def _lines_for_flood(front: Front, options: RunOptions, lines, domain, spacing, 
                                 within=within, flow_spacing=spacing)
 
 
+def _refining(options: RunOptions) -> bool:
+    """Whether a run refines its mesh on the points (--refine, or the misfit passes, which take
+    their noise from the plane fits' window)."""
+    return options.refine or bool(options.misfit_passes and options.node_elevation == "plane")
+
+
 def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits,
-               mesh_lines, domain, size, max_area, cancelled):
+               mesh_lines, domain, size, max_area, cancelled, low_ground=None):
     """(mesh, refinement rounds): refined on the points gridded until the bounds hold, or its
     node z fitted on them (``node_elevation="plane"``); the held-out points stay independent."""
     delta = front.dem.cell_size / 2
@@ -389,18 +397,33 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
             return mesh
         points, fit_index = fits.measured()
         z, counts = fit_node_elevations(mesh.nodes, points, mesh_lines, fits.window.node_radius,
-                                        on_line=delta / 10, index=fit_index)
+                                        on_line=delta / 10, index=fit_index,
+                                        noise=fits.window.noise)
         fits.node_counts.update(counts)
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 
-    if not options.refine:
+    if not _refining(options):
         return steps.run("node elevations", elevations, mesh), []
-    return steps.run("refine", refine_mesh, front.dem, mesh_lines, fits.measured()[0],
-                     check=front.holdout.xyz, domain=domain, size_field=size,
-                     min_angle=options.min_angle, max_area=max_area,
-                     conforming=options.conforming, elevations=elevations,
-                     lower=options.refine_lower, upper=options.refine_upper,
-                     max_nodes=options.max_triangles, cancelled=cancelled)
+    common = dict(check=front.holdout.xyz, domain=domain, size_field=size,
+                  min_angle=options.min_angle, max_area=max_area, conforming=options.conforming,
+                  elevations=elevations, max_nodes=options.max_triangles,
+                  noise=fits.window.noise if fits.window else None, cancelled=cancelled,
+                  mesh_options=dict(max_triangles=options.max_triangles,
+                                    corner_gap=options.min_spacing or None))
+    if options.refine:
+        return steps.run("refine", refine_mesh, front.dem, mesh_lines, fits.measured()[0],
+                         lower=options.refine_lower, upper=options.refine_upper, **common)
+    # folds no line describes (crossings, junctions, rounded ends), split without new points;
+    # every k-th point, some MISFIT_DENSITY a m² (a split triangle holds 8 cells² or more)
+    points = fits.measured()[0]
+    every = max(1, int(fits.window.density / MISFIT_DENSITY))
+    floor = MISFIT_FLOOR_CELLS * front.dem.cell_size ** 2
+    low_floor = None if low_ground is None else (lambda xy: np.where(np.isfinite(nearest_value(
+        low_ground, xy[:, 0], xy[:, 1])), MISFIT_LOW_FLOOR * floor, floor))
+    return steps.run("refine", refine_mesh, front.dem, mesh_lines, points[::every],
+                     lower=MISFIT_EXCESS, upper=None, max_rounds=options.misfit_passes + 1,
+                     most=MISFIT_SHARE, measure_last=False, floor_at=low_floor,
+                     floor=floor, first=mesh, **common)
 
 
 def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected, max_area):

@@ -99,8 +99,9 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
         _add_size_options(p)
         p.add_argument("--refine", action="store_true",
                        help="refine until the residual bounds hold (the method's step 9): "
-                            "triangles whose points' RMS residual exceeds --lower get smaller, "
-                            "points beyond --upper go into the mesh")
+                            "triangles whose points' RMS residual exceeds their noise by "
+                            "--lower (in quadrature) get smaller, points beyond --upper go into "
+                            "the mesh")
         p.add_argument("--lower", type=float, default=DEFAULTS.refine_lower,
                        help="with --refine, m (default %(default)s)")
         p.add_argument("--upper", type=float, default=DEFAULTS.refine_upper,
@@ -141,6 +142,10 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
     p.add_argument("--join-gap", type=float,
                    help="join localised break-line pieces whose ends face each other across at "
                         "most this gap, m (default 10 cell sizes; 0: off)")
+    p.add_argument("--misfit-passes", type=int, default=DEFAULTS.misfit_passes,
+                   help="passes splitting the triangles whose points misfit the mesh beyond "
+                        "their noise (folds no break line describes: crossings, junctions, "
+                        "rounded ends), with plane node elevations (default %(default)s; 0: off)")
     p.add_argument("--far-field-area", type=float,
                    help="larger triangles, up to this many m², away from the break lines where "
                         "the terrain is plane (default: max area everywhere)")
@@ -207,6 +212,7 @@ def _options(args) -> RunOptions:
                       node_elevation=getattr(args, "node_elevation", DEFAULTS.node_elevation),
                       node_radius=getattr(args, "node_radius", None),
                       join_gap=getattr(args, "join_gap", None),
+                      misfit_passes=getattr(args, "misfit_passes", DEFAULTS.misfit_passes),
                       far_field_area=getattr(args, "far_field_area", None),
                       flow_area=getattr(args, "flow_area", None),
                       conforming=getattr(args, "conforming", DEFAULTS.conforming),
@@ -377,7 +383,7 @@ def cmd_refine(args):
           boundary=args.boundary, user_lines=args.user_lines, check=args.check,
           min_angle=args.min_angle, max_area=args.max_area, lower=args.lower, upper=args.upper,
           target_rmse=args.target_rmse, target_max=args.target_max, max_nodes=args.max_nodes,
-          max_rounds=args.max_rounds, report=args.report, crs=args.crs)
+          max_rounds=args.max_rounds, noise=args.noise, report=args.report, crs=args.crs)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -522,9 +528,13 @@ def _add_mesh_commands(sub) -> None:
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle)
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area)
     p.add_argument("--lower", type=float, default=0.10,
-                   help="refine triangles whose points' RMS residual exceeds this, m (0.10)")
+                   help="refine triangles whose points' RMS residual exceeds their noise by "
+                        "this (in quadrature), m (0.10)")
     p.add_argument("--upper", type=float, default=0.25,
                    help="insert points whose residual exceeds this into the TIN, m (0.25)")
+    p.add_argument("--noise", type=float,
+                   help="vertical noise of the points, m (default: estimated from them, the "
+                        "median RMS of planes fitted to some 30 points each; 0: exact points)")
     p.add_argument("--target-rmse", type=float, help="stop when the RMSE is at most this, m")
     p.add_argument("--target-max", type=float, help="stop when max |residual| is at most this, m")
     p.add_argument("--max-nodes", type=int, default=1_000_000, help="node budget")

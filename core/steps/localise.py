@@ -420,7 +420,8 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
 
 
 def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.ndarray],
-                        radius: float, *, on_line: float, index=None) -> tuple[np.ndarray, dict]:
+                        radius: float, *, on_line: float, index=None,
+                        noise: float | None = None) -> tuple[np.ndarray, dict]:
     """Node elevations (n,) with the noise taken out: nodes within ``on_line`` m of a break line
     (k, 3 arrays) take z along it; the others z of a least-squares plane of ``points`` within
     ``radius`` m (at most 0.9 of their distance to the nearest line, at least ``on_line``·10),
@@ -444,7 +445,18 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     off = ~on
     r = np.clip(0.9 * distance[off], min(radius, 10 * on_line), radius)
     index = index if index is not None else point_index(points)
-    plane, _, count = _plane_fits(index, points, xy[off], r)
+    plane, rms, count = _plane_fits(index, points, xy[off], r)
+    if noise:  # lean planes (where they misfit beyond the noise, a fold inside): a closer fit
+        for _ in range(2):
+            bent = (count >= 6) & (rms ** 2 > noise ** 2 * (1 + 3 * np.sqrt(
+                2 / np.maximum(count - 3, 1))))
+            if not bent.any():
+                break
+            closer = _plane_fits(index, points, xy[off][bent], r[bent] / 2)
+            better = closer[2] >= 6
+            pick = np.nonzero(bent)[0][better]
+            plane[pick], rms[pick], count[pick] = (c[better] for c in closer)
+            r[pick] = r[pick] / 2
     fitted = count >= 6
     idx = np.nonzero(off)[0][fitted]
     z[idx] = plane[fitted]

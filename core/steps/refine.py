@@ -3,11 +3,12 @@
 Each round meshes the DEM with its break lines, then measures the residual (point − TIN) of
 the refinement points (the LiDAR points used for gridding, or DEM cell centres): a point whose
 |residual| exceeds the ``upper`` bound goes into the TIN as a vertex with its measured
-elevation (the worst one per triangle and round); a triangle whose points' RMS residual
-exceeds the ``lower`` bound (a systematic misfit, not one noisy point) gets a quarter of its
-area as its local maximum. Rounds stop when the target holds (RMSE and/or largest |residual|
-of the refinement points), when the node budget would be passed, or when nothing is left to
-refine.
+elevation (the worst one per triangle and round); a triangle whose points' mean square residual
+exceeds the survey's noise² by more than ``lower``² (a systematic misfit, a fold the lines
+missed, not noise: the excess must also stand three standard errors above the noise of that
+many points) gets a quarter of its area as its local maximum. Rounds stop when the target holds
+(RMSE and/or largest |residual| of the refinement points), when the node budget would be
+passed, or when nothing is left to refine.
 Check points (held out, never used for refinement) are assessed every round, so the error
 reported is independent of the refinement.
 """
@@ -21,7 +22,8 @@ import numpy as np
 from ..errors import Cancelled, FloodMeshError
 from ..raster import Grid
 from .accuracy import residuals
-from .mesh import Mesh, build_mesh, containing_triangle, triangle_areas
+from .localise import estimate_noise
+from .mesh import Mesh, build_mesh, triangle_areas
 
 
 @dataclass(frozen=True)
@@ -42,34 +44,50 @@ class RefineRound:
 def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                 check: np.ndarray | None = None, domain=None, size_field=None,
                 min_angle: float = 25.0, conforming: bool = False, elevations=None,
-                max_area: float = 100.0, lower: float = 0.10, upper: float = 0.25,
+                max_area: float = 100.0, lower: float = 0.10, upper: float | None = 0.25,
                 target_rmse: float | None = None, target_max: float | None = None,
-                max_nodes: int = 1_000_000, max_rounds: int = 8,
+                max_nodes: int = 1_000_000, max_rounds: int = 8, noise: float | None = None,
+                floor: float | None = None, mesh_options: dict | None = None,
+                first: Mesh | None = None, most: float | None = None,
+                measure_last: bool = True,
+                floor_at: Callable[[np.ndarray], np.ndarray] | None = None,
                 progress: Callable[[float], None] | None = None,
                 cancelled: Callable[[], bool] | None = None) -> tuple[Mesh, list[RefineRound]]:
     """Refine until the target holds on ``points`` (n, 3), within ``max_nodes`` nodes and
-    ``max_rounds`` rounds. Bounds and targets in metres; with no target, rounds go on until
-    nothing is left to refine. ``domain`` and ``size_field`` as for ``build_mesh``;
-    ``elevations(mesh)`` (or None) gives each round's mesh its node z.
+    ``max_rounds`` rounds. Bounds and targets in metres (``upper`` None: no point is
+    inserted); with no target, rounds go on until nothing is left to refine. ``noise`` (m): the
+    points' vertical noise (None: estimated from them, ``localise.estimate_noise``);
+    ``floor`` (m²): no triangle is refined to less (default half a DEM cell). ``domain``,
+    ``size_field`` and ``mesh_options`` as for ``build_mesh``; ``elevations(mesh)`` (or None)
+    gives each round's mesh its node z; ``first``: the first round's mesh if already built;
+    ``most``: the share of a round's triangles split at most, the worst misfits first;
+    ``measure_last`` False: the last of ``max_rounds`` rounds measures only the check points
+    (its refinement points' figures NaN), as nothing is refined after it; ``floor_at(xy)``: the
+    floor (m²) at triangle centroids (k, 2), where it varies (None: ``floor`` everywhere).
     Returns the last mesh within the budget and every round."""
     points = np.asarray(points, float)
     if points.ndim != 2 or points.shape[1] != 3 or not len(points):
         raise FloodMeshError("refinement needs measured points (x, y, z); none were given")
-    if not 0 < lower <= upper:
+    if not 0 < lower <= (np.inf if upper is None else upper):
         raise FloodMeshError(f"refinement bounds must satisfy 0 < lower <= upper, got lower "
                              f"{lower} m and upper {upper} m (10 and 25 cm are usual)")
     if max_rounds < 1 or max_nodes < 3:
         raise FloodMeshError("give at least one round and a node budget of at least 3")
-    floor = dem.cell_size ** 2 / 2  # no refinement below the DEM's own resolution
+    # no refinement below the DEM's own resolution
+    floor = dem.cell_size ** 2 / 2 if floor is None else floor
+    # lazy: numba loads only when this runs
+    from .._kernels.mesh import locate
+
     inserted = np.empty((0, 3))
     local = np.empty((0, 3))  # x, y, local maximum area (m²) of every triangle refined so far
     rounds, best = [], None
     for k in range(max_rounds):
         if cancelled is not None and cancelled():
             raise Cancelled()
-        mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area, points=inserted,
-                          local_areas=local, domain=domain, size_field=size_field,
-                          conforming=conforming)
+        mesh = first if k == 0 and first is not None else build_mesh(
+            dem, lines, min_angle=min_angle, max_area=max_area, points=inserted,
+            local_areas=local, domain=domain, size_field=size_field, conforming=conforming,
+            **(mesh_options or {}))
         if elevations is not None:  # node z from a terrain fit, each round
             mesh = elevations(mesh)
         if len(mesh.nodes) > max_nodes:
@@ -80,13 +98,21 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
             break
         if rounds and len(mesh.nodes) == rounds[-1].nodes:
             break  # what is left to insert lies too close to a node or the boundary
-        res = residuals(mesh, points)
-        check_res = residuals(mesh, check) if check is not None and len(check) else np.array([])
-        found = containing_triangle(mesh.nodes[:, :2], mesh.triangles, points)
-        new_points = _worst_per_triangle(points, res, found, upper)
-        misfit = _misfit_triangles(mesh, found, res, lower, floor)
+        if k == max_rounds - 1 and not measure_last:  # nothing is refined after it
+            rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), np.nan, np.nan,
+                                      *_check_figures(mesh, check), 0, 0))
+            best = mesh
+            break
+        found, tin = locate(mesh.nodes, mesh.triangles, points, mesh.nodes[:, 2])
+        res = points[:, 2] - tin
+        new_points = (points[:0] if upper is None
+                      else _worst_per_triangle(points, res, found, upper))
+        if noise is None:  # from planes fitted to some 30 points each (as the run's window)
+            noise = estimate_noise(points, len(points) / (np.isfinite(dem.values).sum()
+                                                          * dem.cell_size ** 2))
+        misfit = _misfit_triangles(mesh, found, res, lower, floor, noise, most, floor_at)
         rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), _rmse(res),
-                                  _max_abs(res), _rmse(check_res), _max_abs(check_res),
+                                  _max_abs(res), *_check_figures(mesh, check),
                                   len(new_points), len(misfit)))
         best = mesh
         if progress is not None:
@@ -96,6 +122,12 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         inserted = np.vstack([inserted, new_points])
         local = np.vstack([local, misfit])
     return best, rounds
+
+
+def _check_figures(mesh: Mesh, check) -> tuple[float, float]:
+    """RMSE and largest |residual| (m) of the check points (NaN without them)."""
+    res = residuals(mesh, check) if check is not None and len(check) else np.array([])
+    return _rmse(res), _max_abs(res)
 
 
 def _worst_per_triangle(points, res, found, upper) -> np.ndarray:
@@ -110,16 +142,27 @@ def _worst_per_triangle(points, res, found, upper) -> np.ndarray:
     return points[order[first]]
 
 
-def _misfit_triangles(mesh: Mesh, found, res, lower, floor) -> np.ndarray:
-    """Centroid x, y and a quarter of the area of each triangle whose points' RMS residual
-    exceeds ``lower``, where that quarter is at least ``floor`` m²."""
+def _misfit_triangles(mesh: Mesh, found, res, lower, floor, noise, most=None,
+                      floor_at=None) -> np.ndarray:
+    """Centroid x, y and a quarter of the area of each triangle whose points' mean square
+    residual exceeds ``noise``² by more than ``lower``² and by three standard errors of that
+    many points' (χ²: noise²·√(2/n)), where that quarter is at least ``floor`` m²; of them, the
+    share ``most`` of all triangles (None: every one) whose excess over the triangle's area
+    (m²·m²) is largest."""
     ok = (found >= 0) & np.isfinite(res)
     n_tri = len(mesh.triangles)
     count = np.bincount(found[ok], minlength=n_tri)
     square = np.bincount(found[ok], weights=res[ok] ** 2, minlength=n_tri)
-    rms = np.sqrt(square / np.maximum(count, 1))
+    excess = square / np.maximum(count, 1) - noise ** 2
     quarter = triangle_areas(mesh.nodes, mesh.triangles) / 4
-    pick = (count > 0) & (rms > lower) & (quarter >= floor)
+    if floor_at is not None:
+        floor = floor_at(mesh.nodes[mesh.triangles, :2].mean(axis=1))
+    pick = ((count > 2) & (excess > lower ** 2)
+            & (excess > 3 * noise ** 2 * np.sqrt(2 / np.maximum(count, 1))) & (quarter >= floor))
+    if most is not None and pick.sum() > most * n_tri:
+        worst = np.argsort(np.where(pick, -excess * quarter, np.inf))[:int(most * n_tri)]
+        pick = np.zeros_like(pick)
+        pick[worst] = True
     centroid = mesh.nodes[mesh.triangles[pick], :2].mean(axis=1)
     return np.column_stack([centroid, quarter[pick]])
 
