@@ -76,7 +76,8 @@ JOIN_GAP_CELLS = 10.0
 BRIDGE_GAP_CELLS = 30.0
 # misfit refinement (RunOptions.misfit_passes): a triangle whose points' mean square residual
 # exceeds their noise² by more than MISFIT_EXCESS² (m) is split, down to MISFIT_FLOOR_CELLS
-# cells² a quarter; chosen on the evaluation corpus (benchmarks/RESULTS.md, "Misfits split")
+# cells² a quarter; chosen on the evaluation corpus and its floods (benchmarks/RESULTS.md,
+# "Misfits split where features cross and meet")
 MISFIT_EXCESS, MISFIT_FLOOR_CELLS = 0.05, 2.0
 MISFIT_DENSITY = 2.0  # points a m² the misfit pass measures (every k-th of denser surveys)
 # ... and no more than MISFIT_SHARE of the mesh's triangles a pass, the worst first (an urban
