@@ -28,8 +28,7 @@ from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
 from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS,
                        MISFIT_DENSITY, MISFIT_EXCESS, MISFIT_FLOOR_CELLS, MISFIT_LOW_FLOOR,
-                       MISFIT_SHARE, RunOptions,
-                       check_sigma_fits)
+                       MISFIT_SHARE, RunOptions, check_sigma_fits)
 from ..points import PointCloud, repeated_positions_note, sparse_survey_note, split_holdout
 from ..raster import Grid, nearest_value
 from ..steps.accuracy import accuracy_statistics, residuals

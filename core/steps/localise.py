@@ -87,6 +87,12 @@ def estimate_noise(points: np.ndarray, density: float, *, samples: int = 400,
     return float(np.median(rms[good])) if good.any() else 0.0
 
 
+def beyond_noise(mean_square: np.ndarray, noise: float, dof: np.ndarray) -> np.ndarray:
+    """Whether each mean square residual (m²) of ``dof`` degrees of freedom exceeds the noise²
+    (m) by more than three of its standard errors (χ²: noise²·√(2/dof)): a misfit, a fold."""
+    return mean_square - noise ** 2 > 3 * noise ** 2 * np.sqrt(2 / np.maximum(dof, 1))
+
+
 # Centres fitted at a time: their neighbour query holds some 36 B for each (centre, neighbour)
 # pair (room for every point of the cells it reads, then the CSR), 140 MB for the 130,000 nodes
 # of a 4 km² mesh at once; a chunk holds some 80 MB at most (the hinge fits' 110 points a
@@ -448,8 +454,7 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     plane, rms, count = _plane_fits(index, points, xy[off], r)
     if noise:  # lean planes (where they misfit beyond the noise, a fold inside): a closer fit
         for _ in range(2):
-            bent = (count >= 6) & (rms ** 2 > noise ** 2 * (1 + 3 * np.sqrt(
-                2 / np.maximum(count - 3, 1))))
+            bent = (count >= 6) & beyond_noise(rms ** 2, noise, count - 3)
             if not bent.any():
                 break
             closer = _plane_fits(index, points, xy[off][bent], r[bent] / 2)

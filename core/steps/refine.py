@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import Cancelled, FloodMeshError
 from ..raster import Grid
 from .accuracy import residuals
-from .localise import estimate_noise
+from .localise import beyond_noise, estimate_noise
 from .mesh import Mesh, build_mesh, triangle_areas
 
 
@@ -153,18 +153,19 @@ def _misfit_triangles(mesh: Mesh, found, res, lower, floor, noise, most=None,
     n_tri = len(mesh.triangles)
     count = np.bincount(found[ok], minlength=n_tri)
     square = np.bincount(found[ok], weights=res[ok] ** 2, minlength=n_tri)
-    excess = square / np.maximum(count, 1) - noise ** 2
+    mean_square = square / np.maximum(count, 1)
+    excess = mean_square - noise ** 2
     quarter = triangle_areas(mesh.nodes, mesh.triangles) / 4
+    centroid = mesh.nodes[mesh.triangles, :2].mean(axis=1)
     if floor_at is not None:
-        floor = floor_at(mesh.nodes[mesh.triangles, :2].mean(axis=1))
-    pick = ((count > 2) & (excess > lower ** 2)
-            & (excess > 3 * noise ** 2 * np.sqrt(2 / np.maximum(count, 1))) & (quarter >= floor))
+        floor = floor_at(centroid)
+    pick = ((count > 2) & (excess > lower ** 2) & beyond_noise(mean_square, noise, count)
+            & (quarter >= floor))
     if most is not None and pick.sum() > most * n_tri:
         worst = np.argsort(np.where(pick, -excess * quarter, np.inf))[:int(most * n_tri)]
         pick = np.zeros_like(pick)
         pick[worst] = True
-    centroid = mesh.nodes[mesh.triangles[pick], :2].mean(axis=1)
-    return np.column_stack([centroid, quarter[pick]])
+    return np.column_stack([centroid[pick], quarter[pick]])
 
 
 def _met(res, target_rmse, target_max) -> bool:
