@@ -41,6 +41,75 @@ def spread(x, y):
 
 
 @njit(cache=True, nogil=True)
+def hull_candidates(x, y):
+    """Which points can be vertices of the points' convex hull: those not strictly inside the
+    octagon of the eight extreme points (least and greatest x, y, x + y, x - y; Akl and
+    Toussaint 1978), in two passes. On a survey's points a few thousand of millions."""
+    n = x.shape[0]
+    best = np.zeros(8, np.int64)  # least y, x - y greatest, x, x + y, y; x - y least, x, x + y
+    for p in range(1, n):
+        for k in range(8):
+            u = _octagon_direction(k, x[p], y[p])
+            if u > _octagon_direction(k, x[best[k]], y[best[k]]):
+                best[k] = p
+    ox, oy = x[best], y[best]
+    scale = max(np.abs(ox).max(), np.abs(oy).max(), 1.0)
+    keep = np.ones(n, np.bool_)
+    for p in range(n):
+        inside = True
+        for k in range(8):
+            ex, ey = ox[(k + 1) % 8] - ox[k], oy[(k + 1) % 8] - oy[k]
+            if ex == 0.0 and ey == 0.0:
+                continue  # two extremes in one point
+            # strictly left of every edge, beyond rounding (the octagon runs anticlockwise)
+            if ex * (y[p] - oy[k]) - ey * (x[p] - ox[k]) <= 1e-9 * scale * (abs(ex) + abs(ey)):
+                inside = False
+                break
+        keep[p] = not inside
+    return keep
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _octagon_direction(k, x, y):
+    """The points' k-th extreme is the greatest of this; k = 0..7 runs anticlockwise from the
+    least y."""
+    if k == 0:
+        return -y
+    if k == 1:
+        return x - y
+    if k == 2:
+        return x
+    if k == 3:
+        return x + y
+    if k == 4:
+        return y
+    if k == 5:
+        return y - x
+    if k == 6:
+        return -x
+    return -x - y
+
+
+@njit(cache=True, nogil=True)
+def monotone_chain(x, y):
+    """Vertices (h, 2) of the convex hull of points sorted by x then y, anticlockwise, without
+    collinear vertices (Andrew 1979)."""
+    n = x.shape[0]
+    hull = np.empty((2 * n + 1, 2))
+    h = 0
+    for rounds in range(2):
+        start = h
+        for i in range(n) if rounds == 0 else range(n - 1, -1, -1):
+            while (h >= start + 2 and (hull[h - 1, 0] - hull[h - 2, 0]) * (y[i] - hull[h - 2, 1])
+                   - (hull[h - 1, 1] - hull[h - 2, 1]) * (x[i] - hull[h - 2, 0]) <= 0.0):
+                h -= 1
+            hull[h, 0], hull[h, 1] = x[i], y[i]
+            h += 1
+        h -= 1  # each chain's last point starts the other
+    return hull[:max(h, 1)]
+
+
+@njit(cache=True, nogil=True)
 def scaled_points(X, Y, Z, classification, keep, scales, offsets):
     """(m, 3) x, y, z in metres of the points whose class ``keep`` marks (a 256-entry table),
     from a LAS file's stored integers: ``stored · scale + offset``, as laspy scales them, in

@@ -240,10 +240,51 @@ def test_tiles_equal_one_global_tin():
     z = 5 * np.sin(x / 37) * np.cos(y / 23) + 0.01 * x
     xyz = np.column_stack([x + 500_000, y + 6e6, z])
     dem = grid_module.grid_points_linear(PointCloud(xyz, CRS_M), 1.0, max_gap=50.0)
-    assert dem.shape[1] > 2 * grid_module.TILE  # several tiles each way
+    assert dem.shape[1] > 2 * grid_module.NEAR_TILE  # several tiles each way
     rows, cols = np.indices(dem.shape)
     gx, gy = dem.cell_centres(rows, cols)
     reference = griddata(np.column_stack([x, y]), z, (gx - 500_000, gy - 6e6), method="linear")
+    assert_array_equal(np.isfinite(dem.values), np.isfinite(reference))
+    both = np.isfinite(reference)
+    assert_allclose(dem.values[both], reference[both], atol=1e-9)
+
+
+def test_voids_and_a_ragged_edge_across_tiles_equal_one_global_tin():
+    """Dense points (tiles then take a near halo, checked) with a lake, a channel and ponds
+    across tile edges and a ragged survey boundary: every cell equals linear interpolation on
+    Qhull's Delaunay TIN of all the points, NaN where the triangle has an edge over the max gap
+    or no triangle covers the cell. A near halo taken on trust would bridge the voids with
+    triangles that the whole TIN does not have."""
+    from floodmesh.core.steps import grid as grid_module
+
+    rng = np.random.default_rng(11)
+    n = 500_000
+    x, y = rng.uniform(0, 400, n), rng.uniform(0, 300, n)
+    void = (((x - 128) ** 2 + (y - 150) ** 2 < 25 ** 2) | (np.abs(x - 256 + 0.1 * y) < 4)
+            | ((x - 60) ** 2 + (y - 60) ** 2 < 9))
+    for px, py in ((384.5, 100), (200, 161.5), (320, 34.5)):  # ponds on tile edges
+        void |= (x - px) ** 2 + (y - py) ** 2 < 4.5 ** 2
+    void |= y > 290 - 12 * np.abs(np.sin(x / 17))  # a ragged, concave edge
+    x, y = x[~void], y[~void]
+    z = 4 * np.sin(x / 23) * np.cos(y / 31) + 0.01 * x
+    xyz = np.column_stack([x + ORIGIN[0], y + ORIGIN[1], z])
+    dem = grid_module.grid_points_linear(cloud(xyz), 1.0, max_gap=10.0)
+    assert dem.shape[1] > 2 * grid_module.NEAR_TILE
+    gx, gy = centres(dem)
+    tin = Delaunay(np.column_stack([x, y]))
+    cells = np.column_stack([gx.ravel() - ORIGIN[0], gy.ravel() - ORIGIN[1]])
+    simplex = tin.find_simplex(cells)
+    corners = tin.points[tin.simplices[simplex]]
+    longest = np.max([np.hypot(*(corners[:, k] - corners[:, (k + 1) % 3]).T) for k in range(3)],
+                     axis=0)
+    reference = np.full(len(cells), np.nan)
+    inside = (simplex >= 0) & (longest <= 10.0)
+    weights = np.einsum("nij,nj->ni", tin.transform[simplex[inside], :2],
+                        cells[inside] - tin.transform[simplex[inside], 2])
+    weights = np.column_stack([weights, 1 - weights.sum(axis=1)])
+    reference[inside] = (weights * z[tin.simplices[simplex[inside]]]).sum(axis=1)
+    reference = reference.reshape(dem.shape)
+    assert np.isnan(reference).sum() > 3000  # the voids are there
     assert_array_equal(np.isfinite(dem.values), np.isfinite(reference))
     both = np.isfinite(reference)
     assert_allclose(dem.values[both], reference[both], atol=1e-9)
