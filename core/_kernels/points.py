@@ -46,48 +46,36 @@ def hull_candidates(x, y):
     octagon of the eight extreme points (least and greatest x, y, x + y, x - y; Akl and
     Toussaint 1978), in two passes. On a survey's points a few thousand of millions."""
     n = x.shape[0]
-    best = np.zeros(8, np.int64)  # least y, x - y greatest, x, x + y, y; x - y least, x, x + y
-    for p in range(1, n):
+    # anticlockwise from the least y: greatest -y, x - y, x, x + y, y, y - x, -x, -x - y
+    best = np.zeros(8, np.int64)
+    top = np.full(8, -np.inf)
+    for p in range(n):
+        xp, yp = x[p], y[p]
+        u = (-yp, xp - yp, xp, xp + yp, yp, yp - xp, -xp, -xp - yp)
         for k in range(8):
-            u = _octagon_direction(k, x[p], y[p])
-            if u > _octagon_direction(k, x[best[k]], y[best[k]]):
+            if u[k] > top[k]:
+                top[k] = u[k]
                 best[k] = p
     ox, oy = x[best], y[best]
+    vx, vy, ex, ey, tol = np.empty(8), np.empty(8), np.empty(8), np.empty(8), np.empty(8)
     scale = max(np.abs(ox).max(), np.abs(oy).max(), 1.0)
+    m = 0
+    for k in range(8):
+        dx, dy = ox[(k + 1) % 8] - ox[k], oy[(k + 1) % 8] - oy[k]
+        if dx != 0.0 or dy != 0.0:  # two extremes in one point make no edge
+            vx[m], vy[m], ex[m], ey[m] = ox[k], oy[k], dx, dy
+            tol[m] = 1e-9 * scale * (abs(dx) + abs(dy))
+            m += 1
     keep = np.ones(n, np.bool_)
     for p in range(n):
-        inside = True
-        for k in range(8):
-            ex, ey = ox[(k + 1) % 8] - ox[k], oy[(k + 1) % 8] - oy[k]
-            if ex == 0.0 and ey == 0.0:
-                continue  # two extremes in one point
-            # strictly left of every edge, beyond rounding (the octagon runs anticlockwise)
-            if ex * (y[p] - oy[k]) - ey * (x[p] - ox[k]) <= 1e-9 * scale * (abs(ex) + abs(ey)):
+        # strictly left of every edge, beyond rounding (the octagon runs anticlockwise)
+        inside = m >= 3
+        for k in range(m):
+            if ex[k] * (y[p] - vy[k]) - ey[k] * (x[p] - vx[k]) <= tol[k]:
                 inside = False
                 break
         keep[p] = not inside
     return keep
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _octagon_direction(k, x, y):
-    """The points' k-th extreme is the greatest of this; k = 0..7 runs anticlockwise from the
-    least y."""
-    if k == 0:
-        return -y
-    if k == 1:
-        return x - y
-    if k == 2:
-        return x
-    if k == 3:
-        return x + y
-    if k == 4:
-        return y
-    if k == 5:
-        return y - x
-    if k == 6:
-        return -x
-    return -x - y
 
 
 @njit(cache=True, nogil=True)

@@ -64,3 +64,32 @@ def test_repeated_positions_are_the_numpy_definition(case):
     assert expected[0] > 0
     count, largest = repeated_positions(xyz[:, 0], xyz[:, 1], xyz[:, 2], 1e-4)
     assert (count, largest) == expected
+
+
+@pytest.mark.parametrize("case", ["uniform", "rounded normal", "circle at UTM", "small lattice"])
+def test_convex_hull_is_geos_hull(case):
+    """The candidates outside the octagon of extremes, then Andrew's monotone chain, give the
+    hull GEOS gives of all the points: the same area, anticlockwise, valid; lattices and points
+    on a circle (every point a hull vertex) included."""
+    import shapely
+
+    from floodmesh.core._kernels.points import hull_candidates, monotone_chain
+
+    rng = np.random.default_rng(9)
+    for trial in range(25):
+        n = int(rng.integers(3, 3000))
+        if case == "uniform":
+            x, y = rng.uniform(0, 100, n), rng.uniform(0, 50, n)
+        elif case == "rounded normal":
+            x, y = np.round(rng.normal(0, 10, n)), np.round(rng.normal(0, 10, n))
+        elif case == "circle at UTM":
+            angle = rng.uniform(0, 2 * np.pi, n)
+            x, y = 500_000 + 300 * np.cos(angle), 6e6 + 300 * np.sin(angle)
+        else:
+            x, y = rng.integers(0, 4, n).astype(float), rng.integers(0, 3, n).astype(float)
+        keep = hull_candidates(x, y)
+        order = np.lexsort((y[keep], x[keep]))
+        hull = shapely.Polygon(monotone_chain(x[keep][order], y[keep][order]))
+        expected = shapely.convex_hull(shapely.multipoints(np.column_stack([x, y])))
+        assert hull.is_valid and hull.exterior.is_ccw
+        assert hull.area == pytest.approx(expected.area, rel=1e-9)
