@@ -67,14 +67,25 @@ def _bank(xy, channel=False):
     return z - 1.5 * (np.abs(s) < 2.0) if channel else z
 
 
+def _surveyed(height, seed, noise):
+    """(points, their fit window): 9 points/m² over 100 x 100 m on ``height(xy)``, with
+    ``noise`` m of Gaussian noise."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 100, (90_000, 2))
+    points = np.column_stack([xy, height(xy) + rng.normal(0, noise, len(xy))])
+    return points, fit_window(points, 1e4, 1.0)
+
+
+def _crest_pieces(*spans):
+    """Traced pieces of the bank's crest, one per (s0, s1, offset), at the crest's height."""
+    return [BreakLine(np.column_stack([p[:, :2], _bank(p[:, :2])]), np.full(len(p), 20.0))
+            for p in (_piece(*span) for span in spans)]
+
+
 @pytest.mark.parametrize("channel", [False, True])
 def test_localised_crest_broken_mid_run_joins_unless_a_channel_cuts_it(channel):
-    rng = np.random.default_rng(3)
-    xy = rng.uniform(0, 100, (90_000, 2))
-    points = np.column_stack([xy, _bank(xy, channel) + rng.normal(0, 0.15, len(xy))])
-    window = fit_window(points, 1e4, 1.0)
-    lines = [BreakLine(np.column_stack([p[:, :2], _bank(p[:, :2])]), np.full(len(p), 20.0))
-             for p in (_piece(-35, -3, 0.4), _piece(3, 35, -0.4))]
+    points, window = _surveyed(lambda xy: _bank(xy, channel), seed=3, noise=0.15)
+    lines = _crest_pieces((-35, -3, 0.4), (3, 35, -0.4))
     out, confidence, counts = localise_traced(lines, points, window, join_gap=6.0,
                                               join_lateral=1.0)
     assert len(out) == len(confidence) == (2 if channel else 1)
@@ -191,12 +202,8 @@ def test_a_crest_broken_at_a_crossing_is_bridged_only_where_the_crest_runs_on(ac
     join gap) is bridged where the terrain still has the line's crest along it (a bank's crest
     over a road embankment), the bridge's vertices on the crest at its height, and not where
     the crossing cuts the crest away (a channel through it)."""
-    rng = np.random.default_rng(5)
-    xy = rng.uniform(0, 100, (90_000, 2))
-    points = np.column_stack([xy, _crossed_bank(xy, across) + rng.normal(0, 0.05, len(xy))])
-    window = fit_window(points, 1e4, 1.0)
-    lines = [BreakLine(np.column_stack([p[:, :2], _bank(p[:, :2])]), np.full(len(p), 20.0))
-             for p in (_piece(-40, -10, 0.4), _piece(10, 40, -0.4))]
+    points, window = _surveyed(lambda xy: _crossed_bank(xy, across), seed=5, noise=0.05)
+    lines = _crest_pieces((-40, -10, 0.4), (10, 40, -0.4))
     out, _, counts = localise_traced(lines, points, window, join_gap=6.0, join_lateral=1.0,
                                      bridge_gap=30.0)
     if across == "cut":
