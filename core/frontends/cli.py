@@ -20,7 +20,7 @@ from ..options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS
                        NODE_ELEVATIONS, RunOptions, parse_formats)
 from .console import ProgressBar, print_note, print_notes
 from .flood_cli import add_flood_commands
-from .process import end_process
+from .process import end_process, keep_freed_memory
 
 DEFAULTS = RunOptions()
 
@@ -597,7 +597,9 @@ def main(argv=None) -> int:
 
 def command() -> None:
     """The ``floodmesh`` console command: ``main``, then the exit, without the interpreter's
-    teardown of every module (``process.end_process``)."""
+    teardown of every module (``process.end_process``), in a process whose freed memory is
+    kept for its next arrays (``process.keep_freed_memory``)."""
+    keep_freed_memory()
     try:
         code = main(sys.argv[1:])
     except BrokenPipeError:  # `floodmesh assess … | head`: the reader is gone, so are we

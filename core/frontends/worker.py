@@ -34,7 +34,7 @@ from ..errors import Cancelled, FloodMeshError, Terminated, terminate_as_interru
 from ..flood.model import load_scenario, run_flood
 from ..options import RunOptions
 from .dependencies import install_hint, missing_dependencies
-from .process import end_process
+from .process import end_process, keep_freed_memory
 
 PARTIAL_GLOB = ".*.partial*"  # the temporary names io.atomic_output writes under
 
@@ -165,6 +165,7 @@ def main() -> int:
     sys.stdout = sys.stderr
     faulthandler.enable()  # a crash in GEOS, Triangle or numba leaves its trace on stderr
     terminate_as_interrupt()  # SIGTERM/SIGHUP unwind as Ctrl-C: temporaries and scratch go
+    keep_freed_memory()
     try:
         job = json.loads(sys.stdin.read())
     except ValueError as exc:
