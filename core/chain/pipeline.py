@@ -169,11 +169,15 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
             front.breakpoints = None
     fits = _TerrainFits(front, options)
     # the background thread takes its work in order: the point index first, since the fits
-    # wait for it right after simplifying; the flow zone is wanted only after localising
+    # wait for it right after simplifying; the flow zone and the domain are wanted only after
+    # localising
     index = _point_index_ahead(front, options, steps)
     flow_area = flow_area_for(options.flow_area, front.dem.cell_size)
     hand = None if flow_area is None else steps.ahead(  # resolution where water flows
         "flow zone", height_above_drainage, front.dem, channel_area=CHANNEL_AREA)
+    outline = None if front.domain is not None else steps.ahead(  # the DEM's alone
+        "domain", domain_from_dem, front.dem,
+        tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size))
     simplified, lines, confidence = _break_lines(front, options, steps, fits, index)
     # the input's checks, which only add notes, beside the single-threaded meshing: the
     # gridding and the terrain fits before it keep both cores busy
@@ -181,8 +185,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     size, flow, spacing, max_area = _size_fields(front, options, fits.window, hand, flow_area)
     low_ground = spacing  # finite on low ground (see drainage.flow_spacing)
     hand = None  # the flow zone's work is in the flow size and spacing now
-    domain = (front.domain if front.domain is not None else domain_from_dem(
-        front.dem, tolerance=edge_tolerance(*options.simplification(), front.dem.cell_size)))
+    domain = front.domain if outline is None else outline()
     plain = steps.run("hydraulic lines", _lines_for_flood, front, options, lines, domain, None,
                       spacing)
     kept = {}
