@@ -673,16 +673,21 @@ def _seed(xy):
     y0 = xy[i0, 1]
     if _orient(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]) > 0.0:
         i1, i2 = i2, i1  # clockwise, as delaunator
-    dx = xy[i1, 0] - x0
-    dy = xy[i1, 1] - y0
-    ex = xy[i2, 0] - x0
-    ey = xy[i2, 1] - y0
+    cx, cy = circumcentre(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1])
+    return i0, i1, i2, cx, cy
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def circumcentre(x0, y0, x1, y1, x2, y2):
+    """The centre of the circle through three points (not collinear), from the first."""
+    dx = x1 - x0
+    dy = y1 - y0
+    ex = x2 - x0
+    ey = y2 - y0
     bl = dx * dx + dy * dy
     cl = ex * ex + ey * ey
     f = 0.5 / (dx * ey - dy * ex)
-    cx = x0 + (ey * bl - dy * cl) * f
-    cy = y0 + (dx * cl - ex * bl) * f
-    return i0, i1, i2, cx, cy
+    return x0 + (ey * bl - dy * cl) * f, y0 + (dx * cl - ex * bl) * f
 
 
 @numba.njit(cache=True, nogil=True)

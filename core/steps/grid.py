@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from affine import Affine
 
-from .._kernels.delaunay import delaunay_in_sweep_order
+from .._kernels.delaunay import circumcentre, delaunay_in_sweep_order
 from .._kernels.points import extent, hull_candidates, monotone_chain
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
@@ -384,12 +384,8 @@ def _rasterise_tin(xy, z, simplices, out, row0, row1, col0, col1, d, max_gap, ne
 def _circumcircle(xa, ya, xb, yb, xc, yc):
     """Centre and radius of the circle through three points, the radius a little enlarged
     (1e-9 relative and absolute) so that rounding errs on the side of a larger circle."""
-    ax, ay, bx, by = xa - xc, ya - yc, xb - xc, yb - yc
-    la, lb = ax * ax + ay * ay, bx * bx + by * by
-    den = 2.0 * (ax * by - ay * bx)
-    ux = (by * la - ay * lb) / den
-    uy = (ax * lb - bx * la) / den
-    return ux + xc, uy + yc, math.sqrt(ux * ux + uy * uy) * (1.0 + 1e-9) + 1e-9
+    ux, uy = circumcentre(xa, ya, xb, yb, xc, yc)
+    return ux, uy, math.hypot(ux - xa, uy - ya) * (1.0 + 1e-9) + 1e-9
 
 
 @numba.njit(cache=True, nogil=True)
