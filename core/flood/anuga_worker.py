@@ -8,12 +8,20 @@ DE0), and writes ``JOB_DIR/result.npz``: per triangle the maximum depth, water l
 and the arrival time, and per output time the water volume, the inflow applied, the boundary
 flux integral and the stage at each observation triangle. On stdout it prints
 ``progress T`` after each output time T (s) for the parent's progress bar.
+
+At each output time it checks that the solution is still a flood: where the water turns
+non-finite, or water deeper than the wet depth runs faster than ``unstable_speed_m_s``, it
+writes ``JOB_DIR/unstable.json`` (time, triangle, depth, speed, time step) instead of a result
+and exits with ``UNSTABLE_EXIT``. A blow-up otherwise goes on to the end (depths of 100 m and
+more, a balanced mass budget) or crawls for hours at time steps of 0.0001 s.
 """
 import json
 import sys
 import time
 
 import numpy as np
+
+UNSTABLE_EXIT = 3
 
 
 def _series(times, values, hold=False):
@@ -28,6 +36,31 @@ def _series(times, values, hold=False):
     return f
 
 
+def _outflow(anuga, domain):
+    """An open boundary that lets water out and never draws it in: ANUGA's transmissive
+    boundary (outside = inside), less the normal momentum of an edge whose water moves back
+    into the domain. Transmissive as it is feeds such an edge from an endless reservoir: on a
+    falling limb an eddy at the outflow edge drew water in until it ran at 20 m/s and piled up
+    to 450 m (benchmarks/RESULTS.md, "An outflow edge that blew up"). Where the water leaves,
+    the two are the same."""
+
+    class Outflow(anuga.Transmissive_boundary):
+        def evaluate_segment(self, domain, segment_edges):
+            super().evaluate_segment(domain, segment_edges)
+            if segment_edges is None or domain is None:
+                return
+            cells = domain.boundary_cells[segment_edges]
+            edges = domain.boundary_edges[segment_edges]
+            nx, ny = domain.normals[cells, 2 * edges], domain.normals[cells, 2 * edges + 1]
+            xmom = domain.quantities["xmomentum"].boundary_values
+            ymom = domain.quantities["ymomentum"].boundary_values
+            inward = np.minimum(xmom[segment_edges] * nx + ymom[segment_edges] * ny, 0.0)
+            xmom[segment_edges] -= inward * nx
+            ymom[segment_edges] -= inward * ny
+
+    return Outflow(domain)
+
+
 def _boundary_objects(anuga, domain, kinds: dict):
     objects = {}
     for tag, spec in kinds.items():
@@ -35,7 +68,7 @@ def _boundary_objects(anuga, domain, kinds: dict):
         if kind == "wall":
             objects[tag] = anuga.Reflective_boundary(domain)
         elif kind == "outflow":
-            objects[tag] = anuga.Transmissive_boundary(domain)
+            objects[tag] = _outflow(anuga, domain)
         elif kind == "level":
             if spec.get("levels"):
                 times, levels = zip(*spec["levels"])
@@ -50,6 +83,17 @@ def _boundary_objects(anuga, domain, kinds: dict):
         else:
             raise ValueError(f"unknown boundary kind {kind}")
     return objects
+
+
+def _unstable(stage, depth, speed, wet: float, limit: float):
+    """The triangle where the solution is no longer a flood (its state not finite, or water
+    deeper than ``wet`` m faster than ``limit`` m/s), the fastest such; None when there is none."""
+    broken = np.flatnonzero(~(np.isfinite(stage) & np.isfinite(speed)))
+    if len(broken):
+        return int(broken[0])
+    fast = np.where(depth > wet, speed, 0.0)
+    k = int(np.argmax(fast))
+    return k if fast[k] > limit else None
 
 
 def run(job_dir: str) -> None:
@@ -93,6 +137,7 @@ def run(job_dir: str) -> None:
     area = domain.areas
     obs = data["observation_triangles"].astype(int)
     wet = float(job["wet_depth_m"])
+    limit = float(job["unstable_speed_m_s"])
     n_tri = len(triangles)
     max_depth = np.zeros(n_tri)
     max_stage = np.full(n_tri, -np.inf)
@@ -110,6 +155,11 @@ def run(job_dir: str) -> None:
         with np.errstate(divide="ignore", invalid="ignore"):
             # speed in films thinner than 1 cm is noise at wet/dry fronts, not flow
             speed = np.where(depth > 0.01, np.hypot(xmom, ymom) / depth, 0.0)
+        k = _unstable(stage, depth, speed, wet, limit)
+        if k is not None:
+            return {"time_s": t, "triangle": k, "depth_m": float(stage[k] - bed[k]),
+                    "speed_ms": float(speed[k]), "time_step_s": float(domain.timestep),
+                    "steps_last_interval": int(domain.number_of_steps)}
         np.maximum(max_depth, depth, out=max_depth)
         np.maximum(max_stage, np.where(depth > 0, stage, bed), out=max_stage)
         np.maximum(max_speed, speed, out=max_speed)
@@ -120,6 +170,7 @@ def run(job_dir: str) -> None:
         flux.append(float(domain.get_boundary_flux_integral()))
         obs_stage.append(np.where(obs >= 0, stage[np.maximum(obs, 0)], np.nan))
         steps.append(done[0])
+        return None
 
     start = time.process_time()
     sample(0.0)
@@ -127,8 +178,11 @@ def run(job_dir: str) -> None:
                            finaltime=float(job["duration_s"])):
         t = float(t)
         done[0] += int(domain.number_of_steps)
-        if t > 0:
-            sample(t)
+        unstable = sample(t) if t > 0 else None
+        if unstable is not None:
+            with open(f"{job_dir}/unstable.json", "w") as fh:
+                json.dump(unstable, fh)
+            sys.exit(UNSTABLE_EXIT)
         print(f"progress {t:.3f}", flush=True)
     cpu = time.process_time() - start
     np.savez(f"{job_dir}/result.npz", max_depth=max_depth, max_stage=max_stage,

@@ -34,7 +34,7 @@ from ..errors import Cancelled, FloodMeshError
 from ..options import RESULT_RASTERS
 from ..raster import Grid, require_metric_crs
 from ..steps.hydraulics import (boundary_edges, collinear_wall_stencils, edge_nodes,
-                                hydraulic_checks, neighbours)
+                                hydraulic_checks, inradii, neighbours)
 
 BOUNDARY_KINDS = ("wall", "outflow", "level")
 SIDES = ("north", "south", "east", "west")
@@ -93,12 +93,14 @@ class Scenario:
     initial_stage_m: float | None = None  # a level of still water (None: dry)
     output_interval_s: float = 10.0
     wet_depth_m: float = 0.05         # flooded above this depth (extent, arrival time)
+    unstable_speed_m_s: float = 20.0  # water this fast (deeper than wet) stops the run
     observation_points: tuple = ()    # ((name, x, y), ...)
     cell_size_m: float | None = None  # of the result rasters (None: from the mesh)
 
     def __post_init__(self):
         positive = {"duration": self.duration_s, "output interval": self.output_interval_s,
-                    "wet depth": self.wet_depth_m, "Manning's n": self.manning}
+                    "wet depth": self.wet_depth_m, "Manning's n": self.manning,
+                    "unstable speed": self.unstable_speed_m_s}
         for what, value in positive.items():
             if not (value is not None and np.isfinite(value) and value > 0):
                 raise FloodMeshError(f"the scenario's {what} must be above 0, got {value}")
@@ -223,6 +225,7 @@ def scenario_from_dict(data: dict, base=".") -> Scenario:
                         initial_stage_m=data.get("initial_stage_m"),
                         output_interval_s=float(data.get("output_interval_s", 10.0)),
                         wet_depth_m=float(data.get("wet_depth_m", 0.05)),
+                        unstable_speed_m_s=float(data.get("unstable_speed_m_s", 20.0)),
                         observation_points=points, cell_size_m=data.get("cell_size_m"))
     except KeyError as exc:
         raise FloodMeshError(f"the scenario lacks {exc}: see the scenario example "
@@ -449,6 +452,7 @@ def prepare(nodes, triangles, scenario: Scenario) -> dict:
     arrays["observation_triangles"] = np.asarray(obs, np.int64)
     job = {"duration_s": scenario.duration_s, "output_interval_s": scenario.output_interval_s,
            "wet_depth_m": scenario.wet_depth_m, "initial_stage_m": scenario.initial_stage_m,
+           "unstable_speed_m_s": scenario.unstable_speed_m_s,
            "boundary_tags": tags, "boundary_kinds": kinds, "inflows": inflows,
            "flow_algorithm": "DE0"}
     counts = {name: int((edges[:, 2] == k).sum()) for k, name in enumerate(tags)}
@@ -491,6 +495,9 @@ def run_anuga(prepared: dict, *, work_dir=None, python: str | None = None,
             except BaseException:
                 child.kill()
                 raise
+        if (work / "unstable.json").is_file():
+            raise FloodMeshError(unstable_message(
+                json.loads((work / "unstable.json").read_text()), prepared))
         if child.returncode != 0:
             tail = (work / "stderr.txt").read_text().strip().splitlines()[-3:]
             raise FloodMeshError("ANUGA stopped with an error: " + " | ".join(tail))
@@ -501,6 +508,38 @@ def run_anuga(prepared: dict, *, work_dir=None, python: str | None = None,
     finally:
         if own:
             shutil.rmtree(work, ignore_errors=True)
+
+
+def unstable_message(found: dict, prepared: dict) -> str:
+    """The error for a run the worker stopped (``anuga_worker._unstable``): when, where (the
+    triangle's centre, its inradius, the nearest boundary) and what to do."""
+    arrays, job = prepared["arrays"], prepared["job"]
+    nodes, triangles = arrays["nodes"][:, :2], arrays["triangles"]
+    k = found["triangle"]
+    x, y = nodes[triangles[k]].mean(axis=0)
+    edges = arrays["boundary_edges"]
+    a = nodes[triangles[edges[:, 0], (edges[:, 1] + 1) % 3]]
+    b = nodes[triangles[edges[:, 0], (edges[:, 1] + 2) % 3]]
+    along = np.clip(np.einsum("ij,ij->i", (x, y) - a, b - a)
+                    / np.maximum(np.einsum("ij,ij->i", b - a, b - a), 1e-12), 0.0, 1.0)
+    gap = np.hypot(*(a + along[:, None] * (b - a) - (x, y)).T)
+    near = int(np.argmin(gap))
+    tag = job["boundary_tags"][int(edges[near, 2])]
+    kind = job["boundary_kinds"][tag]["kind"]
+    boundary = {"wall": "a wall", "outflow": "an outflow", "level": "a level"}[kind]
+    where = (f"in the triangle at ({x:.1f}, {y:.1f}) (inradius "
+             f"{float(inradii(nodes, triangles[k:k + 1])[0]):.2f} m, {gap[near]:.1f} m from "
+             f"{boundary}{'' if tag == kind else f' ({tag})'})")
+    if not (np.isfinite(found["depth_m"]) and np.isfinite(found["speed_ms"])):
+        return (f"ANUGA's solution broke down (NaN) by t = {found['time_s']:g} s {where}; "
+                "nothing was written. Check the report figures of the mesh (`hydraulics`) and "
+                "the scenario's inflow for a region of one or two triangles")
+    return (f"ANUGA's solution went unstable by t = {found['time_s']:g} s: water "
+            f"{found['depth_m']:.2f} m deep ran at {found['speed_ms']:.1f} m/s {where}, at a time "
+            f"step of {found['time_step_s']:.2g} s; nothing was written. Look "
+            "at the mesh, the terrain and the boundary there; if such speeds are real (a dam "
+            "break on steep ground), raise the scenario's unstable_speed_m_s (now "
+            f"{job['unstable_speed_m_s']:g})")
 
 
 def mass_balance(result: dict) -> dict:
@@ -592,12 +631,6 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
         log(f"ANUGA on {len(arrays['triangles'])} triangles; estimated time step "
             f"{checks['cfl_time_step_s']:.3g} s at 1 m depth")
     result = run_anuga(prepared, python=python, progress=progress, cancelled=cancelled, log=log)
-    volume = np.asarray(result["volume_m3"])
-    if not np.isfinite(volume).all():
-        at = float(np.asarray(result["times_s"])[~np.isfinite(volume)][0])
-        raise FloodMeshError(f"ANUGA's solution broke down (NaN) by t = {at:g} s; nothing was "
-                             "written. Check report figures of the mesh (`hydraulics`) and the "
-                             "scenario's inflow for a region of one or two triangles")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     cell = scenario.cell_size_m or default_cell_size(arrays["nodes"], arrays["triangles"])
@@ -659,7 +692,11 @@ def write_table(path, header, rows) -> None:
 
 
 def mesh_crs(mesh_path):
-    """The CRS of a ``mesh.gpkg`` or ``dem.tif`` beside a 2DM (which carries none), or None."""
+    """The CRS of a 2DM (which has no place for one) from its own sidecar ``.prj``, else from a
+    ``mesh.gpkg`` or ``dem.tif`` beside it, or None."""
+    own = io.read_prj(mesh_path)
+    if own:
+        return own
     folder = Path(mesh_path).parent
     gpkg = Path(mesh_path).with_suffix(".gpkg")
     for candidate in (gpkg, folder / "mesh.gpkg"):

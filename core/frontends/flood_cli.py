@@ -90,8 +90,8 @@ def add_flood_commands(sub) -> None:
     p.add_argument("--scenario", required=True, help="scenario JSON: inflows, boundaries, "
                    "roughness, buildings, duration (see docs/user-guide.md, The scenario)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--crs", help="CRS of the mesh (default: that of mesh.gpkg or dem.tif "
-                                 "beside it)")
+    p.add_argument("--crs", help="CRS of the mesh (default: its .prj, else that of "
+                                 "mesh.gpkg or dem.tif beside it)")
     p.add_argument("--reference", metavar="MESH", help="also run the scenario on this mesh "
                    "and compare (results in OUT/mesh, OUT/reference, comparison in OUT)")
     p.add_argument("--cell-size", type=float, default=1.0,

@@ -3,11 +3,14 @@ simulated) checked against physics: still water stays still, a steady inflow dow
 channel reaches Manning's normal depth, volumes balance; and the scenario's pieces (inflow
 hydrograph into a region, outflow, walls, roughness polygons, buildings raised or as holes)
 do what they say."""
+import gzip
 import json
 import os
+import re
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +24,7 @@ from floodmesh.core.flood.model import (flood_python, load_scenario, prepare, ru
 from floodmesh.core.options import RESULT_RASTERS
 from floodmesh.core.steps.mesh import PSLG, triangulate_pslg
 
+DATA = Path(__file__).parent.parent / "data"
 CRS = "EPSG:32756"
 X0, Y0 = 382_000.0, 6_354_000.0
 
@@ -174,6 +178,56 @@ def test_flood_with_a_reference_compares_the_two_meshes(tmp_path, capsys):
     assert json.loads((tmp_path / "same" / "comparison.json").read_text())["extent_iou"] == 1
 
 
+@needs_anuga
+def test_an_eddy_at_the_outflow_edge_is_not_fed_until_the_flood_blows_up(tmp_path):
+    """The mesh on which ANUGA's transmissive outflow blew up (tests/data: the oblique corpus
+    flood meshed with min_spacing 2 m; benchmarks/RESULTS.md, "An outflow edge that blew up"):
+    on the wave's falling limb an eddy turns back in at the west edge, and outside = inside fed
+    it until water ran at 70 m/s and stood 168 m deep, a map written as if all were well. Run
+    as a user would (the CLI, the CRS from the mesh's own .prj), the flood stays a flood: no
+    deeper than the river's 3 m, no faster than its 3 m/s, and the water leaves."""
+    from floodmesh.core.frontends.cli import main
+
+    mesh = tmp_path / "mesh.2dm"
+    mesh.write_bytes(gzip.decompress((DATA / "oblique_outflow_eddy.2dm.gz").read_bytes()))
+    io.write_prj(mesh, "EPSG:25832")
+    _write(tmp_path / "s.json", {
+        "duration_s": 760, "output_interval_s": 10, "manning": 0.035,
+        "inflows": [{"circle": {"centre": [412285.0, 5652216.38], "radius": 10.0},
+                     "hydrograph": [[0, 0], [300, 120], [600, 120], [900, 20]]}],
+        "boundaries": [{"kind": "outflow", "sides": ["west"]}]})
+    assert main(["flood", str(mesh), "--scenario", str(tmp_path / "s.json"),
+                 "--out", str(tmp_path / "out")]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["max_depth_m"] < 3.5 and report["max_speed_ms"] < 5.0
+    assert report["mass_balance"]["outflow_volume_m3"] > 10_000
+
+
+@needs_anuga
+def test_water_past_the_unstable_speed_stops_the_run_saying_when_and_where(tmp_path):
+    """A run whose water (deeper than the wet depth) passes the scenario's unstable_speed_m_s
+    stops at that output time: one error naming the time, the depth and speed, the triangle's
+    place and the setting; nothing written. The channel's water runs at about 1 m/s, so a
+    limit of 0.5 m/s stands in for a blow-up's 20."""
+    mesh = tmp_path / "channel.2dm"
+    rectangle_mesh(mesh, 100, 20, lambda x, y: 0.02 * (100 - x))
+    scenario = scenario_from_dict({
+        "duration_s": 120, "output_interval_s": 5, "manning": 0.03, "unstable_speed_m_s": 0.5,
+        "inflows": [{"line": local([[1, 0.5], [1, 19.5]]), "discharge_m3s": 2.0}],
+        "boundaries": [{"kind": "outflow", "sides": ["east"]}]})
+    seen = []
+    with pytest.raises(FloodMeshError) as stop:
+        run_flood(mesh, scenario, tmp_path / "out", crs=CRS, progress=seen.append)
+    message = str(stop.value)
+    assert re.search(r"went unstable by t = \d+ s: water 0\.\d\d m deep ran at \d\.\d m/s in the "
+                     r"triangle at \(3820\d\d\.\d, 63540\d\d\.\d\) \(inradius 0\.\d\d m, \d+\.\d m "
+                     r"from (a wall|an outflow \(outflow_1\))\), at a time step of ", message), \
+        message
+    assert "unstable_speed_m_s (now 0.5)" in message and "nothing was written" in message
+    assert seen and max(seen) < 0.5
+    assert not (tmp_path / "out").exists()
+
+
 def test_buildings_as_holes_leave_the_mesh_with_walls_around_them(tmp_path):
     nodes, tri = rectangle_mesh(tmp_path / "m.2dm", 40, 20, lambda x, y: 0 * x)
     house = local([[10, 5], [16, 5], [16, 12], [10, 12]])
@@ -212,6 +266,8 @@ def test_bad_scenarios_are_refused_with_the_fix(tmp_path):
     rising = scenario_from_dict({"duration_s": 10, "boundaries": [
         {"kind": "level", "sides": ["east"], "levels": [[0, 1.0], [5, 2.0]]}]})
     assert rising.boundaries[0].levels == ((0.0, 1.0), (5.0, 2.0))
+    with pytest.raises(FloodMeshError, match="unstable speed must be above 0"):
+        scenario_from_dict({"duration_s": 10, "unstable_speed_m_s": 0})
     with pytest.raises(FloodMeshError, match="not valid JSON"):
         load_scenario(_write_text(tmp_path / "bad.json", "{"))
 
