@@ -121,26 +121,14 @@ def feature_of_lines(floodplain) -> list:
     return names + ["terrace"] * (2 if floodplain.terrace is not None else 0)
 
 
-def breaks(lines, reference, features, tolerance: float = 2.0) -> dict:
-    """Where the pieces of each true line (as ``score_breaklines`` counts them) meet: at a
+def breaks(reference, features, spans) -> dict:
+    """Where the pieces of each true line (``score_breaklines``'s ``spans_m``) meet: at a
     junction or crossing (the gap within 8 m of another feature's line), mid-run, or a second
     line beside the first in the same band (overlapping along the true line)."""
-    traced = [shapely.LineString(np.asarray(c)[:, :2]) for c in lines]
-    tree = shapely.STRtree(traced)
     kinds = {"junction": 0, "mid-run": 0, "second line": 0}
     for i, ref in enumerate(reference):
-        zone = ref.buffer(tolerance)
-        spans = []
-        for j in tree.query(zone, predicate="intersects"):
-            overlap = shapely.intersection(traced[j], zone)
-            if overlap.length < 3 * tolerance:
-                continue
-            ends = shapely.get_coordinates(overlap)
-            along = ref.project(shapely.points(ends))
-            spans.append((along.min(), along.max()))
-        spans.sort()
         others = shapely.union_all([r for r, f in zip(reference, features) if f != features[i]])
-        for (_, a1), (b0, _) in zip(spans[:-1], spans[1:]):
+        for (_, a1), (b0, _) in zip(spans[i][:-1], spans[i][1:]):
             if b0 < a1 - 1.0:
                 kinds["second line"] += 1
             elif ref.interpolate(0.5 * (a1 + b0)).distance(others) < 8 + 0.5 * (b0 - a1):
@@ -173,12 +161,12 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
         traced = io.read_lines_gpkg(out / "breaklines.gpkg")
         score = score_breaklines(traced, reference, 2.0)
         features = feature_of_lines(floodplain)
-        score["breaks"] = breaks(traced, reference, features)
-        score["features"] = {f: (score_breaklines(traced, [r for r, g in zip(reference, features)
-                                                           if g == f], 2.0)["recall"],
-                                 float(np.mean([p for p, g in zip(score["pieces"], features)
-                                                if g == f])))
-                             for f in dict.fromkeys(features)}
+        score["breaks"] = breaks(reference, features, score["spans_m"])
+        mine = {f: np.array([g == f for g in features]) for f in dict.fromkeys(features)}
+        score["features"] = {f: (float(np.sum(np.array(score["recalled_m"])[m])
+                                       / np.sum(np.array(score["lengths_m"])[m])),
+                                 float(np.mean(np.array(score["pieces"])[m])))
+                             for f, m in mine.items()}
         # whole break-line segments the PSLG left out for the angle bound (see build_pslg)
         score["t_junctions"] = report["terrain_fit"].get("t_junctions_snapped", 0)
         score["dropped"] = sum(int(m) for n in report["notes"]
