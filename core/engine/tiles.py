@@ -45,7 +45,8 @@ from affine import Affine
 from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
-from ..io import GROUND_CLASS, atomic_output, classes_kept, file_format, read_band, read_xyz
+from ..io import (GROUND_CLASS, atomic_output, classes_kept, file_format, las_fields_read,
+                  read_band, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_holdout_count, check_max_gap
 from ..points import clean_points
@@ -349,7 +350,7 @@ def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                 raise
             raise _Unreadable(f"tile {exc}") from None
     try:
-        las = laspy.read(path)
+        las = laspy.read(path, **las_fields_read(laspy))
     except Exception as exc:
         raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file ({exc})") from None
     xyz = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])

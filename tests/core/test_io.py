@@ -45,6 +45,39 @@ def test_las_round_trip_reads_ground_class_by_default(tmp_path, ext):
     assert other.crs == UTM32
 
 
+def test_laz_of_las_1_4_layers_reads_its_ground_exactly(tmp_path):
+    """A LAS 1.4 LAZ in point format 7 (its fields in layers compressed apart: FloodMesh
+    decompresses only x, y, z and the class) with every other field filled: the ground points
+    are those laspy reads with every layer, to the stored integer, and a class above 31 (which
+    only formats 6 to 10 hold) can be asked for."""
+    import laspy
+
+    cloud = _cloud(n=500)
+    n = len(cloud)
+    rng = np.random.default_rng(5)
+    header = laspy.LasHeader(point_format=7, version="1.4")
+    header.scales, header.offsets = np.full(3, 0.001), np.array([412_000.0, 5_652_000.0, 0.0])
+    header.add_crs(UTM32)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = cloud.xyz.T
+    las.classification = rng.choice(np.array([1, 2, 64], np.uint8), n)
+    las.intensity = rng.integers(0, 65535, n).astype(np.uint16)
+    las.gps_time = rng.uniform(3e8, 3e8 + 60, n)
+    las.return_number = rng.integers(1, 4, n).astype(np.uint8)
+    las.number_of_returns = np.full(n, 3, np.uint8)
+    las.scan_angle = rng.integers(-3000, 3000, n).astype(np.int16)
+    las.red = las.green = las.blue = rng.integers(0, 65535, n).astype(np.uint16)
+    path = tmp_path / "points_1_4.laz"
+    las.write(path)
+
+    whole = laspy.read(path)
+    stored = np.column_stack([whole.x, whole.y, whole.z])
+    for classes, want in ((None, 2), ((64,), 64)):
+        read = io.read_points(path, classes=classes)
+        np.testing.assert_array_equal(read.xyz, stored[np.asarray(whole.classification) == want])
+        assert read.crs == UTM32
+
+
 def test_las_absent_classes_are_refused_with_the_present_ones(tmp_path):
     """Asking for classes the file lacks raises FloodMeshError listing the classes present (1, 2)."""
     cloud = _cloud()
