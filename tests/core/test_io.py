@@ -45,6 +45,24 @@ def test_las_round_trip_reads_ground_class_by_default(tmp_path, ext):
     assert other.crs == UTM32
 
 
+def test_class_flags_of_older_point_formats_do_not_change_the_class(tmp_path):
+    """Point formats 0 to 5 keep three flags (synthetic, key-point, withheld) in the top bits
+    of the class byte: a flagged ground point is still ground, as laspy's own class says."""
+    import laspy
+
+    cloud = _cloud(n=400)
+    classes = np.where(np.arange(len(cloud)) % 3 == 0, 1, 2).astype(np.uint8)
+    path = tmp_path / "flagged.laz"
+    io.write_points_las(path, cloud, classes=classes)
+    las = laspy.read(path)
+    las.synthetic = np.arange(len(cloud)) % 2 == 0
+    las.withheld = np.arange(len(cloud)) % 5 == 0
+    las.write(path)
+    assert (np.asarray(laspy.read(path).points.array["raw_classification"]) > 31).any()
+    ground = io.read_points(path)
+    np.testing.assert_allclose(ground.xyz, cloud.xyz[classes == 2], rtol=0, atol=1e-3)
+
+
 def test_laz_of_las_1_4_layers_reads_its_ground_exactly(tmp_path):
     """A LAS 1.4 LAZ in point format 7 (its fields in layers compressed apart: FloodMesh
     decompresses only x, y, z and the class) with every other field filled: the ground points
