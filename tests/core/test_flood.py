@@ -206,15 +206,17 @@ def test_an_eddy_at_the_outflow_edge_is_not_fed_until_the_flood_blows_up(tmp_pat
 @needs_anuga
 def test_water_past_the_unstable_speed_stops_the_run_saying_when_and_where(tmp_path):
     """A run whose water (deeper than the wet depth) passes the scenario's unstable_speed_m_s
-    stops at that output time: one error naming the time, the depth and speed, the triangle's
-    place and the setting; nothing written. The channel's water runs at about 1 m/s, so a
+    stops at that output time (or within 10 s of flood time, when outputs are further apart):
+    one error naming the time, the depth and speed, the triangle's place and the setting;
+    nothing written. The channel's water runs at about 1 m/s, so a
     limit of 0.5 m/s stands in for a blow-up's 20."""
     mesh = tmp_path / "channel.2dm"
     rectangle_mesh(mesh, 100, 20, lambda x, y: 0.02 * (100 - x))
-    scenario = scenario_from_dict({
+    scenario_dict = {
         "duration_s": 120, "output_interval_s": 5, "manning": 0.03, "unstable_speed_m_s": 0.5,
         "inflows": [{"line": local([[1, 0.5], [1, 19.5]]), "discharge_m3s": 2.0}],
-        "boundaries": [{"kind": "outflow", "sides": ["east"]}]})
+        "boundaries": [{"kind": "outflow", "sides": ["east"]}]}
+    scenario = scenario_from_dict(scenario_dict)
     seen = []
     with pytest.raises(FloodMeshError) as stop:
         run_flood(mesh, scenario, tmp_path / "out", crs=CRS, progress=seen.append)
@@ -225,6 +227,11 @@ def test_water_past_the_unstable_speed_stops_the_run_saying_when_and_where(tmp_p
         message
     assert "unstable_speed_m_s (now 0.5)" in message and "nothing was written" in message
     assert seen and max(seen) < 0.5
+    assert not (tmp_path / "out").exists()
+    # outputs 10 minutes apart: the run is checked every 10 s of flood time, not only at them
+    hourly = scenario_from_dict({**scenario_dict, "duration_s": 3600, "output_interval_s": 600})
+    with pytest.raises(FloodMeshError, match=r"went unstable by t = 10 s: "):
+        run_flood(mesh, hourly, tmp_path / "out", crs=CRS)
     assert not (tmp_path / "out").exists()
 
 
