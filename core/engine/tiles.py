@@ -248,7 +248,7 @@ def _read_window(path: str) -> tuple[np.ndarray, np.ndarray]:
     file, box = path.split(_WINDOW)
     x0, y0, x1, y1 = map(float, box.split(","))
     try:
-        with laspy.CopcReader.open(file) as reader:
+        with laspy.CopcReader.open(file, **las_fields_read(laspy)) as reader:
             points = reader.query(bounds=laspy.Bounds(mins=np.array([x0, y0]),
                                                       maxs=np.array([x1, y1])))
     except Exception as exc:
