@@ -12,8 +12,9 @@ flux integral and the stage at each observation triangle. On stdout it prints
 At each output time, and at least every ``CHECK_INTERVAL_S`` of flood time, it checks that
 the solution is still a flood: where the water turns non-finite, or water deeper than the wet
 depth runs faster than ``unstable_speed_m_s``, it writes ``JOB_DIR/unstable.json`` (time,
-triangle, depth, speed, time step) instead of a result and exits with ``UNSTABLE_EXIT``. A blow-up otherwise goes on to the end (depths of 100 m and
-more, a balanced mass budget) or crawls for hours at time steps of 0.0001 s.
+triangle, depth, speed, time step) instead of a result and exits with ``UNSTABLE_EXIT``. A
+blow-up otherwise goes on to the end (depths of 100 m and more, a balanced mass budget) or
+crawls for hours at time steps of 0.0001 s.
 """
 import json
 import math
