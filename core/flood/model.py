@@ -513,16 +513,16 @@ def run_anuga(prepared: dict, *, work_dir=None, python: str | None = None,
 def unstable_message(found: dict, prepared: dict) -> str:
     """The error for a run the worker stopped (``anuga_worker._unstable``): when, where (the
     triangle's centre, its inradius, the nearest boundary) and what to do."""
+    # lazy: GEOS loads only when this runs
+    import shapely
+
     arrays, job = prepared["arrays"], prepared["job"]
     nodes, triangles = arrays["nodes"][:, :2], arrays["triangles"]
     k = found["triangle"]
     x, y = nodes[triangles[k]].mean(axis=0)
     edges = arrays["boundary_edges"]
-    a = nodes[triangles[edges[:, 0], (edges[:, 1] + 1) % 3]]
-    b = nodes[triangles[edges[:, 0], (edges[:, 1] + 2) % 3]]
-    along = np.clip(np.einsum("ij,ij->i", (x, y) - a, b - a)
-                    / np.maximum(np.einsum("ij,ij->i", b - a, b - a), 1e-12), 0.0, 1.0)
-    gap = np.hypot(*(a + along[:, None] * (b - a) - (x, y)).T)
+    gap = shapely.distance(shapely.points(x, y),
+                           shapely.linestrings(nodes[edge_nodes(triangles, edges)]))
     near = int(np.argmin(gap))
     tag = job["boundary_tags"][int(edges[near, 2])]
     kind = job["boundary_kinds"][tag]["kind"]
