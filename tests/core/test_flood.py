@@ -208,8 +208,8 @@ def test_water_past_the_unstable_speed_stops_the_run_saying_when_and_where(tmp_p
     """A run whose water (deeper than the wet depth) passes the scenario's unstable_speed_m_s
     stops at that output time (or within 10 s of flood time, when outputs are further apart):
     one error naming the time, the depth and speed, the triangle's place and the setting;
-    nothing written. The channel's water runs at about 1 m/s, so a
-    limit of 0.5 m/s stands in for a blow-up's 20."""
+    nothing written. The channel's water runs at about 1 m/s, so a limit of 0.5 m/s stands in
+    for a blow-up's 20."""
     mesh = tmp_path / "channel.2dm"
     rectangle_mesh(mesh, 100, 20, lambda x, y: 0.02 * (100 - x))
     scenario_dict = {
