@@ -9,7 +9,9 @@ points clearly better than one plane (an F ratio) and the slope changes across i
 half of tan(S_crit), the vertex moves onto the hinge and takes its z; the fit's RMS residual is
 the vertex's confidence (m). The window follows point density and noise: it holds about
 ``40 + 800·σ`` points (σ in m), at least one and at most 1.5 cells to each side and at most
-six cells along.
+six cells along. A kink that runs beside a localised line but that no traced line follows (the
+toe of a narrow embankment whose band the tracer followed along its crest) is found by probing
+parallel to each line (``_companions``) and becomes a line of its own.
 
 Node elevations: nodes on break lines take z along the (localised) lines; every other node, z of
 a least-squares plane of the measured points within a radius (shrunk so that the window stays
@@ -39,6 +41,14 @@ BRIDGE_HOLD = 0.6
 # A line is cut where it turns by more than CORNER_TURN degrees over CORNER_REACH hinge-window
 # half widths before and after a vertex (a corner, not a bend)
 CORNER_TURN, CORNER_REACH = 30.0, 4.0
+# Companion kinks: probes centred COMPANION_PROBES hinge-window half widths to each side of a
+# localised line look for a parallel kink the tracer missed (the toe beside a crest, the other
+# crest of a narrow embankment); a run of at least COMPANION_RUN probe vertices (half a window
+# apart along the line) that find one, farther than COMPANION_APART half widths from every
+# line, becomes a line
+COMPANION_PROBES = (1.25, 2.25)  # their reach: 0.55 to 2.95 half widths out
+COMPANION_RUN = 6
+COMPANION_APART = 0.45
 
 
 @dataclass(frozen=True)
@@ -643,6 +653,104 @@ def _bridges_fitted(points: np.ndarray, window: FitWindow, s_crit: float, index,
     return make
 
 
+def _resampled(coords: np.ndarray, step: float) -> np.ndarray:
+    """x, y of a line every about ``step`` m along it, its ends included."""
+    xy = coords[:, :2]
+    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+    at = np.linspace(0.0, along[-1], max(2, int(np.ceil(along[-1] / step)) + 1))
+    return np.column_stack([np.interp(at, along, xy[:, 0]), np.interp(at, along, xy[:, 1])])
+
+
+def _runs(ok: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of each run of True in ``ok``."""
+    edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
+    return list(zip(edges[::2], edges[1::2]))
+
+
+def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, index,
+                tolerance: float) -> list[tuple]:
+    """Pieces (as ``localise_traced`` keeps them) for the kinks that run beside a localised
+    piece but that no line follows: the tracer follows one edge of a band of breakpoints, and
+    where a crest and its toe (or a narrow embankment's two crests) lie a band's width apart
+    the other kink goes untraced. Probes run parallel to each piece at ``COMPANION_PROBES``
+    hinge-window half widths to each side (the window then holds none of the piece's own
+    kink), a vertex every half a window length, and are localised; a run of at least
+    ``COMPANION_RUN`` consecutive probe vertices that find a kink of one kind, each farther
+    than ``COMPANION_APART`` half widths from every line and from the companions found before
+    it, is a new piece, thinned by Douglas–Peucker within ``tolerance`` m."""
+    kinds = _kinds(pieces)
+    hw = window.half_width
+    apart = COMPANION_APART * hw
+    lines = [p[0] for p in pieces]
+    samples = [(k, _resampled(p[0], window.half_length)) for k, (p, kind)
+               in enumerate(zip(pieces, kinds)) if kind]
+    samples = [(k, xy, _tangents(xy)[:, ::-1] * (-1.0, 1.0)) for k, xy in samples
+               if len(xy) >= COMPANION_RUN]
+    if not samples:
+        return []
+    xy = np.concatenate([xy for _, xy, _ in samples])
+    normal = np.concatenate([n for _, _, n in samples])
+
+    # a side is probed only where no line runs 1.5 to 6.5 half widths from the piece (within
+    # 2.5 of the point 4 out: the partner, a wide bank's other kink, is traced) and where the
+    # ground between the probes lies above or below the line's by at least half of S_crit's
+    # grade (a kink needs sloping ground beside it)
+    free = [nearest_line(xy + side * 4.0 * hw * normal, lines)[1] > 2.5 * hw
+            for side in (1.0, -1.0)]
+    either = free[0] | free[1]
+    base = _ground_z(points, window, xy[either], index)
+    middle = float(np.mean(COMPANION_PROBES)) * hw
+    for side, ok in zip((1.0, -1.0), free):
+        rise = np.abs(_ground_z(points, window, xy[ok] + side * middle * normal[ok], index)
+                      - base[ok[either]])
+        ok[ok] = ~(rise <= 0.5 * np.tan(np.radians(s_crit)) * middle)
+    fitted, owners, start = [], [], 0
+    for k, xy, normal in samples:
+        stop = start + len(xy)
+        for side, ok in zip((1.0, -1.0), free):
+            if not ok[start:stop].any():
+                continue
+            for a, b in _runs(ok[start:stop]):
+                if b - a < COMPANION_RUN:
+                    continue
+                for reach in COMPANION_PROBES:
+                    probe = xy[a:b] + side * reach * hw * normal[a:b]
+                    fitted.append(np.column_stack([probe, np.full(b - a, np.nan)]))
+                    owners.append(k)
+        start = stop
+    if not fitted:
+        return []
+    moved, fits, kinks = localise_breaklines(fitted, points, window, s_crit=s_crit,
+                                             index=index)
+    vertices = np.concatenate(moved)
+    distance = nearest_line(vertices, lines)[1]
+    runs, start = [], 0
+    for k, coords, fit, kink in zip(owners, moved, fits, kinks):
+        ok = np.isfinite(fit) & (distance[start:start + len(coords)] > apart)
+        start += len(coords)
+        sign = np.sign(np.nan_to_num(kink))
+        for kind in (-1.0, 1.0):
+            for a, b in _runs(ok & (sign == kind)):
+                if b - a >= COMPANION_RUN:
+                    runs.append((k, coords[a:b], fit[a:b], kink[a:b]))
+    out, found = [], []
+    for k, coords, fit, kink in sorted(runs, key=lambda r: -len(r[1])):
+        if found:
+            d = shapely.distance(shapely.points(coords[:, :2]), shapely.multilinestrings(found))
+            keep = d > apart
+            if keep.sum() < COMPANION_RUN:
+                continue
+            first, stop = max(_runs(keep), key=lambda r: r[1] - r[0])
+            if stop - first < COMPANION_RUN:
+                continue
+            coords, fit, kink = coords[first:stop], fit[first:stop], kink[first:stop]
+        thin = douglas_peucker_mask(coords, tolerance)
+        found.append(shapely.LineString(coords[:, :2]))
+        out.append((coords[thin], np.full(int(thin.sum()), np.nan), pieces[k][2], fit[thin],
+                    kink[thin], np.zeros(int(thin.sum()), bool)))
+    return out
+
+
 def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
                     max_gap: float = 12.0, join_gap: float | None = None,
@@ -652,7 +760,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within
     ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
     are cut where they hop across a band from crest to toe (``_hops_cut``) and where they turn
-    a corner (``_corners_cut``), and pieces of one kind (crest or toe) whose ends face each
+    a corner (``_corners_cut``), kinks beside the pieces that no line follows become pieces of
+    their own (``_companions``), and pieces of one kind (crest or toe) whose ends face each
     other across at most ``join_gap`` m are joined (``joining.join_pieces``, lateral offset
     ``join_lateral`` m; None or 0: no joining); the gaps left of up to ``bridge_gap`` m where
     the terrain carries the line's kink across (a crossing, a junction: ``joining.bridges``,
@@ -677,6 +786,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                 pieces.append((coords[piece], line.slopes[piece], line.component, fit[piece],
                                kink[piece], np.zeros(len(piece), bool)))
         hops -= 1
+    companions = _companions(pieces, points, window, s_crit, index, tolerance)
+    pieces += companions
     joined = len(pieces)
     if join_gap:
         pieces = _chained(pieces, join_pieces(
@@ -721,6 +832,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                            "hop_segments_cut": hops,
                            "pieces_joined": joined,
                            "gaps_bridged": n_bridges,
+                           "companions_found": len(companions),
                            "t_junctions_snapped": t_junctions,
                            "join_gap_m": join_gap or 0.0,
                            "thinning_tolerance_m": tolerance,

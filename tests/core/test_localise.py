@@ -154,7 +154,9 @@ def test_chain_fits_the_terrain_on_the_demo_floodplain(demo_points_file, tmp_pat
 
 def test_a_line_hopping_from_crest_to_toe_is_cut():
     """A traced line that follows a bank's crest, hops across the 3 m wide bank and goes on along
-    its toe (the staircase of an oblique band) comes out as two pieces, on the crest and toe."""
+    its toe (the staircase of an oblique band) is cut at the hop; the kink beside each half is
+    found (``_companions``) and joined to it: two lines, the crest and the toe, each along the
+    whole bank."""
     from floodmesh.core.steps.breaklines import BreakLine
     from floodmesh.core.steps.localise import localise_traced
 
@@ -167,11 +169,14 @@ def test_a_line_hopping_from_crest_to_toe_is_cut():
     u = np.where(s < 0, 0.3, 2.7)
     xy = 50.0 + s[:, None] * TANGENT + u[:, None] * NORMAL
     line = BreakLine(np.column_stack([xy, bank(xy)]), np.full(len(s), 20.0))
-    pieces, confidence, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0))
+    pieces, confidence, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0),
+                                                 join_gap=10.0)
     assert counts["hop_segments_cut"] == 1 and len(pieces) == len(confidence) == 2
     for piece, at in zip(pieces, (0.0, 3.0)):
         off = (piece.coords[:, :2] - 50.0) @ NORMAL - at
         assert np.abs(off).max() < 0.15
+        along = (piece.coords[:, :2] - 50.0) @ TANGENT
+        assert along.min() < -23 and along.max() > 23
 
 
 def test_a_loop_without_a_kink_keeps_its_course():
@@ -206,3 +211,44 @@ def test_the_reference_survey_keeps_its_own_window():
     wanted = (40 + 800 * window.noise) / window.density
     assert wanted > 8.0
     assert window.half_width == pytest.approx(min(1.5, np.sqrt(wanted) / 2))
+
+
+def test_a_toe_beside_a_traced_crest_is_found():
+    """A bank 3 m wide (crest at u = 0, toe at u = 3) whose band the tracer followed along its
+    crest only: the toe, which no traced line follows, comes out as a line of its own, on the
+    toe, along most of the bank."""
+    from floodmesh.core.steps.breaklines import BreakLine
+    from floodmesh.core.steps.localise import localise_traced
+
+    def bank(xy):
+        u = (xy - 50.0) @ NORMAL
+        return 10.0 - 0.27 * np.clip(u, 0.0, 3.0)  # 15°: just over S_crit, a narrow band
+
+    points = noisy_points(bank)
+    s = np.arange(-30, 31, 2.0)
+    xy = 50.0 + s[:, None] * TANGENT + 0.3 * NORMAL
+    line = BreakLine(np.column_stack([xy, bank(xy)]), np.full(len(s), 15.0))
+    pieces, _, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0))
+    assert counts["companions_found"] >= 1
+    at = [np.median((p.coords[:, :2] - 50.0) @ NORMAL) for p in pieces]
+    toes = [p for p, u in zip(pieces, at) if abs(u - 3.0) < 0.5]
+    assert sum(p.length for p in toes) > 0.8 * line.length
+    off = np.abs(np.concatenate([(p.coords[:, :2] - 50.0) @ NORMAL for p in toes]) - 3.0)
+    # a 15° bank, a weaker kink than 1:2: a line localised on the toe itself scatters as much
+    assert np.median(off) < 0.1 and off.max() < 0.35
+    assert all(abs(u) < 0.15 or abs(u - 3.0) < 0.15 for u in at)
+
+
+@pytest.mark.parametrize("noise", [0.05, 0.15])
+def test_no_companion_beside_a_lone_crest(noise):
+    """A crest with plain ground on either side (the hinge of ``hinge``), surveyed with noise:
+    the search for a kink beside it finds none, and the crest stays one line."""
+    from floodmesh.core.steps.breaklines import BreakLine
+    from floodmesh.core.steps.localise import localise_traced
+
+    points = noisy_points(hinge, noise=noise, seed=3)
+    s = np.arange(-30, 31, 2.0)
+    xy = 50.0 + s[:, None] * TANGENT
+    line = BreakLine(np.column_stack([xy, hinge(xy)]), np.full(len(s), 26.6))
+    pieces, _, counts = localise_traced([line], points, fit_window(points, 1e4, 1.0))
+    assert counts["companions_found"] == 0 and len(pieces) == 1
