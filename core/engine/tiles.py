@@ -46,7 +46,7 @@ from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
 from ..io import (GROUND_CLASS, atomic_output, classes_kept, file_format, las_fields_read,
-                  read_band, read_xyz)
+                  las_xyz, read_band, read_las, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_holdout_count, check_max_gap
 from ..points import clean_points
@@ -337,9 +337,6 @@ def holdout_mask(n_points: int, fraction: float, seed: int, name: str) -> np.nda
 def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """(xyz, LAS classes or None for text) of all a tile's points, as stored; a tile that cannot
     be read raises ``_Unreadable`` naming it."""
-    # lazy: laspy loads only when this runs
-    import laspy
-
     if _WINDOW in str(path):
         return _read_window(str(path))
     if path.suffix.lower() not in LAS_EXTENSIONS:
@@ -350,11 +347,10 @@ def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                 raise
             raise _Unreadable(f"tile {exc}") from None
     try:
-        las = laspy.read(path, **las_fields_read(laspy))
-    except Exception as exc:
-        raise _Unreadable(f"tile {path.name} is not a readable LAS/LAZ file ({exc})") from None
-    xyz = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
-    return xyz, np.asarray(las.classification)
+        las = read_las(path, f"tile {path.name} is not a readable LAS/LAZ file")
+    except FloodMeshError as exc:
+        raise _Unreadable(str(exc)) from None
+    return las_xyz(las), np.asarray(las.classification)
 
 
 def _which(classes) -> str:

@@ -53,34 +53,54 @@ def read_point_file(path: Path, classes=None, note=None):
 
 
 def _read_las(path: Path, classes, note=None):
+    def check(header):
+        count = int(header.point_count)
+        if count == 0:
+            raise FloodMeshError(f"{path.name} holds no points (its header counts 0): check "
+                                 "that the export or tiling wrote this tile")
+        check_memory(points=count, advice="split the point file into tiles (e.g. pdal "
+                                          "tile or lastile) and mesh them one by one")
+
+    las = read_las(path, f"{path.name} is not a readable LAS/LAZ file", check=check)
+    try:
+        file_crs = las.header.parse_crs()
+    except Exception:
+        file_crs = None
+    cls = np.ascontiguousarray(las.classification)
+    keep = classes_table(np.bincount(cls, minlength=256), classes, path.name, note)
+    return las_xyz(las, keep), file_crs
+
+
+def read_las(path: Path, unreadable: str, *, check=None):
+    """A LAS/LAZ file's points (laspy's ``LasData``), only x, y, z and the class decompressed
+    (``las_fields_read``), after ``check(header)`` where given; where laspy cannot read it,
+    ``FloodMeshError``: ``unreadable`` and laspy's reason."""
     # lazy: laspy loads only when this runs
     import laspy
 
     try:
         with laspy.open(path, **las_fields_read(laspy)) as reader:
-            count = int(reader.header.point_count)
-            if count == 0:
-                raise FloodMeshError(f"{path.name} holds no points (its header counts 0): check "
-                                     "that the export or tiling wrote this tile")
-            check_memory(points=count, advice="split the point file into tiles (e.g. pdal "
-                                              "tile or lastile) and mesh them one by one")
-            las = reader.read()
+            if check is not None:
+                check(reader.header)
+            return reader.read()
     except FloodMeshError:
         raise
     except Exception as exc:
-        raise FloodMeshError(f"{path.name} is not a readable LAS/LAZ file ({exc})") from None
-    try:
-        file_crs = las.header.parse_crs()
-    except Exception:
-        file_crs = None
+        raise FloodMeshError(f"{unreadable} ({exc})") from None
+
+
+def las_xyz(las, keep: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3) x, y, z in metres of the points of ``las`` (a ``LasData``) whose class ``keep``
+    marks (a bool per LAS class, 256; None: all), scaled from the stored integers in one pass
+    as laspy scales them (``scaled_points``)."""
     # lazy: numba loads only when points are read
     from .._kernels.points import scaled_points
 
     cls = np.ascontiguousarray(las.classification)  # one compiled variant for every format
-    keep = classes_table(np.bincount(cls, minlength=256), classes, path.name, note)
+    keep = np.ones(256, bool) if keep is None else keep
     stored, header = las.points.array, las.header
     return scaled_points(stored["X"], stored["Y"], stored["Z"], cls, keep, header.scales,
-                         header.offsets), file_crs
+                         header.offsets)
 
 
 def las_fields_read(laspy) -> dict:
@@ -135,9 +155,6 @@ def _read_ept(path: Path, classes, note=None):
     """The points of an Entwine Point Tile index (``ept.json`` with LAZ nodes in ``ept-data``,
     as Entwine, untwine and QGIS 3.22 with PDAL write): every node, since each point lies in
     exactly one."""
-    # lazy: laspy loads only when this runs
-    import laspy
-
     try:
         meta = json.loads(path.read_text())
         kind, count = meta.get("dataType"), int(meta.get("points", 0))
@@ -153,11 +170,8 @@ def _read_ept(path: Path, classes, note=None):
                                       "tiles")
     parts, cls = [], []
     for node in nodes:
-        try:
-            las = laspy.read(node, **las_fields_read(laspy))
-        except Exception as exc:
-            raise FloodMeshError(f"{path}: node {node.name} is not readable LAZ ({exc})") from None
-        parts.append(np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)]))
+        las = read_las(node, f"{path}: node {node.name} is not readable LAZ")
+        parts.append(las_xyz(las))
         cls.append(np.asarray(las.classification))
     srs = meta.get("srs") or {}
     file_crs = srs.get("wkt") or (f"{srs['authority']}:{srs['horizontal']}"
