@@ -45,9 +45,10 @@ CORNER_TURN, CORNER_REACH = 30.0, 4.0
 # localised line look for a parallel kink the tracer missed (the toe beside a crest, the other
 # crest of a narrow embankment); a run of at least COMPANION_RUN probe vertices (half a window
 # apart along the line) that find one, farther than COMPANION_APART half widths from every
-# line, becomes a line
+# line, becomes a line (the run chosen on the corpus: RESULTS.md, "The run length, chosen on the
+# corpus")
 COMPANION_PROBES = (1.25, 2.25)  # their reach: 0.55 to 2.95 half widths out
-COMPANION_RUN = 6
+COMPANION_RUN = 3
 COMPANION_APART = 0.45
 
 
