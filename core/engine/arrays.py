@@ -29,6 +29,17 @@ def unique_rows(rows, return_inverse: bool = False):
     return unique, inverse
 
 
+def true_runs(mask) -> list[tuple[int, int]]:
+    """(start, stop) of each run of True in a 1-D bool array."""
+    edges = np.flatnonzero(np.diff(np.r_[0, np.asarray(mask).astype(np.int8), 0]))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def distance_along(coords) -> np.ndarray:
+    """Distance (m) along a polyline ((n, 2+) x, y first) at each of its vertices, 0 first."""
+    return np.r_[0.0, np.cumsum(np.hypot(*np.diff(np.asarray(coords)[:, :2], axis=0).T))]
+
+
 def spatial_order(nodes, triangles, bits: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """(the nodes' new order, the triangles renumbered): triangles in Z (Morton) order of their
     centres, nodes in the order the triangles first use them (``nodes[order]``; a node no

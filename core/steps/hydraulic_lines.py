@@ -36,6 +36,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..engine.arrays import distance_along, true_runs
+
 FLOW_PLAN_TOLERANCE = 0.25   # cells: a vertex this close to the chord past it may give way
 FLOW_HEIGHT_TOLERANCE = 0.05  # m: ... if its height is this close too (a flood's wet depth)
 FOLD_ANGLE = 60.0  # degrees: a line whose segments meet at less folds back (the PSLG's corner)
@@ -183,8 +185,7 @@ def without_wet_bridges(lines, bridged, low_ground) -> list[np.ndarray]:
         if not drop.any():
             out.append(coords)
             continue
-        edges = np.flatnonzero(np.diff(np.r_[0, (~drop).astype(np.int8), 0]))
-        out += [coords[a:b + 1] for a, b in zip(edges[::2], edges[1::2])]
+        out += [coords[a:b + 1] for a, b in true_runs(~drop)]
     return out
 
 
@@ -218,7 +219,7 @@ def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: np.nd
         target = np.asarray(shapely.get_coordinates(shapely.line_interpolate_point(
             lines[k], along)))[0]
         bar = lines_xyz[k]
-        lengths = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(bar[:, :2], axis=0).T))])
+        lengths = distance_along(bar)
         seg = int(np.clip(np.searchsorted(lengths, along) - 1, 0, len(bar) - 2))
         tangent = bar[seg + 1, :2] - bar[seg, :2]
         stem = e - coords[inner, :2]

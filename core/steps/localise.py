@@ -25,6 +25,7 @@ import numpy as np
 import shapely
 from numba import njit, prange
 
+from ..engine.arrays import distance_along, true_runs
 from ..engine.nearest import nearest_line, point_index, threads_for
 from ..errors import FloodMeshError
 from .breaklines import BreakLine
@@ -487,7 +488,7 @@ def _failed_fits_left_out(coords, moved, max_gap):
     keep = moved.copy()
     keep[0] = keep[-1] = True
     kept = np.nonzero(keep)[0]
-    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(coords[:, :2], axis=0).T))]
+    along = distance_along(coords)
     for a, b in zip(kept[:-1], kept[1:]):
         if b - a > 1 and along[b] - along[a] > max_gap:
             keep[a + 1:b] = True
@@ -555,7 +556,7 @@ def _corners_cut(keep: np.ndarray, coords: np.ndarray, reach: float,
     xy = coords[keep, :2]
     if len(xy) < 3:
         return [keep]
-    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+    along = distance_along(xy)
 
     def at(distance):  # the points ``distance`` m along the line (its ends beyond them)
         return np.column_stack([np.interp(distance, along, xy[:, 0]),
@@ -656,16 +657,9 @@ def _bridges_fitted(points: np.ndarray, window: FitWindow, s_crit: float, index,
 
 def _resampled(coords: np.ndarray, step: float) -> np.ndarray:
     """x, y of a line every about ``step`` m along it, its ends included."""
-    xy = coords[:, :2]
-    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+    xy, along = coords[:, :2], distance_along(coords)
     at = np.linspace(0.0, along[-1], max(2, int(np.ceil(along[-1] / step)) + 1))
     return np.column_stack([np.interp(at, along, xy[:, 0]), np.interp(at, along, xy[:, 1])])
-
-
-def _runs(ok: np.ndarray) -> list[tuple[int, int]]:
-    """(start, stop) of each run of True in ``ok``."""
-    edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))
-    return list(zip(edges[::2], edges[1::2]))
 
 
 def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, index,
@@ -709,9 +703,7 @@ def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, in
     for k, xy, normal in samples:
         stop = start + len(xy)
         for side, ok in zip((1.0, -1.0), free):
-            if not ok[start:stop].any():
-                continue
-            for a, b in _runs(ok[start:stop]):
+            for a, b in true_runs(ok[start:stop]):
                 if b - a < COMPANION_RUN:
                     continue
                 for reach in COMPANION_PROBES:
@@ -731,7 +723,7 @@ def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, in
         start += len(coords)
         sign = np.sign(np.nan_to_num(kink))
         for kind in (-1.0, 1.0):
-            for a, b in _runs(ok & (sign == kind)):
+            for a, b in true_runs(ok & (sign == kind)):
                 if b - a >= COMPANION_RUN:
                     runs.append((k, coords[a:b], fit[a:b], kink[a:b]))
     out, found = [], []
@@ -741,7 +733,7 @@ def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, in
             keep = d > apart
             if keep.sum() < COMPANION_RUN:
                 continue
-            first, stop = max(_runs(keep), key=lambda r: r[1] - r[0])
+            first, stop = max(true_runs(keep), key=lambda r: r[1] - r[0])
             if stop - first < COMPANION_RUN:
                 continue
             coords, fit, kink = coords[first:stop], fit[first:stop], kink[first:stop]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
+from ..engine.arrays import distance_along
 from ..engine.nearest import nearest_line
 from ..options import (SIMPLIFY_METHODS, check_choice, check_min_distance, check_positive_int,
                        check_tolerance)
@@ -120,7 +121,7 @@ def spline_plan(coords: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.nd
     half = tolerance / 2
     if len(coords) < 5 or not np.isfinite(coords).all():
         return coords, douglas_peucker_mask(coords, tolerance)
-    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(coords[:, :2], axis=0).T))])
+    s = distance_along(coords)
     scale = (s[-1] / len(s)) ** 3  # lam is in units of spacing³
 
     def smoothed(lam):
