@@ -46,7 +46,7 @@ from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
 from ..io import (GROUND_CLASS, atomic_output, classes_kept, file_format, las_fields_read,
-                  las_xyz, read_band, read_las, read_xyz)
+                  las_classes, las_xyz, read_band, read_las, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_holdout_count, check_max_gap
 from ..points import clean_points
@@ -350,7 +350,8 @@ def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
         las = read_las(path, f"tile {path.name} is not a readable LAS/LAZ file")
     except FloodMeshError as exc:
         raise _Unreadable(str(exc)) from None
-    return las_xyz(las), np.asarray(las.classification)
+    cls = las_classes(las)
+    return las_xyz(las, cls), cls
 
 
 def _which(classes) -> str:

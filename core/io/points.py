@@ -66,9 +66,9 @@ def _read_las(path: Path, classes, note=None):
         file_crs = las.header.parse_crs()
     except Exception:
         file_crs = None
-    cls = np.ascontiguousarray(las.classification)
+    cls = las_classes(las)
     keep = classes_table(np.bincount(cls, minlength=256), classes, path.name, note)
-    return las_xyz(las, keep), file_crs
+    return las_xyz(las, cls, keep), file_crs
 
 
 def read_las(path: Path, unreadable: str, *, check=None):
@@ -89,14 +89,19 @@ def read_las(path: Path, unreadable: str, *, check=None):
         raise FloodMeshError(f"{unreadable} ({exc})") from None
 
 
-def las_xyz(las, keep: np.ndarray | None = None) -> np.ndarray:
-    """(n, 3) x, y, z in metres of the points of ``las`` (a ``LasData``) whose class ``keep``
-    marks (a bool per LAS class, 256; None: all), scaled from the stored integers in one pass
-    as laspy scales them (``scaled_points``)."""
+def las_classes(las) -> np.ndarray:
+    """The LAS class of each point of ``las`` (a ``LasData``), contiguous (one compiled
+    variant of ``las_xyz``'s kernel for every point format)."""
+    return np.ascontiguousarray(las.classification)
+
+
+def las_xyz(las, cls: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3) x, y, z in metres of the points of ``las`` (a ``LasData``; ``cls``: its
+    ``las_classes``) whose class ``keep`` marks (a bool per LAS class, 256; None: all), scaled
+    from the stored integers in one pass as laspy scales them (``scaled_points``)."""
     # lazy: numba loads only when points are read
     from .._kernels.points import scaled_points
 
-    cls = np.ascontiguousarray(las.classification)  # one compiled variant for every format
     keep = np.ones(256, bool) if keep is None else keep
     stored, header = las.points.array, las.header
     return scaled_points(stored["X"], stored["Y"], stored["Z"], cls, keep, header.scales,
@@ -171,8 +176,8 @@ def _read_ept(path: Path, classes, note=None):
     parts, cls = [], []
     for node in nodes:
         las = read_las(node, f"{path}: node {node.name} is not readable LAZ")
-        parts.append(las_xyz(las))
-        cls.append(np.asarray(las.classification))
+        cls.append(las_classes(las))
+        parts.append(las_xyz(las, cls[-1]))
     srs = meta.get("srs") or {}
     file_crs = srs.get("wkt") or (f"{srs['authority']}:{srs['horizontal']}"
                                   if srs.get("authority") and srs.get("horizontal") else None)
