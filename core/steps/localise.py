@@ -541,8 +541,23 @@ def _ground_z(points: np.ndarray, window: FitWindow, xy: np.ndarray, index,
     the 8 or so nearest where they are sparser; NaN where fewer than 3 lie that close."""
     radius = max(spacing, float(np.sqrt(8 / (np.pi * window.density))))
     indptr, indices = index.neighbours(np.asarray(xy, float), radius)
-    return np.array([_median(points[k, 2]) if len(k) >= 3 else np.nan
-                     for k in np.split(indices, indptr[1:-1])])
+    return _medians_z(points, indptr, indices, 3)
+
+
+@njit(cache=True, nogil=True)
+def _medians_z(points, indptr, indices, least):
+    """``_median`` of the z of each CSR row's points (``indptr``, ``indices`` into
+    ``points``); NaN for a row of fewer than ``least``."""
+    out = np.full(indptr.shape[0] - 1, np.nan)
+    for i in range(out.shape[0]):
+        n = indptr[i + 1] - indptr[i]
+        if n < max(least, 1):
+            continue
+        ordered = np.sort(points[indices[indptr[i]:indptr[i + 1]], 2].astype(np.float64))
+        if not np.isnan(ordered[-1]):
+            out[i] = (ordered[n // 2] if n % 2
+                      else (ordered[n // 2 - 1] + ordered[n // 2]) / 2)
+    return out
 
 
 def _corners_cut(keep: np.ndarray, coords: np.ndarray, reach: float,
