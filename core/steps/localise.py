@@ -505,14 +505,15 @@ def _hops_cut(keep: np.ndarray, kink: np.ndarray) -> list[np.ndarray]:
     return np.split(keep, cuts)
 
 
+@njit(cache=True, nogil=True)
 def _median(values: np.ndarray) -> float:
     """``np.median`` of a few ``values`` (the middle one, or the mean of the middle two; NaN
-    where any is NaN or none) without its overhead (some 20 µs a call, 1,500 calls a run)."""
+    where any is NaN or none) without its overhead (some 20 µs a call)."""
     ordered = np.sort(values)
     n = len(ordered)
     if not n or np.isnan(ordered[-1]):
-        return float("nan")
-    return float(ordered[n // 2] if n % 2 else (ordered[n // 2 - 1] + ordered[n // 2]) / 2)
+        return np.nan
+    return ordered[n // 2] if n % 2 else (ordered[n // 2 - 1] + ordered[n // 2]) / 2
 
 
 def _ground_follows(points: np.ndarray, window: FitWindow, spacing: float = 0.5, index=None):
@@ -550,13 +551,8 @@ def _medians_z(points, indptr, indices, least):
     ``points``); NaN for a row of fewer than ``least``."""
     out = np.full(indptr.shape[0] - 1, np.nan)
     for i in range(out.shape[0]):
-        n = indptr[i + 1] - indptr[i]
-        if n < max(least, 1):
-            continue
-        ordered = np.sort(points[indices[indptr[i]:indptr[i + 1]], 2].astype(np.float64))
-        if not np.isnan(ordered[-1]):
-            out[i] = (ordered[n // 2] if n % 2
-                      else (ordered[n // 2 - 1] + ordered[n // 2]) / 2)
+        if indptr[i + 1] - indptr[i] >= least:
+            out[i] = _median(points[indices[indptr[i]:indptr[i + 1]], 2])
     return out
 
 
