@@ -115,10 +115,12 @@ def split_holdout(points: PointCloud, fraction: float, seed: int,
     n_out = holdout_count(fraction, n, note)
     check_seed(seed)
     # lazy: numba loads only where points are read
-    from ._kernels.points import rows_left
+    import numba
+
+    from ._kernels.points import split_rows
 
     rng = np.random.default_rng(seed)
     mask = np.zeros(n, dtype=bool)
     mask[rng.choice(n, size=n_out, replace=False)] = True
-    return (PointCloud(rows_left(points.xyz, mask), points.crs),
-            PointCloud(points.xyz[mask], points.crs))
+    gridding, held_out = split_rows(points.xyz, mask, numba.get_num_threads())
+    return PointCloud(gridding, points.crs), PointCloud(held_out, points.crs)

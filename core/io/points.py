@@ -100,12 +100,14 @@ def las_xyz(las, cls: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
     ``las_classes``) whose class ``keep`` marks (a bool per LAS class, 256; None: all), scaled
     from the stored integers in one pass as laspy scales them (``scaled_points``)."""
     # lazy: numba loads only when points are read
+    import numba
+
     from .._kernels.points import scaled_points
 
     keep = np.ones(256, bool) if keep is None else keep
     stored, header = las.points.array, las.header
     return scaled_points(stored["X"], stored["Y"], stored["Z"], cls, keep, header.scales,
-                         header.offsets)
+                         header.offsets, numba.get_num_threads())
 
 
 def las_fields_read(laspy) -> dict:

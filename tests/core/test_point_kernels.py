@@ -93,3 +93,28 @@ def test_convex_hull_is_geos_hull(case):
         expected = shapely.convex_hull(shapely.multipoints(np.column_stack([x, y])))
         assert hull.is_valid and hull.exterior.is_ccw
         assert hull.area == pytest.approx(expected.area, rel=1e-9)
+
+
+@pytest.mark.parametrize("blocks", [1, 2, 3, 16])
+@pytest.mark.parametrize("n", [0, 1, 5, 10_007])
+def test_split_and_scaled_rows_are_numpy_indexing_in_any_blocks(n, blocks):
+    """The holdout split and the scaling of a LAS file's stored integers, counted and copied
+    block by block on threads, give numpy's boolean indexing of the rows: the same rows, in
+    the file's order, whatever the number of blocks (more blocks than points included)."""
+    from floodmesh.core._kernels.points import scaled_points, split_rows
+
+    rng = np.random.default_rng(n + blocks)
+    xyz = rng.normal(size=(n, 3))
+    taken = rng.random(n) < 0.1
+    left, held = split_rows(xyz, taken, blocks)
+    assert np.array_equal(left, xyz[~taken]) and np.array_equal(held, xyz[taken])
+    assert left.shape == (n - taken.sum(), 3) and held.shape == (taken.sum(), 3)
+    stored = [rng.integers(-10**6, 10**6, n).astype(np.int32) for _ in range(3)]
+    classes = rng.integers(0, 8, n).astype(np.uint8)
+    keep = np.zeros(256, bool)
+    keep[[2, 9]] = True
+    scales, offsets = np.array([0.001, 0.01, 0.001]), np.array([4e5, 5.6e6, 17.0])
+    mine = keep[classes]
+    expected = np.column_stack([s[mine] * scales[k] + offsets[k] for k, s in enumerate(stored)])
+    assert np.array_equal(scaled_points(*stored, classes, keep, scales, offsets, blocks),
+                          expected.reshape(-1, 3))
