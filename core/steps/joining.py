@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..engine.arrays import distance_along
+
 
 def _end_frame(coords: np.ndarray, at_start: bool, reach: float):
     """(end point, outward unit direction) of a line's end: the chord over ``reach`` m."""
     xy = coords[:, :2] if not at_start else coords[::-1, :2]
-    step = np.hypot(*np.diff(xy, axis=0).T)
-    back = np.r_[0.0, np.cumsum(step[::-1])]  # distance back from the end
+    back = distance_along(xy[::-1])  # distance back from the end
     k = min(int(np.searchsorted(back, reach)), len(xy) - 1)
     chord = xy[-1] - xy[len(xy) - 1 - k]
     norm = np.hypot(*chord)

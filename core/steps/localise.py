@@ -616,7 +616,8 @@ def _chained(pieces, chains) -> list[tuple]:
                  for p, reverse, first, stop in ((pieces[k], *rest) for k, *rest in chain)]
         coords, slopes, fit, kink, bridged = (np.concatenate([part[j] for part in parts])
                                               for j in range(5))
-        new = np.r_[True, (np.diff(coords[:, :2], axis=0) != 0).any(axis=1)]  # a bridge's end
+        new = np.ones(len(coords), bool)  # False: a bridge's end
+        new[1:] = (np.diff(coords[:, :2], axis=0) != 0).any(axis=1)
         repeated = np.flatnonzero(~new)
         bridged[repeated - 1] |= bridged[repeated]
         out.append((coords[new], slopes[new], min(pieces[k][2] for k, *_ in chain), fit[new],
@@ -656,7 +657,7 @@ def _bridges_fitted(points: np.ndarray, window: FitWindow, s_crit: float, index,
             fit[~ok] = kink[~ok] = np.nan
             nan = np.full(1, np.nan)
             coords = np.vstack([a[None, :3], coords[keep], b[None, :3]])
-            fit, kink = np.r_[nan, fit[keep], nan], np.r_[nan, kink[keep], nan]
+            fit, kink = (np.concatenate([nan, v[keep], nan]) for v in (fit, kink))
             # thinned as the traced lines are: a vertex every half window would hold the
             # mesh's smallest triangles where the bridge runs under water
             thin = douglas_peucker_mask(coords, tolerance)

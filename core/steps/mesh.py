@@ -869,8 +869,8 @@ def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndar
         rel = xy[near] - xy[a]
         t = rel @ d / length ** 2
         off = np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0]) / length
-        on = near[(off <= 1e-6 * max(1.0, length)) & (t >= -1e-9) & (t <= 1 + 1e-9)]
-        chain = on[np.argsort(t[np.isin(near, on)], kind="stable")]
+        inside = (off <= 1e-6 * max(1.0, length)) & (t >= -1e-9) & (t <= 1 + 1e-9)
+        chain = near[inside][np.argsort(t[inside], kind="stable")]
         pairs = np.sort(np.column_stack([chain[:-1], chain[1:]]), axis=1)
         if chain[0] != a and chain[0] != b or not are_edges(pairs).all():
             missing += 1
