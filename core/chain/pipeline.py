@@ -20,7 +20,7 @@ from ..engine.nearest import CellIndex, point_index
 from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
                             read_gridded_points, read_point_tiles, slope_file64,
                             write_front_rasters)
-from ..errors import Cancelled, FloodMeshError
+from ..errors import Cancelled, FloodMeshError, interrupts_unwrapped
 from ..io.layer_definition import QLR_NAME, write_layer_definition
 from ..io.outputs import check_output_folder, scratch_folder, staged_folder
 from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
@@ -106,19 +106,8 @@ class _Steps:
         if "progress" in kwargs and self.progress:
             base = self.done
             kwargs["progress"] = lambda f: self.progress((base + f * weight) / self.total)
-        try:
-            with self.compiles.watching():
-                result = func(*args, **kwargs)
-        except Exception as exc:
-            # Ctrl-C inside an extension can reach Python as another error raised while handling
-            # it: a SystemError from a compiled (numba) call, at times through a second one; a
-            # ValueError from shapely's Cython buffer code. It is the interrupt all the same
-            cause = exc.__cause__ or exc.__context__
-            while cause is not None and not isinstance(cause, KeyboardInterrupt):
-                cause = cause.__cause__ or cause.__context__
-            if cause is not None:  # Ctrl-C, or SIGTERM taken as it (cli.Terminated)
-                raise cause.with_traceback(None) from None
-            raise
+        with self.compiles.watching(), interrupts_unwrapped():
+            result = func(*args, **kwargs)
         self._finished(name, time.perf_counter() - start,
                        time.process_time() - cpu, weight)  # CPU: all threads
         return result
@@ -611,15 +600,20 @@ def _slope_and_breakpoints(dem: Grid, options: RunOptions, steps: _Steps, cancel
 def _read_points(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
                  note) -> _Terrain:
     """One point file, gridded in memory with ``options.holdout`` of its points held out."""
-    data = steps.run("read", io.read_points, source.path, crs=options.crs,
-                     classes=options.classes, note=note, repeats=False)
-    gridding, holdout = split_holdout(data, options.holdout, options.seed, note=note)
+    data, gridding, holdout = steps.run("read", _points_split, source, options, note)
     terrain = _grid_in_memory(gridding, holdout, "LiDAR points withheld from gridding",
                               len(data), options, steps, cancelled=cancelled)
     if note:  # the check of repeated positions: a single-threaded pass, left for an idle core
         terrain.later.append(("repeated points", repeated_positions_note,
                               (data.xyz, io.point_file_name(source.path))))
     return terrain
+
+
+def _points_split(source: Source, options: RunOptions, note):
+    """(the point file's points, those for gridding, those held out; ``split_holdout``)."""
+    data = io.read_points(source.path, crs=options.crs, classes=options.classes, note=note,
+                          repeats=False)
+    return (data, *split_holdout(data, options.holdout, options.seed, note=note))
 
 
 def _grid_in_memory(gridding: PointCloud, holdout: PointCloud, holdout_source: str,

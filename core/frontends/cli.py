@@ -15,7 +15,8 @@ from pathlib import Path
 
 from .. import io
 from ..chain import files as steps
-from ..errors import Cancelled, FloodMeshError, Terminated, terminate_as_interrupt
+from ..errors import (Cancelled, FloodMeshError, Terminated, interrupts_unwrapped,
+                      terminate_as_interrupt)
 from ..options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
                        NODE_ELEVATIONS, RunOptions, parse_formats)
 from .console import ProgressBar, print_note, print_notes
@@ -575,7 +576,8 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     terminate_as_interrupt()
     try:
-        args.func(args)
+        with interrupts_unwrapped():
+            args.func(args)
     except FloodMeshError as exc:
         print(f"floodmesh: error: {exc}", file=sys.stderr)
         return 2

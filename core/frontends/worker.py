@@ -30,7 +30,8 @@ import time
 
 from ..chain import files as steps
 from ..engine.compiles import CompileWatch
-from ..errors import Cancelled, FloodMeshError, Terminated, terminate_as_interrupt
+from ..errors import (Cancelled, FloodMeshError, Terminated, interrupts_unwrapped,
+                      terminate_as_interrupt)
 from ..flood.model import load_scenario, run_flood
 from ..options import RunOptions
 from .dependencies import install_hint, missing_dependencies
@@ -141,7 +142,7 @@ def run_job(job: dict, ch: Channel) -> int:
     # numba's first-run compile said when it really happens (run_pipeline says its own)
     compiles = CompileWatch(ch.info if step is not step_run else None)
     try:
-        with compiles.watching():
+        with compiles.watching(), interrupts_unwrapped():
             result = step(ch, **job.get("args", {}))
         if compiles.summary():
             ch.info(compiles.summary())

@@ -264,6 +264,62 @@ def test_ctrl_c_inside_a_compiled_call_is_an_interrupt():
         steps.run("query", fails)
 
 
+class _CtrlCInsideKernel:
+    """Ctrl-C arriving while a parallel numba kernel runs, where the random moments of
+    ``test_ctrl_c_at_random_moments_leaves_old_or_complete_files`` meet it now and then: such
+    a kernel calls back into Python (numba's ``_numba_unpickle``) on every call, and a
+    KeyboardInterrupt raised there leaves the kernel as a SystemError. Raised there, through a
+    trace function, the first time a call from ``caller`` (a function's name) makes it."""
+
+    def __init__(self, caller: str):
+        self.caller, self.fired = caller, False
+
+    def __enter__(self):
+        self.previous = sys.gettrace()
+        sys.settrace(self.trace)
+        return self
+
+    def __exit__(self, *exc):
+        sys.settrace(self.previous)
+
+    def trace(self, frame, event, arg):
+        if (event == "call" and not self.fired and frame.f_code.co_name == "_numba_unpickle"
+                and frame.f_back is not None and frame.f_back.f_code.co_name == self.caller):
+            self.fired = True
+            raise KeyboardInterrupt
+
+
+def test_ctrl_c_inside_the_holdout_split_leaves_old_files(runs, tmp_path):
+    """Ctrl-C inside the holdout split's compiled (parallel) kernel, between reading and
+    gridding: run_pipeline raises KeyboardInterrupt, not numba's SystemError, and the
+    previous outputs stay as they were."""
+    source, root, done = runs
+    target = tmp_path / "out"
+    _start_from_previous(root, target)
+    with _CtrlCInsideKernel("split_holdout") as ctrl_c, pytest.raises(KeyboardInterrupt):
+        run_pipeline(source, target, AFTER)
+    assert ctrl_c.fired
+    assert set(_assert_each_file_old_or_new(target, done).values()) == {"old"}
+    assert not _leftovers(target)
+
+
+def test_grid_command_given_ctrl_c_inside_a_compiled_kernel_says_interrupted(runs, tmp_path,
+                                                                             capsys):
+    """`floodmesh grid` given Ctrl-C inside a parallel kernel (the holdout split's): exit code
+    130 and its one line, no traceback, no DEM."""
+    from floodmesh.core.frontends.cli import main
+
+    source, _, _ = runs
+    dem = tmp_path / "dem.tif"
+    with _CtrlCInsideKernel("split_holdout") as ctrl_c:
+        code = main(["grid", str(source), "--cell-size", "1", "--holdout", "0.05",
+                     "--out", str(dem)])
+    assert ctrl_c.fired
+    assert code == 130
+    assert "floodmesh: interrupted" in capsys.readouterr().err
+    assert not dem.exists()
+
+
 def test_worker_given_sigterm_unwinds_and_says_so(runs, tmp_path):
     """QGIS's worker (core.frontends.worker) ended with SIGTERM mid-run: one error
     line on its protocol, exit code 143, the previous folder intact, nothing left beside it."""
