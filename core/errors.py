@@ -1,6 +1,7 @@
 """The one family of errors FloodMesh raises for bad input: each message names the problem and the fix."""
 
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 
@@ -38,14 +39,41 @@ def interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
 def interrupts_unwrapped():
     """Within it, an error raised while handling Ctrl-C or SIGTERM (``interrupt_behind``) is
     raised as that interrupt, so that the run unwinds and says so instead of failing with a
-    traceback."""
+    traceback; and an interrupt leaves numba's and llvmlite's locks free
+    (``compiler_locks_freed``)."""
     try:
         yield
+    except KeyboardInterrupt:
+        compiler_locks_freed()
+        raise
     except Exception as exc:
         cause = interrupt_behind(exc)
         if cause is None:
             raise
+        compiler_locks_freed()
         raise cause.with_traceback(None) from None
+
+
+def compiler_locks_freed() -> None:
+    """Release numba's compiler lock and llvmlite's lock on LLVM's C API where this thread
+    holds them outside any compile or LLVM call.
+
+    Both are RLocks taken in a context manager's ``__enter__`` and given back in its
+    ``__exit__``; a signal whose handler raises (Ctrl-C, ``Terminated``) just after the lock is
+    taken leaves ``__enter__`` before it returns, so no ``__exit__`` gives it back. Every other
+    thread that then compiles, loads or links a kernel waits for it forever: the run's
+    background thread did, and the run, joining it, never ended (SIGTERM at random moments hung
+    1 of 40 worker runs, either lock). Called once the interrupt has left every numba and
+    llvmlite frame of this thread."""
+    compiler = sys.modules.get("numba.core.compiler_lock")
+    if compiler is not None:
+        while compiler.global_compiler_lock.is_locked():  # held by this thread
+            compiler.global_compiler_lock.release()
+    ffi = sys.modules.get("llvmlite.binding.ffi")
+    if ffi is not None:
+        llvm = ffi.lib._lock._lock  # the RLock inside llvmlite's _LLVMLock
+        while llvm._is_owned():
+            llvm.release()
 
 
 def terminate_as_interrupt() -> None:

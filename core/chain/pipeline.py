@@ -141,8 +141,9 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     with (ThreadPoolExecutor(max_workers=1) as background, PicturesApart() as pictures,
           without_huge_pages()):
         steps = _Steps(_step_weights(options), progress, cancelled, log, background)
-        return _run(source, out, inputs, options, steps, pictures, started, notes, note,
-                    cancelled, log)
+        with interrupts_unwrapped():  # between steps too: the background thread is joined next
+            return _run(source, out, inputs, options, steps, pictures, started, notes, note,
+                        cancelled, log)
 
 
 def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,

@@ -320,6 +320,60 @@ def test_grid_command_given_ctrl_c_inside_a_compiled_kernel_says_interrupted(run
     assert not dem.exists()
 
 
+@pytest.mark.parametrize("lock", ["numba's compiler lock", "llvmlite's lock on LLVM"])
+def test_ctrl_c_as_a_compiler_lock_is_taken_leaves_the_lock_free(lock):
+    """Ctrl-C (or SIGTERM) whose handler raises just after numba takes its compiler lock, or
+    llvmlite its lock on LLVM's C API (some 10,000 times a run), leaves the lock's
+    ``__enter__`` before it returns, so nothing gives the lock back: another thread compiling
+    a kernel then waits forever (a run's background thread did, and the run joining it hung).
+    Unwound through ``interrupts_unwrapped`` the lock is free again."""
+    import threading
+
+    import llvmlite.binding
+    import numba
+
+    from floodmesh.core.errors import compiler_locks_freed, interrupts_unwrapped
+
+    @numba.njit
+    def first(x):
+        return x + 1
+
+    @numba.njit
+    def second(x):
+        return x * 2
+
+    where, taking = {"numba's compiler lock": (("acquire", "_CompilerLock"), lambda: first(1)),
+                     "llvmlite's lock on LLVM": (("__enter__", "_LLVMLock"),
+                                                 llvmlite.binding.get_process_triple)}[lock]
+
+    def in_enter(frame, event, arg):  # the interrupt as the lock is taken
+        if event == "return":
+            raise KeyboardInterrupt
+        return in_enter
+
+    def trace(frame, event, arg):
+        if (event == "call" and frame.f_code.co_name == where[0]
+                and type(frame.f_locals.get("self")).__name__ == where[1]):
+            return in_enter
+        return None
+
+    previous = sys.gettrace()
+    sys.settrace(trace)
+    try:
+        with pytest.raises(KeyboardInterrupt), interrupts_unwrapped():
+            taking()
+    finally:
+        sys.settrace(previous)
+    compiled = []
+    other = threading.Thread(target=lambda: compiled.append(second(3)), daemon=True)
+    try:
+        other.start()
+        other.join(timeout=60)
+        assert compiled == [6], f"another thread could not take {lock}"
+    finally:  # the suite goes on either way
+        compiler_locks_freed()
+
+
 def test_worker_given_sigterm_unwinds_and_says_so(runs, tmp_path):
     """QGIS's worker (core.frontends.worker) ended with SIGTERM mid-run: one error
     line on its protocol, exit code 143, the previous folder intact, nothing left beside it."""
