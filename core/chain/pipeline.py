@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import closing
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -212,7 +213,9 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
         return report
 
     # the folder is replaced as a whole: an interrupt leaves the old run's files or these
-    with staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage:
+    # and the picture process, drawing into it, ended before an interrupted run removes it
+    with (staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage,
+          closing(pictures)):
         # drawn in the picture process meanwhile, beside the figures and the files' writing
         pictures.draw(stage, mesh.nodes, mesh.triangles, front.holdout.xyz, res, dem=front.dem,
                       lines=[line.coords for line in lines])

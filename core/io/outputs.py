@@ -307,9 +307,9 @@ def staged_folder(out, own=(), keep=()):
     if not swap:
         out.mkdir(parents=True, exist_ok=True)
     staging = (out.parent if swap else out) / f".{out.name}.{tag}.staging"
-    staging.mkdir(parents=True)
-    _ACTIVE.add(str(staging))
-    try:
+    try:  # an interrupt as soon as it is made removes it too
+        staging.mkdir(parents=True)
+        _ACTIVE.add(str(staging))
         yield staging
         if swap:
             _swap_in(out, staging, own, keep, tag)

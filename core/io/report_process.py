@@ -23,8 +23,8 @@ from .report import write_report_pngs
 class PicturesApart:
     """A context for the picture process: ``start`` starts it, ``draw`` hands it the
     pictures' arrays, ``wait`` waits for the pictures (drawing them here where the process
-    could not: no Python executable to start, or it failed). Leaving the context before
-    ``wait`` ends it."""
+    could not: no Python executable to start, or it failed). Leaving the context, or
+    ``close``, before ``wait`` ends it."""
 
     def __init__(self):
         self.child, self.data, self.args = None, None, None
@@ -72,13 +72,18 @@ class PicturesApart:
             Path(self.data).unlink(missing_ok=True)
             self.data = None
 
-    def __exit__(self, *exc):
+    def close(self) -> None:
+        """End the process if it is still drawing (an error or interrupt before ``wait``)
+        and wait for it: before the folder it draws into is removed."""
         if self.child is not None and self.child.poll() is None:
             self.child.kill()  # an error or interrupt before ``wait``, or nothing to draw
             self.child.wait()
         if self.child is not None and self.child.stdin and not self.child.stdin.closed:
             self.child.stdin.close()
         self._clean()
+
+    def __exit__(self, *exc):
+        self.close()
 
 
 def draw_pictures(data, folder) -> None:

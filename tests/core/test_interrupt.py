@@ -401,3 +401,42 @@ def test_worker_given_sigterm_unwinds_and_says_so(runs, tmp_path):
         assert proc.returncode == 143 and "stopped by SIGTERM" in last["error"], stderr
     assert _leftovers(target) == []
     _assert_each_file_old_or_new(target, done)
+
+
+def _children() -> set:
+    """This process's child processes not yet reaped (zombies too)."""
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == os.getpid():
+            found.add(int(stat.parent.name))
+    return found
+
+
+def test_cancel_while_the_pictures_are_drawn_leaves_nothing_beside(runs, tmp_path,
+                                                                   monkeypatch):
+    """Cancel as the report's pictures are drawn (in a process of their own, into the run's
+    staging folder): that process has ended before the staging folder is removed, so it cannot
+    write into the folder as it goes and leave it behind (the Debian 12 suite once found
+    ``.out.floodmesh-….staging`` beside the folder after SIGTERM)."""
+    source, root, done = runs
+    target = tmp_path / "out"
+    _start_from_previous(root, target)
+    before, seen, alive = _children(), [], []
+    remove = shutil.rmtree
+
+    def removing(path, *args, **kwargs):
+        if str(path).endswith(".staging"):
+            alive.append(sorted(_children() - before))
+        return remove(path, *args, **kwargs)
+
+    monkeypatch.setattr(shutil, "rmtree", removing)
+    with pytest.raises(Cancelled):  # at the poll after the pictures are handed over
+        run_pipeline(source, target, AFTER, log=seen.append,
+                     cancelled=lambda: "figures..." in seen)
+    assert alive == [[]], "the picture process was still there as its folder was removed"
+    assert _leftovers(target) == []
+    assert set(_assert_each_file_old_or_new(target, done).values()) == {"old"}
