@@ -341,21 +341,99 @@ def _hinge_offset(u, v, z, m, half_width, steps, fixed, beta, a, b):
     """The hinge's offset across the line: the least SSE of ``steps`` + 1 offsets evenly over
     ±0.7·``half_width``, refined by a parabola through its neighbours' SSE. Returns the offset
     and the best step's index (-1: no offset fits; 0 or ``steps``: at the window's edge).
-    ``fixed``, ``beta``, ``a`` and ``b``: as ``_hinge_sse`` takes them."""
+    ``fixed``, ``beta``, ``a`` and ``b``: as ``_hinge_sse`` takes them.
+
+    Each offset's sums come from the points binned between the offsets (those below an
+    offset fill the bins before it), and its least SSE from the normal equations, the block of
+    (a, b), which no offset changes, eliminated once (its Schur complement): a 2 x 2 solve an
+    offset, not two passes over the points and a 4 x 4 solve. The near-least offsets and the
+    best one's neighbours are then fitted point by point (``_hinge_sse``), so that the offset
+    chosen and refined is the same to the bit as where every offset is (a near-tie, as on a
+    DEM's lattice of cell centres, goes the same way)."""
     reach = 0.7 * half_width
-    best, best_j = np.inf, -1
-    sses = np.full(steps + 1, np.inf)
+    offsets = np.empty(steps + 1)
     for j in range(steps + 1):
-        u0 = -reach + 2 * reach * j / steps
-        sses[j] = _hinge_sse(u, v, z, m, u0, fixed, beta, a, b)
-        if sses[j] < best:
-            best, best_j = sses[j], j
+        offsets[j] = -reach + 2 * reach * j / steps
+    # sums over the points below each offset: Σu, Σu², Σv, Σu·v, Σz, Σu·z and their count,
+    # binned first (bin k: offsets[k - 1] <= u < offsets[k]), then accumulated
+    below = np.zeros((steps + 2, 7))
+    zz = 0.0
+    scale = steps / (2 * reach)
+    for k in range(m):
+        uk, vk, zk = u[k], v[k], z[k]
+        zz += zk * zk
+        f = (uk + reach) * scale
+        i = 0 if f < 0.0 else (steps + 1 if f >= steps + 1 else int(f) + 1)
+        while i <= steps and offsets[i] <= uk:  # exactly as u < offset decides
+            i += 1
+        while i > 0 and offsets[i - 1] > uk:
+            i -= 1
+        row = below[i]
+        row[0] += uk
+        row[1] += uk * uk
+        row[2] += vk
+        row[3] += uk * vk
+        row[4] += zk
+        row[5] += uk * zk
+        row[6] += 1.0
+    for i in range(1, steps + 2):
+        for c in range(7):
+            below[i, c] += below[i - 1, c]
+    # (a, b)'s block [[n, Σv], [Σv, Σv²]] (with _hinge_sse's ridge), inverted once
+    s1, sv, svv, z1, zv = fixed
+    p00, p01, p11 = s1 + 1e-9, sv, svv + 1e-9
+    det = p00 * p11 - p01 * p01
+    if not det > 0.0:
+        return 0.0, -1
+    i00, i01, i11 = p11 / det, -p01 / det, p00 / det
+    plane_part = z1 * (i00 * z1 + i01 * zv) + zv * (i01 * z1 + i11 * zv)
+    best = np.inf
+    sses = np.full(steps + 1, np.inf)
+    total = below[steps + 1]
+    for j in range(steps + 1):
+        u0 = offsets[j]
+        su, suu, svs, suv, sz, suz, nlo = below[j]  # u < u0: below the hinge
+        nhi = m - nlo
+        if nlo < 4 or nhi < 4:
+            continue
+        ru, ruu, rv = total[0] - su, total[1] - suu, total[2] - svs
+        ruv, rz, ruz = total[3] - suv, total[4] - sz, total[5] - suz
+        # the hinge's columns against (1, v), against each other, and against z
+        c0, d0 = su - u0 * nlo, ru - u0 * nhi            # Σlo, Σhi
+        c1, d1 = suv - u0 * svs, ruv - u0 * rv            # Σv·lo, Σv·hi
+        slolo = suu - 2 * u0 * su + u0 * u0 * nlo + 1e-9
+        shihi = ruu - 2 * u0 * ru + u0 * u0 * nhi + 1e-9
+        zlo, zhi = suz - u0 * sz, ruz - u0 * rz
+        # Schur complement of the (a, b) block, and the right-hand side with it eliminated
+        g0, g1 = i00 * c0 + i01 * c1, i01 * c0 + i11 * c1  # P⁻¹·(Σlo, Σv·lo)
+        h0, h1 = i00 * d0 + i01 * d1, i01 * d0 + i11 * d1  # P⁻¹·(Σhi, Σv·hi)
+        s_ll = slolo - (c0 * g0 + c1 * g1)
+        s_lh = -(c0 * h0 + c1 * h1)
+        s_hh = shihi - (d0 * h0 + d1 * h1)
+        e_l = zlo - (g0 * z1 + g1 * zv)
+        e_h = zhi - (h0 * z1 + h1 * zv)
+        det_s = s_ll * s_hh - s_lh * s_lh
+        if not det_s > 0.0:
+            continue
+        explained = (s_hh * e_l * e_l - 2 * s_lh * e_l * e_h + s_ll * e_h * e_h) / det_s
+        sses[j] = max(zz - plane_part - explained, 0.0)
+        best = min(best, sses[j])
+    near_least = best + 1e-6 * best + 1e-12 * zz
+    best, best_j = np.inf, -1
+    for j in range(steps + 1):
+        if sses[j] <= near_least:
+            sse = _hinge_sse(u, v, z, m, offsets[j], fixed, beta, a, b)
+            if sse < best:
+                best, best_j = sse, j
     h = 2 * reach / steps
     u0 = -reach + h * best_j
-    if 0 < best_j < steps and np.isfinite(sses[best_j - 1]) and np.isfinite(sses[best_j + 1]):
-        curv = sses[best_j - 1] - 2 * best + sses[best_j + 1]
-        if curv > 0:
-            u0 += 0.5 * h * (sses[best_j - 1] - sses[best_j + 1]) / curv
+    if 0 < best_j < steps:
+        left = _hinge_sse(u, v, z, m, offsets[best_j - 1], fixed, beta, a, b)
+        right = _hinge_sse(u, v, z, m, offsets[best_j + 1], fixed, beta, a, b)
+        if np.isfinite(left) and np.isfinite(right):
+            curv = left - 2 * best + right
+            if curv > 0:
+                u0 += 0.5 * h * (left - right) / curv
     return u0, best_j
 
 
