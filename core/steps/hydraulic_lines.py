@@ -224,7 +224,8 @@ def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: np.nd
         seg = int(np.clip(np.searchsorted(lengths, along) - 1, 0, len(bar) - 2))
         tangent = bar[seg + 1, :2] - bar[seg, :2]
         stem = e - coords[inner, :2]
-        sine = abs(np.cross(tangent, stem)) / max(np.hypot(*tangent) * np.hypot(*stem), 1e-12)
+        cross = tangent[0] * stem[1] - tangent[1] * stem[0]  # (np.cross of 2-vectors: deprecated)
+        sine = abs(cross) / max(np.hypot(*tangent) * np.hypot(*stem), 1e-12)
         if sine < np.sin(np.radians(JOIN_ANGLE)):
             continue  # a glancing meeting: the corner rule of the PSLG takes it
         z = (float(np.interp(along, lengths, bar[:, 2])) if bar.shape[1] > 2
