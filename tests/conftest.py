@@ -49,6 +49,18 @@ def real_data():
     return REAL_DATA
 
 
+def child_processes(pid: int) -> set:
+    """The processes whose parent is ``pid`` and that it has not reaped (zombies too)."""
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.add(int(stat.parent.name))
+    return found
+
 def plane_points(a=0.1, b=-0.05, c=12.0, size=40.0, density=4.0, seed=0, origin=(500000.0, 6e6)):
     """Random points on the plane z = a·x + b·y + c (local x, y), as an (N, 3) array."""
     rng = np.random.default_rng(seed)

@@ -22,7 +22,7 @@ from floodmesh.core.errors import Cancelled
 from floodmesh.core.chain.pipeline import OUTPUT_FILES, RunOptions, run_pipeline
 from floodmesh.core.points import PointCloud
 
-from ..conftest import plane_points
+from ..conftest import child_processes, plane_points
 
 FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
 BEFORE = RunOptions(holdout=0.05, cell_size=2.0, max_area=80.0)  # the previous run's outputs
@@ -403,19 +403,6 @@ def test_worker_given_sigterm_unwinds_and_says_so(runs, tmp_path):
     _assert_each_file_old_or_new(target, done)
 
 
-def _children() -> set:
-    """This process's child processes not yet reaped (zombies too)."""
-    found = set()
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[1]) == os.getpid():
-            found.add(int(stat.parent.name))
-    return found
-
-
 def test_cancel_while_the_pictures_are_drawn_leaves_nothing_beside(runs, tmp_path,
                                                                    monkeypatch):
     """Cancel as the report's pictures are drawn (in a process of their own, into the run's
@@ -425,12 +412,12 @@ def test_cancel_while_the_pictures_are_drawn_leaves_nothing_beside(runs, tmp_pat
     source, root, done = runs
     target = tmp_path / "out"
     _start_from_previous(root, target)
-    before, seen, alive = _children(), [], []
+    before, seen, alive = child_processes(os.getpid()), [], []
     remove = shutil.rmtree
 
     def removing(path, *args, **kwargs):
         if str(path).endswith(".staging"):
-            alive.append(sorted(_children() - before))
+            alive.append(sorted(child_processes(os.getpid()) - before))
         return remove(path, *args, **kwargs)
 
     monkeypatch.setattr(shutil, "rmtree", removing)

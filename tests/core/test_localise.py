@@ -254,6 +254,21 @@ def test_no_companion_beside_a_lone_crest(noise):
     assert counts["companions_found"] == 0 and len(pieces) == 1
 
 
+
+def _hinge_search(u, v, z, half_width=1.5, steps=24):
+    """``_hinge_offset``'s (offset, step) on a window, and the SSE of fitting the hinge point
+    by point (``_hinge_sse``) at every one of its offsets."""
+    from floodmesh.core.steps.localise import _hinge_fixed, _hinge_offset, _hinge_sse
+
+    m = len(u)
+    fixed = _hinge_fixed(v, z, m)
+    beta, a, b = np.zeros(4), np.empty((4, 4)), np.empty(4)
+    reach = 0.7 * half_width
+    direct = np.array([_hinge_sse(u, v, z, m, -reach + 2 * reach * j / steps, fixed, beta, a, b)
+                       for j in range(steps + 1)])
+    return _hinge_offset(u, v, z, m, half_width, steps, fixed, beta, a, b), direct
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_hinge_offset_search_matches_the_least_squares_fit_at_each_offset(seed):
     """The offset search (each offset's SSE from binned sums, the (a, b) block eliminated; the
@@ -261,8 +276,6 @@ def test_hinge_offset_search_matches_the_least_squares_fit_at_each_offset(seed):
     the hinge point by point at every offset gives (``_hinge_sse``: two passes over the points
     and a 4 x 4 solve an offset), to the bit: on noisy windows over a kink, on a plane, on a
     window half empty, and on DEM cell centres, whose lattice makes near-ties."""
-    from floodmesh.core.steps.localise import _hinge_fixed, _hinge_offset, _hinge_sse
-
     rng = np.random.default_rng(seed)
     half_width, steps = 1.5, 24
     m = int(rng.integers(12, 300))
@@ -278,13 +291,9 @@ def test_hinge_offset_search_matches_the_least_squares_fit_at_each_offset(seed):
     noise = 0.0 if seed in (4, 7) else 0.05  # noiseless: exact fits, SSEs near zero
     z = 0.02 * v + slope * np.maximum(u - kink, 0.0) + rng.normal(0.0, noise, m)
     z -= z.mean()
-    fixed = _hinge_fixed(v, z, m)
-    beta, a, b = np.zeros(4), np.empty((4, 4)), np.empty(4)
-    reach = 0.7 * half_width
-    offsets = -reach + 2 * reach * np.arange(steps + 1) / steps
-    direct = np.array([_hinge_sse(u, v, z, m, u0, fixed, beta, a, b) for u0 in offsets])
-    u0, best_j = _hinge_offset(u, v, z, m, half_width, steps, fixed, beta, a, b)
+    (u0, best_j), direct = _hinge_search(u, v, z, half_width, steps)
     assert best_j == int(np.argmin(direct))
+    reach = 0.7 * half_width
     j, h = best_j, 2 * reach / steps
     expected = -reach + h * j
     if 0 < j < steps and np.isfinite(direct[j - 1]) and np.isfinite(direct[j + 1]):
@@ -294,25 +303,15 @@ def test_hinge_offset_search_matches_the_least_squares_fit_at_each_offset(seed):
     assert u0 == expected  # to the bit
 
 
-
 @pytest.mark.parametrize("rows", [3, 4, 6, 9])
 def test_hinge_offset_search_breaks_ties_as_the_direct_fit_does(rows):
     """An exact plane on DEM cell centres: every offset fits it, each SSE zero but for rounding,
     so the offset chosen is decided by the rounding of the fits. The search keeps the one that
     fitting point by point at every offset keeps."""
-    from floodmesh.core.steps.localise import _hinge_fixed, _hinge_offset, _hinge_sse
-
-    half_width, steps = 1.5, 24
     u, v = (g.ravel() for g in np.meshgrid(np.arange(-1.45, 1.5, 0.1),
                                            np.arange(rows) * 0.5 - 0.25 * rows))
     z = 0.1 * u + 0.02 * v
     z -= z.mean()
-    m = len(u)
-    fixed = _hinge_fixed(v, z, m)
-    beta, a, b = np.zeros(4), np.empty((4, 4)), np.empty(4)
-    reach = 0.7 * half_width
-    direct = np.array([_hinge_sse(u, v, z, m, -reach + 2 * reach * j / steps, fixed, beta, a, b)
-                       for j in range(steps + 1)])
+    (u0, best_j), direct = _hinge_search(u, v, z)
     assert direct.max() < 1e-12  # every offset fits
-    u0, best_j = _hinge_offset(u, v, z, m, half_width, steps, fixed, beta, a, b)
     assert best_j == int(np.argmin(direct))

@@ -16,7 +16,7 @@ from shapely.geometry import Polygon, box
 from floodmesh.core import io
 from floodmesh.core.raster import Grid
 
-from ..conftest import REAL_DATA
+from ..conftest import REAL_DATA, child_processes
 from .conftest import write_ept
 
 TOPOGRAPHY_CRS = CRS.from_epsg(2949)
@@ -118,20 +118,14 @@ def test_refine_from_the_laz_then_export_with_regions(qgis_process, topography, 
 
 def _worker_of(pid):
     """The worker process qgis_process started, if it runs yet."""
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
+    for child in child_processes(pid):
         try:
-            with open(f"/proc/{entry}/stat") as fh:
-                ppid = int(fh.read().rsplit(")", 1)[1].split()[1])
-            with open(f"/proc/{entry}/cmdline", "rb") as fh:
-                command = fh.read()
+            with open(f"/proc/{child}/cmdline", "rb") as fh:
+                if b"core.frontends.worker" in fh.read():
+                    return child
         except OSError:
             continue
-        if ppid == pid and b"core.frontends.worker" in command:
-            return int(entry)
     return None
-
 
 @pytest.mark.parametrize("sig, words", [
     (signal.SIGKILL, "FloodMesh's worker process was killed (SIGKILL"),  # as the OOM killer
