@@ -78,7 +78,7 @@ def _nearest_segment(p, a, b, owner):
     found = np.empty(p.shape[0])
     for i in prange(p.shape[0]):
         x, y = p[i, 0], p[i, 1]
-        ci, cj = _cell_at(y, lo[1], cell), _cell_at(x, lo[0], cell)
+        ci, cj = cell_at(y, lo[1], cell), cell_at(x, lo[0], cell)
         # the rings that reach the grid: from the grid's nearest cell to its farthest
         near = max(0, -ci, ci - (rows - 1), -cj, cj - (cols - 1))
         far = max(abs(ci), abs(ci - (rows - 1)), abs(cj), abs(cj - (cols - 1)))
@@ -127,10 +127,10 @@ def _bucket(a, b, lo, cell, cols, rows, room, held):
         for t in range(pieces):
             x0, x1 = a[s, 0] + dx * t / pieces, a[s, 0] + dx * (t + 1) / pieces
             y0, y1 = a[s, 1] + dy * t / pieces, a[s, 1] + dy * (t + 1) / pieces
-            for row in range(_cell_of(min(y0, y1), lo[1], cell, rows),
-                             _cell_of(max(y0, y1), lo[1], cell, rows) + 1):
-                for col in range(_cell_of(min(x0, x1), lo[0], cell, cols),
-                                 _cell_of(max(x0, x1), lo[0], cell, cols) + 1):
+            for row in range(cell_of(min(y0, y1), lo[1], cell, rows),
+                             cell_of(max(y0, y1), lo[1], cell, rows) + 1):
+                for col in range(cell_of(min(x0, x1), lo[0], cell, cols),
+                                 cell_of(max(x0, x1), lo[0], cell, cols) + 1):
                     k = row * cols + col
                     if held.size:
                         held[room[k]] = s
@@ -140,7 +140,7 @@ def _bucket(a, b, lo, cell, cols, rows, room, held):
 
 
 @njit(cache=True, nogil=True)
-def _cell_at(v, v0, cell):
+def cell_at(v, v0, cell):
     """The cell of coordinate ``v`` in cells of ``cell`` from ``v0``, on or off the grid
     (within ±10¹⁵ cells): the floor of the rounded quotient, monotonic in ``v`` (points and
     queries bucketed by it agree), where Python's exact ``//`` took 5 ns."""
@@ -148,9 +148,9 @@ def _cell_at(v, v0, cell):
 
 
 @njit(cache=True, nogil=True)
-def _cell_of(v, v0, cell, cells):
+def cell_of(v, v0, cell, cells):
     """The cell (0 to ``cells`` - 1) of coordinate ``v`` in cells of ``cell`` from ``v0``."""
-    return min(max(_cell_at(v, v0, cell), 0), cells - 1)
+    return min(max(cell_at(v, v0, cell), 0), cells - 1)
 
 
 @njit(cache=True, nogil=True)
@@ -325,8 +325,8 @@ def _cell_sort(x, y, x0, y0, cell, cols, rows, index_type, blocks):
     counts = np.zeros((blocks, cells), np.int64)
     for t in prange(blocks):
         for p in range(t * n // blocks, (t + 1) * n // blocks):
-            c = min(_cell_at(x[p], x0, cell), cols - 1)
-            r = min(_cell_at(y[p], y0, cell), rows - 1)
+            c = min(cell_at(x[p], x0, cell), cols - 1)
+            r = min(cell_at(y[p], y0, cell), rows - 1)
             key[p] = r * cols + c
             counts[t, key[p]] += 1
     bounds = np.zeros(cells + 1, np.int64)
@@ -356,10 +356,10 @@ def _ball_csr(xy, order, bounds, x0, y0, cell, cols, rows, centres, radius):
     for i in prange(m):
         cx, cy, r = centres[i, 0], centres[i, 1], radius[i]
         # clipped so that a centre off the points indexes no cell (an empty range)
-        span[i, 0] = min(max(_cell_at(cx - r, x0, cell), 0), cols)
-        span[i, 1] = max(min(_cell_at(cx + r, x0, cell), cols - 1), -1)
-        span[i, 2] = max(_cell_at(cy - r, y0, cell), 0)
-        span[i, 3] = min(_cell_at(cy + r, y0, cell), rows - 1)
+        span[i, 0] = min(max(cell_at(cx - r, x0, cell), 0), cols)
+        span[i, 1] = max(min(cell_at(cx + r, x0, cell), cols - 1), -1)
+        span[i, 2] = max(cell_at(cy - r, y0, cell), 0)
+        span[i, 3] = min(cell_at(cy + r, y0, cell), rows - 1)
         for row in range(span[i, 2], span[i, 3] + 1):  # room for every point of the cells
             room[i + 1] += (bounds[row * cols + span[i, 1] + 1]
                             - bounds[row * cols + span[i, 0]])

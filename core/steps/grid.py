@@ -24,6 +24,7 @@ from .._kernels.delaunay import circumcentre, delaunay_in_sweep_order
 from .._kernels.points import extent, hull_candidates, monotone_chain
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
+from ..engine.nearest import cell_of
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_cell_size, check_max_gap
 from ..points import PointCloud
@@ -128,9 +129,10 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
                               xy, bounds, n_bcols, bucket_size)
 
     def bucket_span(x_lo, x_hi, y_lo, y_hi):
-        """Rows and columns (first, last) of the buckets that hold a box's points."""
-        return (max(0, int(y_lo // bucket_size)), min(n_brows - 1, int(y_hi // bucket_size)),
-                max(0, int(x_lo // bucket_size)), min(n_bcols - 1, int(x_hi // bucket_size)))
+        """Rows and columns (first, last) of the buckets that hold a box's points (the
+        buckets as ``_bucket_counts`` numbers them)."""
+        return (cell_of(y_lo, 0.0, bucket_size, n_brows), cell_of(y_hi, 0.0, bucket_size, n_brows),
+                cell_of(x_lo, 0.0, bucket_size, n_bcols), cell_of(x_hi, 0.0, bucket_size, n_bcols))
 
     def grid_tile(tile):
         r0, c0 = tile
@@ -268,10 +270,12 @@ def _bucket_sort(xyz, x0, y1, size, n_rows, n_cols, pool, workers):
 
 @numba.njit(cache=True, nogil=True)
 def _bucket_counts(xyz, start, stop, x0, y1, size, n_rows, n_cols, bucket, counts):
-    """The bucket of points ``start``..``stop``-1 into ``bucket``, counted into ``counts``."""
+    """The bucket of points ``start``..``stop``-1 into ``bucket``, counted into ``counts``
+    (``cell_of``: Python's exact ``//`` made this pass 0.4 s of CPU for 9 M points, ten times
+    the rest)."""
     for p in range(start, stop):
-        r = min(max(int((y1 - xyz[p, 1]) // size), 0), n_rows - 1)
-        c = min(max(int((xyz[p, 0] - x0) // size), 0), n_cols - 1)
+        r = cell_of(y1 - xyz[p, 1], 0.0, size, n_rows)
+        c = cell_of(xyz[p, 0] - x0, 0.0, size, n_cols)
         bucket[p] = r * n_cols + c
         counts[r * n_cols + c] += 1
 
@@ -394,15 +398,17 @@ def _empty_past(points, bounds, n_bcols, bucket_size, ux, uy, r, box):
     the radius taken a little short for rounding."""
     n_brows = (bounds.shape[0] - 1) // n_bcols
     r_in = r * (1.0 - 2e-9) - 2e-9
-    for i in range(max(0, int((uy - r) // bucket_size)),
-                   min(n_brows - 1, int((uy + r) // bucket_size)) + 1):
-        for j in range(max(0, int((ux - r) // bucket_size)),
-                       min(n_bcols - 1, int((ux + r) // bucket_size)) + 1):
-            # the bucket's square (the edge buckets also hold the points past the window)
-            x0 = -np.inf if j == 0 else j * bucket_size
-            x1 = np.inf if j == n_bcols - 1 else (j + 1) * bucket_size
-            y0 = -np.inf if i == 0 else i * bucket_size
-            y1 = np.inf if i == n_brows - 1 else (i + 1) * bucket_size
+    for i in range(cell_of(uy - r, 0.0, bucket_size, n_brows),
+                   cell_of(uy + r, 0.0, bucket_size, n_brows) + 1):
+        for j in range(cell_of(ux - r, 0.0, bucket_size, n_bcols),
+                       cell_of(ux + r, 0.0, bucket_size, n_bcols) + 1):
+            # the bucket's square (the edge buckets also hold the points past the window),
+            # a hair wider: ``cell_of`` rounds the quotient, so a point a rounding below a
+            # bucket's edge may be in it
+            x0 = -np.inf if j == 0 else (j - 1e-9 * (j + 1)) * bucket_size
+            x1 = np.inf if j == n_bcols - 1 else (j + 1 + 1e-9 * (j + 2)) * bucket_size
+            y0 = -np.inf if i == 0 else (i - 1e-9 * (i + 1)) * bucket_size
+            y1 = np.inf if i == n_brows - 1 else (i + 1 + 1e-9 * (i + 2)) * bucket_size
             if box[0] <= x0 and x1 <= box[1] and box[2] <= y0 and y1 <= box[3]:
                 continue  # all its points are in the box
             if (min(max(ux, x0), x1) - ux) ** 2 + (min(max(uy, y0), y1) - uy) ** 2 >= r_in * r_in:
