@@ -2,14 +2,17 @@
 the mesh's linear (TIN) elevation there. Kept out of ``mesh`` so that importing it does not load
 numba.
 
-The triangles are counting-sorted into square buckets (about two triangles' width) by their
-bounding boxes; a point tests the triangles of its bucket. An edge's orientation test is always
-computed from its lower node to its higher, so the two triangles sharing an edge decide a point
-on it with exactly opposite signs: no point of the mesh falls between them. Memory is some 30 B
-a triangle, where matplotlib's trapezoid map took about 1 kB (and 6 s for 260,000 triangles).
+The triangles are counting-sorted into square buckets (half a triangle's area) by their
+bounding boxes; the points are counting-sorted into the same buckets and each tests the
+triangles of its bucket, which stay in cache for all the bucket's points. An edge's orientation
+test is always computed from its lower node to its higher, so the two triangles sharing an edge
+decide a point on it with exactly opposite signs: no point of the mesh falls between them.
+Memory is some 100 B a triangle and 40 B a point, where matplotlib's trapezoid map took about
+1 kB a triangle (and 6 s for 260,000 triangles).
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -34,9 +37,11 @@ class Locator:
         self.origin = xy.min(axis=0)  # local coordinates: the tests keep their precision
         self.local = np.ascontiguousarray(xy - self.origin)
         span = self.local.max(axis=0)
-        self.cell = float(max(np.sqrt(span[0] * span[1] / max(len(self.triangles) / 2.0, 1.0)),
-                              span.max() / 4096.0, 1e-9))
-        self.cols, self.rows = int(span[0] // self.cell) + 1, int(span[1] // self.cell) + 1
+        # half a triangle's area a bucket: some 5 triangles' boxes reach into each (8 at twice
+        # the side, where the tests took 1.4x as long)
+        self.cell = float(max(np.sqrt(span[0] * span[1] / max(2.0 * len(self.triangles), 1.0)),
+                              span.max() / 8192.0, 1e-9))
+        self.cols, self.rows = int(span[0] / self.cell) + 1, int(span[1] / self.cell) + 1
         self.bounds, self.members = _buckets(self.local, self.triangles, self.cell, self.cols,
                                              self.rows)
 
@@ -50,9 +55,10 @@ class Locator:
         px = np.ascontiguousarray(points[:, 0] - self.origin[0])
         py = np.ascontiguousarray(points[:, 1] - self.origin[1])
         _locate(self.local, self.triangles, self.bounds, self.members, self.cell, self.cols,
-                self.rows, px, py, found)
-        if z is not None:
-            _interpolate(self.local, self.triangles, np.asarray(z, float), px, py, found, values)
+                self.rows, px, py, found, np.empty(0) if z is None else np.asarray(z, float),
+                np.empty(0) if values is None else values,
+                # a count of every bucket for each block: no more of them than points
+                max(1, min(numba.get_num_threads(), len(points) // (self.rows * self.cols))))
         return found, values
 
 
@@ -74,8 +80,10 @@ def _buckets(xy, triangles, cell, cols, rows):
             x1 = max(xy[a, 0], xy[b, 0], xy[c, 0])
             y0 = min(xy[a, 1], xy[b, 1], xy[c, 1])
             y1 = max(xy[a, 1], xy[b, 1], xy[c, 1])
-            c0, c1 = int(x0 // cell), min(int(x1 // cell), cols - 1)
-            r0, r1 = int(y0 // cell), min(int(y1 // cell), rows - 1)
+            # x / cell, not x // cell: monotone as well (a point in the box falls in one of
+            # its buckets) at a twentieth of the cost
+            c0, c1 = int(x0 / cell), min(int(x1 / cell), cols - 1)
+            r0, r1 = int(y0 / cell), min(int(y1 / cell), rows - 1)
             for r in range(r0, r1 + 1):
                 for q in range(c0, c1 + 1):
                     if stage == 0:
@@ -98,37 +106,58 @@ def _side(xy, i, j, x, y):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _locate(xy, triangles, bounds, members, cell, cols, rows, px, py, found):
-    """Each point's triangle (on all cores: every point is its own search)."""
-    for p in prange(px.shape[0]):
+def _locate(xy, triangles, bounds, members, cell, cols, rows, px, py, found, z, values,
+            blocks):
+    """Each point's triangle, and with node elevations ``z`` (else empty) the barycentric
+    interpolation there in ``values``. The points are counting-sorted (stably, each of
+    ``blocks`` threads its share) into the buckets and taken bucket by bucket, on all cores: in
+    their own order (a survey file's, or random) each test was a cache miss, 2.25 M points in
+    0.28 s where these took 0.09 s. A point's answer does not depend on the order."""
+    n, n_buckets = px.shape[0], rows * cols
+    bucket = np.empty(n, np.int64)
+    for p in prange(n):
         x, y = px[p], py[p]
-        if not (x >= 0.0 and y >= 0.0):  # also NaN
-            continue
-        q, r = int(x // cell), int(y // cell)
-        if q >= cols or r >= rows:
-            continue
-        k = r * cols + q
-        for s in range(bounds[k], bounds[k + 1]):
-            t = members[s]
-            a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
-            d1, d2, d3 = _side(xy, a, b, x, y), _side(xy, b, c, x, y), _side(xy, c, a, x, y)
-            if (d1 >= 0.0 and d2 >= 0.0 and d3 >= 0.0) or (d1 <= 0.0 and d2 <= 0.0
-                                                          and d3 <= 0.0):
-                if d1 == 0.0 and d2 == 0.0 and d3 == 0.0:
-                    continue  # a degenerate triangle (no area) holds nothing
-                found[p] = t
-                break
-
-
-@njit(cache=True, nogil=True, parallel=True)
-def _interpolate(xy, triangles, z, px, py, found, values):
-    """Barycentric interpolation of the node elevations in each point's triangle."""
-    for p in prange(px.shape[0]):
-        t = found[p]
-        if t < 0:
-            continue
-        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
-        area = _side(xy, a, b, xy[c, 0], xy[c, 1])
-        wa = _side(xy, b, c, px[p], py[p]) / area
-        wb = _side(xy, c, a, px[p], py[p]) / area
-        values[p] = wa * z[a] + wb * z[b] + (1.0 - wa - wb) * z[c]
+        bucket[p] = -1
+        if x >= 0.0 and y >= 0.0:  # also not NaN; x / cell as in _buckets
+            q, r = int(x / cell), int(y / cell)
+            if q < cols and r < rows:
+                bucket[p] = r * cols + q
+    fill = np.zeros((blocks, n_buckets), np.int64)
+    for b in prange(blocks):
+        for p in range(b * n // blocks, (b + 1) * n // blocks):
+            if bucket[p] >= 0:
+                fill[b, bucket[p]] += 1
+    first = np.zeros(n_buckets + 1, np.int64)
+    for k in range(n_buckets):  # where each block's points of bucket k go, in point order
+        at = first[k]
+        for b in range(blocks):
+            at, fill[b, k] = at + fill[b, k], at
+        first[k + 1] = at
+    order, sx, sy = np.empty(first[n_buckets], np.int64), np.empty(first[n_buckets]), \
+        np.empty(first[n_buckets])
+    for b in prange(blocks):
+        for p in range(b * n // blocks, (b + 1) * n // blocks):
+            k = bucket[p]
+            if k >= 0:
+                i = fill[b, k]
+                order[i], sx[i], sy[i] = p, px[p], py[p]
+                fill[b, k] = i + 1
+    interpolate = z.shape[0] > 0
+    for k in prange(n_buckets):
+        for i in range(first[k], first[k + 1]):
+            x, y = sx[i], sy[i]
+            for s in range(bounds[k], bounds[k + 1]):
+                t = members[s]
+                a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+                d1, d2, d3 = (_side(xy, a, b, x, y), _side(xy, b, c, x, y),
+                              _side(xy, c, a, x, y))
+                if (d1 >= 0.0 and d2 >= 0.0 and d3 >= 0.0) or (d1 <= 0.0 and d2 <= 0.0
+                                                              and d3 <= 0.0):
+                    if d1 == 0.0 and d2 == 0.0 and d3 == 0.0:
+                        continue  # a degenerate triangle (no area) holds nothing
+                    found[order[i]] = t
+                    if interpolate:  # barycentric
+                        area = _side(xy, a, b, xy[c, 0], xy[c, 1])
+                        wa, wb = _side(xy, b, c, x, y) / area, _side(xy, c, a, x, y) / area
+                        values[order[i]] = wa * z[a] + wb * z[b] + (1.0 - wa - wb) * z[c]
+                    break

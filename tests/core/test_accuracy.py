@@ -119,6 +119,39 @@ def test_points_on_edges_and_nodes_are_never_lost_and_match_matplotlib():
                               np.arange(len(tri)))
 
 
+def test_located_points_do_not_depend_on_their_order_or_the_threads():
+    """The locator sorts the points into its buckets, a share per thread: shuffled, or on one
+    thread, the same points get the same triangles and the same TIN elevations to the bit,
+    nodes and edge midpoints (held by several triangles: the lowest-index one) included."""
+    import numba
+
+    from floodmesh.core._kernels.mesh import Locator
+
+    rng = np.random.default_rng(11)
+    xy = rng.uniform(0, 100, (400, 2))
+    mesh = _delaunay_mesh(xy, rng.normal(20.0, 1.0, len(xy)))
+    tri = mesh.triangles
+    edges = 0.5 * (xy[tri[:, 0]] + xy[tri[:, 1]])
+    pts = np.vstack([xy, edges, rng.uniform(-10, 110, (20_000, 2))]) + ORIGIN
+    locator = Locator(mesh.nodes[:, :2], tri)
+    assert len(pts) > 2 * locator.rows * locator.cols  # each thread sorts a share
+    found, z = locator(pts, mesh.nodes[:, 2])
+    assert (found[:len(xy)] >= 0).all() and (found < 0).any()
+    for t, c in zip(tri[found[:len(xy)]], range(len(xy))):  # a node: its lowest triangle
+        assert found[c] == np.flatnonzero((tri == c).any(axis=1)).min() and c in t
+    shuffle = rng.permutation(len(pts))
+    found_shuffled, z_shuffled = locator(pts[shuffle], mesh.nodes[:, 2])
+    assert np.array_equal(found_shuffled, found[shuffle])
+    assert np.array_equal(z_shuffled, z[shuffle], equal_nan=True)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        found_one, z_one = locator(pts, mesh.nodes[:, 2])
+    finally:
+        numba.set_num_threads(threads)
+    assert np.array_equal(found_one, found) and np.array_equal(z_one, z, equal_nan=True)
+
+
 def test_points_in_a_mesh_hole_are_outside():
     """A mesh built around a NaN hole: points in the hole are NaN, points on the plane elsewhere 0."""
     n = 40
