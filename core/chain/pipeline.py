@@ -159,10 +159,10 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
         if options.far_field_area is None:
             front.breakpoints = None
     fits = _TerrainFits(front, options)
-    # the background thread takes its work in order: the point index first, since the fits
-    # wait for it right after simplifying; the flow zone and the domain are wanted only after
-    # localising
-    index = _point_index_ahead(front, options, steps)
+    # the background thread takes its work in order: the point index first (started after
+    # the gridding), since the fits wait for it right after simplifying; the flow zone and the
+    # domain are wanted only after localising
+    index = front.index
     flow_area = flow_area_for(options.flow_area, front.dem.cell_size)
     hand = None if flow_area is None else steps.ahead(  # resolution where water flows
         "flow zone", height_above_drainage, front.dem, channel_area=CHANNEL_AREA)
@@ -295,11 +295,12 @@ class _TerrainFits:
         return {**self.counts, **({"nodes": self.node_counts} if self.node_counts else {})}
 
 
-def _point_index_ahead(front: Front, options: RunOptions, steps: _Steps):
-    """The terrain fits' point index started on the background thread (``_Steps.ahead``: call
-    it for the index), or None where no fit needs the points or they are not read yet."""
-    return (steps.ahead("point index", point_index, front.measured)
-            if _fitting(options) and front.measured is not None else None)
+def _point_index_ahead(measured, options: RunOptions, steps: _Steps):
+    """The terrain fits' point index of ``measured`` (``Front.measured``) started on the
+    background thread (``_Steps.ahead``: call it for the index), or None where no fit needs
+    the points or they are not read yet."""
+    return (steps.ahead("point index", point_index, measured)
+            if _fitting(options) and measured is not None else None)
 
 
 def _fitting(options: RunOptions) -> bool:
@@ -535,6 +536,7 @@ class Front:
     # checks of the input whose notes are said later, beside other steps (``_say_later``):
     # (step name, function, arguments), the function giving a note or None
     later: list = field(default_factory=list)
+    index: Callable | None = None  # gives the index of ``measured`` (``_point_index_ahead``)
 
 
 TILE_HOLDOUT = "LiDAR points withheld from gridding, tile by tile"
@@ -564,6 +566,9 @@ def trace_front(source, options: RunOptions, steps: "_Steps | None" = None, *,
     steps = steps or _Steps({}, None, cancelled, None)
     source = open_source(source)
     terrain = _READERS[source.kind](source, options, steps, cancelled=cancelled, note=note)
+    # started now, beside the single-threaded slope and tracing: begun after them, the fits
+    # waited some 0.2 s for it
+    index = _point_index_ahead(terrain.measured, options, steps)
     dem = terrain.dem
     sparse = sparse_survey_note(terrain.n_points, int(np.isfinite(dem.values).sum()),
                                 dem.cell_size)
@@ -583,7 +588,7 @@ def trace_front(source, options: RunOptions, steps: "_Steps | None" = None, *,
                        min_length=options.min_length, seed=options.seed)
     return Front(dem, terrain.holdout, terrain.holdout_source, terrain.n_points, slope_grid,
                  breakpoints, traced, domain, own_lines, terrain.measured, terrain.files,
-                 terrain.later)
+                 terrain.later, index)
 
 
 def _slope_and_breakpoints(dem: Grid, options: RunOptions, steps: _Steps, cancelled):
