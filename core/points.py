@@ -59,9 +59,11 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
 def _check_area(xy: np.ndarray, source: str) -> None:
     """Refuse points that all lie at one place or on one straight line (in any direction)."""
     # lazy: numba loads only where points are read
+    import numba
+
     from ._kernels.points import spread
 
-    span, across, along = spread(xy[:, 0], xy[:, 1])
+    span, across, along = spread(xy[:, 0], xy[:, 1], numba.get_num_threads())
     if span <= 0:
         raise FloodMeshError(f"{source}: all points lie at one place ({xy[0, 0]:.3f}, "
                              f"{xy[0, 1]:.3f}); a terrain model needs points spread over an area")

@@ -182,7 +182,8 @@ def near_tile_side(rows: int, cols: int, cell_size: float, n_points: int, worker
 
 def _local_hull(xyz, x0, y1) -> np.ndarray:
     """The convex hull of the points in local coordinates (x - x0, y1 - y), anticlockwise there."""
-    keep = hull_candidates(xyz[:, 0], xyz[:, 1])
+    # the few candidates' rows once (a mask over all the points, twice, took 30 ms)
+    keep = np.flatnonzero(hull_candidates(xyz[:, 0], xyz[:, 1], numba.get_num_threads()))
     x, y = xyz[keep, 0] - x0, y1 - xyz[keep, 1]
     order = np.lexsort((y, x))
     return monotone_chain(x[order], y[order])

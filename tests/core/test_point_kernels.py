@@ -24,10 +24,12 @@ def test_spread_is_the_numpy_definition(case):
     angle = np.radians(33.0)
     xy = np.column_stack([400_000 + t * np.cos(angle) - across * np.sin(angle),
                           5_600_000 + t * np.sin(angle) + across * np.cos(angle)])
-    ours, expected = spread(xy[:, 0], xy[:, 1]), _numpy_spread(xy)
-    assert ours[0] == pytest.approx(expected[0], abs=1e-9)
-    assert ours[1] == pytest.approx(expected[1], abs=1e-6)  # the minor axis: across
-    assert ours[2] == pytest.approx(expected[2], abs=1e-6)
+    expected = _numpy_spread(xy)
+    for blocks in (1, 3, 64):  # a block a thread, one, or more blocks than threads
+        ours = spread(xy[:, 0], xy[:, 1], blocks)
+        assert ours[0] == pytest.approx(expected[0], abs=1e-9)
+        assert ours[1] == pytest.approx(expected[1], abs=1e-6)  # the minor axis: across
+        assert ours[2] == pytest.approx(expected[2], abs=1e-6)
 
 
 def _numpy_repeats(xyz, step):
@@ -87,7 +89,9 @@ def test_convex_hull_is_geos_hull(case):
             x, y = 500_000 + 300 * np.cos(angle), 6e6 + 300 * np.sin(angle)
         else:
             x, y = rng.integers(0, 4, n).astype(float), rng.integers(0, 3, n).astype(float)
-        keep = hull_candidates(x, y)
+        keep = hull_candidates(x, y, 3)
+        # the first point of each extreme, whatever the blocks: the same candidates
+        assert all(np.array_equal(hull_candidates(x, y, blocks), keep) for blocks in (1, 2, 64))
         order = np.lexsort((y[keep], x[keep]))
         hull = shapely.Polygon(monotone_chain(x[keep][order], y[keep][order]))
         expected = shapely.convex_hull(shapely.multipoints(np.column_stack([x, y])))
