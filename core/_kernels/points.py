@@ -181,13 +181,16 @@ def repeated_positions(x, y, z, step):
     for b in range(n_blocks):
         starts[b + 1] += starts[b]
     kx, ky, kz = np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n)
+    kc = np.empty(n, np.int32)  # the cell within its block: a division by ``side`` once a point
     fill = starts[:-1].copy()
     for p in range(n):
         px = np.int64(np.rint((x[p] - xmin) / step))
         py = np.int64(np.rint((y[p] - ymin) / step))
-        b = (py // side // group) * block_cols + px // side // group
-        kx[fill[b]], ky[fill[b]], kz[fill[b]] = px, py, z[p]
-        fill[b] += 1
+        cx, cy = px // side, py // side
+        b = (cy // group) * block_cols + cx // group
+        k = fill[b]
+        kx[k], ky[k], kz[k], kc[k] = px, py, z[p], (cy % group) * group + cx % group
+        fill[b] = k + 1
     largest_block = 0
     for b in range(n_blocks):
         largest_block = max(largest_block, starts[b + 1] - starts[b])
@@ -198,17 +201,14 @@ def repeated_positions(x, y, z, step):
         first, last = starts[b], starts[b + 1]
         if last - first < 2:
             continue
-        cx0, cy0 = (b % block_cols) * group, (b // block_cols) * group
         cell_starts[:] = 0
         for p in range(first, last):
-            cell = (ky[p] // side - cy0) * group + kx[p] // side - cx0
-            cell_starts[cell + 1] += 1
+            cell_starts[kc[p] + 1] += 1
         for c in range(group * group):
             cell_starts[c + 1] += cell_starts[c]
         for p in range(first, last):
-            cell = (ky[p] // side - cy0) * group + kx[p] // side - cx0
-            order[cell_starts[cell]] = p
-            cell_starts[cell] += 1
+            order[cell_starts[kc[p]]] = p
+            cell_starts[kc[p]] += 1
         cell_first = 0  # cell_starts[c] is now where cell c ends
         for c in range(group * group):
             cell_last = cell_starts[c]
