@@ -197,7 +197,7 @@ class PointIndex:
         self.cell = float(max(np.sqrt(span[0] * span[1] / cells), span.max() / cells, 1e-9))
         self.cols = int(span[0] // self.cell) + 1
         self.rows = int(span[1] // self.cell) + 1
-        self.order, self.bounds, self.xy = _cell_sort(
+        self.order, self.bounds, self.xy = cell_sort(
             x, y, self.lo[0], self.lo[1], self.cell, self.cols, self.rows,
             np.int32 if n < 2 ** 31 else np.int64, numba.get_num_threads())
 
@@ -316,35 +316,39 @@ def _bounding_box(x, y):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _cell_sort(x, y, x0, y0, cell, cols, rows, index_type, blocks):
-    """(original index of each point in cell order, of ``index_type``; first point of each
-    cell + the end; the points' x, y in cell order). Stable: a cell's points keep their
-    order. Each of ``blocks`` threads counts and places one block of the points."""
+def cell_sort(x, y, x0, y0, cell, cols, rows, index_type, blocks):
+    """Points counting-sorted into ``rows`` x ``cols`` square cells of ``cell`` from (x0, y0),
+    those off the grid in its edge cells: (original index of each point in cell order, of
+    ``index_type``; first point of each cell + the end; the points' x, y in cell order). A
+    point with a coordinate not finite is left out. Stable: a cell's points keep their order.
+    Each of ``blocks`` threads counts and places one block of the points (a count of every
+    cell each: no more blocks than points per cell keeps that within the points' memory)."""
     n, cells = x.shape[0], rows * cols
     key = np.empty(n, index_type)  # some 64 points a cell: cell numbers fit too
     counts = np.zeros((blocks, cells), np.int64)
     for t in prange(blocks):
         for p in range(t * n // blocks, (t + 1) * n // blocks):
-            c = min(cell_at(x[p], x0, cell), cols - 1)
-            r = min(cell_at(y[p], y0, cell), rows - 1)
-            key[p] = r * cols + c
-            counts[t, key[p]] += 1
+            key[p] = -1
+            if np.isfinite(x[p]) and np.isfinite(y[p]):
+                key[p] = cell_of(y[p], y0, cell, rows) * cols + cell_of(x[p], x0, cell, cols)
+                counts[t, key[p]] += 1
     bounds = np.zeros(cells + 1, np.int64)
     for k in range(cells):  # the blocks' first places in each cell, in block order
         start = bounds[k]
         for t in range(blocks):
             counts[t, k], start = start, start + counts[t, k]
         bounds[k + 1] = start
-    order = np.empty(n, index_type)
-    ordered = np.empty((n, 2))
+    order = np.empty(bounds[cells], index_type)
+    ordered = np.empty((bounds[cells], 2))
     for t in prange(blocks):
         fill = counts[t]
         for p in range(t * n // blocks, (t + 1) * n // blocks):
-            k = fill[key[p]]
-            fill[key[p]] += 1
-            order[k] = p
-            ordered[k, 0] = x[p]
-            ordered[k, 1] = y[p]
+            if key[p] >= 0:
+                k = fill[key[p]]
+                fill[key[p]] += 1
+                order[k] = p
+                ordered[k, 0] = x[p]
+                ordered[k, 1] = y[p]
     return order, bounds, ordered
 
 

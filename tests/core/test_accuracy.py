@@ -122,7 +122,8 @@ def test_points_on_edges_and_nodes_are_never_lost_and_match_matplotlib():
 def test_located_points_do_not_depend_on_their_order_or_the_threads():
     """The locator sorts the points into its buckets, a share per thread: shuffled, or on one
     thread, the same points get the same triangles and the same TIN elevations to the bit,
-    nodes and edge midpoints (held by several triangles: the lowest-index one) included."""
+    nodes and edge midpoints (held by several triangles: the lowest-index one) included; points
+    far off the mesh or with a coordinate not a number are outside."""
     import numba
 
     from floodmesh.core._kernels.mesh import Locator
@@ -133,10 +134,13 @@ def test_located_points_do_not_depend_on_their_order_or_the_threads():
     tri = mesh.triangles
     edges = 0.5 * (xy[tri[:, 0]] + xy[tri[:, 1]])
     pts = np.vstack([xy, edges, rng.uniform(-10, 110, (20_000, 2))]) + ORIGIN
+    off = [[np.nan, 50.0], [50.0, np.nan], [np.inf, 50.0], [-1e12, 50.0], [50.0, 1e12]]
+    pts[-len(off):] = ORIGIN + off
     locator = Locator(mesh.nodes[:, :2], tri)
     assert len(pts) > 2 * locator.rows * locator.cols  # each thread sorts a share
     found, z = locator(pts, mesh.nodes[:, 2])
     assert (found[:len(xy)] >= 0).all() and (found < 0).any()
+    assert (found[-len(off):] == -1).all() and np.isnan(z[-len(off):]).all()
     for t, c in zip(tri[found[:len(xy)]], range(len(xy))):  # a node: its lowest triangle
         assert found[c] == np.flatnonzero((tri == c).any(axis=1)).min() and c in t
     shuffle = rng.permutation(len(pts))
