@@ -176,12 +176,22 @@ def test_exact_predicates():
                 s = dl._orient(*p[0], *p[1], *p[2])
                 assert np.sign(s) == np.sign(orient_fraction(*p))
 
+    # on a circle (the determinant rounding noise) and anywhere in a tile (most decided by
+    # the static bound alone: the points' own, as the sweep takes it, or a wider set's)
     rng = np.random.default_rng(5)
-    for _ in range(500):
+    decided = 0
+    for k in range(1000):
         r = rng.uniform(0.1, 100.0)
-        p = [r * np.array([np.cos(t), np.sin(t)]) for t in rng.uniform(0, 2 * np.pi, 4)]
-        s = dl._incircle(*p[0], *p[1], *p[2], *p[3])
-        assert np.sign(s) == np.sign(_incircle_fraction(*p))
+        p = ([r * np.array([np.cos(t), np.sin(t)]) for t in rng.uniform(0, 2 * np.pi, 4)]
+             if k % 2 else list(rng.uniform(0.0, 130.0, (4, 2)) + rng.uniform(-1e6, 1e6, 2)))
+        exact = np.sign(_incircle_fraction(*p))
+        assert np.sign(dl._incircle(*p[0], *p[1], *p[2], *p[3], np.inf)) == exact
+        for static in (dl._incircle_static_bound(np.array(p)),
+                       dl._incircle_static_bound(np.array(p + [p[0] + 100.0]))):
+            s = dl._incircle(*p[0], *p[1], *p[2], *p[3], static)
+            assert np.sign(s) == exact
+            decided += abs(s) > static
+    assert decided > 900
 
 
 @pytest.mark.parametrize("n", [3, 50, 5000])
