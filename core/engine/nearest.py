@@ -201,13 +201,16 @@ class PointIndex:
             x, y, self.lo[0], self.lo[1], self.cell, self.cols, self.rows,
             np.int32 if n < 2 ** 31 else np.int64, numba.get_num_threads())
 
-    def neighbours(self, centres: np.ndarray, radius) -> tuple[np.ndarray, np.ndarray]:
+    def neighbours(self, centres: np.ndarray, radius, *,
+                   ascending: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """CSR (indptr, indices) of the points within ``radius`` (m, one or one per centre) of
-        each of ``centres`` (k, 2+), each centre's indices ascending."""
+        each of ``centres`` (k, 2+), each centre's indices ascending (``ascending=False``: in
+        the index's own order, the same for the same points, for uses that do not need it: a
+        fit's 500 points sorted took more than half of the query)."""
         centres, radius = _queries(centres, radius)
         with threads_for(len(centres)):
             return _ball_csr(self.xy, self.order, self.bounds, self.lo[0], self.lo[1],
-                             self.cell, self.cols, self.rows, centres, radius)
+                             self.cell, self.cols, self.rows, centres, radius, ascending)
 
 
 def _queries(centres, radius) -> tuple[np.ndarray, np.ndarray]:
@@ -236,17 +239,21 @@ class CellIndex:
         self.a, self.c, self.e, self.f = (float(transform.a), float(transform.c),
                                           float(transform.e), float(transform.f))
 
-    def neighbours(self, centres: np.ndarray, radius) -> tuple[np.ndarray, np.ndarray]:
+    def neighbours(self, centres: np.ndarray, radius, *,
+                   ascending: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """CSR (indptr, indices) of the points within ``radius`` (m, one or one per centre) of
-        each of ``centres`` (k, 2+), each centre's indices ascending."""
+        each of ``centres`` (k, 2+), each centre's indices ascending, whatever ``ascending``
+        (``PointIndex``'s; a DEM's cells are few a query, cheap to sort, and a fit on them the
+        same to the bit in any run)."""
+        del ascending
         centres, radius = _queries(centres, radius)
         with threads_for(len(centres)):
             return _cells_csr(self.rank, self.rows, self.cols, self.a, self.c, self.e, self.f,
-                              centres, radius)
+                              centres, radius, True)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _cells_csr(rank, rows, cols, a, c, e, f, centres, radius):
+def _cells_csr(rank, rows, cols, a, c, e, f, centres, radius, ascending):
     m = centres.shape[0]
     span = np.empty((m, 4), np.int64)
     room = np.zeros(m + 1, np.int64)
@@ -275,7 +282,7 @@ def _cells_csr(rank, rows, cols, a, c, e, f, centres, radius):
                     found[k] = q
                     k += 1
         count[i] = k - room[i]
-    return _sorted_csr(room, count, found)
+    return _packed_csr(room, count, found, ascending)
 
 
 @njit(cache=True, nogil=True)
@@ -288,16 +295,17 @@ def _scratch(room):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _sorted_csr(room, count, found):
+def _packed_csr(room, count, found, ascending):
     """CSR (indptr, indices) of the centres' points: centre i's ``count[i]`` points at
-    ``found[room[i]:]``, each centre's sorted ascending."""
+    ``found[room[i]:]``, each centre's sorted ascending if ``ascending``."""
     m = count.shape[0]
     indptr = np.zeros(m + 1, np.int64)
     indptr[1:] = np.cumsum(count)
     indices = np.empty(indptr[-1], np.int64)
     for i in prange(m):
         mine = found[room[i]:room[i] + count[i]]
-        mine.sort()
+        if ascending:
+            mine.sort()
         indices[indptr[i]:indptr[i + 1]] = mine
     return indptr, indices
 
@@ -353,7 +361,7 @@ def cell_sort(x, y, x0, y0, cell, cols, rows, index_type, blocks):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _ball_csr(xy, order, bounds, x0, y0, cell, cols, rows, centres, radius):
+def _ball_csr(xy, order, bounds, x0, y0, cell, cols, rows, centres, radius, ascending):
     m = centres.shape[0]
     span = np.empty((m, 4), np.int64)
     room = np.zeros(m + 1, np.int64)
@@ -380,4 +388,4 @@ def _ball_csr(xy, order, bounds, x0, y0, cell, cols, rows, centres, radius):
                     found[k] = order[q]
                     k += 1
         count[i] = k - room[i]
-    return _sorted_csr(room, count, found)
+    return _packed_csr(room, count, found, ascending)

@@ -498,7 +498,9 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     for _ in range(iterations):
         tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
         with threads_for(len(coords)):
-            fits = np.concatenate([_hinge_fits(points, *index.neighbours(coords[a:b, :2], reach),
+            # the fits' sums need no particular order of their points
+            fits = np.concatenate([_hinge_fits(points, *index.neighbours(coords[a:b, :2], reach,
+                                                                         ascending=False),
                                                coords[a:b, 0].copy(), coords[a:b, 1].copy(),
                                                tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
                                                window.half_width, window.half_length)
@@ -619,7 +621,7 @@ def _ground_z(points: np.ndarray, window: FitWindow, xy: np.ndarray, index,
     """The median z of the measured points within a ``spacing`` (m) of each of ``xy``, or of
     the 8 or so nearest where they are sparser; NaN where fewer than 3 lie that close."""
     radius = max(spacing, float(np.sqrt(8 / (np.pi * window.density))))
-    indptr, indices = index.neighbours(np.asarray(xy, float), radius)
+    indptr, indices = index.neighbours(np.asarray(xy, float), radius, ascending=False)
     return _medians_z(points, indptr, indices, 3)
 
 

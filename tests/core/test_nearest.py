@@ -66,11 +66,17 @@ def test_nearest_line_far_off_and_long_segments_at_utm_magnitudes():
 
 
 def _same_as_ckdtree(points, centres, radius):
-    indptr, indices = point_index(points).neighbours(centres, radius)
+    """The index's query as cKDTree's, sorted; unsorted (``ascending=False``), the same
+    points and counts."""
+    index = point_index(points)
+    indptr, indices = index.neighbours(centres, radius)
+    loose_indptr, loose = index.neighbours(centres, radius, ascending=False)
+    assert np.array_equal(loose_indptr, indptr)
     tree = cKDTree(points[:, :2])
     radii = np.broadcast_to(radius, (len(centres),))
     for k, (c, r) in enumerate(zip(centres, radii)):
         assert list(indices[indptr[k]:indptr[k + 1]]) == sorted(tree.query_ball_point(c, r))
+        assert sorted(loose[indptr[k]:indptr[k + 1]]) == sorted(tree.query_ball_point(c, r))
 
 
 def test_point_index_finds_the_points_cKDTree_finds():
@@ -123,5 +129,7 @@ def test_cell_index_finds_the_points_the_point_index_finds_on_a_dem():
                        rng.uniform(0.2, 4, len(centres)) * cell):
             a, b = by_cells.neighbours(centres, radius), by_points.neighbours(centres, radius)
             assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+            loose = by_cells.neighbours(centres, radius, ascending=False)  # sorted all the same
+            assert np.array_equal(loose[0], a[0]) and np.array_equal(loose[1], a[1])
         assert by_cells.neighbours(centres, 1.0 * cell)[1].size > len(centres)
         assert by_cells.rank.itemsize == 4  # 4 B a cell
