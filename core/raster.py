@@ -143,7 +143,7 @@ def nearest_value(grid: Grid, x, y) -> np.ndarray:
     r, c = np.rint(r).astype(np.int64), np.rint(c).astype(np.int64)
     inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
     out = np.full(np.shape(r), np.nan)
-    out[inside] = np.asarray(grid.values, float)[r[inside], c[inside]]
+    out[inside] = grid.values[r[inside], c[inside]]  # the cells', not the grid's, as floats
     return out
 
 

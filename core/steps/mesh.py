@@ -459,10 +459,13 @@ def _area_limits(result: dict, origin: np.ndarray, max_area: float,
         inside = found >= 0
         np.minimum.at(limit, found[inside], local_areas[inside, 2])
     if size_field is not None:
-        corners = xy[tris] + origin
-        at = np.concatenate([corners, corners.mean(axis=1, keepdims=True)], axis=1)
-        wanted = np.asarray(size_field(at[..., 0].ravel(), at[..., 1].ravel()), float)
-        wanted = np.where(np.isfinite(wanted), wanted, np.inf).reshape(-1, 4).min(axis=1)
+        # each vertex asked once (it is the corner of some six triangles), then each centroid
+        nodes = xy + origin
+        centroids = nodes[tris].mean(axis=1)
+        at = np.concatenate([nodes, centroids])
+        wanted = np.asarray(size_field(at[:, 0], at[:, 1]), float)
+        wanted = np.where(np.isfinite(wanted), wanted, np.inf)
+        wanted = np.minimum(wanted[tris].min(axis=1), wanted[len(nodes):])
         if (wanted <= 0).any():
             raise FloodMeshError("the size field asks for triangles of 0 m² or less; give "
                                  "positive maximum areas (NaN where there is no limit)")
