@@ -37,10 +37,12 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
     ``repeated_positions_note``)."""
     crs = require_metric_crs(crs, source, kind)
     # lazy: numba loads only where points are read
+    import numba
+
     from ._kernels.points import finite_rows
 
     xyz = np.asarray(xyz, dtype=np.float64)
-    finite = finite_rows(xyz)
+    finite = finite_rows(xyz, numba.get_num_threads())
     if finite is not None:
         if note:
             note(f"{source}: {int((~finite).sum()):,} points without a finite x, y and z "

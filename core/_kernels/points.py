@@ -142,13 +142,35 @@ def scaled_points(X, Y, Z, classification, keep, scales, offsets, blocks):
     return xyz
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _extent_of(x, y, first, stop):
+    """(xmin, ymin, xmax, ymax) of points ``first`` to ``stop`` - 1, in one pass."""
+    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
+    for p in range(first, stop):
+        xmin, xmax = min(xmin, x[p]), max(xmax, x[p])
+        ymin, ymax = min(ymin, y[p]), max(ymax, y[p])
+    return xmin, ymin, xmax, ymax
+
+
 @njit(cache=True, nogil=True)
 def extent(x, y):
     """(xmin, ymin, xmax, ymax) of the points, in one pass."""
-    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
-    for p in range(x.shape[0]):
-        xmin, xmax = min(xmin, x[p]), max(xmax, x[p])
-        ymin, ymax = min(ymin, y[p]), max(ymax, y[p])
+    return _extent_of(x, y, 0, x.shape[0])
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def extent_on_threads(x, y, blocks):
+    """``extent`` with each of ``blocks`` threads a block of the points (9 M points: 94 ms
+    on one)."""
+    n = x.shape[0]
+    part = np.empty((blocks, 4))
+    for b in prange(blocks):
+        part[b, 0], part[b, 1], part[b, 2], part[b, 3] = _extent_of(
+            x, y, b * n // blocks, (b + 1) * n // blocks)
+    xmin, ymin, xmax, ymax = np.inf, np.inf, -np.inf, -np.inf
+    for b in range(blocks):
+        xmin, ymin = min(xmin, part[b, 0]), min(ymin, part[b, 1])
+        xmax, ymax = max(xmax, part[b, 2]), max(ymax, part[b, 3])
     return xmin, ymin, xmax, ymax
 
 
@@ -238,17 +260,19 @@ def repeated_positions(x, y, z, step):
     return repeats, largest
 
 
-@njit(cache=True, nogil=True)
-def occupied_bins(x, y, x0, y0, size, cols, rows):
+@njit(cache=True, nogil=True, parallel=True)
+def occupied_bins(x, y, x0, y0, size, cols, rows, blocks):
     """How many of the ``cols`` x ``rows`` square bins of ``size`` m from (x0, y0) hold a
-    point (the points lie inside)."""
+    point (the points lie inside); each of ``blocks`` threads marks a block's bins (every
+    mark the same value, so the count does not depend on which thread marks first)."""
     occupied = np.zeros(cols * rows, np.bool_)
+    n = x.shape[0]
+    for b in prange(blocks):
+        for p in range(b * n // blocks, (b + 1) * n // blocks):
+            occupied[np.int64((y[p] - y0) / size) * cols + np.int64((x[p] - x0) / size)] = True
     count = 0
-    for p in range(x.shape[0]):
-        b = np.int64((y[p] - y0) / size) * cols + np.int64((x[p] - x0) / size)
-        if not occupied[b]:
-            occupied[b] = True
-            count += 1
+    for k in range(cols * rows):
+        count += occupied[k]
     return count
 
 
@@ -279,17 +303,24 @@ def split_rows(xyz, taken, blocks):
     return left, out
 
 
-@njit(cache=True, nogil=True)
-def finite_rows(xyz):
-    """Which rows of ``xyz`` are finite throughout; None where all are (no mask made)."""
+@njit(cache=True, nogil=True, parallel=True)
+def finite_rows(xyz, blocks):
+    """Which rows of ``xyz`` are finite throughout; None where all are (no mask made). Each
+    of ``blocks`` threads looks through a block of the rows."""
     n, m = xyz.shape
-    for p in range(n):
+    finite = np.ones(blocks, np.bool_)
+    for b in prange(blocks):
+        for p in range(b * n // blocks, (b + 1) * n // blocks):
+            for k in range(m):
+                if not np.isfinite(xyz[p, k]):
+                    finite[b] = False
+            if not finite[b]:
+                break
+    if finite.all():
+        return None
+    rows = np.ones(n, np.bool_)
+    for p in prange(n):
         for k in range(m):
             if not np.isfinite(xyz[p, k]):
-                finite = np.ones(n, np.bool_)
-                for q in range(p, n):
-                    for j in range(m):
-                        if not np.isfinite(xyz[q, j]):
-                            finite[q] = False
-                return finite
-    return None
+                rows[p] = False
+    return rows

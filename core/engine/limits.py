@@ -129,15 +129,18 @@ def footprint(xy: np.ndarray, bounds=None) -> tuple[float, float]:
     not of the box.
     """
     # lazy: numba loads only where points are read
-    from .._kernels.points import extent, occupied_bins
+    import numba
+
+    from .._kernels.points import extent_on_threads, occupied_bins
 
     n = len(xy)
-    xmin, ymin, xmax, ymax = extent(xy[:, 0], xy[:, 1]) if bounds is None else bounds
+    xmin, ymin, xmax, ymax = (extent_on_threads(xy[:, 0], xy[:, 1], numba.get_num_threads())
+                              if bounds is None else bounds)
     lo, hi = np.array([xmin, ymin]), np.array([xmax, ymax])
     span = np.maximum(hi - lo, 1e-9)
     size = max(4.0 * math.sqrt(span[0] * span[1] / n), float(span.max()) / 4096, 1e-9)
     cols = int(span[0] / size) + 1
     rows = int(span[1] / size) + 1
     area = occupied_bins(xy[:, 0], xy[:, 1], float(lo[0]), float(lo[1]), size, cols,
-                         rows) * size * size
+                         rows, numba.get_num_threads()) * size * size
     return area, math.sqrt(area / n)

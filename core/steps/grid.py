@@ -21,7 +21,7 @@ import numpy as np
 from affine import Affine
 
 from .._kernels.delaunay import circumcentre, delaunay_in_sweep_order
-from .._kernels.points import extent, hull_candidates, monotone_chain
+from .._kernels.points import extent_on_threads, hull_candidates, monotone_chain
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
 from ..engine.nearest import cell_of
@@ -203,7 +203,7 @@ def check_grid(points: PointCloud, cell_size: float, max_gap: float | None = Non
     (``rows``, ``cols``, ``x0``, ``y1``, ``max_gap``) and the points' ``area`` (m²) and
     ``spacing`` (m)."""
     xyz = points.xyz
-    bounds = extent(xyz[:, 0], xyz[:, 1])
+    bounds = extent_on_threads(xyz[:, 0], xyz[:, 1], numba.get_num_threads())
     area, _ = footprint(xyz[:, :2], bounds)
     return check_layout(bounds, len(xyz), area, cell_size, max_gap, memory=memory)
 

@@ -122,3 +122,29 @@ def test_split_and_scaled_rows_are_numpy_indexing_in_any_blocks(n, blocks):
     expected = np.column_stack([s[mine] * scales[k] + offsets[k] for k, s in enumerate(stored)])
     assert np.array_equal(scaled_points(*stored, classes, keep, scales, offsets, blocks),
                           expected.reshape(-1, 3))
+
+
+@pytest.mark.parametrize("blocks", [1, 2, 3, 16])
+@pytest.mark.parametrize("n", [1, 5, 10_007])
+def test_extent_bins_and_finite_rows_are_numpy_in_any_blocks(n, blocks):
+    """The bounding box, the occupied bins of the footprint and the finite rows, each block of
+    points on a thread, give numpy's: a non-finite value in the first, a middle or the last
+    row, or in none."""
+    from floodmesh.core._kernels.points import (extent, extent_on_threads, finite_rows,
+                                                occupied_bins)
+
+    rng = np.random.default_rng(n * blocks)
+    xyz = rng.uniform(0.0, 50.0, (n, 3)) + [600_000.0, 5_700_000.0, 0.0]
+    x, y = xyz[:, 0].copy(), xyz[:, 1].copy()
+    box = (x.min(), y.min(), x.max(), y.max())
+    assert extent_on_threads(x, y, blocks) == box == extent(x, y)
+    size = 2.5
+    cols, rows = int((x.max() - x.min()) / size) + 1, int((y.max() - y.min()) / size) + 1
+    bins = np.unique(((y - y.min()) / size).astype(np.int64) * cols
+                     + ((x - x.min()) / size).astype(np.int64))
+    assert occupied_bins(x, y, x.min(), y.min(), size, cols, rows, blocks) == len(bins)
+    assert finite_rows(xyz, blocks) is None
+    for row, column, value in ((0, 2, np.nan), (n // 2, 0, np.inf), (n - 1, 1, -np.inf)):
+        broken = xyz.copy()
+        broken[row, column] = value
+        assert np.array_equal(finite_rows(broken, blocks), np.isfinite(broken).all(axis=1))
