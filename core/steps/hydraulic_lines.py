@@ -109,6 +109,8 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     inner = domain.buffer(-clearance) if domain is not None else None
     if within is not None:
         inner = within if inner is None else shapely.intersection(inner, within)
+    if inner is not None:  # most lines lie well inside: a prepared test spares their overlay
+        shapely.prepare(inner)
     # a line folding back on itself is two lines: the shorter's part within the spacing of
     # the longer goes, as for any two lines (a fold's arms a fraction of a metre apart made
     # the mesh's smallest triangles)
@@ -128,7 +130,7 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
                                    **keep_terrain)
             coords = drop_spikes(coords, _spacing_at(flow_spacing, coords, spacing) > spacing)
         line = shapely.LineString(coords)
-        if inner is not None:
+        if inner is not None and not shapely.contains_properly(inner, line):
             clipped = shapely.intersection(line, inner)
             stats["clipped_at_edge"] += clipped.length < line.length - 1e-9
             line = clipped
