@@ -130,7 +130,9 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
                                    **keep_terrain)
             coords = drop_spikes(coords, _spacing_at(flow_spacing, coords, spacing) > spacing)
         line = shapely.LineString(coords)
-        if inner is not None and not shapely.contains_properly(inner, line):
+        # (the overlay also splits a line where it crosses itself: such a line is taken to it)
+        if inner is not None and not (shapely.contains_properly(inner, line)
+                                      and shapely.is_simple(line)):
             clipped = shapely.intersection(line, inner)
             stats["clipped_at_edge"] += clipped.length < line.length - 1e-9
             line = clipped

@@ -16,6 +16,21 @@ from floodmesh.core.options import RunOptions
 from floodmesh.core.chain.pipeline import run_pipeline
 
 
+def test_a_line_crossing_itself_well_inside_is_split_at_the_crossing():
+    """A loop that crosses itself with gentle turns (no fold to split it) far from the edge:
+    its arms leave the crossing as separate lines, none crossing another, the loop kept a
+    spacing clear of them (a whole self-crossing line made the PSLG node it there itself)."""
+    domain = shapely.box(0, 0, 200, 200)
+    t = np.linspace(-1.6, 1.6, 161)
+    alpha = np.column_stack([30 * (t * t - 1) + 100, 30 * (t ** 3 - t) + 100, np.full(161, 5.0)])
+    assert not shapely.is_simple(shapely.LineString(alpha))
+    out, _ = lines_for_hydraulics([alpha], domain, spacing=1.0)
+    geoms = [shapely.LineString(c[:, :2]) for c in out]
+    assert len(geoms) == 3 and all(shapely.is_simple(geoms))
+    assert not any(shapely.crosses(a, b) for i, a in enumerate(geoms) for b in geoms[i + 1:])
+    assert np.allclose(out[0][-1, :2], (100.0, 100.0))  # an arm ends at the crossing
+
+
 def test_lines_keep_clear_of_the_edge_and_of_other_lines():
     domain = shapely.box(0, 0, 100, 50)
     along_edge = np.array([[10, 0.4, 1], [90, 0.4, 1]])          # 0.4 m inside the edge
