@@ -249,11 +249,11 @@ class CellIndex:
         centres, radius = _queries(centres, radius)
         with threads_for(len(centres)):
             return _cells_csr(self.rank, self.rows, self.cols, self.a, self.c, self.e, self.f,
-                              centres, radius, True)
+                              centres, radius)
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _cells_csr(rank, rows, cols, a, c, e, f, centres, radius, ascending):
+def _cells_csr(rank, rows, cols, a, c, e, f, centres, radius):
     m = centres.shape[0]
     span = np.empty((m, 4), np.int64)
     room = np.zeros(m + 1, np.int64)
@@ -282,7 +282,7 @@ def _cells_csr(rank, rows, cols, a, c, e, f, centres, radius, ascending):
                     found[k] = q
                     k += 1
         count[i] = k - room[i]
-    return _packed_csr(room, count, found, ascending)
+    return _packed_csr(room, count, found, True)
 
 
 @njit(cache=True, nogil=True)
