@@ -103,7 +103,9 @@ def test_unclassified_las_is_used_whole_and_the_cli_says_so(tmp_path, capsys):
     assert len(notes) == 1 and "not classified" in notes[0]
     assert main(["run", str(path), "--out", str(tmp_path / "out"), "--max-area", "20"]) == 0
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"floodmesh: note: {notes[0]}"]
+    # its notes: with a cold numba cache the run also says what it compiles
+    assert [line for line in err if line.startswith("floodmesh: note:")] == [
+        f"floodmesh: note: {notes[0]}"]
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["notes"] == notes
     assert report["n_holdout"] == 20
