@@ -14,6 +14,8 @@ import warnings
 import numba
 import numpy as np
 
+from .points import extent
+
 __all__ = ["delaunay", "delaunay_in_sweep_order"]
 
 _EPS = 2.0 ** -53                       # Shewchuk's epsilon (half an ulp of 1)
@@ -245,13 +247,9 @@ def _incircle_static_bound(pts):
     determinant beyond it has the sign the adaptive test would give: one comparison where the
     permanent cost 10-13 % of the triangulation. Tiles of some 130 m: about 7e-6 m⁴, where
     neighbours 0.3 m apart give 1e-2."""
-    n = pts.shape[0]
-    if n == 0:
+    if pts.shape[0] == 0:
         return 0.0
-    xmin, xmax, ymin, ymax = pts[0, 0], pts[0, 0], pts[0, 1], pts[0, 1]
-    for k in range(1, n):
-        xmin, xmax = min(xmin, pts[k, 0]), max(xmax, pts[k, 0])
-        ymin, ymax = min(ymin, pts[k, 1]), max(ymax, pts[k, 1])
+    xmin, ymin, xmax, ymax = extent(pts[:, 0], pts[:, 1])
     d = max(xmax - xmin, ymax - ymin)
     product = d * d
     lift = product + product
