@@ -126,19 +126,26 @@ def _add_to(e, elen, f, flen, sign):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _copy(e, elen, out):
+    """out[:elen] = e[:elen], element by element (a slice assignment may allocate)."""
+    for i in range(elen):
+        out[i] = e[i]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _sign(v):
     return 1.0 if v > 0.0 else (-1.0 if v < 0.0 else 0.0)
 
 
-# workspace of _incircle_exact, in doubles (a separate allocation there: passing a workspace
-# down from the sweep makes the hot loop some 15 % slower)
-_WS_SIZE = 2140
+# the exact predicates' workspace, in doubles: handed down, so that the sweep allocates nothing
+# and runs without numba's reference counts (see _sweep_points)
+WORKSPACE = 2140
 
 
 @numba.njit(cache=True, nogil=True)
-def _orient_exact(ax, ay, bx, by, cx, cy):
-    """Exact sign of (a - c) x (b - c) = ax by - ax cy - cx by - ay bx + ay cx + bx cy."""
-    ws = np.empty(13)
+def _orient_exact(ax, ay, bx, by, cx, cy, ws):
+    """Exact sign of (a - c) x (b - c) = ax by - ax cy - cx by - ay bx + ay cx + bx cy (``ws``:
+    a workspace of ``WORKSPACE`` doubles)."""
     n = 0
     for i in range(6):
         if i == 0:
@@ -159,9 +166,9 @@ def _orient_exact(ax, ay, bx, by, cx, cy):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _orient(ax, ay, bx, by, cx, cy):
+def _orient(ax, ay, bx, by, cx, cy, ws):
     """Shewchuk's orient2d: > 0 if a, b, c turn counter-clockwise, < 0 clockwise, 0 collinear
-    (the sign is exact; the magnitude is not)."""
+    (the sign is exact; the magnitude is not). ``ws``: a workspace of ``WORKSPACE`` doubles."""
     detleft = (ax - cx) * (by - cy)
     detright = (ay - cy) * (bx - cx)
     det = detleft - detright
@@ -178,7 +185,7 @@ def _orient(ax, ay, bx, by, cx, cy):
     bound = _CCW_BOUND * detsum
     if det >= bound or -det >= bound:
         return det
-    return _orient_exact(ax, ay, bx, by, cx, cy)
+    return _orient_exact(ax, ay, bx, by, cx, cy, ws)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -193,10 +200,9 @@ def _diff_exp(a, b, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy):
+def _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy, ws):
     """Exact sign of the incircle determinant, sum over the cyclic (p, u, v) of (a, b, c) of
-    |p - d|^2 ((u - d) x (v - d)), in expansion arithmetic."""
-    ws = np.empty(_WS_SIZE)
+    |p - d|^2 ((u - d) x (v - d)), in expansion arithmetic (``ws``: ``WORKSPACE`` doubles)."""
     # ws layout: 6 differences of 2, products 8 + 8, lift 16, cross 16, term 512, tmp 32,
     # total 1536
     dif = ws[0:12]
@@ -223,15 +229,15 @@ def _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy):
         vy = dif[2 * iv + 2:2 * iv + 4]
         n1 = _mul(px, nd[ip], px, nd[ip], p1, tmp)
         n2 = _mul(py, nd[ip + 1], py, nd[ip + 1], p2, tmp)
-        lift[:n1] = p1[:n1]
+        _copy(p1, n1, lift)
         nlift = _add_to(lift, n1, p2, n2, 1.0)
         n1 = _mul(ux, nd[iu], vy, nd[iv + 1], p1, tmp)
         n2 = _mul(vx, nd[iv], uy, nd[iu + 1], p2, tmp)
-        cross[:n1] = p1[:n1]
+        _copy(p1, n1, cross)
         ncross = _add_to(cross, n1, p2, n2, -1.0)
         nterm = _mul(lift, nlift, cross, ncross, term, tmp)
         if ntotal == 0:
-            total[:nterm] = term[:nterm]
+            _copy(term, nterm, total)
             ntotal = nterm
         else:
             ntotal = _add_to(total, ntotal, term, nterm, 1.0)
@@ -259,10 +265,11 @@ def _incircle_static_bound(pts):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _incircle(ax, ay, bx, by, cx, cy, dx, dy, static):
+def _incircle(ax, ay, bx, by, cx, cy, dx, dy, static, ws):
     """Shewchuk's incircle: > 0 if d is inside the circle through a, b, c when those turn
     counter-clockwise (< 0 inside when they turn clockwise), 0 on it; the sign is exact.
-    ``static``: ``_incircle_static_bound`` of points holding these four (inf: none)."""
+    ``static``: ``_incircle_static_bound`` of points holding these four (inf: none); ``ws``:
+    a workspace of ``WORKSPACE`` doubles."""
     adx = ax - dx
     bdx = bx - dx
     cdx = cx - dx
@@ -286,7 +293,7 @@ def _incircle(ax, ay, bx, by, cx, cy, dx, dy, static):
     bound = _ICC_BOUND * permanent
     if det > bound or -det > bound:
         return det
-    return _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy)
+    return _incircle_exact(ax, ay, bx, by, cx, cy, dx, dy, ws)
 
 
 # --------------------------------------------------------------------------------------------
@@ -548,7 +555,7 @@ def _add_triangle(tri, half, t, i0, i1, i2, a, b, c):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _legalize(a, tri, half, pts, hull_start, hull_tri, hull_prev, stack, static):
+def _legalize(a, tri, half, pts, hull_start, hull_tri, hull_prev, stack, static, ws):
     """Flip edges from half-edge a (opposite the new point) until the triangles around the new
     point are Delaunay; returns the half-edge that then ends the fan on a's side. Each flip gives
     the new point one more edge, so a stack of N entries cannot overflow."""
@@ -571,7 +578,7 @@ def _legalize(a, tri, half, pts, hull_start, hull_tri, hull_prev, stack, static)
         p1 = tri[bl]
         # (p0, pr, pl) turn clockwise: p1 inside their circle gives incircle < 0
         if _incircle(pts[p0, 0], pts[p0, 1], pts[pr, 0], pts[pr, 1], pts[pl, 0], pts[pl, 1],
-                     pts[p1, 0], pts[p1, 1], static) < 0.0:
+                     pts[p1, 0], pts[p1, 1], static, ws) < 0.0:
             tri[a] = p1
             tri[b] = p0
             hbl = half[bl]
@@ -642,8 +649,8 @@ def _nearest_neighbour(xy, i0):
     return i1
 
 
-@numba.njit(cache=True, nogil=True)
-def _empty_circle_apex(xy, i0, i1):
+@numba.njit(cache=True, nogil=True, _nrt=False)  # no reference count of ws a point
+def _empty_circle_apex(xy, i0, i1, ws):
     """A point making a Delaunay triangle with the Delaunay edge i0-i1 (nearest neighbours);
     -1 if all points are collinear.
 
@@ -651,7 +658,7 @@ def _empty_circle_apex(xy, i0, i1):
     furthest back (least t along that side's normal) makes a Delaunay triangle with them: an
     empty circle, so no point comes before the seeds in the sweep.
     t = (p - i0).(p - i1) / ((i1 - i0) x (p - i0)), in units of |i1 - i0| / 2. (delaunator
-    takes the smallest circumcircle, which need not be empty.)"""
+    takes the smallest circumcircle, which need not be empty.) ``ws``: ``WORKSPACE`` doubles."""
     x0 = xy[i0, 0]
     y0 = xy[i0, 1]
     x1 = xy[i1, 0]
@@ -663,7 +670,7 @@ def _empty_circle_apex(xy, i0, i1):
     for i in range(xy.shape[0]):
         px = xy[i, 0]
         py = xy[i, 1]
-        o = _orient(x0, y0, x1, y1, px, py)
+        o = _orient(x0, y0, x1, y1, px, py, ws)
         if o == 0.0:
             continue
         dot = (px - x0) * (px - x1) + (py - y0) * (py - y1)
@@ -691,12 +698,13 @@ def _seed(xy):
     i1 = _nearest_neighbour(xy, i0)
     if i1 == -1:
         return i0, i1, -1, 0.0, 0.0
-    i2 = _empty_circle_apex(xy, i0, i1)
+    ws = np.empty(WORKSPACE)
+    i2 = _empty_circle_apex(xy, i0, i1, ws)
     if i2 == -1:
         return i0, i1, -1, 0.0, 0.0
     x0 = xy[i0, 0]
     y0 = xy[i0, 1]
-    if _orient(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]) > 0.0:
+    if _orient(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1], ws) > 0.0:
         i1, i2 = i2, i1  # clockwise, as delaunator
     cx, cy = circumcentre(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1])
     return i0, i1, i2, cx, cy
@@ -753,8 +761,7 @@ def _start_hull(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull_t
 def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
     """Triangulate the sorted points pts; returns the length used in tri (3 per triangle) and
     the number of distinct points that could not be inserted (0 but for pathological rounding
-    in the sort). The per-point loop stays whole: split into compiled helpers (hull search,
-    forward and backward fans) it ran about 15 % slower on 2 M points."""
+    in the sort)."""
     n = pts.shape[0]
     r0, r1, r2 = _seed_ranks(ids, i0, i1, i2)
     hash_size = max(int(np.ceil(np.sqrt(n))), 1)
@@ -764,10 +771,24 @@ def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
     hull_hash = np.full(hash_size, -1, np.int32)
     stack = np.empty(n + 16, np.int32)  # untouched pages cost no memory
     _start_hull(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull_tri, hull_hash)
+    return _sweep_points(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull_tri,
+                         hull_hash, stack, _incircle_static_bound(pts), np.empty(WORKSPACE))
+
+
+# No reference counts: numba counts a reference to each array handed to an inlined helper
+# (_legalize, _link) with an atomic increment and decrement, some 30 a point, which took a third
+# of the sweep's time. Without numba's runtime nothing here may allocate: the exact
+# predicates' workspace ``ws`` comes from _sweep.
+@numba.njit(cache=True, nogil=True, _nrt=False)
+def _sweep_points(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull_tri, hull_hash,
+                  stack, static, ws):
+    """_sweep's per-point loop, from the seed triangle (r0, r1, r2) as _start_hull leaves it.
+    It stays whole: split into compiled helpers (hull search, forward and backward fans) it ran
+    about 15 % slower on 2 M points."""
+    n = pts.shape[0]
+    hash_size = hull_hash.shape[0]
     hull_start = r0
     tlen = 3
-    static = _incircle_static_bound(pts)
-
     sx0, sy0 = pts[r0, 0], pts[r0, 1]
     sx1, sy1 = pts[r1, 0], pts[r1, 1]
     sx2, sy2 = pts[r2, 0], pts[r2, 1]
@@ -799,7 +820,7 @@ def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
         e = start
         while True:
             q = hull_next[e]
-            if _orient(px, py, pts[e, 0], pts[e, 1], pts[q, 0], pts[q, 1]) > 0.0:
+            if _orient(px, py, pts[e, 0], pts[e, 1], pts[q, 0], pts[q, 1], ws) > 0.0:
                 break
             e = q
             if e == start:
@@ -813,19 +834,19 @@ def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
         _add_triangle(tri, half, t, e, k, hull_next[e], -1, -1, hull_tri[e])
         tlen += 3
         hull_tri[k] = _legalize(t + 2, tri, half, pts, hull_start, hull_tri, hull_prev, stack,
-                                static)
+                                static, ws)
         hull_tri[e] = t
         # walk forward along the hull, adding triangles
         nn = hull_next[e]
         while True:
             q = hull_next[nn]
-            if not _orient(px, py, pts[nn, 0], pts[nn, 1], pts[q, 0], pts[q, 1]) > 0.0:
+            if not _orient(px, py, pts[nn, 0], pts[nn, 1], pts[q, 0], pts[q, 1], ws) > 0.0:
                 break
             t = tlen
             _add_triangle(tri, half, t, nn, k, q, hull_tri[k], -1, hull_tri[nn])
             tlen += 3
             hull_tri[k] = _legalize(t + 2, tri, half, pts, hull_start, hull_tri, hull_prev,
-                                    stack, static)
+                                    stack, static, ws)
             hull_next[nn] = nn  # removed
             nn = q
 
@@ -833,12 +854,13 @@ def _sweep(pts, ids, i0, i1, i2, cx, cy, tri, half):
         if e == start:
             while True:
                 q = hull_prev[e]
-                if not _orient(px, py, pts[q, 0], pts[q, 1], pts[e, 0], pts[e, 1]) > 0.0:
+                if not _orient(px, py, pts[q, 0], pts[q, 1], pts[e, 0], pts[e, 1], ws) > 0.0:
                     break
                 t = tlen
                 _add_triangle(tri, half, t, q, k, e, -1, hull_tri[e], hull_tri[q])
                 tlen += 3
-                _legalize(t + 2, tri, half, pts, hull_start, hull_tri, hull_prev, stack, static)
+                _legalize(t + 2, tri, half, pts, hull_start, hull_tri, hull_prev, stack, static,
+                          ws)
                 hull_tri[q] = t
                 hull_next[e] = e  # removed
                 e = q

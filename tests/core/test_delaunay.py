@@ -167,13 +167,14 @@ def test_exact_predicates():
         a, b, c = ([Fraction(v) for v in p] for p in (a, b, c))
         return (a[0] - c[0]) * (b[1] - c[1]) - (a[1] - c[1]) * (b[0] - c[0])
 
+    ws = np.empty(dl.WORKSPACE)  # the exact arithmetic's workspace
     u = np.spacing(0.5)
     b, c = np.array([12.0, 12.0]), np.array([24.0, 24.0])
     for i in range(0, 64, 2):
         for j in range(0, 64, 2):
             a = np.array([0.5 + i * u, 0.5 + j * u])
             for p in ((a, b, c), (b, c, a), (c, a, b)):
-                s = dl._orient(*p[0], *p[1], *p[2])
+                s = dl._orient(*p[0], *p[1], *p[2], ws)
                 assert np.sign(s) == np.sign(orient_fraction(*p))
 
     # on a circle (the determinant rounding noise) and anywhere in a tile (most decided by
@@ -185,10 +186,10 @@ def test_exact_predicates():
         p = ([r * np.array([np.cos(t), np.sin(t)]) for t in rng.uniform(0, 2 * np.pi, 4)]
              if k % 2 else list(rng.uniform(0.0, 130.0, (4, 2)) + rng.uniform(-1e6, 1e6, 2)))
         exact = np.sign(_incircle_fraction(*p))
-        assert np.sign(dl._incircle(*p[0], *p[1], *p[2], *p[3], np.inf)) == exact
+        assert np.sign(dl._incircle(*p[0], *p[1], *p[2], *p[3], np.inf, ws)) == exact
         for static in (dl._incircle_static_bound(np.array(p)),
                        dl._incircle_static_bound(np.array(p + [p[0] + 100.0]))):
-            s = dl._incircle(*p[0], *p[1], *p[2], *p[3], static)
+            s = dl._incircle(*p[0], *p[1], *p[2], *p[3], static, ws)
             assert np.sign(s) == exact
             decided += abs(s) > static
     assert decided > 900
