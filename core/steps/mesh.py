@@ -842,8 +842,8 @@ def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
 def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndarray) -> int:
     """How many input segments are not a chain of mesh edges (nodes on the segment, in order,
     each consecutive pair an edge of a triangle)."""
-    # lazy: SciPy loads only when this runs
-    from scipy.spatial import cKDTree
+    # lazy: numba loads only when this runs
+    from ..engine.nearest import point_index
 
     if not len(segments):
         return 0
@@ -860,24 +860,30 @@ def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndar
         return keys[at] == wanted
 
     ordered = np.sort(np.asarray(segments, np.int64), axis=1)
-    split = ordered[~are_edges(ordered)].tolist()
+    split = ordered[~are_edges(ordered)]  # segments that Triangle split with Steiner points
+    if not len(split):
+        return 0
+    # each split segment's chain: the nodes on it, in order along it, all at once
     xy = nodes[:, :2]
-    tree = cKDTree(xy) if split else None
-    missing = 0
-    for a, b in split:  # segments that Triangle split with Steiner points
-        d = xy[b] - xy[a]
-        length = float(np.hypot(*d))
-        near = np.array(tree.query_ball_point((xy[a] + xy[b]) / 2, length / 2 * (1 + 1e-9)
-                                              + 1e-9))
-        rel = xy[near] - xy[a]
-        t = rel @ d / length ** 2
-        off = np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0]) / length
-        inside = (off <= 1e-6 * max(1.0, length)) & (t >= -1e-9) & (t <= 1 + 1e-9)
-        chain = near[inside][np.argsort(t[inside], kind="stable")]
-        pairs = np.sort(np.column_stack([chain[:-1], chain[1:]]), axis=1)
-        if chain[0] != a and chain[0] != b or not are_edges(pairs).all():
-            missing += 1
-    return missing
+    a, b = split[:, 0], split[:, 1]
+    d = xy[b] - xy[a]
+    length = np.hypot(d[:, 0], d[:, 1])
+    indptr, near = point_index(xy).neighbours((xy[a] + xy[b]) / 2,
+                                              length / 2 * (1 + 1e-9) + 1e-9)
+    owner = np.repeat(np.arange(len(split)), np.diff(indptr))
+    rel, d, length = xy[near] - xy[a[owner]], d[owner], length[owner]
+    t = (rel[:, 0] * d[:, 0] + rel[:, 1] * d[:, 1]) / length ** 2
+    off = np.abs(rel[:, 0] * d[:, 1] - rel[:, 1] * d[:, 0]) / length
+    on = np.flatnonzero((off <= 1e-6 * np.maximum(1.0, length)) & (t >= -1e-9)
+                        & (t <= 1 + 1e-9))
+    on = on[np.lexsort((t[on], owner[on]))]  # by segment, then along it (stable)
+    owner, chain = owner[on], near[on]
+    first = np.r_[True, owner[1:] != owner[:-1]]
+    bad = first & (chain != a[owner]) & (chain != b[owner])
+    within = ~first[1:]  # consecutive chain nodes of one segment
+    pairs = np.sort(np.column_stack([chain[:-1], chain[1:]])[within], axis=1)
+    bad[1:][within] |= ~are_edges(pairs)
+    return int(len(np.unique(owner[bad])))
 
 
 def boundary_loops(nodes: np.ndarray, triangles: np.ndarray) -> list[np.ndarray]:
