@@ -166,7 +166,7 @@ def _orient_exact(ax, ay, bx, by, cx, cy, ws):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _orient(ax, ay, bx, by, cx, cy, ws):
+def orient2d(ax, ay, bx, by, cx, cy, ws):
     """Shewchuk's orient2d: > 0 if a, b, c turn counter-clockwise, < 0 clockwise, 0 collinear
     (the sign is exact; the magnitude is not). ``ws``: a workspace of ``WORKSPACE`` doubles."""
     detleft = (ax - cx) * (by - cy)
@@ -670,7 +670,7 @@ def _empty_circle_apex(xy, i0, i1, ws):
     for i in range(xy.shape[0]):
         px = xy[i, 0]
         py = xy[i, 1]
-        o = _orient(x0, y0, x1, y1, px, py, ws)
+        o = orient2d(x0, y0, x1, y1, px, py, ws)
         if o == 0.0:
             continue
         dot = (px - x0) * (px - x1) + (py - y0) * (py - y1)
@@ -704,7 +704,7 @@ def _seed(xy):
         return i0, i1, -1, 0.0, 0.0
     x0 = xy[i0, 0]
     y0 = xy[i0, 1]
-    if _orient(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1], ws) > 0.0:
+    if orient2d(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1], ws) > 0.0:
         i1, i2 = i2, i1  # clockwise, as delaunator
     cx, cy = circumcentre(x0, y0, xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1])
     return i0, i1, i2, cx, cy
@@ -820,7 +820,7 @@ def _sweep_points(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull
         e = start
         while True:
             q = hull_next[e]
-            if _orient(px, py, pts[e, 0], pts[e, 1], pts[q, 0], pts[q, 1], ws) > 0.0:
+            if orient2d(px, py, pts[e, 0], pts[e, 1], pts[q, 0], pts[q, 1], ws) > 0.0:
                 break
             e = q
             if e == start:
@@ -840,7 +840,7 @@ def _sweep_points(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull
         nn = hull_next[e]
         while True:
             q = hull_next[nn]
-            if not _orient(px, py, pts[nn, 0], pts[nn, 1], pts[q, 0], pts[q, 1], ws) > 0.0:
+            if not orient2d(px, py, pts[nn, 0], pts[nn, 1], pts[q, 0], pts[q, 1], ws) > 0.0:
                 break
             t = tlen
             _add_triangle(tri, half, t, nn, k, q, hull_tri[k], -1, hull_tri[nn])
@@ -854,7 +854,7 @@ def _sweep_points(pts, r0, r1, r2, cx, cy, tri, half, hull_prev, hull_next, hull
         if e == start:
             while True:
                 q = hull_prev[e]
-                if not _orient(px, py, pts[q, 0], pts[q, 1], pts[e, 0], pts[e, 1], ws) > 0.0:
+                if not orient2d(px, py, pts[q, 0], pts[q, 1], pts[e, 0], pts[e, 1], ws) > 0.0:
                     break
                 t = tlen
                 _add_triangle(tri, half, t, q, k, e, -1, hull_tri[e], hull_tri[q])

@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..engine.nearest import cell_of, cell_sort
+from .delaunay import WORKSPACE, orient2d
 
 
 def locate(xy: np.ndarray, triangles: np.ndarray, points: np.ndarray,
@@ -135,3 +136,23 @@ def _locate(xy, triangles, bounds, members, order, first, ordered, found, z, val
                         wa, wb = _side(xy, b, c, x, y) / area, _side(xy, c, a, x, y) / area
                         values[order[i]] = wa * z[a] + wb * z[b] + (1.0 - wa - wb) * z[c]
                     break
+
+
+@njit(cache=True, nogil=True)
+def overlap_beyond_shared_end(xy, first, second):
+    """Whether any pair of segments ``first[k]``, ``second[k]`` ((k, 2) indices into the
+    vertices ``xy`` (n, 2)), each pair sharing an end, meets beyond it: both ends shared, or
+    the other two ends exactly collinear with the shared one (Shewchuk's orientation test) and
+    on one side of it."""
+    ws = np.empty(WORKSPACE)
+    for k in range(first.shape[0]):
+        a0, a1, b0, b1 = first[k, 0], first[k, 1], second[k, 0], second[k, 1]
+        if (a0 == b0 and a1 == b1) or (a0 == b1 and a1 == b0):
+            return True
+        p, u, v = (a0, a1, b1) if a0 == b0 else ((a0, a1, b0) if a0 == b1 else (
+            (a1, a0, b1) if a1 == b0 else (a1, a0, b0)))
+        px, py = xy[p, 0], xy[p, 1]
+        if (orient2d(px, py, xy[u, 0], xy[u, 1], xy[v, 0], xy[v, 1], ws) == 0.0
+                and (xy[u, 0] - px) * (xy[v, 0] - px) + (xy[u, 1] - py) * (xy[v, 1] - py) > 0):
+            return True
+    return False

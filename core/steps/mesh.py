@@ -579,8 +579,14 @@ def _segments_cross(vertices: np.ndarray, segments: np.ndarray) -> bool:
     shared = (segments[i][:, :, None] == segments[j][:, None, :]).any(axis=(1, 2))
     if not shared.all():
         return True
-    # segments sharing an end may meet only there: their intersection is that one point
-    return bool((shapely.get_type_id(shapely.intersection(lines[i], lines[j])) != 0).any())
+    # lazy: numba loads only when this runs
+    from .._kernels.mesh import overlap_beyond_shared_end
+
+    # segments sharing an end may meet only there (an exact test: GEOS's overlay of each pair
+    # took half of this check)
+    ends = np.asarray(segments, np.int64)
+    return bool(overlap_beyond_shared_end(np.ascontiguousarray(vertices, float), ends[i],
+                                          ends[j]))
 
 
 def _holes_inside(vertices: np.ndarray, segments: np.ndarray, holes: np.ndarray) -> bool:

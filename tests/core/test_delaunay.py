@@ -174,7 +174,7 @@ def test_exact_predicates():
         for j in range(0, 64, 2):
             a = np.array([0.5 + i * u, 0.5 + j * u])
             for p in ((a, b, c), (b, c, a), (c, a, b)):
-                s = dl._orient(*p[0], *p[1], *p[2], ws)
+                s = dl.orient2d(*p[0], *p[1], *p[2], ws)
                 assert np.sign(s) == np.sign(orient_fraction(*p))
 
     # on a circle (the determinant rounding noise) and anywhere in a tile (most decided by

@@ -379,6 +379,25 @@ def test_triangle_is_handed_only_sound_pslgs(vertices, segments, problem):
         triangulate_pslg(pslg, min_angle=25, max_area=1)
 
 
+@pytest.mark.parametrize("vertices, segments, meet", [
+    ([[0, 0], [2, 0], [1, 0]], [[0, 1], [0, 2]], True),           # one along the other
+    ([[0, 0], [2, 0], [1, 0]], [[1, 0], [2, 0]], True),           # ... either way round
+    ([[0, 0], [1, 0], [-1, 0]], [[0, 1], [0, 2]], False),         # straight on, apart
+    ([[0, 0], [2, 0], [1, 1e-8]], [[0, 1], [0, 2]], False),       # all but collinear
+    ([[0, 0], [2, 0]], [[0, 1], [1, 0]], True),                   # the same segment twice
+    ([[0, 0], [2, 0], [2, 2], [0, 2]], [[0, 1], [1, 2], [2, 3], [3, 0]], False),
+    ([[0, 0], [2, 0], [2, 2], [0, 2]], [[0, 2], [1, 3]], True),   # crossing
+    ([[0, 0], [2, 0], [1, 0], [1, 1]], [[0, 1], [2, 3]], True),   # touching inside
+])
+def test_segments_meeting_other_than_at_a_shared_end_are_found(vertices, segments, meet):
+    """The PSLG check's crossing test, at shared ends exactly: collinear arms on one side of
+    their common end overlap, on opposite sides or a hair off collinear they do not."""
+    from floodmesh.core.steps.mesh import _segments_cross
+
+    xy = np.array(vertices, float) + ORIGIN
+    assert _segments_cross(xy, np.array(segments, np.int32)) is meet
+
+
 def test_lines_meeting_at_a_sharp_corner_stop_a_cell_apart():
     """Two break lines meeting at 20°: one is shortened to end a cell (the spacing the lines
     are kept apart by elsewhere) off the other, not half a cell, so the smallest triangle in
