@@ -16,7 +16,7 @@ import numpy as np
 
 from .points import extent
 
-__all__ = ["delaunay", "delaunay_in_sweep_order"]
+__all__ = ["WORKSPACE", "delaunay", "delaunay_in_sweep_order", "orient2d"]
 
 _EPS = 2.0 ** -53                       # Shewchuk's epsilon (half an ulp of 1)
 _SPLITTER = 134217729.0                  # 2**27 + 1, splits a double into two 26-bit halves

@@ -1,5 +1,6 @@
 """Compiled point location in a triangular mesh (numba): which triangle holds each point, and
-the mesh's linear (TIN) elevation there. Kept out of ``mesh`` so that importing it does not load
+the mesh's linear (TIN) elevation there; and the PSLG check's exact test of segments that share
+an end (``overlap_beyond_shared_end``). Kept out of ``mesh`` so that importing it does not load
 numba.
 
 The triangles are counting-sorted into square buckets (half a triangle's area) by their
