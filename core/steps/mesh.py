@@ -373,7 +373,9 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     ``size_field(x, y)`` (m², NaN: no limit) those whose centroid or corners lie where it asks
     for less than their area.
     A mesh estimated above ``max_triangles`` triangles (or the memory available) is refused
-    before Triangle starts, from the meshed ``area`` (m², default the vertices' bounding box).
+    before Triangle starts, from the meshed ``area`` (m², default the vertices' bounding box);
+    one whose angle bound needs more (a sliver, features far closer than the area implies) is
+    refused when Triangle reaches that many new vertices.
     Returns vertices (n, 2), the PSLG's vertices first, then ``points``, and triangles (m, 3).
 
     The one function that calls Triangle: its helpers only prepare its input or check its output.
@@ -386,9 +388,14 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     origin, data = _triangle_input(pslg, points)
     # Triangle reads numbers in its switches without exponents ("a2e-05" is area 2, then
     # switch e): write them positional
-    quality = f"q{_positional(min_angle)}{'D' if conforming else ''}"
+    # at most max_triangles / 2 new vertices a call (switch S): a mesh has about two triangles
+    # a vertex, and the estimate above, from the area, cannot see what the angle bound asks
+    # (a 3-vertex sliver 6e-5 m wide and 667 m long took 14 M triangles and 32 s)
+    steiner = max(max_triangles // 2, 1)
+    quality = f"q{_positional(min_angle)}{'D' if conforming else ''}S{steiner}"
     switches = f"p{quality}a{_positional(max_area)}"
-    result = triangle.triangulate(data, switches)
+    result = _within_steiner_limit(triangle.triangulate(data, switches), data, steiner,
+                                   max_triangles, min_angle)
     if "triangles" not in result or len(result["triangles"]) == 0:
         raise FloodMeshError("Triangle produced no triangles: the domain boundary is not closed "
                              "or a hole point lies outside its hole")
@@ -400,7 +407,8 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
                              local="the size field" if size_field is not None else "refinement")
         if refine is None:  # every triangle keeps its limit
             break
-        result = triangle.triangulate(refine, f"rp{quality}a")
+        result = _within_steiner_limit(triangle.triangulate(refine, f"rp{quality}a"), refine,
+                                       steiner, max_triangles, min_angle)
     # Triangle leaves a triangle below the bound now and then where the angle rule
     # (below_angle_bound) allows none: it declines to split a skinny triangle whose shortest edge
     # joins two segments at equal distances from their common vertex (Miller, Pav & Walkington's
@@ -413,12 +421,27 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
         if not _angle_defects(result, pslg, min_angle):
             break
         before = len(result["vertices"])
-        result = triangle.triangulate({key: result[key] for key in
-                                       ("vertices", "triangles", "segments")}, "r" + switches)
+        repair = {key: result[key] for key in ("vertices", "triangles", "segments")}
+        result = _within_steiner_limit(triangle.triangulate(repair, "r" + switches), repair,
+                                       steiner, max_triangles, min_angle)
         if len(result["vertices"]) == before:  # Triangle added nothing: it will not again
             break
     _check_angle_rule(result, pslg, min_angle)
     return result["vertices"] + origin, result["triangles"].astype(np.int64)
+
+
+def _within_steiner_limit(result: dict, data: dict, steiner: int, max_triangles: int,
+                          min_angle: float) -> dict:
+    """Triangle's ``result`` from ``data``, refused where it added ``steiner`` vertices, its
+    limit (switch S): the angle bound then asks for more than ``max_triangles`` triangles."""
+    if len(result.get("vertices", ())) - len(data["vertices"]) >= steiner:
+        raise FloodMeshError(
+            f"keeping every angle at {min_angle:g} degrees or more needs more than "
+            f"{max_triangles:,} triangles here: the input has features far closer together than "
+            "its size (a sliver between lines or boundary, lines almost touching); simplify or "
+            "separate them, give a smaller minimum angle, or raise the limit (--max-triangles, "
+            "'Maximum number of triangles' in QGIS) if the machine can take it")
+    return result
 
 
 def _checked_bounds(pslg: PSLG, min_angle: float, max_area: float, max_triangles: int,

@@ -379,6 +379,17 @@ def test_triangle_is_handed_only_sound_pslgs(vertices, segments, problem):
         triangulate_pslg(pslg, min_angle=25, max_area=1)
 
 
+def test_a_sliver_the_angle_bound_cannot_mesh_in_bounds_is_refused_at_once():
+    """A triangle 667 m long and 6e-5 m wide (found by the mesher's fuzz test): its area asks
+    for a few triangles, its angle bound for millions (14 M and 32 s, unbounded, before the
+    Steiner-point limit); refused with what to do, before Triangle goes past the limit."""
+    pslg = PSLG(np.array([[0.0, 0.0], [667.48525793348745, 6.0469950227570735e-05],
+                          [500.70174752380990, 0.0]]) + [-3000.0, 250.0],
+                np.array([[0, 1], [1, 2], [2, 0]], np.int32), np.empty((0, 2)))
+    with pytest.raises(FloodMeshError, match="needs more than 60,000 triangles.*--max-triangles"):
+        triangulate_pslg(pslg, min_angle=17.3, max_area=946448.9, max_triangles=60_000)
+
+
 @pytest.mark.parametrize("vertices, segments, meet", [
     ([[0, 0], [2, 0], [1, 0]], [[0, 1], [0, 2]], True),           # one along the other
     ([[0, 0], [2, 0], [1, 0]], [[1, 0], [2, 0]], True),           # ... either way round
