@@ -871,9 +871,6 @@ def mesh_quality(mesh: Mesh, *, min_angle: float, max_area: float) -> dict:
 def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndarray) -> int:
     """How many input segments are not a chain of mesh edges (nodes on the segment, in order,
     each consecutive pair an edge of a triangle)."""
-    # lazy: numba loads only when this runs
-    from ..engine.nearest import point_index
-
     if not len(segments):
         return 0
     # the edges as sorted keys (a Python set of them took some 600 B a triangle)
@@ -892,6 +889,9 @@ def missing_segments(nodes: np.ndarray, triangles: np.ndarray, segments: np.ndar
     split = ordered[~are_edges(ordered)]  # segments that Triangle split with Steiner points
     if not len(split):
         return 0
+    # lazy: numba loads only when a segment was split
+    from ..engine.nearest import point_index
+
     # each split segment's chain: the nodes on it, in order along it, all at once
     xy = nodes[:, :2]
     a, b = split[:, 0], split[:, 1]
