@@ -9,9 +9,11 @@ points clearly better than one plane (an F ratio) and the slope changes across i
 half of tan(S_crit), the vertex moves onto the hinge and takes its z; the fit's RMS residual is
 the vertex's confidence (m). The window follows point density and noise: it holds about
 ``40 + 800·σ`` points (σ in m), at least one and at most 1.5 cells to each side and at most
-six cells along. A kink that runs beside a localised line but that no traced line follows (the
-toe of a narrow embankment whose band the tracer followed along its crest) is found by probing
-parallel to each line (``_companions``) and becomes a line of its own.
+six cells along; where the two planes misfit the points beyond the noise (the ground bends
+along the line: where it crosses an embankment, at a corner), the fit is repeated over half the
+length, down to half the width. A kink that runs beside a localised line but that no traced
+line follows (the toe of a narrow embankment whose band the tracer followed along its crest) is
+found by probing parallel to each line (``_companions``) and becomes a line of its own.
 
 Node elevations: nodes on break lines take z along the (localised) lines; every other node, z of
 a least-squares plane of the measured points within a radius (shrunk so that the window stays
@@ -39,6 +41,12 @@ from .simplify import douglas_peucker_mask
 MIN_WINDOW_CELLS = 8.0
 # A gap in a line is bridged where this share of the hinge fits along it find the line's kink
 BRIDGE_HOLD = 0.6
+# A hinge fit that misfits its points beyond the noise, or beyond LEAN_NOISE_FLOOR m where the
+# noise is less (QL1 LiDAR's RMSEz; on clean points a window's slight curvature is no misfit),
+# is fitted again over half the window's length (the ground bends along the line: a road
+# crossing the crest, a corner), up to LEAN_ROUNDS times and no shorter than LEAN_LEAST of the
+# window's half width (chosen on the corpus: RESULTS.md, "Crossings under sparse points")
+LEAN_ROUNDS, LEAN_LEAST, LEAN_NOISE_FLOOR = 3, 0.5, 0.05
 # A line is cut where it turns by more than CORNER_TURN degrees over CORNER_REACH hinge-window
 # half widths before and after a vertex (a corner, not a bend)
 CORNER_TURN, CORNER_REACH = 30.0, 4.0
@@ -494,17 +502,31 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     starts = np.r_[0, np.cumsum(sizes)]
     confidence = np.full(len(coords), np.nan)
     kink = np.full(len(coords), np.nan)
-    reach = float(np.hypot(window.half_width, window.half_length))
+
+    def hinge_fits(xy, tangents, half_length):
+        reach = float(np.hypot(window.half_width, half_length))
+        with threads_for(len(xy)):
+            # the fits' sums need no particular order of their points
+            return np.concatenate([_hinge_fits(points, *index.neighbours(xy[a:b], reach,
+                                                                         ascending=False),
+                                               xy[a:b, 0].copy(), xy[a:b, 1].copy(),
+                                               tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
+                                               window.half_width, half_length)
+                                   for a, b in _chunks(len(xy))])
+
     for _ in range(iterations):
         tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
-        with threads_for(len(coords)):
-            # the fits' sums need no particular order of their points
-            fits = np.concatenate([_hinge_fits(points, *index.neighbours(coords[a:b, :2], reach,
-                                                                         ascending=False),
-                                               coords[a:b, 0].copy(), coords[a:b, 1].copy(),
-                                               tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
-                                               window.half_width, window.half_length)
-                                   for a, b in _chunks(len(coords))])
+        fits = hinge_fits(coords[:, :2], tangents, window.half_length)
+        half_length = window.half_length
+        for _ in range(LEAN_ROUNDS):  # where the ground bends along the line: a shorter window
+            half_length /= 2
+            bent = np.flatnonzero(np.isfinite(fits[:, 2]) & beyond_noise(
+                fits[:, 2] ** 2, max(window.noise, LEAN_NOISE_FLOOR), fits[:, 5] - 4))
+            if half_length < LEAN_LEAST * window.half_width or not len(bent):
+                break
+            closer = hinge_fits(coords[bent, :2], tangents[bent], half_length)
+            fitted = np.isfinite(closer[:, 2])
+            fits[bent[fitted]] = closer[fitted]
         good = (np.isfinite(fits[:, 0]) & (np.abs(fits[:, 3]) >= min_kink)
                 & (fits[:, 4] >= min_f_ratio))
         normal = np.column_stack([-tangents[:, 1], tangents[:, 0]])
