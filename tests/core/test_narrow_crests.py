@@ -207,8 +207,9 @@ def test_a_run_traces_both_toes_of_narrow_embankments(tmp_path, monkeypatch):
 def test_a_sparse_survey_traces_both_toes_of_narrow_embankments(tmp_path, monkeypatch):
     """The same at 2 points/m², where the fit window is 6.7 m long: a run of 6 probe vertices
     (20 m) was longer than many stretches of untraced toe (the worst toe recalled 0.63 with
-    runs of 6, when written); with runs of ``COMPANION_RUN`` (3, chosen on the corpus) every
-    toe is recalled over at least 90 % of its length (0.94 the worst)."""
+    runs of 6, when written; still under 0.9 since hinge fits that misfit refit over shorter
+    windows); with runs of ``COMPANION_RUN`` (3, chosen on the corpus) every toe is recalled
+    over at least 90 % of its length (0.94 the worst, when written)."""
     from floodmesh.core.steps import localise
 
     scored = _two_narrow_embankments(tmp_path, 2.0)
@@ -216,4 +217,4 @@ def test_a_sparse_survey_traces_both_toes_of_narrow_embankments(tmp_path, monkey
     assert recall[TOES].min() >= 0.9 and precision >= 0.98
     monkeypatch.setattr(localise, "COMPANION_RUN", 6)
     recall_six, _ = scored("runs of six")
-    assert recall_six[TOES].min() < 0.7
+    assert recall_six[TOES].min() < 0.9
