@@ -357,3 +357,24 @@ def test_a_toe_crossing_an_embankment_keeps_its_height_on_sparse_points():
     assert fitted[on_road].mean() >= 0.7
     error = moved[:, 2] - ground(moved[:, :2])
     assert np.abs(error[on_road & fitted]).max() < 0.25
+
+
+def test_a_localised_line_follows_the_ground_over_an_embankment():
+    """From the user's side: the toe line out of ``localise_traced`` (what the mesh is built
+    on) runs over the road at the ground's height, instead of a chord at the toe's height
+    where fits failed (1.2 m under the road's crest)."""
+    import shapely
+
+    from floodmesh.core.steps.breaklines import BreakLine
+    from floodmesh.core.steps.localise import localise_traced
+
+    ground, points, s, line = _toe_under_a_road()
+    out, _, _ = localise_traced([BreakLine(line, np.full(len(s), 20.0))], points,
+                                fit_window(points, 1e4, 1.0), max_gap=20.0)
+    for piece in out:
+        path = shapely.LineString(piece.coords)
+        at = shapely.get_coordinates(shapely.line_interpolate_point(
+            path, np.arange(0.0, path.length, 0.5)), include_z=True)
+        assert np.abs(at[:, 2] - ground(at[:, :2])).max() < 0.3
+    covered = shapely.union_all([shapely.LineString(p.coords[:, :2]) for p in out])
+    assert shapely.LineString(line[:, :2]).buffer(1.0).intersection(covered).length > 38
