@@ -331,7 +331,8 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
             "localise", localise_traced, lines, front.measured, fits.window,
             s_crit=options.s_crit, tolerance=dem.cell_size / 10, max_gap=20 * dem.cell_size,
             join_gap=join_gap, join_lateral=dem.cell_size,
-            bridge_gap=BRIDGE_GAP_CELLS * dem.cell_size if join_gap else None, index=fits.index)
+            bridge_gap=BRIDGE_GAP_CELLS * dem.cell_size if join_gap else None,
+            cell_size=dem.cell_size, index=fits.index)
         fits.counts.update(counts)
     fits.let_go()
     return simplified, lines, confidence

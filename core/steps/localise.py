@@ -47,6 +47,13 @@ BRIDGE_HOLD = 0.6
 # crossing the crest, a corner), up to LEAN_ROUNDS times and no shorter than LEAN_LEAST of the
 # window's half width (chosen on the corpus: RESULTS.md, "Crossings under sparse points")
 LEAN_ROUNDS, LEAN_LEAST, LEAN_NOISE_FLOOR = 3, 0.5, 0.05
+# Between two vertices the fit moved onto crests, a vertex it did not move stays where dropping
+# it would move the line by more than UNMOVED_LATERAL cells: a crest's corner where an
+# embankment meets a levee, not the raster's staircase; a toe's corner stays cut (where a
+# traced toe turns from a river into a tributary, the corner sits a metre from the river's toe:
+# a sliver in the wet channel). Chosen on the corpus: RESULTS.md, "Crossings under sparse
+# points"
+UNMOVED_LATERAL = 2.0
 # A line is cut where it turns by more than CORNER_TURN degrees over CORNER_REACH hinge-window
 # half widths before and after a vertex (a corner, not a bend)
 CORNER_TURN, CORNER_REACH = 30.0, 4.0
@@ -583,10 +590,13 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
                "kept": int((~fitted).sum())}
 
 
-def _failed_fits_left_out(coords, moved, max_gap):
-    """Which vertices to keep: the moved ones, the line's ends, and runs of vertices the fit did
+def _failed_fits_left_out(coords, moved, max_gap, lateral, kink):
+    """Which vertices to keep: the moved ones, the line's ends, runs of vertices the fit did
     not move where the moved vertices on either side are farther apart than ``max_gap`` m along
-    the line (a stretch without a clear kink keeps its traced course)."""
+    the line (a stretch without a clear kink keeps its traced course), and, in shorter runs
+    between two moved vertices on crests (``kink`` negative at both: not a toe, not a hop from
+    crest to toe), those that Douglas–Peucker keeps within ``lateral`` m in plan (a crest's
+    corner is not cut by a chord)."""
     keep = moved.copy()
     keep[0] = keep[-1] = True
     kept = np.nonzero(keep)[0]
@@ -594,6 +604,9 @@ def _failed_fits_left_out(coords, moved, max_gap):
     for a, b in zip(kept[:-1], kept[1:]):
         if b - a > 1 and along[b] - along[a] > max_gap:
             keep[a + 1:b] = True
+        elif b - a > 1 and kink[a] < 0 and kink[b] < 0:
+            flat = np.column_stack([coords[a:b + 1, :2], np.zeros(b + 1 - a)])  # in plan
+            keep[a:b + 1] |= douglas_peucker_mask(flat, lateral)
     return keep
 
 
@@ -862,9 +875,11 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
                     max_gap: float = 12.0, join_gap: float | None = None,
                     join_lateral: float = 1.0, bridge_gap: float | None = None,
-                    index=None) -> tuple[list, list[float], dict]:
+                    cell_size: float = 1.0, index=None) -> tuple[list, list[float], dict]:
     """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
-    move are dropped where that leaves no gap over ``max_gap`` m, and Douglas–Peucker within
+    move are dropped where that leaves no gap over ``max_gap`` m and, between crests, moves the
+    line by no more than ``UNMOVED_LATERAL`` cells (``cell_size`` m) in plan
+    (``_failed_fits_left_out``), and Douglas–Peucker within
     ``tolerance`` m (horizontal and vertical) keeps what the smooth, localised line needs; lines
     are cut where they hop across a band from crest to toe (``_hops_cut``) and where they turn
     a corner (``_corners_cut``), kinks beside the pieces that no line follows become pieces of
@@ -879,11 +894,12 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
     where none moved) and counts. ``index``: ``nearest.point_index(points)`` if built."""
     index = index if index is not None else point_index(points)  # one for both uses below
+    lateral = UNMOVED_LATERAL * cell_size  # the grid's cell (m)
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
                                                    window, s_crit=s_crit, index=index)
     pieces, hops = [], 0  # (coords, slopes, component, fit RMS, kink, bridged) per piece
     for line, coords, fit, kink in zip(lines, moved, confidence, kinks):
-        fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap)
+        fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap, lateral, kink)
         keep = np.nonzero(fitted)[0][douglas_peucker_mask(coords[fitted], tolerance)]
         for piece in (corner for hop in _hops_cut(keep, kink)
                       for corner in _corners_cut(hop, coords, CORNER_REACH * window.half_width,

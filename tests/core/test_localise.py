@@ -378,3 +378,26 @@ def test_a_localised_line_follows_the_ground_over_an_embankment():
         assert np.abs(at[:, 2] - ground(at[:, :2])).max() < 0.3
     covered = shapely.union_all([shapely.LineString(p.coords[:, :2]) for p in out])
     assert shapely.LineString(line[:, :2]).buffer(1.0).intersection(covered).length > 38
+
+
+def test_unmoved_vertices_stay_where_a_crest_turns():
+    """A run of vertices the fit did not move is dropped, but for the corner of a crest line
+    (the kinks on either side crests): the raster's staircase goes, and so does the turn of a
+    toe line (where a toe turns from a river into a tributary) or of a line that hops from a
+    crest to a toe (cut there anyway)."""
+    from floodmesh.core.steps.localise import _failed_fits_left_out
+
+    x = np.arange(0.0, 11.0)
+    coords = np.column_stack([x, np.zeros(11), np.full(11, 5.0)])
+    coords[3, 1] = 0.4                               # the raster's staircase: goes
+    coords[9:, 0], coords[9:, 1] = 8.0, x[9:] - 6.0  # a right-angle corner at vertex 8
+    moved = np.zeros(11, bool)
+    moved[[0, 1, 10]] = True
+    crest = np.where(moved, -0.5, np.nan)
+    keep = _failed_fits_left_out(coords, moved, 20.0, 2.0, crest)
+    assert keep[[0, 1, 8, 10]].all() and not keep[[2, 3, 4, 5, 6, 7, 9]].any()
+    for kink in (-crest, np.where(np.arange(11) == 10, 0.5, crest)):  # a toe; a hop
+        assert not _failed_fits_left_out(coords, moved, 20.0, 2.0, kink)[2:10].any()
+    # on a long stretch without fits, the traced course is kept whole
+    assert _failed_fits_left_out(coords, moved, 5.0, 2.0, crest)[1:].all()
+
