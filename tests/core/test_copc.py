@@ -47,8 +47,9 @@ def test_copc_tiles_grid_to_the_dem_of_their_las_tiles(survey, tmp_path):
     # the same points in octree order: the terrain fits' draws differ, not the mesh's quality
     # (1,287 against 1,263 nodes without the flow area, before the flow area went only where
     # the terrain needs it and after; the flow area's nodes on every cell of low ground had
-    # diluted that to 0.7 %)
-    assert abs(copc["nodes"] - las["nodes"]) <= 0.025 * las["nodes"]
+    # diluted that to 0.7 %; 1,472 against 1,539 since fits that misfit refit over shorter
+    # windows, whose choice follows the noise drawn: 0.0509 against 0.0505 m)
+    assert abs(copc["nodes"] - las["nodes"]) <= 0.05 * las["nodes"]
 
 
 def test_a_copc_file_that_fits_is_one_point_file(survey):
