@@ -605,8 +605,7 @@ def _failed_fits_left_out(coords, moved, max_gap, lateral, kink):
         if b - a > 1 and along[b] - along[a] > max_gap:
             keep[a + 1:b] = True
         elif b - a > 1 and kink[a] < 0 and kink[b] < 0:
-            flat = np.column_stack([coords[a:b + 1, :2], np.zeros(b + 1 - a)])  # in plan
-            keep[a:b + 1] |= douglas_peucker_mask(flat, lateral)
+            keep[a:b + 1] |= douglas_peucker_mask(coords[a:b + 1, :2], lateral)  # in plan
     return keep
 
 

@@ -44,7 +44,8 @@ def simplify_douglas_peucker(lines: list[BreakLine], tolerance: float) -> list[B
 
 def douglas_peucker_mask(coords: np.ndarray, tolerance: float,
                          rank: np.ndarray | None = None) -> np.ndarray:
-    """Boolean mask of the vertices Douglas–Peucker keeps (horizontal and vertical deviation).
+    """Boolean mask of the vertices Douglas–Peucker keeps (horizontal and vertical deviation;
+    ``coords`` (k, 3), or (k, 2): in plan alone).
 
     With ``rank`` (an integer per vertex, lower preferred), a stretch with a vertex farther
     than ``tolerance`` (m) from its chord is split at the farthest of its vertices of the lowest
@@ -54,6 +55,8 @@ def douglas_peucker_mask(coords: np.ndarray, tolerance: float,
     from .._kernels.simplify import douglas_peucker_keep
 
     coords = np.ascontiguousarray(coords, dtype=np.float64)
+    if coords.ndim == 2 and coords.shape[1] == 2:  # the kernel reads a height: none here
+        coords = np.column_stack([coords, np.zeros(len(coords))])
     if len(coords) < 2:
         return np.ones(len(coords), bool)
     ranked = rank is not None

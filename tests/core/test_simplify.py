@@ -109,6 +109,21 @@ def test_douglas_peucker_vertical_deviation_alone_keeps_a_vertex():
     np.testing.assert_array_equal(coarse.coords, line.coords[[0, -1]])
 
 
+def test_douglas_peucker_in_plan_alone():
+    """Coordinates in plan (k, 2) are simplified as if their heights were all zero: the same
+    mask as (k, 3) with z 0, a bump in plan kept, nothing read past the array."""
+    from floodmesh.core.steps.simplify import douglas_peucker_mask
+
+    rng = np.random.default_rng(4)
+    xy = np.cumsum(rng.normal(0, 1, (200, 2)), axis=0)
+    flat = np.column_stack([xy, np.zeros(len(xy))])
+    for tolerance in (0.3, 1.0, 3.0):
+        np.testing.assert_array_equal(douglas_peucker_mask(xy, tolerance),
+                                      douglas_peucker_mask(flat, tolerance))
+    bump = np.column_stack([np.arange(11.0), np.where(np.arange(11) == 5, 0.5, 0.0)])
+    assert douglas_peucker_mask(bump, 0.1)[5] and not douglas_peucker_mask(bump, 1.0)[5]
+
+
 def test_straight_line_collapses_to_two_points():
     """Collinear points with linear z reduce to the two ends."""
     t = np.linspace(0, 1, 50)
