@@ -527,9 +527,11 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
         half_length = window.half_length
         for _ in range(LEAN_ROUNDS):  # where the ground bends along the line: a shorter window
             half_length /= 2
+            if half_length < LEAN_LEAST * window.half_width:
+                break
             bent = np.flatnonzero(np.isfinite(fits[:, 2]) & beyond_noise(
                 fits[:, 2] ** 2, max(window.noise, LEAN_NOISE_FLOOR), fits[:, 5] - 4))
-            if half_length < LEAN_LEAST * window.half_width or not len(bent):
+            if not len(bent):
                 break
             closer = hinge_fits(coords[bent, :2], tangents[bent], half_length)
             fitted = np.isfinite(closer[:, 2])
