@@ -753,7 +753,11 @@ def _line_vertex_z(lines, vertices: np.ndarray, precision: float):
     known, known_z = ordered[last], line_xyz[order[last], 2]
     mesh_keys = keys(np.asarray(vertices, float))
     pos = np.minimum(np.searchsorted(known, mesh_keys), len(known) - 1)
-    hit = (known[pos] == mesh_keys) & np.isfinite(known_z[pos])
+    # field by field: == on structured arrays promotes their dtypes first, and a Ctrl-C landing
+    # there comes out as numpy's TypeError ("Cannot compare structured arrays ...")
+    found = known[pos]
+    hit = ((found["x"] == mesh_keys["x"]) & (found["y"] == mesh_keys["y"])
+           & np.isfinite(known_z[pos]))
     return np.flatnonzero(hit), known_z[pos[hit]]
 
 
