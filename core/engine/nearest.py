@@ -191,6 +191,7 @@ class PointIndex:
         if not np.isfinite(box).all():
             raise ValueError("a point index needs finite points")
         n = len(x)
+        self.box = box  # xmin, ymin, xmax, ymax (m)
         self.lo = box[:2]
         span = box[2:] - self.lo
         cells = max(n / 64.0, 1.0)  # fewer, larger cells: the sort's scatter stays in cache
@@ -238,6 +239,9 @@ class CellIndex:
         self.rank[cells] = np.arange(len(cells), dtype=self.rank.dtype)
         self.a, self.c, self.e, self.f = (float(transform.a), float(transform.c),
                                           float(transform.e), float(transform.f))
+        x = self.c + self.a * np.array([0.5, self.cols - 0.5])
+        y = self.f + self.e * np.array([0.5, self.rows - 0.5])
+        self.box = np.array([x.min(), y.min(), x.max(), y.max()])  # of the cells' centres (m)
 
     def neighbours(self, centres: np.ndarray, radius, *,
                    ascending: bool = True) -> tuple[np.ndarray, np.ndarray]:

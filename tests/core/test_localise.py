@@ -123,6 +123,21 @@ def test_noise_estimate():
     assert estimate_noise(points, 9.0) == pytest.approx(0.10, rel=0.15)
 
 
+def test_noise_estimate_of_the_same_points_in_another_order_is_the_same():
+    points = noisy_points(hinge, noise=0.10, seed=3)
+    shuffled = points[np.random.default_rng(1).permutation(len(points))]
+    assert estimate_noise(shuffled, 9.0) == pytest.approx(estimate_noise(points, 9.0), rel=1e-9)
+
+
+def test_noise_estimate_of_a_reach_across_its_bounding_box():
+    """A reach at 45° fills a fifth of its bounding box: the places drawn outside it are drawn
+    again, and the estimate is the noise's."""
+    points = noisy_points(hinge, noise=0.10, seed=3)
+    diagonal = np.abs(points[:, 0] - points[:, 1]) < 10
+    assert diagonal.mean() < 0.25
+    assert estimate_noise(points[diagonal], 9.0) == pytest.approx(0.10, rel=0.15)
+
+
 def test_chain_fits_the_terrain_on_the_demo_floodplain(demo_points_file, tmp_path):
     """run_pipeline with the fits (the defaults) against the chain without them, scored on the
     demo's TRUE surface: a lower true RMSE with no more nodes; report.json states the fits."""
