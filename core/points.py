@@ -108,10 +108,49 @@ def sparse_survey_note(n_points: int, valid_cells: int, cell_size: float) -> str
             "(one point a cell) suits it (--cell-size, 'Grid cell size d' in QGIS)")
 
 
+def every_nth_by_place(xyz: np.ndarray, every: int) -> np.ndarray:
+    """About one in ``every`` of the points (n, 3), chosen by a hash of their x, y, z (to
+    0.1 mm), not by their order: the same survey read in any order (a COPC file's octree, a LAS
+    file's flight lines, tiles merged) gives the same points."""
+    if every <= 1:
+        return xyz
+    # lazy: numba loads only where points are read
+    import numba
+
+    from ._kernels.points import rows_by_place
+    return rows_by_place(np.ascontiguousarray(xyz, float), int(every), numba.get_num_threads())
+
+
+def held_out_by_place(xyz: np.ndarray, n_out: int, seed: int) -> np.ndarray:
+    """Which ``n_out`` of the points (n, 3) are held out (a mask): those whose hash of x, y, z
+    (to 0.1 mm), salted by ``seed``, is least. A random draw that follows the points, not
+    their order: the same survey as a LAS file or a COPC file, or as tiles named otherwise,
+    holds out the same check points; another seed draws others."""
+    n = len(xyz)
+    if n_out <= 0 or n_out >= n:
+        return np.full(n, n_out > 0)
+    # lazy: numba loads only where points are read
+    from ._kernels.points import point_hashes
+    salt = np.uint64((int(seed) * 0xD1B54A32D192ED03 + 0x8CB92BA72F3D8DD7) % (1 << 64))
+    hashes = point_hashes(np.ascontiguousarray(xyz, float), salt)
+    # the n_out least: among the hashes under a bound that holds about twice as many
+    bound = np.uint64(min((1 << 64) - 1, int(2.0 ** 64 * min(1.0, (2 * n_out + 64) / n))))
+    candidates = np.flatnonzero(hashes <= bound)
+    if len(candidates) < n_out:
+        candidates = np.arange(n)
+    kth = np.partition(hashes[candidates], n_out - 1)[n_out - 1]
+    mask = hashes <= kth
+    extra = int(np.count_nonzero(mask)) - n_out
+    if extra:  # the k-th point more than once (the same x, y, z): any of its copies
+        mask[np.flatnonzero(hashes == kth)[:extra]] = False
+    return mask
+
+
 def split_holdout(points: PointCloud, fraction: float, seed: int,
                   note=None) -> tuple[PointCloud, PointCloud]:
-    """Split off a random ``fraction`` of the points for accuracy assessment (at least the 20
-    check points of the FEMA/NSSDA test, ``options.holdout_count``, said through ``note``).
+    """Split off a random ``fraction`` of the points (``held_out_by_place``) for accuracy
+    assessment (at least the 20 check points of the FEMA/NSSDA test, ``options.holdout_count``,
+    said through ``note``).
 
     Returns (points for gridding, held-out points); the same seed gives the same split.
     """
@@ -123,8 +162,6 @@ def split_holdout(points: PointCloud, fraction: float, seed: int,
 
     from ._kernels.points import split_rows
 
-    rng = np.random.default_rng(seed)
-    mask = np.zeros(n, dtype=bool)
-    mask[rng.choice(n, size=n_out, replace=False)] = True
+    mask = held_out_by_place(points.xyz, n_out, seed)
     gridding, held_out = split_rows(points.xyz, mask, numba.get_num_threads())
     return PointCloud(gridding, points.crs), PointCloud(held_out, points.crs)

@@ -324,3 +324,57 @@ def finite_rows(xyz, blocks):
             if not np.isfinite(xyz[p, k]):
                 rows[p] = False
     return rows
+
+
+
+_MIX_X = np.uint64(0x9E3779B97F4A7C15)
+_MIX_Y = np.uint64(0xC2B2AE3D27D4EB4F)
+_MIX_Z = np.uint64(0x165667B19E3779F9)
+_MIX_1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX_2 = np.uint64(0x94D049BB133111EB)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _point_hash(x, y, z, salt):
+    """A 64-bit hash of a point's x, y, z to 0.1 mm, salted (splitmix64's finaliser): the point
+    itself, whatever its place in the file."""
+    h = (np.uint64(np.int64(np.rint(x * 1e4))) * _MIX_X) ^ (
+        np.uint64(np.int64(np.rint(y * 1e4))) * _MIX_Y) ^ (
+        np.uint64(np.int64(np.rint(z * 1e4))) * _MIX_Z) ^ salt
+    h ^= h >> np.uint64(31)
+    h *= _MIX_1
+    h ^= h >> np.uint64(29)
+    h *= _MIX_2
+    return h ^ (h >> np.uint64(32))
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def point_hashes(xyz, salt):
+    """``_point_hash`` of every row of ``xyz`` (n, 3+), on all cores."""
+    out = np.empty(xyz.shape[0], np.uint64)
+    for p in prange(xyz.shape[0]):
+        out[p] = _point_hash(xyz[p, 0], xyz[p, 1], xyz[p, 2], salt)
+    return out
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def rows_by_place(xyz, every, blocks):
+    """The rows of ``xyz`` whose unsalted hash is a multiple of ``every`` (about one in
+    ``every``), in order; each of ``blocks`` threads counts, then copies, one block."""
+    n, width = xyz.shape
+    k = np.uint64(every)
+    zero = np.uint64(0)
+    starts = np.zeros(blocks + 1, np.int64)
+    for b in prange(blocks):
+        for p in range(b * n // blocks, (b + 1) * n // blocks):
+            if _point_hash(xyz[p, 0], xyz[p, 1], xyz[p, 2], zero) % k == 0:
+                starts[b + 1] += 1
+    starts = np.cumsum(starts)
+    out = np.empty((starts[-1], width))
+    for b in prange(blocks):
+        j = starts[b]
+        for p in range(b * n // blocks, (b + 1) * n // blocks):
+            if _point_hash(xyz[p, 0], xyz[p, 1], xyz[p, 2], zero) % k == 0:
+                out[j] = xyz[p]
+                j += 1
+    return out

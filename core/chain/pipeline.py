@@ -30,7 +30,8 @@ from ..io.report_html import HTML_NAME, write_report_html
 from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS,
                        MISFIT_DENSITY, MISFIT_EXCESS, MISFIT_FLOOR_CELLS, MISFIT_LOW_FLOOR,
                        MISFIT_SHARE, RunOptions, check_sigma_fits)
-from ..points import PointCloud, repeated_positions_note, sparse_survey_note, split_holdout
+from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
+                      split_holdout)
 from ..raster import Grid, nearest_value
 from ..steps.accuracy import accuracy_statistics, residuals
 from ..steps.breaklines import trace_breaklines
@@ -411,13 +412,14 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
         return steps.run("refine", refine_mesh, front.dem, mesh_lines, fits.measured()[0],
                          lower=options.refine_lower, upper=options.refine_upper, **common)
     # folds no line describes (crossings, junctions, rounded ends), split without new points;
-    # every k-th point, some MISFIT_DENSITY a m² (a split triangle holds 8 cells² or more)
-    points = fits.measured()[0]
+    # one point in k, some MISFIT_DENSITY a m² (a split triangle holds 8 cells² or more), chosen
+    # by place so that the survey's order does not change the mesh
     every = max(1, int(fits.window.density / MISFIT_DENSITY))
+    points = every_nth_by_place(fits.measured()[0], every)
     floor = MISFIT_FLOOR_CELLS * front.dem.cell_size ** 2
     low_floor = None if low_ground is None else (lambda xy: np.where(np.isfinite(nearest_value(
         low_ground, xy[:, 0], xy[:, 1])), MISFIT_LOW_FLOOR * floor, floor))
-    return steps.run("refine", refine_mesh, front.dem, mesh_lines, points[::every],
+    return steps.run("refine", refine_mesh, front.dem, mesh_lines, points,
                      lower=MISFIT_EXCESS, upper=None, max_rounds=options.misfit_passes + 1,
                      most=MISFIT_SHARE, measure_last=False, floor_at=low_floor,
                      floor=floor, first=mesh, **common)

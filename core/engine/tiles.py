@@ -2,8 +2,8 @@
 tiles (several GeoTIFFs) read as one grid.
 
 Point tiles are gridded in two rounds of Dask tasks. Round one reads each tile, draws its
-holdout points (seeded by the run's seed and the tile's file name, so the same tile always holds
-back the same points, whatever the other tiles) and keeps the tile's edge band: its points
+holdout points (drawn by where they lie and the run's seed, so the same points always hold back
+the same points, whatever the tile's name, format or order and the other tiles) and keeps the tile's edge band: its points
 within two halos of its outline, in a scratch file on a local cluster (on a running scheduler's
 workers, in their memory). Round two grids the DEM in blocks of about one tile
 (``grid.grid_window``): each block re-reads the tile under it and takes its neighbours' edge
@@ -34,7 +34,6 @@ import math
 import os
 import shutil
 import time
-import zlib
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,7 +48,7 @@ from ..io import (GROUND_CLASS, atomic_output, classes_kept, file_format, las_fi
                   las_classes, las_xyz, read_band, read_las, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_holdout_count, check_max_gap
-from ..points import clean_points
+from ..points import clean_points, held_out_by_place
 from ..raster import Grid, check_transform, require_metric_crs
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
@@ -323,15 +322,11 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
 
 # ---------------------------------------------------------------------------------------------
 # per-tile work (Dask tasks: plain functions of picklable arguments)
-def holdout_mask(n_points: int, fraction: float, seed: int, name: str) -> np.ndarray:
-    """Which of a tile's ``n_points`` are held out: ``fraction`` of them, drawn from a generator
-    seeded by ``seed`` and the tile's file ``name``, so reproducible tile by tile."""
-    n_out = int(round(fraction * n_points))
-    mask = np.zeros(n_points, dtype=bool)
-    if n_out:
-        rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
-        mask[rng.choice(n_points, size=n_out, replace=False)] = True
-    return mask
+def holdout_mask(xyz: np.ndarray, fraction: float, seed: int) -> np.ndarray:
+    """Which of a tile's points (n, 3) are held out: ``fraction`` of them, drawn by where they
+    lie (``points.held_out_by_place``), so reproducible tile by tile whatever the tile's name,
+    format or point order."""
+    return held_out_by_place(xyz, int(round(fraction * len(xyz))), seed)
 
 
 def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
@@ -418,7 +413,7 @@ def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int, note
         kept, sparse = kept[np.isfinite(kept).all(axis=1)], False
     else:
         kept, sparse = _usable(kept, crs_wkt, name, notes if notes is not None else [])
-    held = holdout_mask(len(kept), holdout, seed, name)
+    held = holdout_mask(kept, holdout, seed)
     return {"gridding": kept[~held], "held": kept[held], "kind": kind, "digest": digest,
             "sparse": sparse}
 

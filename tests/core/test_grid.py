@@ -14,7 +14,8 @@ from scipy.spatial import Delaunay
 
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.steps.grid import grid_points_linear
-from floodmesh.core.points import PointCloud, split_holdout
+from floodmesh.core.points import (PointCloud, every_nth_by_place, held_out_by_place,
+                                   split_holdout)
 
 from ..conftest import plane_points
 
@@ -186,6 +187,40 @@ def test_holdout_fraction_and_partition(thousand):
     together = np.vstack([kept.xyz, held.xyz])
     assert_array_equal(together[np.lexsort(together.T)],
                        thousand.xyz[np.lexsort(thousand.xyz.T)])
+
+
+def test_the_same_points_in_another_order_hold_out_the_same_points(thousand):
+    order = np.random.default_rng(3).permutation(len(thousand))
+    shuffled = PointCloud(thousand.xyz[order], thousand.crs)
+    for fraction, seed in ((0.1, 42), (0.001, 0)):
+        kept, held = split_holdout(thousand, fraction, seed=seed)
+        kept_again, held_again = split_holdout(shuffled, fraction, seed=seed)
+        assert rows_as_set(held_again.xyz) == rows_as_set(held.xyz)
+        assert rows_as_set(kept_again.xyz) == rows_as_set(kept.xyz)
+    # another seed, another draw
+    draws = [rows_as_set(split_holdout(thousand, 0.1, seed=seed)[1].xyz) for seed in (42, 43)]
+    assert draws[0] != draws[1]
+
+
+def test_points_given_twice_still_hold_out_the_count_asked(thousand):
+    twice = np.vstack([thousand.xyz, thousand.xyz[:500]])
+    for n_out, seed in ((1, 0), (20, 1), (150, 2), (1499, 3)):
+        assert held_out_by_place(twice, n_out, seed).sum() == n_out
+    assert not held_out_by_place(twice, 0, 0).any() and held_out_by_place(twice, 1500, 0).all()
+
+
+def test_every_nth_point_by_place_is_the_same_in_any_order():
+    xyz = plane_points(size=100.0, density=9.0, seed=5, origin=ORIGIN)
+    some = every_nth_by_place(xyz, 9)
+    assert abs(len(some) - len(xyz) / 9) < 4 * np.sqrt(len(xyz) / 9)
+    assert rows_as_set(some) <= rows_as_set(xyz)
+    shuffled = every_nth_by_place(xyz[np.random.default_rng(0).permutation(len(xyz))], 9)
+    assert rows_as_set(shuffled) == rows_as_set(some)
+    # spread over the area as the points are: each quarter holds its share
+    quarter = (some[:, :2] - some[:, :2].min(axis=0)) // 50
+    counts = np.unique(quarter[:, 0] * 2 + quarter[:, 1], return_counts=True)[1]
+    assert len(counts) == 4 and counts.min() > 0.8 * len(some) / 4
+    assert every_nth_by_place(xyz, 1) is xyz
 
 
 def test_a_small_survey_holds_out_the_20_points_the_nssda_test_needs(thousand):

@@ -64,9 +64,14 @@ def test_tiles_grid_to_the_dem_of_the_whole_cloud(survey, scheduler, tmp_path):
     n = sum(len(io.read_points(p)) for p in tiles)
     assert len(kept) + len(tiled.holdout) == n == tiled.n_points
     assert abs(len(tiled.holdout) - 0.01 * n) <= len(tiles)
-    again = holdout_mask(1000, 0.01, 5, tiles[0].name)
-    assert np.array_equal(again, holdout_mask(1000, 0.01, 5, tiles[0].name))
-    assert not np.array_equal(again, holdout_mask(1000, 0.01, 5, tiles[1].name))
+    first = io.read_points(tiles[0]).xyz
+    again = holdout_mask(first, 0.01, 5)
+    assert again.sum() == round(0.01 * len(first))
+    assert np.array_equal(again, holdout_mask(first, 0.01, 5))
+    assert not np.array_equal(again, holdout_mask(first, 0.01, 6))
+    # the same points in another order hold out the same points
+    order = np.random.default_rng(0).permutation(len(first))
+    assert np.array_equal(holdout_mask(first[order], 0.01, 5), again[order])
 
 
 def test_a_local_cluster_keeps_the_edge_bands_in_scratch_files(survey, scheduler, tmp_path,
