@@ -191,9 +191,9 @@ def test_a_run_traces_both_toes_of_narrow_embankments(tmp_path, monkeypatch):
     """From the user's side: LiDAR (9 points/m²) of two narrow embankments
     (``_two_narrow_embankments``). The tracer follows each band of breakpoints along one of its
     edges, so that a toe went untraced over a third of its length (recall 0.65 without the
-    search, 0.99 with it, when written); the search for a kink beside each localised line
-    finds it: every toe recalled over at least 90 % of its length, with nothing traced where
-    there is no line."""
+    search, 0.99 with it, when written; 0.84 without since the check points are drawn by
+    place); the search for a kink beside each localised line finds it: every toe recalled over
+    at least 90 % of its length, with nothing traced where there is no line."""
     from floodmesh.core.steps import localise
 
     scored = _two_narrow_embankments(tmp_path, 9.0)
@@ -201,7 +201,7 @@ def test_a_run_traces_both_toes_of_narrow_embankments(tmp_path, monkeypatch):
     assert recall[TOES].min() >= 0.9 and precision >= 0.98
     monkeypatch.setattr(localise, "COMPANION_RUN", 10 ** 9)
     recall_without, _ = scored("without")
-    assert recall_without[TOES].min() < 0.75
+    assert recall_without[TOES].min() < 0.9
 
 
 def test_a_sparse_survey_traces_both_toes_of_narrow_embankments(tmp_path, monkeypatch):
