@@ -85,7 +85,7 @@ def repeated_positions_note(xyz: np.ndarray, source: str) -> str | None:
     if not n:
         return None
     return (f"{source}: {n:,} point{'s repeat' if n > 1 else ' repeats'} the x, y of another "
-            f"with a different z (up to {dz:.3g} m apart); the grid keeps one of each: check "
+            f"with a different z (up to {dz:.3g} m apart); the grid takes their mean: check "
             "for overlapping flight lines or tiles merged twice")
 
 

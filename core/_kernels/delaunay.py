@@ -16,7 +16,7 @@ import numpy as np
 
 from .points import extent
 
-__all__ = ["WORKSPACE", "delaunay", "delaunay_in_sweep_order", "orient2d"]
+__all__ = ["WORKSPACE", "delaunay", "delaunay_in_sweep_order", "orient2d", "repeats_averaged"]
 
 _EPS = 2.0 ** -53                       # Shewchuk's epsilon (half an ulp of 1)
 _SPLITTER = 134217729.0                  # 2**27 + 1, splits a double into two 26-bit halves
@@ -924,3 +924,26 @@ def delaunay_in_sweep_order(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
         warnings.warn(f"Delaunay triangulation left out {skipped} points that rounding placed "
                       "inside the hull", RuntimeWarning, stacklevel=3)
     return pts, ids, tri[:tlen].reshape(-1, 3)
+
+
+@numba.njit(cache=True, nogil=True)
+def repeats_averaged(pts, z):
+    """``z`` (N,) of the points ``pts`` (N, 2) in the sweep's order, each run of points at one
+    place (next to one another after the sort; the sweep keeps the first) given the mean of
+    their z, summed in ascending order: the same value whatever order the survey held them in,
+    where the first would follow that order."""
+    out = z.copy()
+    n = pts.shape[0]
+    k = 0
+    while k < n:
+        end = k + 1
+        while end < n and pts[end, 0] == pts[k, 0] and pts[end, 1] == pts[k, 1]:
+            end += 1
+        if end - k > 1:
+            values = np.sort(z[k:end])
+            total = 0.0
+            for v in values:
+                total += v
+            out[k:end] = total / (end - k)
+        k = end
+    return out

@@ -132,6 +132,31 @@ def test_exact_duplicate_points_give_the_same_dem():
     assert_allclose(doubled.values, reference.values, rtol=0, atol=1e-9, equal_nan=True)
 
 
+def test_points_repeated_with_another_z_grid_to_their_mean():
+    """Every point again 0.2 m higher (tiles merged twice after a reprocessing): each place's
+    two heights averaged, so the DEM is the surface 0.1 m up, whatever order the copies come
+    in (the sweep kept the first of each, so the DEM followed the file's order)."""
+    xyz = curved_points()
+    reference = grid_points_linear(cloud(xyz), 1.0)
+    higher = xyz + [0.0, 0.0, 0.2]
+    for both in (np.vstack([xyz, higher]), np.vstack([higher, xyz[::-1]])):
+        doubled = grid_points_linear(cloud(both), 1.0)
+        assert_array_equal(np.isnan(doubled.values), np.isnan(reference.values))
+        assert_allclose(doubled.values, reference.values + 0.1, rtol=0, atol=1e-9,
+                        equal_nan=True)
+
+
+def test_the_same_points_in_any_order_grid_to_the_same_dem():
+    """A survey with some places measured two and three times, in three orders: the DEM the
+    same to the bit (kept by the order of the file, 574 of 1,600 cells differed)."""
+    xyz = curved_points()
+    survey = np.vstack([xyz, xyz[:800] + [0.0, 0.0, 0.3], xyz[:200] - [0.0, 0.0, 0.1]])
+    first = grid_points_linear(cloud(survey), 1.0).values
+    for seed in (1, 2):
+        order = np.random.default_rng(seed).permutation(len(survey))
+        assert_array_equal(grid_points_linear(cloud(survey[order]), 1.0).values, first)
+
+
 def test_jittered_duplicate_points_give_the_same_dem():
     """Each point again, moved by 1e-9 m in x and y (same z)."""
     xyz = curved_points()
