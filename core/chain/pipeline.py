@@ -28,8 +28,8 @@ from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
 from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
 from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS,
-                       MISFIT_DENSITY, MISFIT_EXCESS, MISFIT_FLOOR_CELLS, MISFIT_LOW_FLOOR,
-                       MISFIT_SHARE, RunOptions, check_sigma_fits)
+                       MISFIT_CROSSING_CELLS, MISFIT_DENSITY, MISFIT_EXCESS, MISFIT_FLOOR_CELLS,
+                       MISFIT_LOW_FLOOR, MISFIT_SHARE, RunOptions, check_sigma_fits)
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
 from ..raster import Grid, nearest_value
@@ -42,6 +42,7 @@ from ..steps.export import export_formats
 from ..steps.grid import check_grid, grid_points_linear
 from ..steps.hydraulic_lines import lines_for_hydraulics, without_wet_bridges
 from ..steps.hydraulics import hydraulic_checks
+from ..steps.joining import crossing_points
 from ..steps.localise import fit_node_elevations, fit_window, localise_traced
 from ..steps.mesh import (build_mesh, domain_from_dem, edge_tolerance, mesh_quality,
                           size_from_slope, user_domain)
@@ -417,12 +418,32 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
     every = max(1, int(fits.window.density / MISFIT_DENSITY))
     points = every_nth_by_place(fits.measured()[0], every)
     floor = MISFIT_FLOOR_CELLS * front.dem.cell_size ** 2
-    low_floor = None if low_ground is None else (lambda xy: np.where(np.isfinite(nearest_value(
-        low_ground, xy[:, 0], xy[:, 1])), MISFIT_LOW_FLOOR * floor, floor))
+    low_floor = None if low_ground is None else _low_ground_floor(
+        low_ground, mesh_lines, floor, MISFIT_CROSSING_CELLS * front.dem.cell_size)
     return steps.run("refine", refine_mesh, front.dem, mesh_lines, points,
                      lower=MISFIT_EXCESS, upper=None, max_rounds=options.misfit_passes + 1,
                      most=MISFIT_SHARE, measure_last=False, floor_at=low_floor,
                      floor=floor, first=mesh, **common)
+
+
+def _low_ground_floor(low_ground: Grid, lines, floor: float, reach: float):
+    """The misfit pass's floor (m²) at x, y (k, 2+): ``MISFIT_LOW_FLOOR`` times ``floor`` on
+    ``low_ground`` (finite there), where the smallest wet triangle sets a flood model's time
+    step, but ``floor`` within ``reach`` m of where two ``lines`` cross or meet (the folds of
+    two features' overlapping slopes) and off low ground."""
+    crossings = crossing_points(lines)
+    if len(crossings):
+        # lazy: scipy's spatial index loads only for a misfit pass over lines that cross
+        from scipy.spatial import cKDTree
+
+        near = cKDTree(crossings)
+
+    def floor_at(xy):
+        low = np.isfinite(nearest_value(low_ground, xy[:, 0], xy[:, 1]))
+        if len(crossings):
+            low &= near.query(xy[:, :2], distance_upper_bound=reach)[0] > reach
+        return np.where(low, MISFIT_LOW_FLOOR * floor, floor)
+    return floor_at
 
 
 def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected, max_area):

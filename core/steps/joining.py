@@ -361,3 +361,36 @@ def _trim_stub(lines, takes, i, side, node, longest):
     take = takes[i] if side == 1 else takes[i][::-1]
     c, take = c[:k + 1], take[:k + 1]
     lines[i], takes[i] = (c, take) if side == 1 else (c[::-1], take[::-1])
+
+
+def crossing_points(lines, *, min_angle: float = 30.0, reach: float = 2.0) -> np.ndarray:
+    """x, y (k, 2) of the points where two of ``lines`` ((n, 2+) arrays) cross or meet at more
+    than ``min_angle`` degrees (a road over a channel, a tributary's banks at the river's),
+    each line's direction taken over ``reach`` m either side; not where one line's pieces meet
+    end to end nor where two run side by side."""
+    # lazy: GEOS loads only when this runs
+    import shapely
+
+    if len(lines) < 2:
+        return np.zeros((0, 2))
+    shapes = np.array([shapely.LineString(np.asarray(c, float)[:, :2]) for c in lines],
+                      dtype=object)
+    first, second = shapely.STRtree(shapes).query(shapes, predicate="intersects")
+    pair = first < second
+    first, second = first[pair], second[pair]
+    points, which = shapely.get_coordinates(shapely.intersection(shapes[first], shapes[second]),
+                                            return_index=True)
+    if not len(points):
+        return np.zeros((0, 2))
+    at = shapely.points(points)
+
+    def direction(owner):
+        line = shapes[owner]
+        along = shapely.line_locate_point(line, at)
+        ends = [shapely.get_coordinates(shapely.line_interpolate_point(
+            line, np.clip(along + step, 0.0, shapely.length(line)))) for step in (-reach, reach)]
+        d = ends[1] - ends[0]
+        return d / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-12)[:, None]
+
+    cos = np.abs((direction(first[which]) * direction(second[which])).sum(axis=1))
+    return points[cos < np.cos(np.radians(min_angle))]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from floodmesh.core.steps.breaklines import BreakLine
-from floodmesh.core.steps.joining import join_pieces
+from floodmesh.core.steps.joining import crossing_points, join_pieces
 from floodmesh.core.steps.localise import _ground_follows, fit_window, localise_traced
 
 ANGLE = np.radians(32.0)  # oblique to the grid
@@ -275,3 +275,15 @@ def test_a_run_keeps_a_channels_banks_and_a_roads_sides_whole_through_their_cros
     # when written: 1.25 pieces a line (at most 2), recall 0.995; before, 2.9 (2 to 4), 0.967
     assert np.mean(whole) <= 1.5 and max(whole) <= 2 and recall >= 0.98
     assert np.mean(broken) >= 2.5 and min(broken) >= 2 and recall_before < recall
+
+
+def test_crossing_points_are_where_two_lines_cross_or_meet_at_an_angle():
+    road = np.array([[0.0, -50.0], [0.0, 50.0]])
+    bank = np.array([[-50.0, 10.0], [50.0, 10.0]])                  # crosses the road at 90°
+    spur = np.array([[20.0, 10.0], [20.0 + 30 * np.cos(0.6), 10.0 + 30 * np.sin(0.6)]])  # 34°
+    graze = np.array([[-40.0, 10.0], [-10.0, 10.0 + 30 * np.tan(np.radians(20))]])  # 20°
+    piece = np.array([[50.0, 10.0], [90.0, 10.0]])                  # the bank's next piece
+    beside = np.array([[-50.0, 11.0], [10.0, 11.0]])                # a metre beside it
+    found = crossing_points([road, bank, spur, graze, piece, beside])
+    assert sorted(map(tuple, np.round(found, 6))) == [(0.0, 10.0), (0.0, 11.0), (20.0, 10.0)]
+    assert crossing_points([road]).shape == (0, 2)
