@@ -326,7 +326,6 @@ def finite_rows(xyz, blocks):
     return rows
 
 
-
 _MIX_X = np.uint64(0x9E3779B97F4A7C15)
 _MIX_Y = np.uint64(0xC2B2AE3D27D4EB4F)
 _MIX_Z = np.uint64(0x165667B19E3779F9)

@@ -2,15 +2,15 @@
 tiles (several GeoTIFFs) read as one grid.
 
 Point tiles are gridded in two rounds of Dask tasks. Round one reads each tile, draws its
-holdout points (drawn by where they lie and the run's seed, so the same points always hold back
-the same points, whatever the tile's name, format or order and the other tiles) and keeps the tile's edge band: its points
-within two halos of its outline, in a scratch file on a local cluster (on a running scheduler's
-workers, in their memory). Round two grids the DEM in blocks of about one tile
+holdout points (drawn by where they lie and the run's seed, so a tile holds back the same points
+whatever its name, format or order and whatever the other tiles) and keeps the tile's edge band:
+its points within two halos of its outline, in a scratch file on a local cluster (on a running
+scheduler's workers, in their memory). Round two grids the DEM in blocks of about one tile
 (``grid.grid_window``): each block re-reads the tile under it and takes its neighbours' edge
 bands, so every TIN triangle that can cover a block cell is formed as in one TIN of all the
 points, and the DEM equals gridding the whole cloud at once (to round-off) with no seam. A
-worker holds one tile's points and one block of cells at a time: peak memory depends on the
-tile size, not on the area.
+worker holds one tile's points and one block of cells at a time: peak memory depends on the tile
+size, not on the area.
 
 A folder is read as a surveyor delivers it: its LAS/LAZ (or DEM) files are the tiles, XYZ text
 only by its numbers, and the rest (a README, a tile index, a .prj) is named in a note and left
