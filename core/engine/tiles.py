@@ -385,16 +385,14 @@ def _usable(xyz: np.ndarray, crs_wkt: str, name: str, notes: list) -> tuple[np.n
 
 def _digest(xyz: np.ndarray, chunk: int = 1 << 20) -> tuple[int, int]:
     """(count, hash) of a tile's points to 0.1 mm, whatever their order: two tiles with the same
-    digest hold the same points. A million points at a time, to hold little beside the tile."""
+    digest hold the same points (the sum of ``point_hashes``: points without x, y or z one key
+    each). A million points at a time, to hold little beside the tile."""
+    # lazy: numba loads only where tiles are read
+    from .._kernels.points import point_hashes
+
     total = 0
     for start in range(0, len(xyz), chunk):
-        with np.errstate(invalid="ignore"):  # points without x, y or z: one key each
-            keys = np.rint(xyz[start:start + chunk] * 1e4).astype(np.int64).view(np.uint64)
-        mixed = (keys[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (keys[:, 1] * np.uint64(
-            0xC2B2AE3D27D4EB4F)) ^ (keys[:, 2] * np.uint64(0x165667B19E3779F9))
-        mixed ^= mixed >> np.uint64(31)
-        mixed *= np.uint64(0xBF58476D1CE4E5B9)
-        mixed ^= mixed >> np.uint64(29)
+        mixed = point_hashes(np.ascontiguousarray(xyz[start:start + chunk], float), np.uint64(0))
         total = (total + int(mixed.sum(dtype=np.uint64))) % (1 << 64)
     return len(xyz), total
 
