@@ -16,7 +16,7 @@ import numpy as np
 
 from .points import extent
 
-__all__ = ["WORKSPACE", "delaunay", "delaunay_in_sweep_order", "orient2d", "repeats_averaged"]
+__all__ = ["WORKSPACE", "average_repeats", "delaunay", "delaunay_in_sweep_order", "orient2d"]
 
 _EPS = 2.0 ** -53                       # Shewchuk's epsilon (half an ulp of 1)
 _SPLITTER = 134217729.0                  # 2**27 + 1, splits a double into two 26-bit halves
@@ -927,12 +927,11 @@ def delaunay_in_sweep_order(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
 
 
 @numba.njit(cache=True, nogil=True)
-def repeats_averaged(pts, z):
-    """``z`` (N,) of the points ``pts`` (N, 2) in the sweep's order, each run of points at one
-    place (next to one another after the sort; the sweep keeps the first) given the mean of
-    their z, summed in ascending order: the same value whatever order the survey held them in,
-    where the first would follow that order."""
-    out = z.copy()
+def average_repeats(pts, z):
+    """Give each run of points at one place in ``pts`` (N, 2, the sweep's order: they sit next
+    to one another after its sort; the sweep keeps the first) the mean of their ``z`` (N,), in
+    place, summed in ascending order: the same value whatever order the survey held them in,
+    where the first would follow that order. Returns ``z``."""
     n = pts.shape[0]
     k = 0
     while k < n:
@@ -944,6 +943,6 @@ def repeats_averaged(pts, z):
             total = 0.0
             for v in values:
                 total += v
-            out[k:end] = total / (end - k)
+            z[k:end] = total / (end - k)
         k = end
-    return out
+    return z

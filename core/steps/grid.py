@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from affine import Affine
 
-from .._kernels.delaunay import circumcentre, delaunay_in_sweep_order, repeats_averaged
+from .._kernels.delaunay import average_repeats, circumcentre, delaunay_in_sweep_order
 from .._kernels.points import extent_on_threads, hull_candidates, monotone_chain
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
@@ -124,8 +124,9 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
         # a side of the box beyond every point needs no check: no point lies past it
         box = ((x_lo if x_lo > data[0] else -np.inf), (x_hi if x_hi < data[1] else np.inf),
                (y_lo if y_lo > data[2] else -np.inf), (y_hi if y_hi < data[3] else np.inf))
-        # points at one place (overlapping flight lines, tiles merged twice): their mean z
-        return _rasterise_tin(swept, repeats_averaged(swept, local_z[ids]), triangles, values,
+        # points at one place (overlapping flight lines, tiles merged twice): their mean z, in
+        # the copy that indexing by ``ids`` makes
+        return _rasterise_tin(swept, average_repeats(swept, local_z[ids]), triangles, values,
                               r0, r1, c0, c1, float(cell_size), float(max_gap), checked,
                               np.array(box), hull, xy, bounds, n_bcols, bucket_size)
 
