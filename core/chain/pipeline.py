@@ -432,16 +432,12 @@ def _low_ground_floor(low_ground: Grid, lines, floor: float, reach: float):
     step, but ``floor`` within ``reach`` m of where two ``lines`` cross or meet (the folds of
     two features' overlapping slopes) and off low ground."""
     crossings = crossing_points(lines)
-    if len(crossings):
-        # lazy: scipy's spatial index loads only for a misfit pass over lines that cross
-        from scipy.spatial import cKDTree
-
-        near = cKDTree(crossings)
+    near = point_index(crossings) if len(crossings) else None
 
     def floor_at(xy):
         low = np.isfinite(nearest_value(low_ground, xy[:, 0], xy[:, 1]))
-        if len(crossings):
-            low &= near.query(xy[:, :2], distance_upper_bound=reach)[0] > reach
+        if near is not None:
+            low &= np.diff(near.neighbours(xy, reach, ascending=False)[0]) == 0
         return np.where(low, MISFIT_LOW_FLOOR * floor, floor)
     return floor_at
 
