@@ -172,16 +172,6 @@ def check_holdout(fraction) -> float:
     return fraction
 
 
-def check_holdout_count(fraction: float, n_points: int) -> int:
-    """The number of check points ``fraction`` of ``n_points`` gives; refused when it is above 0
-    but below what the FEMA/NSSDA test needs."""
-    fraction = check_holdout(fraction)
-    n_out = int(round(fraction * n_points))
-    if fraction > 0 and n_out < MIN_CHECK_POINTS:
-        raise FloodMeshError(_too_few_check_points(fraction, n_out, n_points))
-    return n_out
-
-
 def holdout_count(fraction: float, n_points: int, note=None) -> int:
     """The number of check points held out of ``n_points``: ``fraction`` of them, raised to the
     FEMA/NSSDA test's minimum of 20 where that keeps fewer (a small survey under the reference

@@ -129,10 +129,7 @@ def held_out_by_place(xyz: np.ndarray, n_out: int, seed: int) -> np.ndarray:
     n = len(xyz)
     if n_out <= 0 or n_out >= n:
         return np.full(n, n_out > 0)
-    # lazy: numba loads only where points are read
-    from ._kernels.points import point_hashes
-    salt = np.uint64((int(seed) * 0xD1B54A32D192ED03 + 0x8CB92BA72F3D8DD7) % (1 << 64))
-    hashes = point_hashes(np.ascontiguousarray(xyz, float), salt)
+    hashes = place_hashes(xyz, seed)
     # the n_out least: among the hashes under a bound that holds about twice as many
     bound = np.uint64(min((1 << 64) - 1, int(2.0 ** 64 * min(1.0, (2 * n_out + 64) / n))))
     candidates = np.flatnonzero(hashes <= bound)
@@ -144,6 +141,43 @@ def held_out_by_place(xyz: np.ndarray, n_out: int, seed: int) -> np.ndarray:
     if extra:  # the k-th point more than once (the same x, y, z): any of its copies
         mask[np.flatnonzero(hashes == kth)[:extra]] = False
     return mask
+
+
+def place_hashes(xyz: np.ndarray, seed: int) -> np.ndarray:
+    """The points' (n, 3) 64-bit hashes (uint64) of x, y, z to 0.1 mm, salted by ``seed``: the
+    order in which ``held_out_by_place`` draws check points."""
+    # lazy: numba loads only where points are read
+    from ._kernels.points import point_hashes
+    salt = np.uint64((int(seed) * 0xD1B54A32D192ED03 + 0x8CB92BA72F3D8DD7) % (1 << 64))
+    return point_hashes(np.ascontiguousarray(xyz, float), salt)
+
+
+def holdout_candidates(hashes: np.ndarray, fraction: float) -> tuple[np.ndarray, int]:
+    """(the indices of a part's candidates for the check points, the bound of their hashes):
+    the points of one part of a survey (a tile of ``len(hashes)`` points, ``place_hashes``)
+    whose hash is at most a bound that holds about 1.5 ``fraction`` of them and 64 more. The
+    survey's n least hashes (``held_out_by_place``) are among the candidates of all its parts
+    where they lie under the least bound (``least_hash``), which holds several times n points
+    but by a chance under 1e-11."""
+    if fraction <= 0 or not len(hashes):  # none to draw: complete under any bound
+        return np.empty(0, np.int64), (1 << 64) - 1
+    bound = min((1 << 64) - 1, int(2.0 ** 64 * min(1.0, 1.5 * fraction + 64 / len(hashes))))
+    return np.flatnonzero(hashes <= np.uint64(bound)), bound
+
+
+def least_hash(candidates: list[np.ndarray], bounds: list[int], n_out: int) -> int | None:
+    """The ``n_out``-th least of the survey's hashes from its parts' ``candidates`` (hashes,
+    each part's under its bound in ``bounds``, ``holdout_candidates``): the points of hash at
+    most this are the check points ``held_out_by_place`` draws from the whole survey at once
+    (all copies of a point repeated there); None for none. Where fewer than ``n_out``
+    candidates lie under the least bound, the points under it."""
+    if n_out <= 0 or not candidates:
+        return None
+    below = np.uint64(min(bounds))
+    pool = np.concatenate([h[h <= below] for h in candidates])
+    if len(pool) < n_out:
+        return int(below)
+    return int(np.partition(pool, n_out - 1)[n_out - 1])
 
 
 def split_holdout(points: PointCloud, fraction: float, seed: int,

@@ -559,7 +559,7 @@ class Front:
     index: Callable | None = None  # gives the index of ``measured`` (``_point_index_ahead``)
 
 
-TILE_HOLDOUT = "LiDAR points withheld from gridding, tile by tile"
+HELD_OUT = "LiDAR points withheld from gridding"  # tiles or one file: the same points
 
 
 @dataclass
@@ -630,7 +630,7 @@ def _read_points(source: Source, options: RunOptions, steps: _Steps, *, cancelle
                  note) -> _Terrain:
     """One point file, gridded in memory with ``options.holdout`` of its points held out."""
     data, gridding, holdout = steps.run("read", _points_split, source, options, note)
-    terrain = _grid_in_memory(gridding, holdout, "LiDAR points withheld from gridding",
+    terrain = _grid_in_memory(gridding, holdout, HELD_OUT,
                               len(data), options, steps, cancelled=cancelled)
     if note:  # the check of repeated positions: a single-threaded pass, left for an idle core
         terrain.later.append(("repeated points", repeated_positions_note,
@@ -682,7 +682,8 @@ def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, can
                       note) -> _Terrain:
     """Point tiles read into memory where they fit and no scheduler is given
     (``tiles.read_point_tiles``), then gridded as one file's points; else gridded on Dask
-    (``_read_tiles_on_dask``). The per-tile held-out points are the independent check."""
+    (``_read_tiles_on_dask``). The held-out points, the same as one file of all the tiles'
+    points holds out, are the independent check."""
     if not options.scheduler:
         tiles = steps.run("read", read_point_tiles, source.paths, options.cell_size,
                           crs=options.crs, classes=options.classes, holdout=options.holdout,
@@ -691,7 +692,7 @@ def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, can
             for message in tiles.notes if note else ():
                 note(message)
             return _grid_in_memory(PointCloud(tiles.gridding, tiles.crs),
-                                   PointCloud(tiles.holdout, tiles.crs), TILE_HOLDOUT,
+                                   PointCloud(tiles.holdout, tiles.crs), HELD_OUT,
                                    tiles.n_points, options, steps, cancelled=cancelled)
     return _read_tiles_on_dask(source, options, steps, cancelled=cancelled, note=note)
 
@@ -720,13 +721,12 @@ def _read_tiles_on_dask(source: Source, options: RunOptions, steps: _Steps, *, c
     measured = None
     if fits_in_memory(points=data.n_gridding, cells=data.dem.values.size,
                       cell_bytes=BYTES_PER_FITTED_CELL):
-        measured = steps.run("read back", read_gridded_points, data, options.holdout,
-                             options.seed, cancelled=cancelled)
+        measured = steps.run("read back", read_gridded_points, data, cancelled=cancelled)
     elif note:
         note(f"the tiles' {data.n_gridding:,} points gridded are more than memory holds beside "
              "the DEM: the terrain fits take the DEM's cell centres")
     return _Terrain(data.dem, PointCloud(data.holdout, data.dem.crs),
-                    TILE_HOLDOUT, data.n_points,
+                    HELD_OUT, data.n_points,
                     measured=measured, files=files)
 
 

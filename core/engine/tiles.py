@@ -1,16 +1,17 @@
 """A survey delivered as tiles: LAS/LAZ/XYZ point tiles gridded tile by tile on Dask, and DEM
 tiles (several GeoTIFFs) read as one grid.
 
-Point tiles are gridded in two rounds of Dask tasks. Round one reads each tile, draws its
-holdout points (drawn by where they lie and the run's seed, so a tile holds back the same points
-whatever its name, format or order and whatever the other tiles) and keeps the tile's edge band:
-its points within two halos of its outline, in a scratch file on a local cluster (on a running
-scheduler's workers, in their memory). Round two grids the DEM in blocks of about one tile
-(``grid.grid_window``): each block re-reads the tile under it and takes its neighbours' edge
-bands, so every TIN triangle that can cover a block cell is formed as in one TIN of all the
-points, and the DEM equals gridding the whole cloud at once (to round-off) with no seam. A
-worker holds one tile's points and one block of cells at a time: peak memory depends on the tile
-size, not on the area.
+Point tiles are gridded in two rounds of Dask tasks. Round one reads each tile, hashes its
+points by where they lie and the run's seed and sends the client the few of least hash, from
+which it draws the survey's check points: the points one file of all the tiles holds out
+(``points.held_out_by_place``), whatever the tiles' names, formats, order or cut. It keeps the
+tile's edge band: its points within two halos of its outline, in a scratch file on a local
+cluster (on a running scheduler's workers, in their memory). Round two grids the DEM, check
+points left out, in blocks of about one tile (``grid.grid_window``): each block re-reads the
+tile under it and takes its neighbours' edge bands, so every TIN triangle that can cover a block
+cell is formed as in one TIN of all the points, and the DEM equals gridding the whole cloud at
+once (to round-off) with no seam. A worker holds one tile's points and one block of cells at a
+time: peak memory depends on the tile size, not on the area.
 
 A folder is read as a surveyor delivers it: its LAS/LAZ (or DEM) files are the tiles, XYZ text
 only by its numbers, and the rest (a README, a tile index, a .prj) is named in a note and left
@@ -47,8 +48,8 @@ from ..errors import Cancelled, FloodMeshError
 from ..io import (GROUND_CLASS, atomic_output, classes_kept, file_format, las_fields_read,
                   las_classes, las_xyz, read_band, read_las, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
-from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_holdout_count, check_max_gap
-from ..points import clean_points, held_out_by_place
+from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
+from ..points import clean_points, holdout_candidates, least_hash, place_hashes
 from ..raster import Grid, check_transform, require_metric_crs
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
@@ -322,13 +323,6 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
 
 # ---------------------------------------------------------------------------------------------
 # per-tile work (Dask tasks: plain functions of picklable arguments)
-def holdout_mask(xyz: np.ndarray, fraction: float, seed: int) -> np.ndarray:
-    """Which of a tile's points (n, 3) are held out: ``fraction`` of them, drawn by where they
-    lie (``points.held_out_by_place``), so reproducible tile by tile whatever the tile's name,
-    format or point order."""
-    return held_out_by_place(xyz, int(round(fraction * len(xyz))), seed)
-
-
 def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """(xyz, LAS classes or None for text) of all a tile's points, as stored; a tile that cannot
     be read raises ``_Unreadable`` naming it."""
@@ -397,30 +391,42 @@ def _digest(xyz: np.ndarray, chunk: int = 1 << 20) -> tuple[int, int]:
     return len(xyz), total
 
 
-def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int, notes=None, *,
-               checked: bool = False) -> dict:
-    """A tile's gridding and held-out points, what was kept (``_kept``), and with ``notes`` (round
-    one) the digest of all its points and whether it is sparse (``_usable``); ``checked``: round
-    two, which only re-reads the tile and drops the same non-finite points."""
+def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int,
+               notes: list) -> dict:
+    """Round one's read of a tile: the points kept (``_kept``, ``_usable``: ``points``), the
+    candidates for the survey's check points among them (``holdout_candidates`` of a
+    ``holdout`` fraction, hashed by ``seed``: ``candidates``, their row indices, hashes and
+    bound), the digest of all its points and whether it is sparse."""
     name = Path(path).name
     xyz, cls = _read_raw(Path(path))
-    digest = None if checked else _digest(xyz)
+    digest = _digest(xyz)
     kept, kind = _kept(xyz, cls, classes, name, notes)
     del xyz, cls
-    if checked:
-        kept, sparse = kept[np.isfinite(kept).all(axis=1)], False
-    else:
-        kept, sparse = _usable(kept, crs_wkt, name, notes if notes is not None else [])
-    held = holdout_mask(kept, holdout, seed)
-    return {"gridding": kept[~held], "held": kept[held], "kind": kind, "digest": digest,
-            "sparse": sparse}
+    kept, sparse = _usable(kept, crs_wkt, name, notes)
+    hashes = place_hashes(kept, seed)
+    rows, bound = holdout_candidates(hashes, holdout)
+    return {"points": kept, "candidates": {"rows": rows, "hashes": hashes[rows], "bound": bound},
+            "kind": kind, "digest": digest, "sparse": sparse}
 
 
-def _tile_points(path: str, crs_wkt: str, classes, holdout: float, seed: int, notes=None, *,
-                 checked: bool = False):
-    """(gridding xyz, held-out xyz) of one tile (``_tile_read``)."""
-    tile = _tile_read(path, crs_wkt, classes, holdout, seed, notes, checked=checked)
-    return tile["gridding"], tile["held"]
+def _tile_points(path: str, crs_wkt: str, classes, held_below: int | None, seed: int):
+    """Round two's read of a tile: (its points to grid, its check points: ``_held`` by
+    ``held_below``), of the points round one kept (the same classes, the same non-finite points
+    dropped)."""
+    xyz, cls = _read_raw(Path(path))
+    kept = _kept(xyz, cls, classes, Path(path).name)[0]
+    del xyz, cls
+    kept = kept[np.isfinite(kept).all(axis=1)]
+    held = _held(kept, held_below, seed)
+    return kept[~held], kept[held]
+
+
+def _held(xyz: np.ndarray, held_below: int | None, seed: int) -> np.ndarray:
+    """Which of ``xyz`` are check points: their hash (``place_hashes``) at most ``held_below``
+    (the survey's, ``least_hash``; None: none)."""
+    if held_below is None or not len(xyz):
+        return np.zeros(len(xyz), bool)
+    return place_hashes(xyz, seed) <= np.uint64(held_below)
 
 
 def _within(xyz: np.ndarray, box) -> np.ndarray:
@@ -431,17 +437,19 @@ def _within(xyz: np.ndarray, box) -> np.ndarray:
 
 def _tile_figures(path: str, crs_wkt: str, classes, holdout: float, seed: int
                   ) -> tuple[dict, np.ndarray | None]:
-    """(a tile's figures and held-out points, its points to grid) as round one reads it
+    """(a tile's figures and candidate check points, its points) as round one reads it
     (``_tile_read``); an unreadable tile gives its message (``unreadable``) and no points, for
-    the client to decide."""
+    the client to decide, which draws the check points (``_check_points``)."""
     notes = []
     try:
         tile = _tile_read(path, crs_wkt, classes, holdout, seed, notes)
     except _Unreadable as exc:
         return {"path": path, "unreadable": str(exc)}, None
-    xyz, held = tile.pop("gridding"), tile.pop("held")
-    figures = {"path": path, "bounds": None, "n_points": len(xyz) + len(held),
-               "n_gridding": len(xyz), "area": 0.0, "holdout": held, "notes": notes,
+    xyz = tile.pop("points")
+    candidates = tile.pop("candidates")
+    candidates["xyz"] = xyz[candidates["rows"]]
+    figures = {"path": path, "bounds": None, "n_points": len(xyz), "n_gridding": len(xyz),
+               "area": 0.0, "candidates": candidates, "holdout": None, "notes": notes,
                "edge": None, **tile}
     if len(xyz):
         lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
@@ -452,9 +460,10 @@ def _tile_figures(path: str, crs_wkt: str, classes, holdout: float, seed: int
 
 def read_tile(path: str, crs_wkt: str, classes, holdout: float, seed: int, band: float,
               spill: str | None = None) -> dict:
-    """Round one: a tile's figures, held-out points and edge band (points within ``band`` m of
-    its outline): the points, or with ``spill`` (a file path) the path of the ``.npy`` file
-    they were written to (``_tile_figures``). A sparse tile's points are all edge band: its
+    """Round one: a tile's figures, candidate check points and edge band (points within ``band``
+    m of its outline, check points among them: round two leaves them out): the points, or with
+    ``spill`` (a file path) the path of the ``.npy`` file they were written to
+    (``_tile_figures``). A sparse tile's points are all edge band: its
     neighbours' blocks grid them."""
     result, xyz = _tile_figures(path, crs_wkt, classes, holdout, seed)
     if xyz is None or not len(xyz):
@@ -496,10 +505,11 @@ def _edge(result):
     return None if isinstance(result, _Failed) else result.get("edge")
 
 
-def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes, holdout: float,
-               seed: int) -> np.ndarray:
+def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes,
+               held_below: int | None, seed: int) -> np.ndarray:
     """Round two: the cells of one block, from the tiles under it (``full``: paths, re-read) and
-    its neighbours' edge bands (``edges``: arrays, or ``.npy`` files read in place)."""
+    its neighbours' edge bands (``edges``: arrays, or ``.npy`` files read in place), without the
+    check points (hash at most ``held_below``, ``_held``)."""
     # lazy: numba loads only when this runs
     from ..steps.grid import grid_window
 
@@ -507,10 +517,11 @@ def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes, hol
     parts = []
     for edge in edges:
         xyz = np.load(edge, mmap_mode="r") if isinstance(edge, str) else edge
-        parts.append(np.array(xyz[_within(xyz, box)]))
+        xyz = np.array(xyz[_within(xyz, box)])
+        parts.append(xyz[~_held(xyz, held_below, seed)])
         del xyz
     for path in full:
-        xyz = _tile_points(path, crs_wkt, classes, holdout, seed, checked=True)[0]
+        xyz = _tile_points(path, crs_wkt, classes, held_below, seed)[0]
         parts.append(xyz[_within(xyz, box)])
     xyz = np.concatenate(parts) if parts else np.empty((0, 3))
     return grid_window(xyz, window["cell_size"], window["max_gap"], window["x0"], window["y1"],
@@ -601,7 +612,7 @@ def _as_completed(client, futures, *, progress, cancelled, base: float, weight: 
 @dataclass
 class TiledDem:
     dem: Grid | None         # the whole DEM in memory (``keep=True``), else None
-    holdout: np.ndarray      # (n, 3) held-out points of all tiles
+    holdout: np.ndarray      # (n, 3) held-out points of all tiles (``_check_points``)
     n_points: int            # points read, holdout included
     n_tiles: int
     area: float              # m² the points cover
@@ -610,6 +621,8 @@ class TiledDem:
     gridded: tuple = ()      # the tiles with points to grid, as round two re-reads them
     classes: tuple | None = None  # the classes round two gridded
     n_gridding: int = 0      # points gridded (all tiles)
+    held_below: int | None = None  # the check points' hashes are at most this (``_held``)
+    seed: int = 0            # ... hashed with this seed
 
 
 def _tiles_counted(meta: list, classes, skip_unreadable: bool, notes: list) -> list[int]:
@@ -645,6 +658,26 @@ def _tiles_counted(meta: list, classes, skip_unreadable: bool, notes: list) -> l
                          f"point{'s' * (n > 1)}, too few or too close to a line for a terrain "
                          "model of its own: gridded with its neighbours' points")
     return counted
+
+
+def _check_points(counted: list, holdout: float, notes: list) -> int | None:
+    """The survey's check points drawn from the candidates of the tiles that count
+    (``counted``, round one's figures): as one file of all their points holds out
+    (``points.split_holdout``: the ``holdout`` share, at least the 20 the FEMA/NSSDA test
+    takes, said in ``notes``), the least hashes. Sets each tile's ``holdout`` (xyz),
+    ``held_rows`` (indices into its points) and ``n_gridding``; returns the largest hash of a
+    check point (None: none)."""
+    n_points = sum(m["n_points"] for m in counted)
+    n_out = holdout_count(holdout, n_points, notes.append) if n_points else 0
+    held_below = least_hash([m["candidates"]["hashes"] for m in counted],
+                            [m["candidates"]["bound"] for m in counted], n_out)
+    for m in counted:
+        candidates = m["candidates"]
+        held = (np.zeros(len(candidates["hashes"]), bool) if held_below is None
+                else candidates["hashes"] <= np.uint64(held_below))
+        m["holdout"], m["held_rows"] = candidates["xyz"][held], candidates["rows"][held]
+        m["n_gridding"] = m["n_points"] - int(held.sum())
+    return held_below
 
 
 def _check_enough(n_gridding: int, n_tiles: int, classes) -> None:
@@ -702,6 +735,7 @@ class _Layout:
     area: float              # m² the points cover
     block: int               # cells a side of a block of round two
     plan: dict               # ``check_layout``'s
+    held_below: int | None   # the check points' hashes are at most this (``_check_points``)
 
 
 def _tile_layout(meta: list, classes, holdout: float, cell_size: float, max_gap: float | None,
@@ -717,13 +751,13 @@ def _tile_layout(meta: list, classes, holdout: float, cell_size: float, max_gap:
 
     indices = _tiles_counted(meta, classes, skip_unreadable, notes)
     counted = [meta[i] for i in indices]
+    held_below = _check_points(counted, holdout, notes)
     gridded = [i for i in indices if meta[i]["n_gridding"]]  # sparse tiles too
     n_points = sum(m["n_points"] for m in counted)
     n_gridding = sum(m["n_gridding"] for m in counted)
     _check_enough(n_gridding, len(meta), classes)
     if classes is None and any(m["kind"] == "ground" for m in counted):
         classes = (GROUND_CLASS,)  # round two re-reads tiles with ground: their ground
-    check_holdout_count(holdout, n_points)
     notes += _overlaps([meta[i] for i in gridded])
     bounds = (min(meta[i]["bounds"][0] for i in gridded),
               min(meta[i]["bounds"][1] for i in gridded),
@@ -743,7 +777,7 @@ def _tile_layout(meta: list, classes, holdout: float, cell_size: float, max_gap:
         check_memory(cells=plan["rows"] * plan["cols"], points=per_block * parallel,
                      advice="give a larger cell size, or grid the tiles alone "
                             "(floodmesh grid TILES --out dem.tif) and mesh a part")
-    return _Layout(counted, gridded, classes, n_points, area, block, plan)
+    return _Layout(counted, gridded, classes, n_points, area, block, plan, held_below)
 
 
 def _block_sources(box: tuple, gridded: list, meta: list, tiles: list, edges: list,
@@ -767,7 +801,7 @@ def _block_sources(box: tuple, gridded: list, meta: list, tiles: list, edges: li
 
 
 def _submit_blocks(client, layout: _Layout, meta: list, tiles: list, edges: list,
-                   cell_size: float, halo: float, band: float, crs_wkt: str, holdout: float,
+                   cell_size: float, halo: float, band: float, crs_wkt: str,
                    seed: int) -> tuple[list, list]:
     """Round two submitted: a ``grid_block`` task (key ``grid-ROW-COL``) for each block of the
     layout, on the points within ``halo`` m of it (``_block_sources``); (the tasks, the (row,
@@ -786,7 +820,8 @@ def _submit_blocks(client, layout: _Layout, meta: list, tiles: list, edges: list
                       "cell_size": cell_size, "max_gap": plan["max_gap"]}
             windows.append((r0, c0))
             tasks.append(client.submit(_task, grid_block, window, full, near, crs_wkt,
-                                       layout.classes, holdout, seed, key=f"grid-{r0}-{c0}"))
+                                       layout.classes, layout.held_below, seed,
+                                       key=f"grid-{r0}-{c0}"))
     return tasks, windows
 
 
@@ -888,13 +923,13 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
             for read in reads:
                 read.cancel()
     counted = _tiles_counted(meta, classes, skip_unreadable, notes)
-    gridding = [points[i] for i in counted]
+    _check_points([meta[i] for i in counted], holdout, notes)
+    gridding = [np.delete(points[i], meta[i]["held_rows"], axis=0) for i in counted]
     held = [meta[i]["holdout"] for i in counted]
     _count_repeats_once(gridding, held, [Path(meta[i]["path"]).name for i in counted], notes)
     n_gridding = sum(len(p) for p in gridding)
     n_points = n_gridding + sum(len(h) for h in held)
     _check_enough(n_gridding, len(meta), classes)
-    check_holdout_count(holdout, n_points)
     return TilePoints(np.concatenate(gridding), np.concatenate(held), n_points, len(counted),
                       notes, tile_crs)
 
@@ -984,7 +1019,7 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
         if check is not None:
             check(layout.plan)
         tasks, windows = _submit_blocks(client, layout, meta, tiles, edges, cell_size, halo,
-                                        band, crs_wkt, holdout, seed)
+                                        band, crs_wkt, seed)
         # the edge bands, some 17 MB a km² at 9 points/m² and 1 m cells, are the one term of the
         # gridding that grows with the area: on a local cluster they wait in scratch files;
         # a remote scheduler's workers hold them, each dropped from the cluster when the last
@@ -995,10 +1030,10 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
     held = np.concatenate([m["holdout"] for m in layout.counted])
     return TiledDem(dem, held, layout.n_points, len(layout.counted), layout.area, notes,
                     tile_crs, tuple(tiles[i].path for i in layout.gridded), layout.classes,
-                    sum(meta[i]["n_gridding"] for i in layout.gridded))
+                    sum(meta[i]["n_gridding"] for i in layout.gridded), layout.held_below, seed)
 
 
-def read_gridded_points(tiled: TiledDem, holdout: float, seed: int, *,
+def read_gridded_points(tiled: TiledDem, *,
                         cancelled: Callable[[], bool] | None = None) -> np.ndarray:
     """(n, 3) the points the tiles' DEM was gridded from, read back tile by tile as round two
     reads them (the same classes, the same points held out): what the terrain fits take, as
@@ -1007,7 +1042,7 @@ def read_gridded_points(tiled: TiledDem, holdout: float, seed: int, *,
     for path in tiled.gridded:
         if cancelled is not None and cancelled():
             raise Cancelled()
-        parts.append(_tile_points(path, crs_wkt, tiled.classes, holdout, seed, checked=True)[0])
+        parts.append(_tile_points(path, crs_wkt, tiled.classes, tiled.held_below, tiled.seed)[0])
     return np.concatenate(parts) if parts else np.empty((0, 3))
 
 

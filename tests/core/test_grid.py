@@ -15,7 +15,7 @@ from scipy.spatial import Delaunay
 from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.steps.grid import grid_points_linear
 from floodmesh.core.points import (PointCloud, every_nth_by_place, held_out_by_place,
-                                   split_holdout)
+                                   holdout_candidates, least_hash, place_hashes, split_holdout)
 
 from ..conftest import plane_points
 
@@ -232,6 +232,27 @@ def test_points_given_twice_still_hold_out_the_count_asked(thousand):
     for n_out, seed in ((1, 0), (20, 1), (150, 2), (1499, 3)):
         assert held_out_by_place(twice, n_out, seed).sum() == n_out
     assert not held_out_by_place(twice, 0, 0).any() and held_out_by_place(twice, 1500, 0).all()
+
+
+@pytest.mark.parametrize("fraction, n_out", [(0.1, 100), (0.001, 20), (0.5, 500)])
+def test_parts_of_a_survey_draw_the_check_points_of_the_whole(thousand, fraction, n_out):
+    """Cut into parts of any size (tiles, an empty one, one of a single point), each part's
+    candidates hold the check points the whole survey draws at once."""
+    xyz = thousand.xyz
+    whole = rows_as_set(xyz[held_out_by_place(xyz, n_out, 7)])
+    cuts = [0, 0, 1, 37, 400, 401, 999, 1000]  # parts of 0, 1, 36, 363, 0, 1, 598, 1 points
+    parts = [xyz[a:b] for a, b in zip(cuts[:-1], cuts[1:])]
+    drawn = [holdout_candidates(place_hashes(p, 7), fraction) for p in parts]
+    below = least_hash([place_hashes(p, 7)[rows] for p, (rows, _) in zip(parts, drawn)],
+                       [bound for _, bound in drawn], n_out)
+    held = set()
+    for p in parts:
+        held |= rows_as_set(p[place_hashes(p, 7) <= np.uint64(below)])
+    assert held == whole and len(held) == n_out
+    # a part's candidates are few: about 1.5 times its share and 64 more
+    rows, _ = holdout_candidates(place_hashes(xyz, 7), 0.001)
+    assert len(rows) < 1.5 * 1 + 64 + 4 * np.sqrt(66)
+    assert least_hash([], [], 5) is None and least_hash([np.zeros(3, np.uint64)], [9], 0) is None
 
 
 def test_every_nth_point_by_place_is_the_same_in_any_order():

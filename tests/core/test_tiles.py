@@ -16,12 +16,12 @@ from floodmesh.core.errors import Cancelled, FloodMeshError
 from floodmesh.core.steps.grid import grid_points_linear
 from floodmesh.core.options import RunOptions
 from floodmesh.core.chain.pipeline import run_pipeline
-from floodmesh.core.points import PointCloud
+from floodmesh.core.points import PointCloud, split_holdout
 from floodmesh.core.raster import Grid
 from floodmesh.core.steps.breakpoints import breakpoints_file, classify_breakpoints
 from floodmesh.core.steps.slope import slope
-from floodmesh.core.engine.tiles import (_tile_points, grid_point_tiles, holdout_mask, read_back,
-                                         read_dem_tiles, read_point_tiles, slope_file64)
+from floodmesh.core.engine.tiles import (_tile_points, grid_point_tiles, read_back, read_dem_tiles,
+                                         read_point_tiles, slope_file64)
 
 from ..conftest import survey_tiles
 
@@ -50,7 +50,8 @@ def test_tiles_grid_to_the_dem_of_the_whole_cloud(survey, scheduler, tmp_path):
     # 0.5 m cells: blocks of one tile (300 x 240 cells) meet at the tile edges
     tiled = grid_point_tiles(survey / "tiles", 0.5, holdout=0.01, seed=5, scheduler=scheduler,
                              out_path=tmp_path / "dem.tif")
-    kept = np.concatenate([_tile_points(str(p), crs, None, 0.01, 5)[0] for p in tiles])
+    kept = np.concatenate([_tile_points(str(p), crs, None, tiled.held_below, 5)[0]
+                           for p in tiles])
     whole = grid_points_linear(PointCloud(kept, tiled.crs), 0.5)
     assert tiled.dem.transform == whole.transform and tiled.dem.shape == whole.shape
     assert np.array_equal(np.isnan(tiled.dem.values), np.isnan(whole.values))
@@ -60,18 +61,18 @@ def test_tiles_grid_to_the_dem_of_the_whole_cloud(survey, scheduler, tmp_path):
         assert src.profile["tiled"] and src.block_shapes[0] == (256, 256)
     on_disk = io.read_raster(tmp_path / "dem.tif")
     np.testing.assert_array_equal(on_disk.values, whole.values.astype(np.float32))
-    # the holdout: 1 % of each tile, the same again with the same seed
-    n = sum(len(io.read_points(p)) for p in tiles)
-    assert len(kept) + len(tiled.holdout) == n == tiled.n_points
-    assert abs(len(tiled.holdout) - 0.01 * n) <= len(tiles)
-    first = io.read_points(tiles[0]).xyz
-    again = holdout_mask(first, 0.01, 5)
-    assert again.sum() == round(0.01 * len(first))
-    assert np.array_equal(again, holdout_mask(first, 0.01, 5))
-    assert not np.array_equal(again, holdout_mask(first, 0.01, 6))
-    # the same points in another order hold out the same points
-    order = np.random.default_rng(0).permutation(len(first))
-    assert np.array_equal(holdout_mask(first[order], 0.01, 5), again[order])
+    # the check points: the 1 % that one file of all the tiles' points holds out (drawn by
+    # place, not by tile), the rest gridded
+    merged = PointCloud(np.concatenate([io.read_points(p).xyz for p in tiles]), tiled.crs)
+    one_file = split_holdout(merged, 0.01, 5)
+    assert len(kept) + len(tiled.holdout) == len(merged) == tiled.n_points
+    assert len(tiled.holdout) == round(0.01 * len(merged))
+    assert _rows(tiled.holdout) == _rows(one_file[1].xyz)
+    assert _rows(kept) == _rows(one_file[0].xyz)
+
+
+def _rows(xyz):
+    return {tuple(row) for row in np.asarray(xyz).tolist()}
 
 
 def test_a_local_cluster_keeps_the_edge_bands_in_scratch_files(survey, scheduler, tmp_path,
@@ -111,12 +112,19 @@ def _lines(path):
 @pytest.mark.parametrize("route", ["dask", "in-memory"])
 def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path, route):
     # on Dask the terrain fits (localisation, node z) take the tiles' points read back, as one
-    # file's; in memory (the default where the tiles fit) the points read: with every point
-    # gridded, the same lines and mesh to the byte either way
-    options = RunOptions(holdout=0.0, scheduler=scheduler if route == "dask" else None)
+    # file's; in memory (the default where the tiles fit) the points read. With the default
+    # options the tiles hold out the check points one file of their points holds out (each
+    # tile held out its own share before: 7 of the 288 were other points, and the mesh had
+    # 1,499 nodes against 1,493) and give the same lines and mesh to the byte either way
+    options = RunOptions(scheduler=scheduler if route == "dask" else None)
     tiled = run_pipeline(survey / "tiles", tmp_path / "tiled", options)
     single = run_pipeline(survey / "single.laz", tmp_path / "single", options)
     assert ("read back" in tiled["seconds"]) == (route == "dask")
+    assert tiled["n_holdout"] == single["n_holdout"] == 288
+    checks = [io.read_points_vector(tmp_path / name / "residuals.gpkg") for name in
+              ("tiled", "single")]
+    assert _rows(checks[0]) == _rows(checks[1])
+    assert tiled["holdout_source"] == single["holdout_source"]
     assert io.read_raster(tmp_path / "tiled" / "dem.tif").values.tobytes() == \
         io.read_raster(tmp_path / "single" / "dem.tif").values.tobytes()
     for key in ("nodes", "triangles", "n_breakpoints", "n_breaklines", "min_angle_deg",
@@ -234,10 +242,10 @@ def test_tiles_that_fit_in_memory_are_read_without_a_cluster_to_the_same_dem(sur
             held.append(sorted(f.geometry.coordinates for f in layer))
     assert len(held[0]) == 2880 and held[0] == held[1]
     read = read_point_tiles(survey / "tiles", 1.0, holdout=0.01, seed=5, workers=2)
-    kept = [_tile_points(str(p), CRS.from_epsg(25832).to_wkt(), None, 0.01, 5)
-            for p in sorted((survey / "tiles").glob("*.laz"))]
-    np.testing.assert_array_equal(read.gridding, np.concatenate([k[0] for k in kept]))
-    np.testing.assert_array_equal(read.holdout, np.concatenate([k[1] for k in kept]))
+    merged = PointCloud(np.concatenate([io.read_points(p).xyz for p in
+                                        sorted((survey / "tiles").glob("*.laz"))]), read.crs)
+    kept, check = split_holdout(merged, 0.01, 5)  # one file of the same points
+    assert _rows(read.gridding) == _rows(kept.xyz) and _rows(read.holdout) == _rows(check.xyz)
     assert (read.n_tiles, read.n_points) == (4, len(read.gridding) + len(read.holdout))
     polls = []
     with pytest.raises(Cancelled):
@@ -292,9 +300,9 @@ def test_refine_on_tiles_fits_the_points_and_checks_on_the_tiles_holdout(survey,
     assert rounds[-1]["max_abs_m"] < rounds[0]["max_abs_m"]
     assert rounds[-1]["rmse_m"] < rounds[0]["rmse_m"]
     assert rounds[-1]["check_rmse_m"] < rounds[0]["check_rmse_m"]
-    assert report["holdout_source"] == "LiDAR points withheld from gridding, tile by tile"
-    # the check points are the tiles' own held-out LiDAR points, 1 % of each tile
-    assert abs(report["n_holdout"] - 0.01 * report["n_points"]) <= 4
+    assert report["holdout_source"] == "LiDAR points withheld from gridding"
+    # the check points are held-out LiDAR points, 1 % of the tiles' points
+    assert report["n_holdout"] == round(0.01 * report["n_points"])
 
 
 def test_tiles_whose_points_exceed_memory_fit_the_dem_cells_with_a_note(survey, scheduler,
