@@ -86,8 +86,9 @@ def test_windows_of_a_copc_file_hold_every_point_once(survey, monkeypatch):
 def test_a_copc_file_larger_than_memory_runs_in_windows_to_the_one_files_mesh(survey, tmp_path,
                                                                              monkeypatch):
     """More points than memory holds: the COPC file becomes its windows, gridded on a local
-    cluster; the run gives the DEM, break lines and mesh of one LAZ file of the same points (in
-    the windows' order: the terrain fits' draws follow the order of the points) to the byte."""
+    cluster; with the default options the run gives the check points, DEM, break lines and mesh
+    of one LAZ file of the same points to the byte (in the windows' order: the terrain fits'
+    sums follow the order of the points, the lines' coordinates to round-off)."""
     monkeypatch.setattr(tiles, "WINDOW_POINTS", 40_000)
     copc = survey / "reach.copc.laz"
     windows, crs, _ = tiles.check_point_tiles([copc])
@@ -96,11 +97,14 @@ def test_a_copc_file_larger_than_memory_runs_in_windows_to_the_one_files_mesh(su
         [tiles._read_raw(Path(w.path))[0] for w in windows]), crs))
     monkeypatch.setattr(tiles, "fits_in_memory", lambda **sizes: False)  # too many points
     assert open_source(copc).kind == POINT_TILES
-    options = RunOptions(holdout=0.0, workers=2)
+    options = RunOptions(workers=2)
     windowed = run_pipeline(copc, tmp_path / "windowed", options)
     single = run_pipeline(in_order, tmp_path / "single", options)
     assert "read back" in windowed["seconds"]  # gridded on the cluster, the points read back
     assert windowed["n_points"] == single["n_points"] == len(io.read_points(copc))
+    assert windowed["n_holdout"] == single["n_holdout"] > 0
+    assert np.array_equal(*[_sorted(io.read_points_vector(tmp_path / name / "residuals.gpkg"))
+                            for name in ("windowed", "single")])
     assert io.read_raster(tmp_path / "windowed" / "dem.tif").values.tobytes() == \
         io.read_raster(tmp_path / "single" / "dem.tif").values.tobytes()
     for name in ("mesh.2dm", "breaklines.gpkg"):
