@@ -870,7 +870,7 @@ def _point_tiles(inputs, crs, skip_unreadable: bool) -> tuple[list[PointTile], C
 class TilePoints:
     """A tile set's points read in memory (``read_point_tiles``)."""
     gridding: np.ndarray     # (n, 3) the points to grid, tile after tile
-    holdout: np.ndarray      # (m, 3) the points held out, tile by tile
+    holdout: np.ndarray      # (m, 3) the points held out (``_check_points``), tile by tile
     n_points: int            # points of the tiles counted, holdout included
     n_tiles: int             # tiles counted
     notes: list
