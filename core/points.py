@@ -154,14 +154,17 @@ def place_hashes(xyz: np.ndarray, seed: int) -> np.ndarray:
 
 def holdout_candidates(hashes: np.ndarray, fraction: float) -> tuple[np.ndarray, int]:
     """(the indices of a part's candidates for the check points, the bound of their hashes):
-    the points of one part of a survey (a tile of ``len(hashes)`` points, ``place_hashes``)
-    whose hash is at most a bound that holds about 1.5 ``fraction`` of them and 64 more. The
-    survey's n least hashes (``held_out_by_place``) are among the candidates of all its parts
-    where they lie under the least bound (``least_hash``), which holds several times n points
-    but by a chance under 1e-11."""
-    if fraction <= 0 or not len(hashes):  # none to draw: complete under any bound
+    the points of one part of a survey (a tile of n = ``len(hashes)`` points, ``place_hashes``)
+    whose hash is at most a bound that holds ``fraction`` of them, 8 standard deviations
+    (8·√(fraction·n)) and 64 more. The survey's check points, its least hashes
+    (``held_out_by_place``: the fraction, or 20), are among the candidates of all its parts
+    where they lie under the least bound (``least_hash``), which holds them with 8 standard
+    deviations to spare or more (a chance under 1e-15 that it does not)."""
+    n = len(hashes)
+    if fraction <= 0 or not n:  # none to draw: complete under any bound
         return np.empty(0, np.int64), (1 << 64) - 1
-    bound = min((1 << 64) - 1, int(2.0 ** 64 * min(1.0, 1.5 * fraction + 64 / len(hashes))))
+    share = min(1.0, fraction + 8 * np.sqrt(fraction / n) + 64 / n)
+    bound = min((1 << 64) - 1, int(2.0 ** 64 * share))
     return np.flatnonzero(hashes <= np.uint64(bound)), bound
 
 
