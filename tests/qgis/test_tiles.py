@@ -54,7 +54,9 @@ def test_qgis_process_meshes_tiles(qgis_process, survey, tmp_path):
     results = json.loads(run.stdout[run.stdout.index("{"):])["results"]
     report = json.loads((out / "report.json").read_text())
     assert results["NODES"] == report["nodes"] > 100
-    assert report["holdout_source"].endswith("tile by tile")
+    # held out as one file of the tiles' points holds them out: 1 % of them
+    assert report["holdout_source"] == "LiDAR points withheld from gridding"
+    assert report["n_holdout"] == round(0.01 * report["n_points"])
     assert len(report["input"]) == len(tiles)
 
 
