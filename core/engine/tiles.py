@@ -720,7 +720,7 @@ def _overlaps(tiles: list) -> list[str]:
     named = "; ".join(pairs[:3]) + (f"; {len(pairs) - 3} more" if len(pairs) > 3 else "")
     return [f"{len(pairs)} pair{'s' * (len(pairs) > 1)} of tiles overlap ({named}): "
             "on a cluster a point both hold is gridded once (the TIN keeps one) but counted "
-            "twice, and may be held out from one and gridded from the other; give the tiles "
+            "twice, and where held out, held out twice; give the tiles "
             "without their buffer (lastile -remove_buffer), or run without --scheduler where "
             "they fit in memory, which counts them once"]
 
@@ -939,8 +939,9 @@ def _count_repeats_once(gridding: list, held: list, names: list, notes: list) ->
     margin) counted once: each point identical to 0.1 mm in x, y and z to one of an earlier
     tile is dropped from the later tile's points to grid (``gridding``) or held out (``held``),
     in place, with a note naming both tiles. Only points within another tile's bounds are
-    compared, so tiles that meet without overlapping cost nothing. A point held out in one tile
-    and gridded in another stays held out: the check stays independent of the grid."""
+    compared, so tiles that meet without overlapping cost nothing. A point is held out in both
+    tiles or in neither (its hash is the same in each): the check stays independent of the
+    grid."""
     parts = [np.concatenate([g, h]) for g, h in zip(gridding, held)]
     boxes = [(p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()) if len(p) else None
              for p in parts]
