@@ -403,7 +403,8 @@ def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int,
     kept, kind = _kept(xyz, cls, classes, name, notes)
     del xyz, cls
     kept, sparse = _usable(kept, crs_wkt, name, notes)
-    hashes = place_hashes(kept, seed)
+    # hashed only where points are held out (``grid`` holds none by default)
+    hashes = place_hashes(kept, seed) if holdout > 0 else np.empty(0, np.uint64)
     rows, bound = holdout_candidates(hashes, holdout)
     return {"points": kept, "candidates": {"rows": rows, "hashes": hashes[rows], "bound": bound},
             "kind": kind, "digest": digest, "sparse": sparse}
@@ -924,7 +925,11 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
                 read.cancel()
     counted = _tiles_counted(meta, classes, skip_unreadable, notes)
     _check_points([meta[i] for i in counted], holdout, notes)
-    gridding = [np.delete(points[i], meta[i]["held_rows"], axis=0) for i in counted]
+    gridding = []
+    for i in counted:  # each tile's points let go as its points to grid are made
+        rows = meta[i]["held_rows"]
+        gridding.append(np.delete(points[i], rows, axis=0) if len(rows) else points[i])
+        points[i] = None
     held = [meta[i]["holdout"] for i in counted]
     _count_repeats_once(gridding, held, [Path(meta[i]["path"]).name for i in counted], notes)
     n_gridding = sum(len(p) for p in gridding)
