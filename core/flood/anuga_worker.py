@@ -6,7 +6,9 @@ elevations, per-triangle Manning's n, tagged boundary edges, inflows, observatio
 and ``JOB_DIR/job.json`` (duration, output interval, boundary kinds), runs ANUGA (flow algorithm
 DE0), and writes ``JOB_DIR/result.npz``: per triangle the maximum depth, water level and speed
 and the arrival time, and per output time the water volume, the inflow applied, the boundary
-flux integral and the stage at each observation triangle. On stdout it prints
+flux integral and the stage at each observation triangle, and per triangle how often it set
+the time step (at the checks below: the triangle of least inradius over its fastest wave in the
+step before, and the steps since the last check). On stdout it prints
 ``progress T`` after each output time T (s) for the parent's progress bar.
 
 At each output time, and at least every ``CHECK_INTERVAL_S`` of flood time, it checks that
@@ -148,6 +150,20 @@ def run(job_dir: str) -> None:
     arrival = np.full(n_tri, np.nan)
     times, volume, applied, flux, obs_stage, steps = [], [], [], [], [], []
     done = [0]  # time steps so far: ANUGA counts them per output interval
+    # the triangle whose inradius over its fastest wave (ANUGA's own: its flux time step is
+    # the least of radii / max_speed) set the last step before each check, and the steps of
+    # the interval that check closes
+    step_setter_checks = np.zeros(n_tri, dtype=np.int64)
+    step_setter_steps = np.zeros(n_tri, dtype=np.int64)
+
+    def take_step_setter(steps_done: int) -> None:
+        wave = domain.max_speed
+        with np.errstate(divide="ignore"):
+            cell_step = np.where(wave > 0, domain.radii / np.where(wave > 0, wave, 1.0), np.inf)
+        k = int(np.argmin(cell_step))
+        if np.isfinite(cell_step[k]):
+            step_setter_checks[k] += 1
+            step_setter_steps[k] += steps_done
 
     def sample(t, record=True):
         """The state at ``t`` checked (``_unstable``'s finding, or None) and, with ``record``,
@@ -185,6 +201,8 @@ def run(job_dir: str) -> None:
     for n, t in enumerate(domain.evolve(yieldstep=interval / checks, finaltime=duration)):
         t = float(t)
         done[0] += int(domain.number_of_steps)
+        if t > 0:
+            take_step_setter(int(domain.number_of_steps))
         unstable = sample(t, n % checks == 0 or t >= duration - 1e-9) if t > 0 else None
         if unstable is not None:
             with open(f"{job_dir}/unstable.json", "w") as fh:
@@ -198,6 +216,7 @@ def run(job_dir: str) -> None:
              boundary_flux_m3=np.array(flux),
              observation_stage_m=np.array(obs_stage).reshape(len(times), len(obs)),
              steps=np.array(steps), cpu_s=np.array(cpu),
+             step_setter_checks=step_setter_checks, step_setter_steps=step_setter_steps,
              anuga_version=np.array(anuga.__version__))
 
 

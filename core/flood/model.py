@@ -555,6 +555,24 @@ def mass_balance(result: dict) -> dict:
             "error_m3": error, "relative_error": error / scale}
 
 
+def time_step_setters(nodes, triangles, result: dict, most: int = 5) -> list[dict]:
+    """The triangles that set the solver's time step (ANUGA's: the least inradius over the
+    fastest wave of a triangle's edges) at the worker's checks, those that set it for the most
+    steps first: centroid (m), inradius (m), share of the run's steps (those of the intervals
+    whose last step each set), the flood's max depth (m) and speed (m/s) there."""
+    steps = np.asarray(result["step_setter_steps"], float)
+    total = max(float(steps.sum()), 1.0)
+    radius = inradii(nodes, triangles)
+    centre = nodes[triangles, :2].mean(axis=1)
+    found = np.flatnonzero(result["step_setter_checks"])
+    order = found[np.lexsort((-result["step_setter_checks"][found], -steps[found]))][:most]
+    return [{"x": float(centre[k, 0]), "y": float(centre[k, 1]),
+             "inradius_m": float(radius[k]), "share_of_steps": float(steps[k] / total),
+             "checks": int(result["step_setter_checks"][k]),
+             "max_depth_m": float(result["max_depth"][k]),
+             "max_speed_ms": float(result["max_speed"][k])} for k in order]
+
+
 def outflow_hydrograph(result: dict) -> np.ndarray:
     """(k, 2) time (s) and discharge out through the open boundaries (m³/s), per interval."""
     t = np.asarray(result["times_s"], float)
@@ -655,6 +673,7 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
         "boundary_edges": prepared["boundary_edges"],
         "cpu_s": float(result["cpu_s"]), "wall_s": float(result["wall_s"]),
         "time_steps": steps, "mean_time_step_s": scenario.duration_s / max(steps, 1),
+        "time_step_set_by": time_step_setters(arrays["nodes"], arrays["triangles"], result),
         "mass_balance": balance,
         "flooded_area_m2": float(area[depth > scenario.wet_depth_m].sum()),
         "max_depth_m": float(depth.max()),

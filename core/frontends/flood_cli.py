@@ -62,7 +62,19 @@ def _summary(report: dict, out) -> str:
             f"smallest inradius {h['min_inradius_m']:.3g} m); flooded "
             f"{report['flooded_area_m2']:.0f} m², max depth {report['max_depth_m']:.2f} m, "
             f"mass balance error {mb['error_m3']:.3g} m³ ({100 * mb['relative_error']:.2g} %)\n"
-            f"written to {out}/")
+            f"{_step_setter(report)}written to {out}/")
+
+
+def _step_setter(report: dict) -> str:
+    """Where the time step was set most: the place a modeller looks at to make the flood
+    cheaper (a sliver, a line end, a fast jet over a weir)."""
+    found = report.get("time_step_set_by") or []
+    if not found:
+        return ""
+    k = found[0]
+    return (f"time step set most by the triangle at ({k['x']:.1f}, {k['y']:.1f}) (inradius "
+            f"{k['inradius_m']:.2f} m, max depth {k['max_depth_m']:.2f} m, max speed "
+            f"{k['max_speed_ms']:.2f} m/s): {100 * k['share_of_steps']:.0f} % of the steps\n")
 
 
 def _comparison(c: dict) -> str:

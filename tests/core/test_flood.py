@@ -179,6 +179,40 @@ def test_flood_with_a_reference_compares_the_two_meshes(tmp_path, capsys):
 
 
 @needs_anuga
+def test_the_report_names_the_wet_sliver_that_sets_the_time_step_not_the_smallest_dry_one(
+        tmp_path, capsys):
+    """A channel (100 × 20 m, slope 0.02) beside a dry bank 2 m higher: a 0.3 m segment in the
+    water and a 0.1 m one on the bank leave slivers in both; the bank's are the mesh's
+    smallest, but the water's set the solver's time step, and the report (and the command's
+    summary) name that place, where a modeller would look to make the flood cheaper."""
+    from floodmesh.core.frontends.cli import main
+
+    corners = [[0, 0], [100, 0], [100, 30], [0, 30]]
+    wet, dry = [[50, 10], [50.3, 10]], [[60, 26], [60.1, 26]]
+    xy = np.array(corners + wet + dry, float) + (X0, Y0)
+    segments = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [6, 7]])
+    xy, tri = triangulate_pslg(PSLG(xy, segments, np.empty((0, 2))), min_angle=25.0,
+                               max_area=2.0)
+    x, y = xy[:, 0] - X0, xy[:, 1] - Y0
+    nodes = np.column_stack([xy, 0.02 * (100 - x) + 2.0 * np.clip(y - 20, 0, 2) / 2])
+    io.write_mesh_2dm(tmp_path / "m.2dm", nodes, tri)
+    _write(tmp_path / "s.json", {
+        "duration_s": 100, "output_interval_s": 5, "manning": 0.03,
+        "inflows": [{"line": local([[1, 0.5], [1, 19.5]]), "discharge_m3s": 3.0}],
+        "boundaries": [{"kind": "outflow", "sides": ["east"]}]})
+    assert main(["flood", str(tmp_path / "m.2dm"), "--scenario", str(tmp_path / "s.json"),
+                 "--out", str(tmp_path / "out"), "--crs", CRS]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    setter = report["time_step_set_by"][0]
+    assert np.hypot(setter["x"] - X0 - 50.15, setter["y"] - Y0 - 10) < 1.0
+    assert setter["share_of_steps"] > 0.5 and setter["max_depth_m"] > 0.05
+    assert setter["inradius_m"] > 1.5 * report["hydraulics"]["min_inradius_m"]  # not the bank's
+    assert sum(k["share_of_steps"] for k in report["time_step_set_by"]) <= 1 + 1e-9
+    assert f"time step set most by the triangle at ({setter['x']:.1f}, {setter['y']:.1f})" in (
+        capsys.readouterr().out)
+
+
+@needs_anuga
 def test_an_eddy_at_the_outflow_edge_is_not_fed_until_the_flood_blows_up(tmp_path):
     """The mesh on which ANUGA's transmissive outflow blew up (tests/data: the oblique corpus
     flood meshed with min_spacing 2 m; benchmarks/RESULTS.md, "An outflow edge that blew up"):
