@@ -10,7 +10,9 @@ smallest spacing s (default: the cell size d):
   where it lies on low ground;
 - a detected line that folds back (segments meeting at less than ``FOLD_ANGLE``) is cut there
   into two lines;
-- detected lines are clipped back ``clearance`` (default 2 s) from the domain edge;
+- detected lines are clipped back ``clearance`` (default 2 s) from the domain edge; where the
+  clip's end falls within the clearance of the line's last vertex, the line ends at that
+  vertex (a short stub beside the edge's nodes made a flood's smallest wet triangle);
 - the parts of a detected line within s of an own line, or of a longer detected line, are cut
   away (near-parallel lines merge into the longer one; crossings keep one line through them);
 - an end left within s of a line it meets at ``JOIN_ANGLE`` or more is moved onto that line
@@ -111,6 +113,7 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
         inner = within if inner is None else shapely.intersection(inner, within)
     if inner is not None:  # most lines lie well inside: a prepared test spares their overlay
         shapely.prepare(inner)
+    edge = inner.boundary if inner is not None else None  # where the clip leaves line ends
     # a line folding back on itself is two lines: the shorter's part within the spacing of
     # the longer goes, as for any two lines (a fold's arms a fraction of a metre apart made
     # the mesh's smallest triangles)
@@ -153,6 +156,8 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
                 coords = shapely.get_coordinates(piece, include_z=True)
                 local = _spacing_at(flow_spacing, coords, spacing)
                 coords = thin_vertices(coords, local, **(keep_terrain or {}))
+                if edge is not None:
+                    coords = without_edge_stubs(coords, np.maximum(local, clearance), edge)
                 if _length(coords) >= max(2 * spacing, local.max()) and len(coords) >= 2:
                     own_pieces.append(coords)
         joined = []  # ends a spacing off a line they meet, onto it (not onto each other)
@@ -269,6 +274,25 @@ def _boxes_near(b: np.ndarray, box, spacing: float) -> np.ndarray:
     ``box``."""
     return np.flatnonzero((b[:, 0] <= box[2] + spacing) & (b[:, 2] >= box[0] - spacing)
                           & (b[:, 1] <= box[3] + spacing) & (b[:, 3] >= box[1] - spacing))
+
+
+def without_edge_stubs(coords: np.ndarray, spacing: np.ndarray, edge) -> np.ndarray:
+    """``coords`` without an end the clip at the domain edge (``edge``, the clipped area's
+    boundary) made closer than its ``spacing`` (m, per vertex) to the next vertex: the line
+    ends at that vertex instead. The clip's end is no terrain (a point interpolated on a
+    segment), and the short segment it leaves beside the edge's nodes held the smallest
+    triangle of a flood's outflow (87 % of its time steps)."""
+    # lazy: GEOS loads only when this runs
+    import shapely
+
+    for end, inner in ((0, 1), (-1, -2)):
+        if len(coords) < 3:
+            break
+        gap = np.hypot(*(coords[end, :2] - coords[inner, :2]))
+        if gap < spacing[end] and shapely.distance(shapely.Point(coords[end, :2]), edge) < 1e-6:
+            coords = coords[1:] if end == 0 else coords[:-1]
+            spacing = spacing[1:] if end == 0 else spacing[:-1]
+    return coords
 
 
 def _spacing_at(flow_spacing, coords, spacing: float) -> np.ndarray:

@@ -11,7 +11,7 @@ from floodmesh.core.raster import Grid
 from floodmesh.core.steps.hydraulic_lines import (drop_spikes, lines_for_hydraulics,
                                                   split_at_folds, thin_vertices)
 from floodmesh.core.steps.hydraulics import inradii
-from floodmesh.core.steps.mesh import build_mesh
+from floodmesh.core.steps.mesh import build_mesh, domain_from_dem
 from floodmesh.core.options import RunOptions
 from floodmesh.core.chain.pipeline import run_pipeline
 
@@ -280,6 +280,28 @@ def test_a_line_running_into_another_ends_on_it_not_a_spacing_short():
     glancing = np.array([[10, 20, 1], [40, 29.2, 1]])
     _, stats = lines_for_hydraulics([bar, glancing], None, spacing=1.0)
     assert stats["ends_joined"] == 0
+
+
+def test_a_line_clipped_at_the_edge_leaves_no_stub_beside_it():
+    """A bank running out of the domain is clipped the clearance (2 m) inside the edge; where
+    that cut falls 1.5 m past the bank's last vertex, the stub between them (no terrain: the
+    cut's point is interpolated) held the smallest triangle by the edge, which set 87 % of a
+    flood's time steps at the corpus's outflow. The line now ends at its vertex."""
+    dem = Grid(np.zeros((50, 100)), Affine(1, 0, 0, 0, -1, 50), CRS.from_epsg(32633))
+    domain = domain_from_dem(dem)  # the cells' centres: x from 0.5
+    bank = np.array([[50, 25, 1], [30, 20, 1], [4.0, 15, 1], [-5, 13.5, 1]])
+    out, stats = lines_for_hydraulics([bank], domain, spacing=1.0)
+    assert stats["clipped_at_edge"] == 1 and len(out) == 1
+    assert out[0].tolist() == [[50, 25, 1], [30, 20, 1], [4.0, 15, 1]]
+    stub = np.array([[50, 25, 1], [30, 20, 1], [4.0, 15, 1], [2.5, 14.75, 1]])  # as before
+    as_before, now = (build_mesh(dem, lines, max_area=100, domain=domain)
+                      for lines in ([stub], out))
+    assert inradii(as_before.nodes, as_before.triangles).min() < 0.6
+    assert inradii(now.nodes, now.triangles).min() > 1.2
+    # a clip further from the vertex (3 m) keeps its end there: the line reaches the edge
+    far = np.array([[50, 25, 1], [30, 20, 1], [5.5, 15, 1], [-5, 13.5, 1]])
+    out, _ = lines_for_hydraulics([far], domain, spacing=1.0)
+    assert out[0][-1, 0] == pytest.approx(2.5) and len(out[0]) == 4
 
 
 def test_a_bridge_on_low_ground_is_left_out_of_the_mesh_lines_and_kept_on_high_ground():
