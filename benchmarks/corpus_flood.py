@@ -107,9 +107,14 @@ def run_case(name: str, args, out: Path) -> list[dict]:
         c = compare_floods(case / "runs" / label, case / "runs" / "reference",
                            case / "compare" / label, crs=demo.DEMO_CRS)
         report = runs[label]
+        setter = (report.get("time_step_set_by") or [None])[0]
         rows.append({"terrain": name, "mesh": label, "nodes": report["nodes"],
                      "cpu_s": report["cpu_s"], "time_steps": report["time_steps"],
                      "min_inradius_m": report["hydraulics"]["min_inradius_m"],
+                     "step_set_by": setter and {
+                         "x_local": setter["x"] - X0, "y_local": setter["y"] - Y0,
+                         "inradius_m": setter["inradius_m"],
+                         "share_of_steps": setter["share_of_steps"]},
                      "extent_iou": c["extent_iou"], "max_depth_rmse_m": c["max_depth_rmse_m"],
                      "max_depth_bias_m": c["max_depth_bias_m"]})
     ref = runs["reference"]
@@ -147,6 +152,12 @@ def main(argv=None):
         print(f"{r['terrain']:<26}{r['mesh']:<11}{r['nodes']:>7,}{r['cpu_s']:>8.1f}"
               f"{r['time_steps']:>7,}{r['min_inradius_m']:>11.3f}{r['extent_iou']:>7.3f}"
               f"{r['max_depth_rmse_m']:>8.3f}{r['max_depth_bias_m']:>8.3f}")
+    print("time step set most by (local x, y; inradius; share of the steps):")
+    for r in rows:
+        if r.get("step_set_by"):
+            k = r["step_set_by"]
+            print(f"  {r['terrain']:<26}{r['mesh']:<11}({k['x_local']:.0f}, {k['y_local']:.0f})"
+                  f"  {k['inradius_m']:.2f} m  {100 * k['share_of_steps']:.0f} %")
     for name in names:
         ours, uni = ([r for r in rows if r["terrain"] == name and r["mesh"] == m][0]
                      for m in ("floodmesh", "uniform"))
