@@ -420,10 +420,29 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
     floor = MISFIT_FLOOR_CELLS * front.dem.cell_size ** 2
     low_floor = None if low_ground is None else _low_ground_floor(
         low_ground, mesh_lines, floor, MISFIT_CROSSING_CELLS * front.dem.cell_size)
+    # the band the lines keep clear of (``_lines_for_flood``); none where the spacing is off
+    clearance = 2 * (front.dem.cell_size if options.min_spacing is None else options.min_spacing)
     return steps.run("refine", refine_mesh, front.dem, mesh_lines, points,
                      lower=MISFIT_EXCESS, upper=None, max_rounds=options.misfit_passes + 1,
-                     most=MISFIT_SHARE, measure_last=False, floor_at=low_floor,
+                     most=MISFIT_SHARE, measure_last=False,
+                     floor_at=_off_edge(low_floor, floor, domain, clearance),
                      floor=floor, first=mesh, **common)
+
+
+def _off_edge(floor_at, floor: float, domain, clearance: float):
+    """``floor_at`` (or ``floor`` everywhere), but no split of a triangle whose centroid lies
+    within ``clearance`` m of the ``domain``'s edge: the band the detected lines keep clear of,
+    where a split made the smallest triangles at the edge a flood flows in and out by (91 % of
+    the demo levee flood's time steps)."""
+    edge = shapely.boundary(domain) if domain is not None else None
+
+    def off_edge(xy):
+        at = floor_at(xy) if floor_at is not None else np.full(len(xy), floor)
+        if edge is None:
+            return at
+        return np.where(shapely.distance(shapely.points(xy[:, :2]), edge) < clearance,
+                        np.inf, at)
+    return off_edge
 
 
 def _low_ground_floor(low_ground: Grid, lines, floor: float, reach: float):

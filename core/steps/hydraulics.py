@@ -98,7 +98,8 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
     """The report's ``hydraulics`` section: the smallest inradius, the CFL time step it allows
     at ``depth`` (and a uniform mesh's of the same node count, for comparison), how many
     triangles have an inradius under ``small_inradius`` and how many of those lie within
-    ``edge_band`` of the domain edge, the shortest edge at the domain edge and the closest node
+    ``edge_band`` of the domain edge, the smallest inradius there (where a flood flows in and
+    out, a small triangle costs every step), the shortest edge at the domain edge and the closest node
     to it, and the shortest
     edge at the points where the modeller's ``own_lines`` cross ``detected_lines`` (lists of
     (k, 2+) coordinate arrays); with the ``dem`` (a Grid), how far the mesh's surface along
@@ -119,10 +120,12 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
     on_edge = np.unique(bnodes)
     centroids = nodes[triangles][:, :, :2].mean(axis=1)
     small = np.nonzero(r < small_inradius)[0]
-    near_edge = 0
-    if small.size and on_edge.size:
-        dist, _ = cKDTree(nodes[on_edge, :2]).query(centroids[small])
-        near_edge = int((dist <= edge_band).sum())
+    near_edge, edge_r = 0, None
+    if on_edge.size:
+        dist, _ = cKDTree(nodes[on_edge, :2]).query(centroids)
+        near_edge = int((dist[small] <= edge_band).sum())
+        if (dist <= edge_band).any():
+            edge_r = float(r[dist <= edge_band].min())
     touches_edge = np.isin(edges, on_edge).any(axis=1)
     # a uniform mesh of equilateral triangles with the same node count over the same area
     uniform_area = np.abs(triangle_areas(nodes, triangles)).sum() / max(len(triangles), 1)
@@ -139,6 +142,7 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
         "n_small_inradius": int(small.size),
         "n_small_inradius_near_edge": near_edge,
         "edge_band_m": edge_band,
+        "min_inradius_near_edge_m": edge_r,
         "n_collinear_wall_stencils": int(len(collinear_wall_stencils(nodes, triangles))),
         "min_edge_m": float(lengths.min()),
         "min_edge_at_domain_edge_m": float(lengths[touches_edge].min()) if touches_edge.any()
