@@ -7,6 +7,7 @@ from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
                        QgsProcessingParameterFolderDestination, QgsProcessingParameterMeshLayer,
                        QgsRasterLayer)
 
+from ..core.flood.summary import time_step_summary
 from ..core.options import RESULT_RASTERS
 from .base import FloodMeshAlgorithm, crs_or_none, layer_file
 from .styles import load_results, run_group_name
@@ -62,6 +63,8 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
         feedback.pushInfo(f"ANUGA: {report['cpu_s']:.1f} s CPU, {report['time_steps']} steps; "
                           f"flooded {report['flooded_area_m2']:.0f} m², mass balance error "
                           f"{mb['error_m3']:.3g} m³")
+        if time_step_summary(report):
+            feedback.pushInfo(time_step_summary(report))
         results = {self.OUTPUT: str(out), self.HYDROGRAPH: str(out / "hydrograph.csv"),
                    self.REPORT: str(out / "report.json")}
         layers = []

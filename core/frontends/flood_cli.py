@@ -6,6 +6,7 @@ from pathlib import Path
 from .. import io
 from ..flood.compare import compare_floods
 from ..flood.model import load_scenario, run_flood
+from ..flood.summary import time_step_summary
 from ..steps.hydraulic_lines import flood_size_field, wet_zone
 from .console import ProgressBar, print_notes
 
@@ -57,24 +58,13 @@ def write_zone(path, zone, crs) -> None:
 
 def _summary(report: dict, out) -> str:
     h, mb = report["hydraulics"], report["mass_balance"]
-    return (f"{report['nodes']} nodes, {report['triangles']} triangles: ANUGA {report['cpu_s']:.1f} s "
-            f"CPU, {report['time_steps']} steps (mean {report['mean_time_step_s']:.3g} s; "
-            f"smallest inradius {h['min_inradius_m']:.3g} m); flooded "
-            f"{report['flooded_area_m2']:.0f} m², max depth {report['max_depth_m']:.2f} m, "
-            f"mass balance error {mb['error_m3']:.3g} m³ ({100 * mb['relative_error']:.2g} %)\n"
-            f"{_step_setter(report)}written to {out}/")
-
-
-def _step_setter(report: dict) -> str:
-    """Where the time step was set most: the place a modeller looks at to make the flood
-    cheaper (a sliver, a line end, a fast jet over a weir)."""
-    found = report.get("time_step_set_by") or []
-    if not found:
-        return ""
-    k = found[0]
-    return (f"time step set most by the triangle at ({k['x']:.1f}, {k['y']:.1f}) (inradius "
-            f"{k['inradius_m']:.2f} m, max depth {k['max_depth_m']:.2f} m, max speed "
-            f"{k['max_speed_ms']:.2f} m/s): {100 * k['share_of_steps']:.0f} % of the steps\n")
+    lines = [f"{report['nodes']} nodes, {report['triangles']} triangles: ANUGA "
+             f"{report['cpu_s']:.1f} s CPU, {report['time_steps']} steps (mean "
+             f"{report['mean_time_step_s']:.3g} s; smallest inradius {h['min_inradius_m']:.3g} m); "
+             f"flooded {report['flooded_area_m2']:.0f} m², max depth {report['max_depth_m']:.2f} "
+             f"m, mass balance error {mb['error_m3']:.3g} m³ ({100 * mb['relative_error']:.2g} %)",
+             time_step_summary(report), f"written to {out}/"]
+    return "\n".join(line for line in lines if line)
 
 
 def _comparison(c: dict) -> str:

@@ -107,7 +107,7 @@ def step_flood(ch, *, mesh, scenario, output, crs=None):
     for message in report["notes"]:
         ch.note(message)
     return {key: report[key] for key in ("cpu_s", "time_steps", "flooded_area_m2",
-                                         "mass_balance")}
+                                         "mass_balance", "time_step_set_by")}
 
 
 def _pipeline_log(ch):

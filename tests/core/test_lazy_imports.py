@@ -2,7 +2,7 @@
 start, each saying why: a ``# lazy:`` comment above its run of imports, or an optional
 dependency tried under ``except ImportError``. What the laziness buys is checked too: the
 command line starts without numba, GDAL, PROJ or GEOS, and the modules QGIS's own Python
-imports (options, errors) need nothing beyond the standard library."""
+imports (options, errors, the flood summary) need nothing beyond the standard library."""
 import ast
 import json
 import subprocess
@@ -78,7 +78,8 @@ def test_the_command_line_starts_without_the_heavy_packages():
     assert not loaded & set(HEAVY), sorted(loaded & set(HEAVY))
 
 
-@pytest.mark.parametrize("module", ["floodmesh.core.options", "floodmesh.core.errors"])
+@pytest.mark.parametrize("module", ["floodmesh.core.options", "floodmesh.core.errors",
+                                    "floodmesh.core.flood.summary"])
 def test_what_qgis_imports_needs_only_the_standard_library(module):
     # what the interpreter loads by itself (site's .pth hooks) is not the module's doing
     outside = (loaded_after(module) - loaded_after("sys") - set(sys.stdlib_module_names)

@@ -37,6 +37,23 @@ def processing():
     QgsApplication.processingRegistry().removeProvider(provider)
 
 
+@pytest.fixture
+def feedback_log():
+    """A Processing feedback that keeps what an algorithm logs (``infos``, ``warnings``): the
+    messages a user reads in the algorithm dialog's log."""
+    class Recorder(qgis_core.QgsProcessingFeedback):
+        def __init__(self):
+            super().__init__()
+            self.infos, self.warnings = [], []
+
+        def pushInfo(self, text):  # noqa: N802
+            self.infos.append(text)
+
+        def pushWarning(self, text):  # noqa: N802
+            self.warnings.append(text)
+    return Recorder()
+
+
 REPO = Path(__file__).resolve().parent.parent.parent
 
 

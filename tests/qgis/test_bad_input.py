@@ -37,25 +37,16 @@ def test_bad_input_is_a_processing_exception_with_the_cli_message(case, processi
     assert not out.exists() or list(out.iterdir()) == []
 
 
-def test_build_mesh_says_what_it_repaired_in_the_break_lines(processing, tmp_path):
+def test_build_mesh_says_what_it_repaired_in_the_break_lines(processing, tmp_path, feedback_log):
     """Crossing and duplicated break lines through Build mesh: a mesh, and the repairs in the
     algorithm's log as warnings, in core's words."""
     import numpy as np
     from pyproj import CRS
-    from qgis.core import QgsProcessingFeedback
 
     from floodmesh.core import io
     from floodmesh.core.steps.mesh import build_mesh
 
     from ..bad_inputs import write_tif, slope_dem
-
-    class Recorder(QgsProcessingFeedback):
-        def __init__(self):
-            super().__init__()
-            self.warnings = []
-
-        def pushWarning(self, text):  # noqa: N802
-            self.warnings.append(text)
 
     dem = write_tif(tmp_path / "dem.tif", slope_dem())
     x0, y0 = 412_000.0, 5_652_000.0
@@ -67,9 +58,8 @@ def test_build_mesh_says_what_it_repaired_in_the_break_lines(processing, tmp_pat
     build_mesh(io.read_raster(dem), io.read_lines_gpkg(tmp_path / "lines.gpkg"),
                note=expected.append)
     assert len(expected) == 2
-    feedback = Recorder()
     result = processing.run("floodmesh:buildmesh", {
         "DEM": str(dem), "BREAKLINES": str(tmp_path / "lines.gpkg"),
-        "OUTPUT": str(tmp_path / "mesh.2dm")}, feedback=feedback)
+        "OUTPUT": str(tmp_path / "mesh.2dm")}, feedback=feedback_log)
     assert result["TRIANGLE_COUNT"] > 0 and (tmp_path / "mesh.2dm").exists()
-    assert feedback.warnings == expected
+    assert feedback_log.warnings == expected

@@ -17,7 +17,7 @@ X0, Y0 = 382_000.0, 6_354_000.0
 
 
 @pytest.mark.skipif(flood_python() is None, reason="ANUGA is not installed (make setup)")
-def test_build_mesh_then_flood_on_it(processing, tmp_path):
+def test_build_mesh_then_flood_on_it(processing, tmp_path, feedback_log):
     x = np.arange(100) + 0.5
     dem = Grid(np.tile(0.02 * (100 - x), (20, 1)).astype(np.float32),
                Affine(1, 0, X0, 0, -1, Y0 + 20), CRS.from_epsg(32756))
@@ -30,7 +30,7 @@ def test_build_mesh_then_flood_on_it(processing, tmp_path):
         "boundaries": [{"kind": "outflow", "sides": ["east"]}]}))
     flood = processing.run("floodmesh:floodonmesh", {
         "MESH": mesh["OUTPUT"], "SCENARIO": str(tmp_path / "scenario.json"),
-        "CRS": "EPSG:32756", "OUTPUT_FOLDER": str(tmp_path / "flood")})
+        "CRS": "EPSG:32756", "OUTPUT_FOLDER": str(tmp_path / "flood")}, feedback=feedback_log)
     depth = QgsRasterLayer(flood["MAX_DEPTH"], "depth")
     assert depth.isValid() and depth.crs().authid() == "EPSG:32756"
     stats = depth.dataProvider().bandStatistics(1)
@@ -40,4 +40,8 @@ def test_build_mesh_then_flood_on_it(processing, tmp_path):
     with open(flood["REPORT"]) as fh:
         report = json.load(fh)
     assert abs(report["mass_balance"]["relative_error"]) < 1e-6
+    # the log says where the time step was set, as the command line does
+    setter = report["time_step_set_by"][0]
+    assert any(f"time step set most by the triangle at ({setter['x']:.1f}, {setter['y']:.1f})"
+               in line for line in feedback_log.infos), "\n".join(feedback_log.infos)
     assert report["mass_balance"]["inflow_volume_m3"] == pytest.approx(120, rel=1e-6)
