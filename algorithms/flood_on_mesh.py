@@ -3,9 +3,9 @@ process; its maxima load as rasters."""
 from pathlib import Path
 
 from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
-                       QgsProcessingParameterCrs, QgsProcessingParameterFile,
-                       QgsProcessingParameterFolderDestination, QgsProcessingParameterMeshLayer,
-                       QgsRasterLayer)
+                       QgsProcessingOutputVectorLayer, QgsProcessingParameterCrs,
+                       QgsProcessingParameterFile, QgsProcessingParameterFolderDestination,
+                       QgsProcessingParameterMeshLayer, QgsRasterLayer, QgsVectorLayer)
 
 from ..core.flood.summary import time_step_summary
 from ..core.options import RESULT_RASTERS
@@ -30,11 +30,13 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
             "or across a line), boundaries (wall, outflow, level; by side or by line), "
             "Manning's n (one value, polygons with values), buildings (raised, or holes), duration. Writes maximum "
             "depth, maximum water level, maximum speed and arrival time as GeoTIFFs in the "
-            "mesh's CRS, the outflow hydrograph, the stage at observation points and "
-            "report.json (mass balance, hydraulic checks of the mesh, cost). ANUGA needs its own "
+            "mesh's CRS, the triangles that set the solver's time step (points, with their share "
+            "of the steps: where a sliver or a fast jet makes the flood dear), the outflow "
+            "hydrograph, the stage at observation points and report.json (mass balance, "
+            "hydraulic checks of the mesh, cost). ANUGA needs its own "
             "environment (make setup builds .venv-flood).")
     MESH, SCENARIO, CRS, OUTPUT = "MESH", "SCENARIO", "CRS", "OUTPUT_FOLDER"
-    HYDROGRAPH, REPORT = "HYDROGRAPH", "REPORT"
+    HYDROGRAPH, REPORT, TIME_STEP = "HYDROGRAPH", "REPORT", "TIME_STEP"
 
     def initAlgorithm(self, config=None):  # noqa: N802
         self.addParameter(QgsProcessingParameterMeshLayer(self.MESH, self.tr("Mesh (SMS 2DM)")))
@@ -46,6 +48,8 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
             self.OUTPUT, self.tr("Output folder")))
         for name, label, _ in RASTERS:
             self.addOutput(QgsProcessingOutputRasterLayer(name, self.tr(label)))
+        self.addOutput(QgsProcessingOutputVectorLayer(
+            self.TIME_STEP, self.tr("Where the time step was set")))
         self.addOutput(QgsProcessingOutputFile(self.HYDROGRAPH, self.tr("Outflow hydrograph")))
         self.addOutput(QgsProcessingOutputFile(self.REPORT, self.tr("Report")))
 
@@ -67,7 +71,10 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
             feedback.pushInfo(time_step_summary(report))
         results = {self.OUTPUT: str(out), self.HYDROGRAPH: str(out / "hydrograph.csv"),
                    self.REPORT: str(out / "report.json")}
-        layers = []
+        results[self.TIME_STEP] = str(out / "time_step.gpkg")
+        layers = [(QgsVectorLayer(f"{results[self.TIME_STEP]}|layername=time_step_set_by",
+                                  "Where the time step was set"), lambda layer: None,
+                   self.TIME_STEP)]
         for name, label, key in RASTERS:
             results[name] = str(out / RESULT_RASTERS[key])
             layers.append((QgsRasterLayer(results[name], label), lambda layer: None, name))

@@ -41,7 +41,9 @@ SIDES = ("north", "south", "east", "west")
 BUILDING_MODES = ("raised", "holes")
 WORKER = Path(__file__).with_name("anuga_worker.py")
 FLOOD_FILES = tuple(RESULT_RASTERS.values()) + ("hydrograph.csv", "observations.csv",
-                                                "report.json")
+                                                "time_step.gpkg", "report.json")
+SETTER_FIELDS = ("rank", "inradius_m", "share_of_steps", "checks", "max_depth_m",
+                 "max_speed_ms")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -559,7 +561,8 @@ def time_step_setters(nodes, triangles, result: dict, most: int = 5) -> list[dic
     """The triangles that set the solver's time step (ANUGA's: the least inradius over the
     fastest wave of a triangle's edges) at the worker's checks, those that set it for the most
     steps first: centroid (m), inradius (m), share of the run's steps (those of the intervals
-    whose last step each set), the flood's max depth (m) and speed (m/s) there."""
+    whose last step each set), the flood's max depth (m) and speed (m/s) there; ``z`` is the
+    bed's mean at the triangle's corners (m)."""
     steps = np.asarray(result["step_setter_steps"], float)
     total = max(float(steps.sum()), 1.0)
     radius = inradii(nodes, triangles)
@@ -567,6 +570,7 @@ def time_step_setters(nodes, triangles, result: dict, most: int = 5) -> list[dic
     found = np.flatnonzero(result["step_setter_checks"])
     order = found[np.lexsort((-result["step_setter_checks"][found], -steps[found]))][:most]
     return [{"x": float(centre[k, 0]), "y": float(centre[k, 1]),
+             "z": float(nodes[triangles[k], 2].mean()) if nodes.shape[1] > 2 else 0.0,
              "inradius_m": float(radius[k]), "share_of_steps": float(steps[k] / total),
              "checks": int(result["step_setter_checks"][k]),
              "max_depth_m": float(result["max_depth"][k]),
@@ -686,6 +690,13 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
         "notes": prepared["notes"],
         "files": sorted(FLOOD_FILES),
     }
+    setters = report["time_step_set_by"]
+    io.write_points_gpkg(out / "time_step.gpkg",
+                         np.array([[k["x"], k["y"], k["z"]] for k in setters]).reshape(-1, 3),
+                         crs, layer="time_step_set_by", attributes={
+                             name: [rank + 1 if name == "rank" else k[name]
+                                    for rank, k in enumerate(setters)]
+                             for name in SETTER_FIELDS})
     np.savez(out / "triangles.npz", nodes=arrays["nodes"], triangles=arrays["triangles"],
              **{k: result[k] for k in ("max_depth", "max_stage", "max_speed", "arrival_s")})
     io.write_json(out / "report.json", report)

@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import fiona
 import numpy as np
 import pytest
 import rasterio
@@ -210,6 +211,13 @@ def test_the_report_names_the_wet_sliver_that_sets_the_time_step_not_the_smalles
     assert sum(k["share_of_steps"] for k in report["time_step_set_by"]) <= 1 + 1e-9
     assert f"time step set most by the triangle at ({setter['x']:.1f}, {setter['y']:.1f})" in (
         capsys.readouterr().out)
+    # and as points to put on the map, ranked, in the mesh's CRS
+    with fiona.open(tmp_path / "out" / "time_step.gpkg", layer="time_step_set_by") as src:
+        assert src.crs.to_epsg() == 32756
+        first = next(iter(src))
+    assert first["properties"]["rank"] == 1
+    assert first["properties"]["share_of_steps"] == pytest.approx(setter["share_of_steps"])
+    assert first["geometry"]["coordinates"][:2] == pytest.approx((setter["x"], setter["y"]))
 
 
 @needs_anuga

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from affine import Affine
 from pyproj import CRS
-from qgis.core import QgsRasterLayer
+from qgis.core import QgsRasterLayer, QgsVectorLayer
 
 from floodmesh.core import io
 from floodmesh.core.flood.model import flood_python
@@ -37,6 +37,8 @@ def test_build_mesh_then_flood_on_it(processing, tmp_path, feedback_log):
     assert 0.05 < stats.maximumValue < 1.0
     for name in ("MAX_LEVEL", "MAX_SPEED", "ARRIVAL"):
         assert QgsRasterLayer(flood[name], name).isValid()
+    where = QgsVectorLayer(f"{flood['TIME_STEP']}|layername=time_step_set_by", "where")
+    assert where.isValid() and where.crs().authid() == "EPSG:32756" and where.featureCount() >= 1
     with open(flood["REPORT"]) as fh:
         report = json.load(fh)
     assert abs(report["mass_balance"]["relative_error"]) < 1e-6
