@@ -67,8 +67,9 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
         feedback.pushInfo(f"ANUGA: {report['cpu_s']:.1f} s CPU, {report['time_steps']} steps; "
                           f"flooded {report['flooded_area_m2']:.0f} m², mass balance error "
                           f"{mb['error_m3']:.3g} m³")
-        if time_step_summary(report):
-            feedback.pushInfo(time_step_summary(report))
+        setter = time_step_summary(report)
+        if setter:
+            feedback.pushInfo(setter)
         results = {self.OUTPUT: str(out), self.HYDROGRAPH: str(out / "hydrograph.csv"),
                    self.REPORT: str(out / "report.json")}
         results[self.TIME_STEP] = str(out / "time_step.gpkg")

@@ -362,6 +362,12 @@ def _size_fields(front: Front, options: RunOptions, window, hand, flow_area):
             flow_spacing(dem, flow_area=flow_area, hand=hand), max_area)
 
 
+def _line_spacing(front: Front, options: RunOptions) -> float:
+    """The smallest spacing a flood model affords (m): ``--min-spacing``, else the cell size;
+    0 where it is off. The detected lines keep twice it clear of the domain edge."""
+    return front.dem.cell_size if options.min_spacing is None else options.min_spacing
+
+
 def _lines_for_flood(front: Front, options: RunOptions, lines, domain, spacing, low_ground):
     """(the detected lines' coordinates, their statistics or None): lines a flood model can
     afford (see hydraulic_lines), without their bridges on ``low_ground`` (a Grid, finite there,
@@ -369,7 +375,7 @@ def _lines_for_flood(front: Front, options: RunOptions, lines, domain, spacing, 
     ``options.min_spacing`` is 0."""
     detected = without_wet_bridges([line.coords for line in lines],
                                    [line.bridged for line in lines], low_ground)
-    least = front.dem.cell_size if options.min_spacing is None else options.min_spacing
+    least = _line_spacing(front, options)
     if least <= 0:
         return detected, None
     within = (shapely.union_all(io.read_boundary(options.flow_zone)) if options.flow_zone
@@ -420,8 +426,7 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
     floor = MISFIT_FLOOR_CELLS * front.dem.cell_size ** 2
     low_floor = None if low_ground is None else _low_ground_floor(
         low_ground, mesh_lines, floor, MISFIT_CROSSING_CELLS * front.dem.cell_size)
-    # the band the lines keep clear of (``_lines_for_flood``); none where the spacing is off
-    clearance = 2 * (front.dem.cell_size if options.min_spacing is None else options.min_spacing)
+    clearance = 2 * _line_spacing(front, options)  # the band the lines keep clear of
     return steps.run("refine", refine_mesh, front.dem, mesh_lines, points,
                      lower=MISFIT_EXCESS, upper=None, max_rounds=options.misfit_passes + 1,
                      most=MISFIT_SHARE, measure_last=False,
@@ -434,14 +439,15 @@ def _off_edge(floor_at, floor: float, domain, clearance: float):
     within ``clearance`` m of the ``domain``'s edge: the band the detected lines keep clear of,
     where a split made the smallest triangles at the edge a flood flows in and out by (91 % of
     the demo levee flood's time steps)."""
-    edge = shapely.boundary(domain) if domain is not None else None
+    edge = shapely.boundary(domain) if domain is not None and clearance > 0 else None
+    if edge is not None:
+        shapely.prepare(edge)  # an outline of a survey has hundreds of vertices
 
     def off_edge(xy):
         at = floor_at(xy) if floor_at is not None else np.full(len(xy), floor)
         if edge is None:
             return at
-        return np.where(shapely.distance(shapely.points(xy[:, :2]), edge) < clearance,
-                        np.inf, at)
+        return np.where(shapely.dwithin(edge, shapely.points(xy[:, :2]), clearance), np.inf, at)
     return off_edge
 
 

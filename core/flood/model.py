@@ -42,8 +42,7 @@ BUILDING_MODES = ("raised", "holes")
 WORKER = Path(__file__).with_name("anuga_worker.py")
 FLOOD_FILES = tuple(RESULT_RASTERS.values()) + ("hydrograph.csv", "observations.csv",
                                                 "time_step.gpkg", "report.json")
-SETTER_FIELDS = ("rank", "inradius_m", "share_of_steps", "checks", "max_depth_m",
-                 "max_speed_ms")
+SETTER_FIELDS = ("inradius_m", "share_of_steps", "checks", "max_depth_m", "max_speed_ms")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -694,9 +693,8 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
     io.write_points_gpkg(out / "time_step.gpkg",
                          np.array([[k["x"], k["y"], k["z"]] for k in setters]).reshape(-1, 3),
                          crs, layer="time_step_set_by", attributes={
-                             name: [rank + 1 if name == "rank" else k[name]
-                                    for rank, k in enumerate(setters)]
-                             for name in SETTER_FIELDS})
+                             "rank": list(range(1, len(setters) + 1)),
+                             **{name: [k[name] for k in setters] for name in SETTER_FIELDS}})
     np.savez(out / "triangles.npz", nodes=arrays["nodes"], triangles=arrays["triangles"],
              **{k: result[k] for k in ("max_depth", "max_stage", "max_speed", "arrival_s")})
     io.write_json(out / "report.json", report)

@@ -99,8 +99,8 @@ def hydraulic_checks(nodes: np.ndarray, triangles: np.ndarray, *, own_lines=(),
     at ``depth`` (and a uniform mesh's of the same node count, for comparison), how many
     triangles have an inradius under ``small_inradius`` and how many of those lie within
     ``edge_band`` of the domain edge, the smallest inradius there (where a flood flows in and
-    out, a small triangle costs every step), the shortest edge at the domain edge and the closest node
-    to it, and the shortest
+    out, a small triangle costs every step), the shortest edge at the domain edge and the
+    closest node to it, and the shortest
     edge at the points where the modeller's ``own_lines`` cross ``detected_lines`` (lists of
     (k, 2+) coordinate arrays); with the ``dem`` (a Grid), how far the mesh's surface along
     the own lines (crests the modeller chose) falls below the DEM's."""

@@ -157,10 +157,12 @@ def _misfit_triangles(mesh: Mesh, found, res, lower, floor, noise, most=None,
     excess = mean_square - noise ** 2
     quarter = triangle_areas(mesh.nodes, mesh.triangles) / 4
     centroid = mesh.nodes[mesh.triangles, :2].mean(axis=1)
-    if floor_at is not None:
-        floor = floor_at(centroid)
-    pick = ((count > 2) & (excess > lower ** 2) & beyond_noise(mean_square, noise, count)
-            & (quarter >= floor))
+    pick = (count > 2) & (excess > lower ** 2) & beyond_noise(mean_square, noise, count)
+    if floor_at is None:
+        pick &= quarter >= floor
+    elif pick.any():  # the floor only where a triangle misfits: a few % of them
+        at = np.flatnonzero(pick)
+        pick[at] = quarter[at] >= floor_at(centroid[at])
     if most is not None and pick.sum() > most * n_tri:
         worst = np.argsort(np.where(pick, -excess * quarter, np.inf))[:int(most * n_tri)]
         pick = np.zeros_like(pick)
