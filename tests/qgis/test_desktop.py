@@ -21,7 +21,7 @@ SEARCHES = {  # what a modeller types into the toolbox's search, and what it sho
     "telemac": ["exportmesh", "lidartomesh"],
     "hec-ras": ["exportmesh", "lidartomesh"],
 }
-SCRIPT = f"SEARCHES = {SEARCHES!r}\n" + r"""
+HELPERS = r"""
 import json, os, sys, traceback
 from qgis.utils import iface
 from qgis.core import QgsApplication, QgsLayerTreeGroup, QgsProject
@@ -54,7 +54,8 @@ def tree(node):
             rows.append({"layer": child.name(), "valid": bool(layer and layer.isValid()),
                          "crs": layer.crs().authid() if layer else None})
     return rows
-
+"""
+SCRIPT = f"SEARCHES = {SEARCHES!r}\n" + HELPERS + r"""
 
 try:
     import processing
@@ -266,3 +267,51 @@ def test_no_numerical_package_in_the_qgis_process(desktop):
     imported = dict(desktop["imported"])
     shapely = imported.pop("shapely", "/usr/lib/python3/dist-packages/")
     assert imported == {} and shapely.startswith("/usr/lib/python3/dist-packages/")
+
+
+FLOOD_SCRIPT = HELPERS + r"""
+
+try:
+    import processing
+    processing.runAndLoadResults("floodmesh:floodonmesh", {
+        "MESH": os.environ["FM_MESH"], "SCENARIO": os.environ["FM_SCENARIO"],
+        "CRS": "EPSG:32756", "OUTPUT_FOLDER": os.environ["FM_OUTPUT"]})
+    settle()
+    out["tree"] = tree(QgsProject.instance().layerTreeRoot())
+except Exception:
+    out["error"] = traceback.format_exc()
+open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
+os._exit(0)
+"""
+
+
+def test_a_flood_shows_where_its_time_step_was_set(tmp_path):
+    """Flood on mesh run as from the toolbox: once Qt's events have run, the run's group holds
+    the points where the solver's time step was set, valid and in the mesh's CRS, above the
+    four rasters."""
+    import numpy as np
+
+    from floodmesh.core import io
+    from floodmesh.core.flood.model import flood_python
+    from floodmesh.core.steps.mesh import PSLG, triangulate_pslg
+
+    if not shutil.which("xvfb-run") or flood_python() is None:
+        pytest.skip("xvfb-run or ANUGA (make setup) is missing")
+    x0, y0 = 382_000.0, 6_354_000.0
+    corners = np.array([[0, 0], [100, 0], [100, 20], [0, 20]], float) + (x0, y0)
+    xy, tri = triangulate_pslg(PSLG(corners, np.array([[0, 1], [1, 2], [2, 3], [3, 0]]),
+                                    np.empty((0, 2))), min_angle=25.0, max_area=2.0)
+    io.write_mesh_2dm(tmp_path / "channel.2dm",
+                      np.column_stack([xy, 0.02 * (100 - (xy[:, 0] - x0))]), tri)
+    (tmp_path / "scenario.json").write_text(json.dumps({
+        "duration_s": 60, "output_interval_s": 10, "manning": 0.03,
+        "inflows": [{"line": [[x0 + 2, y0 + 1], [x0 + 2, y0 + 19]], "discharge_m3s": 2.0}],
+        "boundaries": [{"kind": "outflow", "sides": ["east"]}]}))
+    seen = run_desktop(FLOOD_SCRIPT, tmp_path, FM_MESH=tmp_path / "channel.2dm",
+                       FM_SCENARIO=tmp_path / "scenario.json", FM_OUTPUT=tmp_path / "flood")
+    groups = [row for row in seen["tree"] if "group" in row]
+    assert len(groups) == 1, seen["tree"]
+    layers = groups[0]["children"]
+    assert layers[0]["layer"] == "Where the time step was set", layers
+    assert layers[0]["valid"] and layers[0]["crs"] == "EPSG:32756", layers
+    assert len(layers) == 5, layers
