@@ -66,6 +66,12 @@ CORNER_TURN, CORNER_REACH = 30.0, 4.0
 COMPANION_PROBES = (1.25, 2.25)  # their reach: 0.55 to 2.95 half widths out
 COMPANION_RUN = 3
 COMPANION_APART = 0.45
+# A line that lies, for SECOND_TRACE_SHARE of its vertices, within SECOND_TRACE_WITHIN cells of
+# a longer line of its kind is a second trace of that kink (two raster traces of one band that
+# the hinge fits moved onto the same kink, as at 45° to the grid) and is left out; chosen on
+# the corpus (RESULTS.md, "Ends joined across a wider offset"): a quarter cell keeps the two
+# crest edges of a 1 m crest apart
+SECOND_TRACE_WITHIN, SECOND_TRACE_SHARE = 0.25, 0.8
 
 # Rounds of places drawn for the noise estimate, for points that fill little of their bounding
 # box (a reach at 45°, a tile with a lake: a fifth filled still gives the samples in 8)
@@ -736,6 +742,29 @@ def _kinds(pieces) -> list[int]:
             for p in pieces]
 
 
+def _second_traces_left_out(pieces, within: float, share: float) -> list:
+    """The ``pieces`` (coords, slopes, component, fit RMS, kink, bridged) without those of
+    which ``share`` of the vertices or more lie within ``within`` m of a longer piece of their
+    kind (crest, toe; unknown goes with either): second traces of one kink."""
+    if len(pieces) < 2:
+        return pieces
+    lines = np.array([shapely.LineString(p[0][:, :2]) for p in pieces], dtype=object)
+    lengths = shapely.length(lines)
+    kinds = np.array(_kinds(pieces))
+    owner = np.repeat(np.arange(len(pieces)), [len(p[0]) for p in pieces])
+    vertex, other = shapely.STRtree(lines).query(
+        shapely.points(np.concatenate([p[0][:, :2] for p in pieces])), predicate="dwithin",
+        distance=within)
+    mine = owner[vertex]
+    longer = (lengths[other] > lengths[mine]) | ((lengths[other] == lengths[mine])
+                                                  & (other < mine))
+    near = np.zeros(len(owner), bool)
+    near[vertex[longer & (kinds[other] * kinds[mine] >= 0)]] = True
+    second = np.bincount(owner, weights=near, minlength=len(pieces)) >= share * np.bincount(
+        owner, minlength=len(pieces))
+    return [p for p, drop in zip(pieces, second) if not drop]
+
+
 def _chained(pieces, chains) -> list[tuple]:
     """The ``pieces`` (coords, slopes, component, fit RMS, kink, bridged) joined as
     ``join_pieces``'s ``chains`` say: one piece per chain, its arrays the chain's parts end to
@@ -902,7 +931,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     other across at most ``join_gap`` m are joined (``joining.join_pieces``, lateral offset
     ``join_lateral`` m; None or 0: no joining); the gaps left of up to ``bridge_gap`` m where
     the terrain carries the line's kink across (a crossing, a junction: ``joining.bridges``,
-    ``_bridges_fitted``) are bridged; line ends that stop within ``join_lateral`` plus a tenth
+    ``_bridges_fitted``) are bridged; a second trace of a kink a longer line follows is left
+    out (``_second_traces_left_out``); line ends that stop within ``join_lateral`` plus a tenth
     of ``join_gap`` m of another line's interior, pointing at it at its height (within
     ``tolerance`` m plus a rise at ``s_crit``), are snapped onto it
     (``joining.snap_t_junctions``). Returns
@@ -951,6 +981,9 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     corners = _corners_left(pieces)
     if corners:
         pieces = _chained(pieces, chains_through([p[0] for p in pieces], corners))
+    traced = len(pieces)
+    pieces = _second_traces_left_out(pieces, SECOND_TRACE_WITHIN * cell_size,
+                                     SECOND_TRACE_SHARE)
     out = [BreakLine(coords, slopes, component, bridged if bridged.any() else None)
            for coords, slopes, component, _, _, bridged in pieces]
     per_line = [_median(p[3][~np.isnan(p[3])]) if np.isfinite(p[3]).any() else float("nan")
@@ -971,6 +1004,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                            "pieces_joined": joined,
                            "gaps_bridged": n_bridges,
                            "companions_found": len(companions),
+                           "second_traces_left_out": traced - len(pieces),
                            "t_junctions_snapped": t_junctions,
                            "join_gap_m": join_gap or 0.0,
                            "thinning_tolerance_m": tolerance,
