@@ -71,11 +71,6 @@ DEFAULT_MAX_TRIANGLES = 5_000_000
 # localised break-line pieces are joined across gaps of up to this many cell sizes (--join-gap);
 # chosen on the evaluation corpus (benchmarks/RESULTS.md, "The evaluation corpus")
 JOIN_GAP_CELLS = 10.0
-# ... whose ends lie at most this many cell sizes apart across the line (plus a tenth of the
-# gap); the same offset bounds the bridges across crossings and the T-junctions' reach. At 1
-# cell, ends that a noisy hinge fit bent 1-2 m off the line stayed apart (mid-run breaks):
-# chosen on the evaluation corpus (benchmarks/RESULTS.md, "Ends joined across a wider offset")
-JOIN_LATERAL_CELLS = 2.0
 # ... and bridged across crossings and junctions of up to this many, where the hinge fits find
 # the line's kink along the gap (localise.localise_traced; 0 join gap: neither)
 BRIDGE_GAP_CELLS = 30.0

@@ -28,9 +28,8 @@ from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
 from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
 from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS,
-                       JOIN_LATERAL_CELLS, MISFIT_CROSSING_CELLS, MISFIT_DENSITY, MISFIT_EXCESS,
-                       MISFIT_FLOOR_CELLS, MISFIT_LOW_FLOOR, MISFIT_SHARE, RunOptions,
-                       check_sigma_fits)
+                       MISFIT_CROSSING_CELLS, MISFIT_DENSITY, MISFIT_EXCESS, MISFIT_FLOOR_CELLS,
+                       MISFIT_LOW_FLOOR, MISFIT_SHARE, RunOptions, check_sigma_fits)
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
 from ..raster import Grid, nearest_value
@@ -333,7 +332,7 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
         lines, confidence, counts = steps.run(
             "localise", localise_traced, lines, front.measured, fits.window,
             s_crit=options.s_crit, tolerance=dem.cell_size / 10, max_gap=20 * dem.cell_size,
-            join_gap=join_gap, join_lateral=JOIN_LATERAL_CELLS * dem.cell_size,
+            join_gap=join_gap, join_lateral=dem.cell_size,
             bridge_gap=BRIDGE_GAP_CELLS * dem.cell_size if join_gap else None,
             cell_size=dem.cell_size, index=fits.index)
         fits.counts.update(counts)
