@@ -69,8 +69,8 @@ COMPANION_APART = 0.45
 # A line that lies, for SECOND_TRACE_SHARE of its vertices, within SECOND_TRACE_WITHIN cells of
 # a longer line of its kind is a second trace of that kink (two raster traces of one band that
 # the hinge fits moved onto the same kink, as at 45° to the grid) and is left out; chosen on
-# the corpus (RESULTS.md, "Ends joined across a wider offset"): a quarter cell keeps the two
-# crest edges of a 1 m crest apart
+# the corpus (RESULTS.md, "One trace per kink"): a quarter cell keeps the two crest edges of
+# a 1 m crest apart
 SECOND_TRACE_WITHIN, SECOND_TRACE_SHARE = 0.25, 0.8
 
 # Rounds of places drawn for the noise estimate, for points that fill little of their bounding
