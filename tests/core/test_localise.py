@@ -417,6 +417,26 @@ def test_unmoved_vertices_stay_where_a_crest_turns():
     assert _failed_fits_left_out(coords, moved, 5.0, 2.0, crest)[1:].all()
 
 
+def test_a_second_trace_goes_and_a_crests_other_edge_a_cell_away_stays():
+    """Of lines along one kink (1 m cells), the longest stays; a shorter crest within a
+    quarter cell of it goes, a crest 1 m beside it (the other edge of a 1 m crest), a toe
+    along it and a crest that leaves it after a third of its length stay."""
+    from floodmesh.core.steps.localise import (SECOND_TRACE_SHARE, SECOND_TRACE_WITHIN,
+                                               _second_traces_left_out)
+
+    def piece(x0, x1, y, kink=-0.3, bend=0.0):
+        x = np.arange(x0, x1 + 0.5, 1.0)
+        coords = np.column_stack([x, y + bend * np.maximum(x - (x0 + (x1 - x0) / 3), 0),
+                                  np.zeros(len(x))])
+        n = len(x)
+        return (coords, np.full(n, 20.0), 0, np.full(n, 0.05), np.full(n, kink),
+                np.zeros(n, bool))
+
+    pieces = [piece(0, 60, 0.0), piece(5, 50, 0.15), piece(5, 50, 1.0),
+              piece(5, 50, 0.1, kink=0.3), piece(5, 50, 0.1, bend=0.5)]
+    kept = _second_traces_left_out(pieces, SECOND_TRACE_WITHIN, SECOND_TRACE_SHARE)
+    assert [any(k is p for k in kept) for p in pieces] == [True, False, True, True, True]
+
 
 def test_a_run_traces_each_kink_of_an_embankment_at_45_degrees_once(tmp_path, monkeypatch):
     """From the user's side: LiDAR (9 points/m², 5 cm noise) of an embankment (1.5 m high, 3 m
