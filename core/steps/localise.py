@@ -73,6 +73,11 @@ COMPANION_APART = 0.45
 # a 1 m crest apart
 SECOND_TRACE_WITHIN, SECOND_TRACE_SHARE = 0.25, 0.8
 
+# Two pieces' ends are measured for a join at their last fitted vertices where the traced run
+# beyond (the raster trace, which noise bends off the kink) spans at most JOIN_TAIL_CELLS cells;
+# chosen on the corpus and Merewether's flood (RESULTS.md, "Joins between the kinks found")
+JOIN_TAIL_CELLS = 6.0
+
 # Rounds of places drawn for the noise estimate, for points that fill little of their bounding
 # box (a reach at 45°, a tile with a lake: a fifth filled still gives the samples in 8)
 NOISE_DRAWS = 8
@@ -765,6 +770,40 @@ def _second_traces_left_out(pieces, within: float, share: float) -> list:
     return [p for p, drop in zip(pieces, second) if not drop]
 
 
+def _fitted_span(coords: np.ndarray, fitted: np.ndarray, tail: float) -> tuple[int, int]:
+    """(first, stop): a piece's vertices from its first fitted one to its last, where the
+    unfitted run beyond either spans at most ``tail`` m (a longer one is the line's own traced
+    course, and stays); the whole piece where fewer than two vertices would be left. The
+    traced course beyond a piece's last kink found bends off the line with the noise (1-2 m at
+    15 cm), so two pieces of one line, measured at their traced ends, lie too far apart across
+    it to join."""
+    n = len(coords)
+    if not fitted.any():
+        return 0, n
+    along = distance_along(coords)
+    first, last = np.flatnonzero(fitted)[[0, -1]]
+    first = first if along[first] <= tail else 0
+    stop = last + 1 if along[-1] - along[last] <= tail else n
+    return (int(first), int(stop)) if stop - first >= 2 else (0, n)
+
+
+def _tails_given_back(chains, spans, sizes) -> list:
+    """``join_pieces``' ``chains`` of the pieces cut to their ``spans`` (``_fitted_span``), as
+    chains of the whole pieces (``sizes`` vertices): each part shifted back onto its piece, and
+    a chain's two free ends given back what was cut (an end that joined nothing keeps its
+    traced course)."""
+    out = []
+    for chain in chains:
+        parts = []
+        for j, (k, reverse, first, stop) in enumerate(chain):
+            shift = sizes[k] - spans[k][1] if reverse else spans[k][0]
+            first, stop = (0 if j == 0 else first + shift,
+                           sizes[k] if j == len(chain) - 1 else stop + shift)
+            parts.append((k, reverse, first, stop))
+        out.append(parts)
+    return out
+
+
 def _chained(pieces, chains) -> list[tuple]:
     """The ``pieces`` (coords, slopes, component, fit RMS, kink, bridged) joined as
     ``join_pieces``'s ``chains`` say: one piece per chain, its arrays the chain's parts end to
@@ -929,8 +968,9 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     a corner (``_corners_cut``), kinks beside the pieces that no line follows become pieces of
     their own (``_companions``), and pieces of one kind (crest or toe) whose ends face each
     other across at most ``join_gap`` m are joined (``joining.join_pieces``, lateral offset
-    ``join_lateral`` m; None or 0: no joining); the gaps left of up to ``bridge_gap`` m where
-    the terrain carries the line's kink across (a crossing, a junction: ``joining.bridges``,
+    ``join_lateral`` m, measured between the pieces' fitted ends: ``_fitted_span``; None or 0:
+    no joining); the gaps left of up to ``bridge_gap`` m where the terrain carries the line's
+    kink across (a crossing, a junction: ``joining.bridges``,
     ``_bridges_fitted``) are bridged; a second trace of a kink a longer line follows is left
     out (``_second_traces_left_out``); line ends that stop within ``join_lateral`` plus a tenth
     of ``join_gap`` m of another line's interior, pointing at it at its height (within
@@ -957,10 +997,14 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     companions = _companions(pieces, points, window, s_crit, index, tolerance)
     pieces += companions
     joined = len(pieces)
-    if join_gap:
-        pieces = _chained(pieces, join_pieces(
-            [p[0] for p in pieces], _kinds(pieces), max_gap=join_gap, lateral=join_lateral,
-            ground=_ground_follows(points, window, index=index)))
+    if join_gap:  # measured between the pieces' fitted ends
+        tail = JOIN_TAIL_CELLS * cell_size
+        spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
+        pieces = _chained(pieces, _tails_given_back(join_pieces(
+            [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)], _kinds(pieces),
+            max_gap=join_gap, lateral=join_lateral,
+            ground=_ground_follows(points, window, index=index)), spans,
+            [len(p[0]) for p in pieces]))
     joined -= len(pieces)
     n_bridges = 0
     if join_gap and bridge_gap:

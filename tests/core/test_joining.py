@@ -272,9 +272,10 @@ def test_a_run_keeps_a_channels_banks_and_a_roads_sides_whole_through_their_cros
     monkeypatch.setattr(pipeline, "BRIDGE_GAP_CELLS", 0.0)
     monkeypatch.setattr(localise, "CORNER_TURN", 180.0)
     broken, recall_before = pieces("without")
-    # when written: 1.25 pieces a line (at most 2), recall 0.995; before, 2.9 (2 to 4), 0.967
+    # when written: 1.25 pieces a line (at most 2), recall 0.995; before, 2.9 (2 to 4), 0.967;
+    # since joins are measured between the pieces' fitted ends, 2.4 before (2 to 3)
     assert np.mean(whole) <= 1.5 and max(whole) <= 2 and recall >= 0.98
-    assert np.mean(broken) >= 2.5 and min(broken) >= 2 and recall_before < recall
+    assert np.mean(broken) >= 2.25 and min(broken) >= 2 and recall_before < recall
 
 
 def test_crossing_points_are_where_two_lines_cross_or_meet_at_an_angle():
