@@ -970,14 +970,14 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     other across at most ``join_gap`` m are joined (``joining.join_pieces``, lateral offset
     ``join_lateral`` m, measured between the pieces' fitted ends: ``_fitted_span``; None or 0:
     no joining); the gaps left of up to ``bridge_gap`` m where the terrain carries the line's
-    kink across (a crossing, a junction: ``joining.bridges``,
-    ``_bridges_fitted``) are bridged; a second trace of a kink a longer line follows is left
-    out (``_second_traces_left_out``); line ends that stop within ``join_lateral`` plus a tenth
-    of ``join_gap`` m of another line's interior, pointing at it at its height (within
+    kink across (a crossing, a junction: ``joining.bridges``, ``_bridges_fitted``) are
+    bridged; a second trace of a kink a longer line follows is left out
+    (``_second_traces_left_out``); line ends that stop within ``join_lateral`` plus a tenth of
+    ``join_gap`` m of another line's interior, pointing at it at its height (within
     ``tolerance`` m plus a rise at ``s_crit``), are snapped onto it
-    (``joining.snap_t_junctions``). Returns
-    the BreakLines, each line's confidence (the median fit RMS residual of its vertices, m; NaN
-    where none moved) and counts. ``index``: ``nearest.point_index(points)`` if built."""
+    (``joining.snap_t_junctions``). Returns the BreakLines, each line's confidence (the
+    median fit RMS residual of its vertices, m; NaN where none moved) and counts. ``index``:
+    ``nearest.point_index(points)`` if built."""
     index = index if index is not None else point_index(points)  # one for both uses below
     lateral = UNMOVED_LATERAL * cell_size  # the grid's cell (m)
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,

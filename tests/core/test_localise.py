@@ -495,9 +495,8 @@ def test_pieces_join_between_their_fitted_ends_and_a_free_end_keeps_its_course()
     assert spans == [(1, 4), (2, 5)]
     chains = join_pieces([a[1:4], b[2:5]], [-1, -1], max_gap=10.0, lateral=1.0)
     [chain] = _tails_given_back(chains, spans, [len(a), len(b)])
-    line = np.concatenate([(p[::-1] if reverse else p)[first:stop]
-                           for p, (_, reverse, first, stop) in zip(
-                               [(a, b)[k] for k, *_ in chain], chain)])
+    line = np.concatenate([((a, b)[k][::-1] if reverse else (a, b)[k])[first:stop]
+                           for k, reverse, first, stop in chain])
     if line[0, 0] > line[-1, 0]:
         line = line[::-1]
     assert line[:, 0].tolist() == [0, 5, 10, 15, 22, 27, 32]  # a's first vertex kept
