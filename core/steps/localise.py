@@ -865,6 +865,29 @@ def _bridges_fitted(points: np.ndarray, window: FitWindow, s_crit: float, index,
     return make
 
 
+def _bridged(pieces, make, max_gap: float, lateral: float, tail: float) -> tuple[list, int]:
+    """``pieces`` (as ``localise_traced`` keeps them) joined by ``joining.bridges`` across the
+    gaps ``make`` (``_bridges_fitted``) bridges, measured between the pieces' ends cut to
+    their fitted spans (``_fitted_span`` within ``tail`` m; 0: their traced ends), a chain's
+    free ends given back what was cut; and how many bridges."""
+    spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
+    cut = [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)]
+    made = bridges(cut, _kinds(pieces), max_gap=max_gap, lateral=lateral, make=make)
+    if not made:
+        return pieces, 0
+    pieces, links = list(pieces), []
+    for (coords, fit, kink), start, stop in made:
+        m = len(pieces)  # the bridge runs from the end ``start`` to the end ``stop``
+        pieces.append((coords, np.full(len(coords), np.nan),
+                       min(pieces[start // 2][2], pieces[stop // 2][2]), fit, kink,
+                       np.ones(len(coords), bool)))
+        spans.append((0, len(coords)))
+        cut.append(coords)
+        links += [(start, 2 * m), (2 * m + 1, stop)]
+    return _chained(pieces, _tails_given_back(chains_through(cut, links), spans,
+                                              [len(p[0]) for p in pieces])), len(made)
+
+
 def _resampled(coords: np.ndarray, step: float) -> np.ndarray:
     """x, y of a line every about ``step`` m along it, its ends included."""
     xy, along = coords[:, :2], distance_along(coords)
@@ -971,7 +994,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     ``join_lateral`` m, measured between the pieces' fitted ends: ``_fitted_span``; None or 0:
     no joining); the gaps left of up to ``bridge_gap`` m where the terrain carries the line's
     kink across (a crossing, a junction: ``joining.bridges``, ``_bridges_fitted``) are
-    bridged; a second trace of a kink a longer line follows is left out
+    bridged, between the traced ends and then between the fitted ends of those still free
+    (``_bridged``); a second trace of a kink a longer line follows is left out
     (``_second_traces_left_out``); line ends that stop within ``join_lateral`` plus a tenth of
     ``join_gap`` m of another line's interior, pointing at it at its height (within
     ``tolerance`` m plus a rise at ``s_crit``), are snapped onto it
@@ -997,8 +1021,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     companions = _companions(pieces, points, window, s_crit, index, tolerance)
     pieces += companions
     joined = len(pieces)
+    tail = JOIN_TAIL_CELLS * cell_size
     if join_gap:  # measured between the pieces' fitted ends
-        tail = JOIN_TAIL_CELLS * cell_size
         spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
         pieces = _chained(pieces, _tails_given_back(join_pieces(
             [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)], _kinds(pieces),
@@ -1007,20 +1031,11 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
             [len(p[0]) for p in pieces]))
     joined -= len(pieces)
     n_bridges = 0
-    if join_gap and bridge_gap:
-        made = bridges([p[0] for p in pieces], _kinds(pieces), max_gap=bridge_gap,
-                       lateral=join_lateral,
-                       make=_bridges_fitted(points, window, s_crit, index, tolerance))
-        links = []
-        for (coords, fit, kink), start, stop in made:
-            m = len(pieces)  # the bridge runs from the end ``start`` to the end ``stop``
-            pieces.append((coords, np.full(len(coords), np.nan),
-                           min(pieces[start // 2][2], pieces[stop // 2][2]), fit, kink,
-                           np.ones(len(coords), bool)))
-            links += [(start, 2 * m), (2 * m + 1, stop)]
-        if made:
-            pieces = _chained(pieces, chains_through([p[0] for p in pieces], links))
-        n_bridges = len(made)
+    if join_gap and bridge_gap:  # between the traced ends, then the fitted ends of the rest
+        make = _bridges_fitted(points, window, s_crit, index, tolerance)
+        for cut in (0.0, tail):
+            pieces, made = _bridged(pieces, make, bridge_gap, join_lateral, cut)
+            n_bridges += made
     # a corner where neither arm joined or bridged anything is no use cut: the line as traced
     corners = _corners_left(pieces)
     if corners:

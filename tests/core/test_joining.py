@@ -224,6 +224,37 @@ def test_a_crest_broken_at_a_crossing_is_bridged_only_where_the_crest_runs_on(ac
     assert out[0].bridged[inner].all() and not out[0].bridged[np.abs(along) > 10.5].any()
 
 
+def test_a_crossing_is_bridged_between_the_pieces_fitted_ends(monkeypatch):
+    """The bank's crest broken where an embankment crosses it, each piece's traced run beyond
+    its last kink found bending off the crest on the embankment's slope (2.1 m to either side
+    at the gap, where the fits fail): measured between the traced ends the two ends lie 4 m
+    apart across the line and stay two lines; measured between the fitted ends, a second pass
+    after the first, the crest is bridged into one line."""
+    from floodmesh.core.steps import localise
+
+    points, window = _surveyed(lambda xy: _crossed_bank(xy, "embankment"), seed=5, noise=0.05)
+
+    def bent(s0, s1, side):  # off the crest by 0.3 m per m inside |s| = 10
+        s = np.arange(s0, s1 + 1e-9, 1.0)
+        xy = (50.0 + s[:, None] * TANGENT
+              + (side * 0.3 * np.maximum(10.0 - np.abs(s), 0.0))[:, None] * NORMAL)
+        return BreakLine(np.column_stack([xy, _bank(xy)]), np.full(len(s), 20.0))
+
+    lines = [bent(-40, -3, 1.0), bent(3, 40, -1.0)]
+    out, _, counts = localise_traced(lines, points, window, join_gap=6.0, join_lateral=1.0,
+                                     bridge_gap=30.0)
+    assert len(out) == 1 and counts["gaps_bridged"] == 1
+    along = (out[0].coords[:, :2] - 50.0) @ TANGENT
+    assert along.min() <= -39.9 and along.max() >= 39.9  # the free ends keep their runs
+    assert np.abs((out[0].coords[:, :2] - 50.0) @ NORMAL).max() < 0.3  # on the crest
+    first = localise._bridged  # the first pass alone: between the traced ends
+    monkeypatch.setattr(localise, "_bridged", lambda pieces, make, gap, lateral, tail: first(
+        pieces, make, gap, lateral, tail) if tail == 0 else (pieces, 0))
+    out, _, counts = localise_traced(lines, points, window, join_gap=6.0, join_lateral=1.0,
+                                     bridge_gap=30.0)
+    assert len(out) == 2 and counts["gaps_bridged"] == 0
+
+
 def test_a_line_is_cut_at_a_corner_and_not_at_a_bend():
     from floodmesh.core.steps.localise import _corners_cut
 
