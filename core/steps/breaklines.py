@@ -45,8 +45,9 @@ DC = np.array([1, 1, 0, -1, -1, -1, 0, 1], dtype=np.int64)
 class BreakLine:
     """One break line: ``coords`` (k, 3) x, y, z in metres, the slope (degrees) at each point,
     and the connected break-line system it belongs to (lines that touch share a component);
-    ``bridged``, where localisation bridged a gap (see ``joining.bridges``), per vertex whether
-    it is one of a bridge's (a segment between two such vertices crosses the gap)."""
+    ``bridged``, where localisation bridged a gap across another line (see
+    ``joining.bridges``, ``localise._bridged``), per vertex whether it is one of such a
+    bridge's (a segment between two such vertices crosses the gap)."""
 
     __slots__ = ("coords", "slopes", "component", "bridged")
 

@@ -180,9 +180,10 @@ def without_wet_bridges(lines, bridged, low_ground) -> list[np.ndarray]:
     """``lines`` ((k, 3) arrays) without the segments of their bridges (``bridged``: per line,
     per vertex whether it is a bridge's, or None; see ``localise.localise_traced``) that lie on
     low ground (``low_ground``: a Grid, finite there, e.g. ``drainage.flow_spacing``; None:
-    none). A bridge carries a line across a crossing; under water it adds little that a flood
-    feels, and its crossings with the other feature's lines hold the wet zone's smallest
-    triangles, which set the flood model's time step (RESULTS.md, "Crossings and junctions")."""
+    none). A bridge so marked carries a line across another feature's (a crossing); under
+    water it adds little that a flood feels, and its crossings with the other feature's lines
+    hold the wet zone's smallest triangles, which set the flood model's time step (RESULTS.md,
+    "Crossings and junctions")."""
     if low_ground is None:
         return list(lines)
     out = []

@@ -77,6 +77,11 @@ SECOND_TRACE_WITHIN, SECOND_TRACE_SHARE = 0.25, 0.8
 # beyond (the raster trace, which noise bends off the kink) spans at most JOIN_TAIL_CELLS cells;
 # chosen on the corpus and Merewether's flood (RESULTS.md, "Joins between the kinks found")
 JOIN_TAIL_CELLS = 6.0
+# The bridges' second pass measures the ends still free at their last fitted vertices where the
+# traced run beyond spans at most BRIDGE_TAIL_CELLS cells: a bridge's hinge fits check the gap,
+# so a longer cut than the joins' is safe; chosen on the corpus and Merewether's flood
+# (RESULTS.md, "Bridges between the kinks found")
+BRIDGE_TAIL_CELLS = 12.0
 
 # Rounds of places drawn for the noise estimate, for points that fill little of their bounding
 # box (a reach at 45°, a tile with a lake: a fifth filled still gives the samples in 8)
@@ -869,23 +874,35 @@ def _bridged(pieces, make, max_gap: float, lateral: float, tail: float) -> tuple
     """``pieces`` (as ``localise_traced`` keeps them) joined by ``joining.bridges`` across the
     gaps ``make`` (``_bridges_fitted``) bridges, measured between the pieces' ends cut to
     their fitted spans (``_fitted_span`` within ``tail`` m; 0: their traced ends), a chain's
-    free ends given back what was cut; and how many bridges."""
+    free ends given back what was cut; and how many bridges. A bridge's vertices are marked
+    bridged (the mesh leaves them out on low ground) only where it crosses another feature:
+    where it passes within ``lateral`` m of a piece other than the two it joins. A bridge
+    across a gap in a line's own run, where noise made the fits fail, is the line's."""
     spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
     cut = [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)]
     made = bridges(cut, _kinds(pieces), max_gap=max_gap, lateral=lateral, make=make)
     if not made:
         return pieces, 0
+    others = shapely.STRtree([shapely.LineString(p[0][:, :2]) for p in pieces])
     pieces, links = list(pieces), []
     for (coords, fit, kink), start, stop in made:
         m = len(pieces)  # the bridge runs from the end ``start`` to the end ``stop``
+        crossing = _crosses_another(others, coords, (start // 2, stop // 2), lateral)
         pieces.append((coords, np.full(len(coords), np.nan),
                        min(pieces[start // 2][2], pieces[stop // 2][2]), fit, kink,
-                       np.ones(len(coords), bool)))
+                       np.full(len(coords), crossing)))
         spans.append((0, len(coords)))
         cut.append(coords)
         links += [(start, 2 * m), (2 * m + 1, stop)]
     return _chained(pieces, _tails_given_back(chains_through(cut, links), spans,
                                               [len(p[0]) for p in pieces])), len(made)
+
+
+def _crosses_another(others, coords: np.ndarray, joined, within: float) -> bool:
+    """Whether a bridge (``coords``) passes within ``within`` m of one of the lines in
+    ``others`` (an STRtree of the pieces) but the two it ``joined`` (their indices)."""
+    near = others.query(shapely.LineString(coords[:, :2]), predicate="dwithin", distance=within)
+    return bool(np.isin(near, joined, invert=True).any())
 
 
 def _resampled(coords: np.ndarray, step: float) -> np.ndarray:
@@ -995,8 +1012,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     no joining); the gaps left of up to ``bridge_gap`` m where the terrain carries the line's
     kink across (a crossing, a junction: ``joining.bridges``, ``_bridges_fitted``) are
     bridged, between the traced ends and then between the fitted ends of those still free
-    (``_bridged``); a second trace of a kink a longer line follows is left out
-    (``_second_traces_left_out``); line ends that stop within ``join_lateral`` plus a tenth of
+    (``_bridged``, ``BRIDGE_TAIL_CELLS``; marked bridged where they cross another line); a
+    second trace of a kink a longer line follows is left out (``_second_traces_left_out``); line ends that stop within ``join_lateral`` plus a tenth of
     ``join_gap`` m of another line's interior, pointing at it at its height (within
     ``tolerance`` m plus a rise at ``s_crit``), are snapped onto it
     (``joining.snap_t_junctions``). Returns the BreakLines, each line's confidence (the
@@ -1021,8 +1038,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     companions = _companions(pieces, points, window, s_crit, index, tolerance)
     pieces += companions
     joined = len(pieces)
-    tail = JOIN_TAIL_CELLS * cell_size
     if join_gap:  # measured between the pieces' fitted ends
+        tail = JOIN_TAIL_CELLS * cell_size
         spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
         pieces = _chained(pieces, _tails_given_back(join_pieces(
             [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)], _kinds(pieces),
@@ -1033,7 +1050,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     n_bridges = 0
     if join_gap and bridge_gap:  # between the traced ends, then the fitted ends of the rest
         make = _bridges_fitted(points, window, s_crit, index, tolerance)
-        for cut in (0.0, tail):
+        for cut in (0.0, BRIDGE_TAIL_CELLS * cell_size):
             pieces, made = _bridged(pieces, make, bridge_gap, join_lateral, cut)
             n_bridges += made
     # a corner where neither arm joined or bridged anything is no use cut: the line as traced

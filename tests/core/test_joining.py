@@ -201,7 +201,8 @@ def test_a_crest_broken_at_a_crossing_is_bridged_only_where_the_crest_runs_on(ac
     """The tracer stops a line where another feature crosses it; the gap (here 20 m, twice the
     join gap) is bridged where the terrain still has the line's crest along it (a bank's crest
     over a road embankment), the bridge's vertices on the crest at its height, and not where
-    the crossing cuts the crest away (a channel through it)."""
+    the crossing cuts the crest away (a channel through it). The bridge is marked as one (the
+    mesh leaves it out on low ground) only where it crosses another line."""
     points, window = _surveyed(lambda xy: _crossed_bank(xy, across), seed=5, noise=0.05)
     lines = _crest_pieces((-40, -10, 0.4), (10, 40, -0.4))
     out, _, counts = localise_traced(lines, points, window, join_gap=6.0, join_lateral=1.0,
@@ -220,8 +221,22 @@ def test_a_crest_broken_at_a_crossing_is_bridged_only_where_the_crest_runs_on(ac
     truth = _crossed_bank(coords[inner, :2], across)
     assert np.abs(coords[inner, 2] - truth).max() < 0.1  # at its height over the embankment
     assert coords[inner, 2].max() > 10.9  # up and over, not the straight chord at 10 m
-    # the bridge's vertices are marked (the mesh leaves them out on low ground), no others
-    assert out[0].bridged[inner].all() and not out[0].bridged[np.abs(along) > 10.5].any()
+    # with no other line across it, the bridge is the crest's own run: nothing is marked
+    assert out[0].bridged is None
+    # with the embankment's crest edge traced across it, the bridge's vertices are marked
+    # (the mesh leaves them out on low ground), no others
+    angle = ANGLE + np.radians(70.0)
+    s = np.arange(-30.0, 30.5, 1.0)
+    xy = (50.0 + s[:, None] * np.array([np.cos(angle), np.sin(angle)])
+          + 1.5 * np.array([-np.sin(angle), np.cos(angle)]))
+    edge = BreakLine(np.column_stack([xy, _crossed_bank(xy, across)]), np.full(len(s), 20.0))
+    out, _, counts = localise_traced(lines + [edge], points, window, join_gap=6.0,
+                                     join_lateral=1.0, bridge_gap=30.0)
+    [bank] = [line for line in out if np.ptp((line.coords[:, :2] - 50.0) @ TANGENT) > 70]
+    along = (bank.coords[:, :2] - 50.0) @ TANGENT
+    inner = np.abs(along) < 9.0
+    assert counts["gaps_bridged"] == 1 and inner.sum() >= 4
+    assert bank.bridged[inner].all() and not bank.bridged[np.abs(along) > 10.5].any()
 
 
 def test_a_crossing_is_bridged_between_the_pieces_fitted_ends(monkeypatch):
