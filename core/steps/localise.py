@@ -876,18 +876,22 @@ def _bridged(pieces, make, max_gap: float, lateral: float, tail: float) -> tuple
     their fitted spans (``_fitted_span`` within ``tail`` m; 0: their traced ends), a chain's
     free ends given back what was cut; and how many bridges. A bridge's vertices are marked
     bridged (the mesh leaves them out on low ground) only where it crosses another feature:
-    where it passes within ``lateral`` m of a piece other than the two it joins. A bridge
+    where it passes within ``lateral`` m of a piece other than the two it joins, or of another
+    bridge of the pass. A bridge
     across a gap in a line's own run, where noise made the fits fail, is the line's."""
     spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
     cut = [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)]
     made = bridges(cut, _kinds(pieces), max_gap=max_gap, lateral=lateral, make=make)
     if not made:
         return pieces, 0
-    others = shapely.STRtree([shapely.LineString(p[0][:, :2]) for p in pieces])
+    n = len(pieces)  # the bridges of this pass cross each other too (two features broken
+    # at their crossing, each bridged across the other)
+    others = shapely.STRtree([shapely.LineString(c[:, :2]) for c in
+                              [p[0] for p in pieces] + [line[0] for line, _, _ in made]])
     pieces, links = list(pieces), []
-    for (coords, fit, kink), start, stop in made:
+    for k, ((coords, fit, kink), start, stop) in enumerate(made):
         m = len(pieces)  # the bridge runs from the end ``start`` to the end ``stop``
-        crossing = _crosses_another(others, coords, (start // 2, stop // 2), lateral)
+        crossing = _crosses_another(others, coords, (start // 2, stop // 2, n + k), lateral)
         pieces.append((coords, np.full(len(coords), np.nan),
                        min(pieces[start // 2][2], pieces[stop // 2][2]), fit, kink,
                        np.full(len(coords), crossing)))
@@ -900,7 +904,8 @@ def _bridged(pieces, make, max_gap: float, lateral: float, tail: float) -> tuple
 
 def _crosses_another(others, coords: np.ndarray, joined, within: float) -> bool:
     """Whether a bridge (``coords``) passes within ``within`` m of one of the lines in
-    ``others`` (an STRtree of the pieces) but the two it ``joined`` (their indices)."""
+    ``others`` (an STRtree of the pieces and bridges) but those in ``joined`` (its two pieces
+    and itself, their indices)."""
     near = others.query(shapely.LineString(coords[:, :2]), predicate="dwithin", distance=within)
     return bool(np.isin(near, joined, invert=True).any())
 

@@ -118,7 +118,7 @@ def test_a_run_puts_a_narrow_embankments_crest_into_the_mesh(tmp_path, monkeypat
     (0.8 m high, sides of 2 m) at 10° to the grid. The mesh carries its crest (the mesh's
     surface along the true crest within 0.10 m of it, median); without the crest lines (found
     nowhere, as before) and without the misfit pass the mesh cut the crest down by more than
-    0.30 m; the misfit pass alone mends part of that, the crest lines most of it."""
+    0.25 m; the misfit pass alone mends part of that, the crest lines most of it."""
     from floodmesh.core import io
     from floodmesh.core.chain.pipeline import run_pipeline
     from floodmesh.core.frontends import demo
@@ -150,7 +150,9 @@ def test_a_run_puts_a_narrow_embankments_crest_into_the_mesh(tmp_path, monkeypat
     error_without, _ = crest_error("without", misfit_passes=0)
     error_pass_alone, _ = crest_error("pass alone")
     assert error <= 0.10  # 0.03 m when written
-    assert error_without > 0.30  # 0.58 m
+    # 0.58 m when written; 0.30 m since the bridges' second pass carries the crest's edge
+    # lines across the gaps where the fits failed
+    assert error_without > 0.25
     assert error <= 0.5 * error_pass_alone  # 0.26 m
 
 

@@ -215,8 +215,9 @@ def test_a_runs_mesh_follows_the_folds_where_a_road_crosses_a_levee(tmp_path):
     # when written: 1,247 nodes at 2.03 cm; without the pass 1,213 nodes at 2.26 cm
     assert rmse <= 0.92 * rmse_off and nodes <= 1.1 * nodes_off
     # 1.97 cm, 1,249 nodes when written; 1.58 cm against the pass alone's 1.57 cm since the
-    # pass splits the crossing on low ground
-    assert rmse_both <= 1.02 * rmse
+    # pass splits the crossing on low ground; 1.46 cm at 1,298 nodes against 1.43 cm at 1,317
+    # since the bridges' second pass (both better, the run with both on fewer nodes)
+    assert rmse_both <= 1.03 * rmse
 
 
 def test_the_misfit_pass_splits_a_road_crossing_a_channel_on_low_ground(tmp_path):
