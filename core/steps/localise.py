@@ -870,6 +870,13 @@ def _bridges_fitted(points: np.ndarray, window: FitWindow, s_crit: float, index,
     return make
 
 
+def _fitted_cut(pieces, tail: float) -> tuple[list, list]:
+    """(each piece's ``_fitted_span`` within ``tail`` m, its coordinates cut to that span):
+    the ends the joins and the bridges measure between."""
+    spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
+    return spans, [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)]
+
+
 def _bridged(pieces, make, max_gap: float, lateral: float, tail: float) -> tuple[list, int]:
     """``pieces`` (as ``localise_traced`` keeps them) joined by ``joining.bridges`` across the
     gaps ``make`` (``_bridges_fitted``) bridges, measured between the pieces' ends cut to
@@ -877,21 +884,20 @@ def _bridged(pieces, make, max_gap: float, lateral: float, tail: float) -> tuple
     free ends given back what was cut; and how many bridges. A bridge's vertices are marked
     bridged (the mesh leaves them out on low ground) only where it crosses another feature:
     where it passes within ``lateral`` m of a piece other than the two it joins, or of another
-    bridge of the pass. A bridge
-    across a gap in a line's own run, where noise made the fits fail, is the line's."""
-    spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
-    cut = [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)]
+    bridge of the pass (two features broken at their crossing, each bridged across the
+    other). A bridge across a gap in a line's own run, where noise made the fits fail, is the
+    line's."""
+    spans, cut = _fitted_cut(pieces, tail)
     made = bridges(cut, _kinds(pieces), max_gap=max_gap, lateral=lateral, make=make)
     if not made:
         return pieces, 0
-    n = len(pieces)  # the bridges of this pass cross each other too (two features broken
-    # at their crossing, each bridged across the other)
+    # the pieces, then this pass's bridges in the order they are appended to them below
     others = shapely.STRtree([shapely.LineString(c[:, :2]) for c in
                               [p[0] for p in pieces] + [line[0] for line, _, _ in made]])
     pieces, links = list(pieces), []
-    for k, ((coords, fit, kink), start, stop) in enumerate(made):
+    for (coords, fit, kink), start, stop in made:
         m = len(pieces)  # the bridge runs from the end ``start`` to the end ``stop``
-        crossing = _crosses_another(others, coords, (start // 2, stop // 2, n + k), lateral)
+        crossing = _crosses_another(others, coords, (start // 2, stop // 2, m), lateral)
         pieces.append((coords, np.full(len(coords), np.nan),
                        min(pieces[start // 2][2], pieces[stop // 2][2]), fit, kink,
                        np.full(len(coords), crossing)))
@@ -1018,9 +1024,10 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     kink across (a crossing, a junction: ``joining.bridges``, ``_bridges_fitted``) are
     bridged, between the traced ends and then between the fitted ends of those still free
     (``_bridged``, ``BRIDGE_TAIL_CELLS``; marked bridged where they cross another line); a
-    second trace of a kink a longer line follows is left out (``_second_traces_left_out``); line ends that stop within ``join_lateral`` plus a tenth of
-    ``join_gap`` m of another line's interior, pointing at it at its height (within
-    ``tolerance`` m plus a rise at ``s_crit``), are snapped onto it
+    second trace of a kink a longer line follows is left out (``_second_traces_left_out``);
+    line ends that stop within ``join_lateral`` plus a tenth of ``join_gap`` m of another
+    line's interior, pointing at it at its height (within ``tolerance`` m plus a rise at
+    ``s_crit``), are snapped onto it
     (``joining.snap_t_junctions``). Returns the BreakLines, each line's confidence (the
     median fit RMS residual of its vertices, m; NaN where none moved) and counts. ``index``:
     ``nearest.point_index(points)`` if built."""
@@ -1044,11 +1051,9 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     pieces += companions
     joined = len(pieces)
     if join_gap:  # measured between the pieces' fitted ends
-        tail = JOIN_TAIL_CELLS * cell_size
-        spans = [_fitted_span(p[0], np.isfinite(p[3]), tail) for p in pieces]
+        spans, cut = _fitted_cut(pieces, JOIN_TAIL_CELLS * cell_size)
         pieces = _chained(pieces, _tails_given_back(join_pieces(
-            [p[0][first:stop] for p, (first, stop) in zip(pieces, spans)], _kinds(pieces),
-            max_gap=join_gap, lateral=join_lateral,
+            cut, _kinds(pieces), max_gap=join_gap, lateral=join_lateral,
             ground=_ground_follows(points, window, index=index)), spans,
             [len(p[0]) for p in pieces]))
     joined -= len(pieces)
