@@ -1,5 +1,6 @@
 """The one family of errors FloodMesh raises for bad input: each message names the problem and the fix."""
 
+import _thread
 import signal
 import sys
 import threading
@@ -76,11 +77,43 @@ def compiler_locks_freed() -> None:
             llvm.release()
 
 
-def terminate_as_interrupt() -> None:
-    """Raise ``Terminated`` on SIGTERM and SIGHUP from now on (in the main thread only)."""
-    def terminate(signum, frame):
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+RETRY_S = 0.01  # s: how soon a signal that arrived in numba's own code is taken again
+_COMPILER_PACKAGES = ("numba", "llvmlite")
+
+
+def stop_signals_as_interrupts() -> None:
+    """From now on (main thread only) SIGINT raises ``KeyboardInterrupt``, SIGTERM and SIGHUP
+    ``Terminated``, at the first moment the main thread runs none of numba's or llvmlite's own
+    Python code.
+
+    A compiled kernel calls back into numba's Python code as it runs (``_numba_unpickle``, for
+    the objects it returns, on every call); an interrupt raised there gives the kernel nothing
+    where it expects an object, and at times it goes on with it: the QGIS worker, given
+    SIGTERM at random moments, ended with a segmentation fault 5 times in 150 (Ctrl-C likewise:
+    numba/numba#2324). A signal that arrives there is taken again ``RETRY_S`` later
+    (``_thread.interrupt_main``), until it arrives in other code: after the kernel returns,
+    or after the compile it came in."""
+    def interrupt(signum, frame):
+        if _in_compiler_code(frame):
+            retry = threading.Timer(RETRY_S, _thread.interrupt_main, (signum,))
+            retry.daemon = True
+            retry.start()
+            return
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
         raise Terminated(signum)
 
     if threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGTERM, signal.SIGHUP):
-            signal.signal(signum, terminate)
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, interrupt)
+
+
+def _in_compiler_code(frame) -> bool:
+    """Whether ``frame`` or a frame that called it is numba's or llvmlite's."""
+    while frame is not None:
+        package = frame.f_globals.get("__name__", "").partition(".")[0]
+        if package in _COMPILER_PACKAGES:
+            return True
+        frame = frame.f_back
+    return False

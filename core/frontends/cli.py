@@ -16,7 +16,7 @@ from pathlib import Path
 from .. import io
 from ..chain import files as steps
 from ..errors import (Cancelled, FloodMeshError, Terminated, interrupts_unwrapped,
-                      terminate_as_interrupt)
+                      stop_signals_as_interrupts)
 from ..options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
                        NODE_ELEVATIONS, RunOptions, parse_formats)
 from .console import ProgressBar, print_note, print_notes
@@ -574,7 +574,7 @@ def _add_mesh_commands(sub) -> None:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     start = time.perf_counter()
-    terminate_as_interrupt()
+    stop_signals_as_interrupts()
     try:
         with interrupts_unwrapped():
             args.func(args)

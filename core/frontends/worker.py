@@ -31,7 +31,7 @@ import time
 from ..chain import files as steps
 from ..engine.compiles import CompileWatch
 from ..errors import (Cancelled, FloodMeshError, Terminated, interrupts_unwrapped,
-                      terminate_as_interrupt)
+                      stop_signals_as_interrupts)
 from ..flood.model import load_scenario, run_flood
 from ..options import RunOptions
 from .dependencies import install_hint, missing_dependencies
@@ -165,7 +165,7 @@ def main() -> int:
     os.dup2(2, 1)
     sys.stdout = sys.stderr
     faulthandler.enable()  # a crash in GEOS, Triangle or numba leaves its trace on stderr
-    terminate_as_interrupt()  # SIGTERM/SIGHUP unwind as Ctrl-C: temporaries and scratch go
+    stop_signals_as_interrupts()  # SIGTERM/SIGHUP unwind as Ctrl-C: temporaries and scratch go
     keep_freed_memory()
     try:
         job = json.loads(sys.stdin.read())
