@@ -387,25 +387,27 @@ rows = np.random.default_rng(1).random((200_000, 3))
 taken = np.random.default_rng(2).random(len(rows)) < 0.05
 expected = split_rows(rows, taken, numba.get_num_threads())
 stop_signals_as_interrupts()
-main, handled, seen = threading.main_thread().ident, [], {"whole": 0, "broken": 0}
+main, armed, handled, seen = threading.main_thread().ident, [], [], {"whole": 0, "broken": 0}
 
-def send():
+def send():  # signal i once the main thread is in its loop of kernel calls for the i-th time
     rng = random.Random(3)
     for i in range(160):
+        while len(armed) <= i:
+            time.sleep(0.0005)
         time.sleep(rng.uniform(0.0, 0.004))
         signal.pthread_kill(main, (signal.SIGTERM, signal.SIGINT)[i % 2])
-        while len(handled) <= i:
-            time.sleep(0.0005)
 
 sender = threading.Thread(target=send, daemon=True)
 sender.start()
-while sender.is_alive() or len(handled) < 160:
+while len(handled) < 160:
     try:
-        got = split_rows(rows, taken, numba.get_num_threads())
-        ok = all(np.array_equal(a, b) for a, b in zip(got, expected))
-        seen["whole" if ok else "broken"] += 1
-    except KeyboardInterrupt as exc:  # Terminated too: where it was raised
-        tb, modules = exc.__traceback__, set()  # the modules of the frames it went through
+        armed.append(True)
+        while True:  # until the signal comes: wherever it is raised, it is raised in here
+            got = split_rows(rows, taken, numba.get_num_threads())
+            ok = all(np.array_equal(a, b) for a, b in zip(got, expected))
+            seen["whole" if ok else "broken"] += 1
+    except KeyboardInterrupt as exc:  # Terminated too: the modules of the frames it went through
+        tb, modules = exc.__traceback__, set()
         while tb is not None:
             modules.add(tb.tb_frame.f_globals["__name__"].partition(".")[0])
             tb = tb.tb_next
