@@ -165,7 +165,7 @@ def main() -> int:
     os.dup2(2, 1)
     sys.stdout = sys.stderr
     faulthandler.enable()  # a crash in GEOS, Triangle or numba leaves its trace on stderr
-    stop_signals_as_interrupts()  # SIGTERM/SIGHUP unwind as Ctrl-C: temporaries and scratch go
+    stop_signals_as_interrupts()  # SIGINT/SIGTERM/SIGHUP unwind: temporaries and scratch go
     keep_freed_memory()
     try:
         job = json.loads(sys.stdin.read())

@@ -1060,8 +1060,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     n_bridges = 0
     if join_gap and bridge_gap:  # between the traced ends, then the fitted ends of the rest
         make = _bridges_fitted(points, window, s_crit, index, tolerance)
-        for cut in (0.0, BRIDGE_TAIL_CELLS * cell_size):
-            pieces, made = _bridged(pieces, make, bridge_gap, join_lateral, cut)
+        for tail in (0.0, BRIDGE_TAIL_CELLS * cell_size):
+            pieces, made = _bridged(pieces, make, bridge_gap, join_lateral, tail)
             n_bridges += made
     # a corner where neither arm joined or bridged anything is no use cut: the line as traced
     corners = _corners_left(pieces)

@@ -378,10 +378,10 @@ def test_ctrl_c_as_a_compiler_lock_is_taken_leaves_the_lock_free(lock):
 # time, at random moments, while a parallel kernel of the run (the holdout split) runs over and
 # over; it prints what each signal became.
 _SIGNALLED_KERNEL = """
-import json, random, signal, sys, threading, time
+import json, random, signal, threading, time
 import numba, numpy as np
 from floodmesh.core._kernels.points import split_rows
-from floodmesh.core.errors import Terminated, stop_signals_as_interrupts
+from floodmesh.core.errors import stop_signals_as_interrupts
 
 rows = np.random.default_rng(1).random((200_000, 3))
 taken = np.random.default_rng(2).random(len(rows)) < 0.05
