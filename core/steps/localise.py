@@ -582,7 +582,8 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
                         radius: float, *, on_line: float, index=None,
                         noise: float | None = None) -> tuple[np.ndarray, dict]:
     """Node elevations (n,) with the noise taken out: nodes within ``on_line`` m of a break line
-    (k, 3 arrays) take z along it; the others z of a least-squares plane of ``points`` within
+    (k, 3 arrays) take z along it (keep theirs where the line has no z there: a modeller's
+    2-D line, read with NaN z); the others z of a least-squares plane of ``points`` within
     ``radius`` m (at most 0.9 of their distance to the nearest line, at least ``on_line``·10),
     or keep theirs where fewer than 6 points are there (a node equally near two lines takes
     the one listed first). Returns z and counts."""
@@ -600,7 +601,9 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
         pick = np.nonzero(on)[0]
         pick = pick[with_z[nearest[pick]]]
         along = shapely.line_locate_point(geoms[nearest[pick]], shapely.points(xy[pick]))
-        z[pick] = shapely.get_z(shapely.line_interpolate_point(geoms[nearest[pick]], along))
+        on_z = shapely.get_z(shapely.line_interpolate_point(geoms[nearest[pick]], along))
+        known = np.isfinite(on_z)
+        z[pick[known]] = on_z[known]
     off = ~on
     r = np.clip(0.9 * distance[off], min(radius, 10 * on_line), radius)
     index = index if index is not None else point_index(points)
