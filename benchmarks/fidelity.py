@@ -11,7 +11,8 @@ embankments; ``--terrains``), noise (``--noise``, 5 and 15 cm by default) and de
 options) runs once per chain of options; its mesh is scored against the TRUE surface (RMSE over 100,000 random points)
 and its break lines against the true ones (recall, precision within 2 m, pieces per true line,
 where the pieces of each true line meet: junction or crossing, mid-run, second line in the band;
-recall and pieces per feature)
+recall and pieces per feature; the median crest height of each levee, road or embankment
+against the true one, which a flood's overtopping follows)
 and the whole segments the PSLG left out for the angle bound and the line ends snapped onto
 another line (T-junctions) are counted.
 Peers, in the same run: uniform 25° Triangle meshes without break lines whose nodes carry the
@@ -112,6 +113,41 @@ def delatin_curve(dem, floodplain, sample, truth):
     return curve
 
 
+def crest_heights(mesh: Mesh, floodplain, spacing: float = 2.0, margin: float = 15.0) -> dict:
+    """Per raised feature (a levee, road or embankment), the median over cross-sections every
+    ``spacing`` m of the mesh's highest z across its crest less the true crest's (m): what a
+    flood model's overtopping follows. Sections within ``margin`` m of the area's edge, off the
+    mesh, or where another feature stands higher (a crossing) are left out."""
+    inside = shapely.box(margin, margin, demo.WIDTH - margin, demo.HEIGHT - margin)
+    errors = {}
+    for name, (line, profile) in floodplain.features.items():
+        if profile.height <= 0:
+            continue
+        centre = shapely.intersection(line, inside)
+        runs = [g for g in getattr(centre, "geoms", [centre]) if not g.is_empty]
+        across = np.linspace(-profile.half_top - 1.0, profile.half_top + 1.0, 81)
+        heights = []
+        for run in runs:
+            at = np.arange(spacing, run.length - spacing, spacing)
+            if not len(at):
+                continue
+            xy = shapely.get_coordinates(run.interpolate(at))
+            ahead = shapely.get_coordinates(run.interpolate(np.minimum(at + 0.01, run.length)))
+            tangent = (ahead - xy) / np.linalg.norm(ahead - xy, axis=1)[:, None]
+            normal = np.column_stack([-tangent[:, 1], tangent[:, 0]])
+            section = xy[:, None, :] + across[None, :, None] * normal[:, None, :]
+            x, y = section[..., 0].ravel(), section[..., 1].ravel()
+            true = demo.ground_elevation(x, y, floodplain).reshape(section.shape[:2])
+            ours = tin_elevation(mesh, x + demo.DEMO_ORIGIN[0],
+                                 y + demo.DEMO_ORIGIN[1]).reshape(section.shape[:2])
+            crest = np.abs(true.max(axis=1) - true[:, len(across) // 2]) < 0.01
+            keep = crest & np.isfinite(ours).all(axis=1)
+            heights.append(ours[keep].max(axis=1) - true[keep].max(axis=1))
+        if heights and sum(map(len, heights)):
+            errors[name] = float(np.median(np.concatenate(heights)))
+    return errors
+
+
 def feature_of_lines(floodplain) -> list:
     """The feature (its name, or "terrace") of each of ``demo.true_breaklines``' lines."""
     area = shapely.box(0, 0, demo.WIDTH, demo.HEIGHT)
@@ -171,6 +207,7 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
         score["t_junctions"] = report["terrain_fit"].get("t_junctions_snapped", 0)
         score["dropped"] = sum(int(m) for n in report["notes"]
                                for m in re.findall(r"\((\d+) too short were left out\)", n))
+        score["crest_m"] = crest_heights(mesh, floodplain)
         score["cfl"] = report["hydraulics"]["cfl_slowdown_vs_uniform"]
         score["min_inradius"] = report["hydraulics"]["min_inradius_m"]
         rows.append((chain, len(nodes), true_rmse(mesh, floodplain, sample, truth), score,
@@ -195,6 +232,9 @@ def run_case(name, floodplain, seed, noise, density, chains, work: Path):
     for chain, n, rmse, score, angle, seconds in rows:
         print(f"{chain}, per feature (recall, pieces per true line): " + "; ".join(
             f"{f} {r:.2f}, {p:.1f}" for f, (r, p) in score["features"].items()))
+        if score["crest_m"]:
+            print(f"{chain}, crest height, mesh less true (median, cm): " + "; ".join(
+                f"{f} {100 * e:+.1f}" for f, e in score["crest_m"].items()))
     print("uniform 25° (exact z): " + ", ".join(f"{n:,} nodes {100 * r:.2f} cm"
                                                 for n, r in uniform[2::2]))
     if delatin:
@@ -303,7 +343,9 @@ def main():
               f"pieces {score['mean_pieces']:.2f}  recall {score['recall']:.3f}  "
               f"precision {score['precision']:.3f}  breaks {score['breaks']}  "
               f"segments dropped {score['dropped']}  T-junctions snapped {score['t_junctions']}  "
-              f"CFL {score['cfl']:.1f}x uniform (smallest inradius {score['min_inradius']:.2f} m)")
+              f"CFL {score['cfl']:.1f}x uniform (smallest inradius {score['min_inradius']:.2f} m)"
+              + (f"  crest {100 * max(score['crest_m'].values(), key=abs):+.1f} cm"
+                 if score["crest_m"] else ""))
 
 
 if __name__ == "__main__":
