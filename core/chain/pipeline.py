@@ -32,7 +32,7 @@ from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN
                        MISFIT_LOW_FLOOR, MISFIT_SHARE, RunOptions, check_sigma_fits)
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
-from ..raster import Grid, nearest_value
+from ..raster import Grid, bilinear, nearest_value
 from ..steps.accuracy import accuracy_statistics, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
@@ -818,7 +818,32 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
     domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name,
                           tolerance=tolerance, note=note) if boundary is not None else None)
     lines = io.read_lines_gpkg(user_lines, note) if user_lines is not None else []
+    if lines and note:
+        _note_own_z_off_the_ground(lines, dem, Path(user_lines).name, note)
     return domain, lines
+
+
+# An own line whose z lies this many metres (median over its vertices) from the DEM's surface is
+# noted: a layer digitised with Z but no values gives z 0 (QGIS's default), tens of metres
+# under a floodplain, where surveyed crests and inverts lie within a few metres of the ground
+OWN_Z_OFF_GROUND = 5.0
+
+
+def _note_own_z_off_the_ground(lines, dem: Grid, name: str, note) -> None:
+    """Tell ``note`` of the lines (k, 3) whose z lies OWN_Z_OFF_GROUND m or more (median)
+    above or below the DEM: kept as given, as the modeller's own heights are."""
+    off = []
+    for number, coords in enumerate(lines, 1):
+        z = coords[:, 2] if coords.shape[1] > 2 else np.full(len(coords), np.nan)
+        gap = z - bilinear(dem, coords[:, 0], coords[:, 1])
+        gap = gap[np.isfinite(gap)]
+        if gap.size and abs(float(np.median(gap))) >= OWN_Z_OFF_GROUND:
+            off.append((number, float(np.median(gap))))
+    if off:
+        note(f"{name}: line(s) {', '.join(str(n) for n, _ in off[:10])} lie "
+             f"{', '.join(f'{g:+.1f}' for _, g in off[:10])} m from the DEM's surface (median "
+             "over their vertices); their z is kept as given. A layer digitised with Z but no "
+             "heights has z 0: save such lines without Z to give them the DEM's")
 
 
 def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:

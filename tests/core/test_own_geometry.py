@@ -72,3 +72,35 @@ def test_own_2d_lines_give_every_node_an_elevation(demo_points_file, tmp_path):
     assert len(on) >= 8
     dem = io.read_raster(tmp_path / "out" / "dem.tif")
     assert np.abs(on[:, 2] - bilinear(dem, on[:, 0], on[:, 1])).max() < 0.3
+
+
+def test_own_lines_far_off_the_ground_are_named(demo_points_file, tmp_path):
+    """From the user's side: own lines in a layer with Z, one digitised without heights (z 0,
+    QGIS's default, some 20 m under the demo's floodplain), one with heights 0.4 m above the
+    ground. The run goes on with both as given, and its notes name the first, with how far it
+    lies from the ground and how to give it the DEM's z; the second is not named."""
+    import numpy as np
+
+    from floodmesh.core import io
+    from floodmesh.core.frontends import demo
+
+    xyz = io.read_points(demo_points_file).xyz
+    x0, y0 = xyz[:, 0].min(), xyz[:, 1].min()
+    along = np.linspace(0, 1, 6)[:, None]
+    zero = np.column_stack([x0 + 40 + 200 * along, y0 + 30 + 120 * along, 0 * along])
+    raised = np.column_stack([x0 + 60 + 200 * along, y0 + 170 - 60 * along])
+    raised = np.column_stack([raised, demo.ground_elevation(raised[:, 0] - demo.DEMO_ORIGIN[0],
+                                                            raised[:, 1] - demo.DEMO_ORIGIN[1],
+                                                            demo.DEMO) + 0.4])
+    schema = {"geometry": "3D LineString", "properties": {"name": "str"}}
+    with fiona.open(tmp_path / "own.gpkg", "w", driver="GPKG", schema=schema,
+                    crs_wkt=CRS.from_epsg(25832).to_wkt()) as dst:
+        for name, coords in (("no heights", zero), ("surveyed", raised)):
+            dst.write({"geometry": {"type": "LineString", "coordinates": coords.tolist()},
+                       "properties": {"name": name}})
+    run = _run(demo_points_file, tmp_path / "out", "--lines", str(tmp_path / "own.gpkg"))
+    assert run.returncode == 0, run.stderr[-3000:]
+    notes = json.loads((tmp_path / "out" / "report.json").read_text())["notes"]
+    named = [n for n in notes if n.startswith("own.gpkg: line(s)")]
+    assert len(named) == 1 and "line(s) 1 lie -2" in named[0], notes
+    assert "without Z" in named[0]
