@@ -837,8 +837,9 @@ def _note_own_z_off_the_ground(lines, dem: Grid, name: str, note) -> None:
         z = coords[:, 2] if coords.shape[1] > 2 else np.full(len(coords), np.nan)
         gap = z - bilinear(dem, coords[:, 0], coords[:, 1])
         gap = gap[np.isfinite(gap)]
-        if gap.size and abs(float(np.median(gap))) >= OWN_Z_OFF_GROUND:
-            off.append((number, float(np.median(gap))))
+        median = float(np.median(gap)) if gap.size else 0.0
+        if abs(median) >= OWN_Z_OFF_GROUND:
+            off.append((number, median))
     if off:
         note(f"{name}: line(s) {', '.join(str(n) for n, _ in off[:10])} lie "
              f"{', '.join(f'{g:+.1f}' for _, g in off[:10])} m from the DEM's surface (median "
