@@ -830,12 +830,12 @@ OWN_Z_OFF_GROUND = 5.0
 
 
 def _note_own_z_off_the_ground(lines, dem: Grid, name: str, note) -> None:
-    """Tell ``note`` of the lines (k, 3) whose z lies OWN_Z_OFF_GROUND m or more (median)
-    above or below the DEM: kept as given, as the modeller's own heights are."""
+    """Tell ``note`` of the lines ((k, 3) as ``io.read_lines_gpkg`` gives them, z NaN where
+    2-D) whose z lies OWN_Z_OFF_GROUND m or more (median) above or below the DEM: kept as
+    given, as the modeller's own heights are."""
     off = []
     for number, coords in enumerate(lines, 1):
-        z = coords[:, 2] if coords.shape[1] > 2 else np.full(len(coords), np.nan)
-        gap = z - bilinear(dem, coords[:, 0], coords[:, 1])
+        gap = coords[:, 2] - bilinear(dem, coords[:, 0], coords[:, 1])
         gap = gap[np.isfinite(gap)]
         median = float(np.median(gap)) if gap.size else 0.0
         if abs(median) >= OWN_Z_OFF_GROUND:

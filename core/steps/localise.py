@@ -597,10 +597,9 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
                           for c in usable], dtype=object)
         nearest, distance = nearest_line(xy, usable)
         on = distance <= on_line
-        with_z = np.array([c.shape[1] >= 3 for c in usable])
         pick = np.nonzero(on)[0]
-        pick = pick[with_z[nearest[pick]]]
         along = shapely.line_locate_point(geoms[nearest[pick]], shapely.points(xy[pick]))
+        # NaN where the line has no z there: a 2-D line's get_z, or a vertex read without z
         on_z = shapely.get_z(shapely.line_interpolate_point(geoms[nearest[pick]], along))
         known = np.isfinite(on_z)
         z[pick[known]] = on_z[known]
