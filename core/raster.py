@@ -27,6 +27,15 @@ def _reproject_hint(kind: str | None, code: str = "XXXX") -> str:
     return f"`{points}` for points, `{raster}` for rasters"
 
 
+@dataclass(frozen=True)
+class RefusedCRS:
+    """What a file declares of its CRS that FloodMesh cannot work in, as ``reason`` (said after
+    the file's name), where no CRS object says it (a LAS's GeoTIFF keys: a user-defined
+    projection, elevations in feet); ``require_metric_crs`` refuses it, as it would the CRS."""
+
+    reason: str
+
+
 def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     """Return ``crs`` as a pyproj CRS, refusing none, geographic, and horizontal or vertical
     units other than metres. ``kind`` ("points" or "raster") picks the reprojection command the
@@ -34,6 +43,8 @@ def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     # lazy: PROJ loads only when this runs
     from pyproj import CRS
 
+    if isinstance(crs, RefusedCRS):
+        raise FloodMeshError(f"{what} {crs.reason}")
     if crs is None:
         raise FloodMeshError(
             f"{what} has no coordinate reference system: give one (--crs EPSG:XXXX, or the CRS "

@@ -143,6 +143,42 @@ def _las_vertical_feet(folder):
     return write_las(folder / "zfeet.laz", xyz, crs="EPSG:26910+6360")
 
 
+def _las_vertical_feet_keys(folder):
+    """LAS 1.2 with GeoTIFF keys only, as US deliveries come: UTM 10N, NAVD88 height in US feet."""
+    xyz = plane_xyz() - [ORIGIN[0] - 500_000.0, ORIGIN[1] - 4_000_000.0, 0.0]
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.offsets, header.scales = np.floor(xyz.min(axis=0)), np.full(3, 0.001)
+    keys = laspy.vlrs.known.GeoKeyDirectoryVlr()
+    keys.geo_keys_header.number_of_keys = 3
+    keys.geo_keys = [laspy.vlrs.geotiff.GeoKeyEntryStruct(i, 0, 1, v)
+                     for i, v in ((1024, 1), (3072, 26910), (4096, 6360))]
+    header.vlrs.append(keys)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz.T
+    las.classification = np.full(len(xyz), 2, np.uint8)
+    path = folder / "zfeet_keys.las"
+    las.write(str(path))
+    return path
+
+
+def _las_cut_short(folder):
+    """A LAS whose copy stopped at a whole point: the header counts more points than it holds."""
+    path = write_las(folder / "cut.las", plane_xyz())
+    path.write_bytes(path.read_bytes()[:-34 * 5000])  # format 3: 34 bytes a point
+    return path
+
+
+def _text(name, text):
+    def make(folder):
+        path = folder / name
+        path.write_text(text, encoding="utf-16" if name.startswith("utf16") else "utf-8")
+        return path
+    return make
+
+
+_ROWS = "".join(f"{x:.3f};{y:.3f};{z:.3f}\n" for x, y, z in plane_xyz(200))
+
+
 def _tif(name, values_fn=slope_dem, **kwargs):
     def make(folder):
         return write_tif(folder / name, values_fn(), **kwargs)
@@ -285,6 +321,15 @@ CASES = [
              _maker(_text_as("text.tif")), _lidar(_text_as("text.tif"))),
     BadInput("xyz-holding-binary", "not an XYZ text file",
              _maker(_binary_xyz, crs=UTM), _lidar(_binary_xyz, crs=UTM)),
+    BadInput("xyz-header-without-x-y-z", "its header line names the columns Elev, Punkt",
+             _maker(_text("named.csv", "Elev;Punkt;Wert\n" + _ROWS), crs=UTM)),
+    BadInput("xyz-decimal-comma", "decimal comma",
+             _maker(_text("comma.csv", _ROWS.replace(".", ",")), crs=UTM)),
+    BadInput("xyz-utf16", "is UTF-16 text", _maker(_text("utf16.xyz", _ROWS), crs=UTM)),
+    BadInput("las-cut-short", "its header counts 20,000 points, the file holds 15,000",
+             _maker(_las_cut_short)),
+    BadInput("vertical-feet-geotiff-keys", "has elevations in US survey foot",
+             _maker(_las_vertical_feet_keys)),
     BadInput("empty-xyz", "is empty", _maker(_empty_xyz, crs=UTM), _lidar(_empty_xyz, crs=UTM)),
     BadInput("empty-las", "holds no points", _maker(_empty_las), _lidar(_empty_las)),
     BadInput("no-ground-points", "no ground points", _maker(_no_ground_las),

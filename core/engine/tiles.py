@@ -45,8 +45,8 @@ from affine import Affine
 from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
-from ..io import (GROUND_CLASS, atomic_output, classes_kept, file_format, las_fields_read,
-                  las_classes, las_xyz, read_band, read_las, read_xyz)
+from ..io import (GROUND_CLASS, atomic_output, classes_kept, file_format, las_classes, las_crs,
+                  las_fields_read, las_xyz, read_band, read_las, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes
@@ -254,7 +254,7 @@ def _read_window(path: str) -> tuple[np.ndarray, np.ndarray]:
     except Exception as exc:
         raise _Unreadable(f"tile {Path(file).name} is not a readable COPC file ({exc})") from None
     x, y = np.asarray(points.x), np.asarray(points.y)
-    inside = (x >= x0) & (x < x1) & (y >= y0) & (y < y1)
+    inside = (x >= x0) & (x < x1) & (y >= y0) & (y < y1) & ~np.asarray(points.withheld, bool)
     xyz = np.column_stack([x[inside], y[inside], np.asarray(points.z)[inside]])
     return xyz, np.asarray(points.classification)[inside]
 
@@ -272,11 +272,8 @@ def _tile_header(path: Path) -> tuple[int, object, tuple | None, bool]:
                           "with the LAS signature 'LASF')")
     try:
         with laspy.open(path) as reader:
-            try:
-                file_crs = reader.header.parse_crs()
-            except Exception:
-                file_crs = None
             header = reader.header
+            file_crs = las_crs(header)
             return int(header.point_count), file_crs, (
                 float(header.mins[0]), float(header.mins[1]), float(header.maxs[0]),
                 float(header.maxs[1])), is_copc(header)
@@ -324,13 +321,13 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
 # ---------------------------------------------------------------------------------------------
 # per-tile work (Dask tasks: plain functions of picklable arguments)
 def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """(xyz, LAS classes or None for text) of all a tile's points, as stored; a tile that cannot
-    be read raises ``_Unreadable`` naming it."""
+    """(xyz, LAS classes, or None for text without a class column) of all a tile's points, as
+    stored; a tile that cannot be read raises ``_Unreadable`` naming it."""
     if _WINDOW in str(path):
         return _read_window(str(path))
     if path.suffix.lower() not in LAS_EXTENSIONS:
         try:
-            return read_xyz(path), None
+            return read_xyz(path)
         except FloodMeshError as exc:  # not XYZ text (its message begins with the file's name)
             if not str(exc).startswith(path.name):
                 raise

@@ -13,9 +13,9 @@ The readers and writers the rest of FloodMesh uses are re-exported here, so that
 from .meshes import (Mesh2DM, read_2dm, read_mesh_2dm, read_prj, write_mesh_2dm, write_mesh_gpkg,
                      write_prj)
 from .outputs import atomic_output, jsonable, require_file, write_json
-from .points import (GROUND_CLASS, classes_kept, file_format, las_classes, las_fields_read,
-                     las_xyz, point_file_name, read_las, read_point_file, read_points, read_xyz,
-                     write_points_las)
+from .points import (GROUND_CLASS, classes_kept, file_format, las_classes, las_crs,
+                     las_fields_read, las_xyz, point_file_name, read_las, read_point_file,
+                     read_points, read_xyz, write_points_las)
 from .rasters import (INTEGER_COMPRESSION, RASTER_EXTENSIONS, TILE, no_valid_cells, nodata_tagged,
                       raster_crs, raster_crs_wkt, raster_profile, read_band, read_input,
                       read_raster, write_raster)
@@ -25,8 +25,8 @@ from .vectors import (read_boundary, read_breaklines, read_lines_gpkg, read_poin
 
 __all__ = [
     # points
-    "GROUND_CLASS", "classes_kept", "file_format", "las_classes", "las_fields_read", "las_xyz",
-    "point_file_name", "read_las", "read_point_file", "read_points", "read_xyz",
+    "GROUND_CLASS", "classes_kept", "file_format", "las_classes", "las_crs", "las_fields_read",
+    "las_xyz", "point_file_name", "read_las", "read_point_file", "read_points", "read_xyz",
     "write_points_las",
     # rasters
     "INTEGER_COMPRESSION", "RASTER_EXTENSIONS", "TILE", "no_valid_cells", "nodata_tagged",

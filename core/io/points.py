@@ -4,6 +4,9 @@ as LAS/LAZ (``write_points_las``)."""
 from __future__ import annotations
 
 import json
+import re
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +15,7 @@ from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import EPT_NAME, POINT_EXTENSIONS
 from ..points import PointCloud, clean_points
+from ..raster import RefusedCRS
 from .outputs import atomic_output, require_file
 
 GROUND_CLASS = 2
@@ -47,7 +51,13 @@ def read_point_file(path: Path, classes=None, note=None):
     if ext in (".las", ".laz"):
         return _read_las(path, classes, note)
     if ext in (".xyz", ".txt", ".csv", ".pts"):
-        return read_xyz(path), None
+        xyz, cls = read_xyz(path)
+        if cls is not None:
+            return classes_kept(xyz, cls, classes, path.name, note), None
+        if classes is not None and note:
+            note(f"{path.name} has no classification column: the classes given do not apply, "
+                 "all its points are used")
+        return xyz, None
     raise FloodMeshError(f"{path.name}: unknown point file type '{ext}'; use LAS/LAZ or "
                          "XYZ/CSV text (x y z per line), or a GeoTIFF DEM")
 
@@ -61,32 +71,101 @@ def _read_las(path: Path, classes, note=None):
         check_memory(points=count, advice="split the point file into tiles (e.g. pdal "
                                           "tile or lastile) and mesh them one by one")
 
-    las = read_las(path, f"{path.name} is not a readable LAS/LAZ file", check=check)
-    try:
-        file_crs = las.header.parse_crs()
-    except Exception:
-        file_crs = None
+    las = read_las(path, f"{path.name} is not a readable LAS/LAZ file", check=check, note=note)
+    file_crs = las_crs(las.header)
     cls = las_classes(las)
     keep = classes_table(np.bincount(cls, minlength=256), classes, path.name, note)
     return las_xyz(las, cls, keep), file_crs
 
 
-def read_las(path: Path, unreadable: str, *, check=None):
-    """A LAS/LAZ file's points (laspy's ``LasData``), only x, y, z and the class decompressed
-    (``las_fields_read``), after ``check(header)`` where given; where laspy cannot read it,
-    ``FloodMeshError``: ``unreadable`` and laspy's reason."""
+GEOKEY_UNITS = {9001: "metres", 9002: "feet", 9003: "US survey feet"}  # EPSG unit codes
+PROJECTED_CRS_KEY, PROJECTED_UNITS_KEY = 3072, 3076  # GeoTIFF keys (OGC 19-008r4)
+VERTICAL_CRS_KEY, VERTICAL_UNITS_KEY = 4096, 4099
+USER_DEFINED = 32767
+
+
+def las_crs(header):
+    """The CRS a LAS header declares: its WKT, else its GeoTIFF keys' EPSG CRS as laspy reads
+    them; a ``RefusedCRS`` where the keys say what laspy leaves out (a user-defined projection,
+    elevations in feet); None where it declares none."""
+    try:
+        crs = header.parse_crs()
+    except Exception:
+        crs = None
+    names = {type(vlr).__name__: vlr for vlr in header.vlrs}
+    if "GeoKeyDirectoryVlr" not in names or (crs is not None
+                                             and "WktCoordinateSystemVlr" in names):
+        return crs
+    keys = {key.id: key.value_offset for key in names["GeoKeyDirectoryVlr"].geo_keys
+            if key.tiff_tag_location == 0}  # values held in the directory itself
+    unit = _vertical_unit(keys)
+    if unit not in (None, "metres"):
+        return RefusedCRS(
+            f"has elevations in {unit} (its GeoTIFF keys' vertical CRS); FloodMesh works in "
+            "metres: convert z to metres first (pdal translate IN OUT -f filters.assign "
+            "--filters.assign.value=\"Z = Z * 0.3048\" for feet, 0.3048006 for US survey "
+            "feet)")
+    if keys.get(PROJECTED_CRS_KEY) == USER_DEFINED:
+        unit = GEOKEY_UNITS.get(keys.get(PROJECTED_UNITS_KEY))
+        fix = ("give its CRS (--crs EPSG:XXXX)" if unit in (None, "metres") else
+               "reproject x, y and z to a CRS in metres first (pdal translate IN OUT -f "
+               "filters.reprojection --filters.reprojection.out_srs=EPSG:XXXX, with z scaled)")
+        return RefusedCRS(f"has a user-defined projection in its GeoTIFF keys"
+                          f"{f' (in {unit})' if unit else ''} that FloodMesh cannot read: {fix}")
+    return crs
+
+
+def _vertical_unit(keys: dict) -> str | None:
+    """The unit of the elevations GeoTIFF ``keys`` (id: value) declare: their vertical units, or
+    their EPSG vertical CRS's; None where they declare neither."""
+    if VERTICAL_UNITS_KEY in keys:
+        code = keys[VERTICAL_UNITS_KEY]
+        return GEOKEY_UNITS.get(code, f"unit {code}")
+    if not 1024 <= keys.get(VERTICAL_CRS_KEY, 0) < USER_DEFINED:
+        return None
+    # lazy: PROJ loads only when this runs
+    from pyproj import CRS
+
+    try:
+        axis = CRS.from_epsg(keys[VERTICAL_CRS_KEY]).axis_info[0]
+    except Exception:  # a code PROJ does not know
+        return None
+    return "metres" if axis.unit_conversion_factor == 1.0 else axis.unit_name
+
+
+def read_las(path: Path, unreadable: str, *, check=None, note=None):
+    """A LAS/LAZ file's points (laspy's ``LasData``) but those flagged withheld, which the LAS
+    specification counts as deleted (``note`` told how many), only x, y, z, the class and its
+    flags decompressed (``las_fields_read``), after ``check(header)`` where given. Where laspy
+    cannot read it, or a LAS holds fewer points than its header counts (a copy cut short),
+    ``FloodMeshError``: ``unreadable`` and the reason."""
     # lazy: laspy loads only when this runs
     import laspy
 
     try:
         with laspy.open(path, **las_fields_read(laspy)) as reader:
+            header = reader.header
             if check is not None:
-                check(reader.header)
-            return reader.read()
+                check(header)
+            if not header.are_points_compressed:
+                held = (path.stat().st_size - header.offset_to_point_data) \
+                    // header.point_format.size
+                if held < header.point_count:
+                    raise FloodMeshError(
+                        f"{unreadable}: its header counts {header.point_count:,} points, the "
+                        f"file holds {max(held, 0):,}: it was cut short; copy or export it again")
+            las = reader.read()
     except FloodMeshError:
         raise
     except Exception as exc:
         raise FloodMeshError(f"{unreadable} ({exc})") from None
+    withheld = np.asarray(las.withheld, bool)
+    if withheld.any():
+        las.points = las.points[~withheld]
+        if note:
+            note(f"{path.name}: {int(withheld.sum()):,} points flagged withheld (deleted, by the "
+                 "LAS specification) were left out")
+    return las
 
 
 def las_classes(las) -> np.ndarray:
@@ -111,8 +190,8 @@ def las_xyz(las, cls: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
 
 
 def las_fields_read(laspy) -> dict:
-    """laspy.open's arguments that decompress only what FloodMesh reads (x, y, z and the
-    class) of a LAZ in a layered point format (6 to 10, LAS 1.4's): on 9 M points in format 7
+    """laspy.open's arguments that decompress only what FloodMesh reads (x, y, z, the class
+    and its flags, withheld among them) of a LAZ in a layered point format (6 to 10, LAS 1.4's): on 9 M points in format 7
     (with intensity, GPS time, scan angle and colour) 1.5–1.9 s where the whole point took
     2.3 s. Other formats are decompressed whole whatever is asked; laspy before 2.2 cannot
     choose."""
@@ -120,7 +199,7 @@ def las_fields_read(laspy) -> dict:
     if choose is None:
         return {}
     return {"decompression_selection": choose.XY_RETURNS_CHANNEL | choose.Z
-            | choose.CLASSIFICATION}
+            | choose.CLASSIFICATION | choose.FLAGS}
 
 
 def classes_kept(xyz, cls, classes, name: str, note=None):
@@ -187,48 +266,147 @@ def _read_ept(path: Path, classes, note=None):
     return classes_kept(np.vstack(parts), np.concatenate(cls), classes, name, note), file_crs
 
 
-def read_xyz(path: Path) -> np.ndarray:
+XYZ_HEAD_LINES = 5  # lines of XYZ text looked at for its layout
+COLUMN_NAMES = {  # what a header line of XYZ text may call each column, once unit and case are cut
+    "x": ("x", "easting", "east", "e", "lon", "long", "longitude"),
+    "y": ("y", "northing", "north", "n", "lat", "latitude"),
+    "z": ("z", "elevation", "elev", "height", "h", "altitude", "alt"),
+    "class": ("classification", "class", "cls"),
+}
+_DECIMAL_COMMA = re.compile(r"-?\d+(,\d+)?([eE][-+]?\d+)?")
+
+
+@dataclass(frozen=True)
+class XyzLayout:
+    """How XYZ text lays out its points: the field ``delimiter`` (None: white space), the lines
+    to ``skip`` (up to a header), the x, y, z ``columns`` and the LAS class column or None."""
+
+    delimiter: str | None
+    skip: int
+    columns: tuple[int, int, int]
+    classes: int | None = None
+
+
+def read_xyz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """(x, y, z of every row, their LAS classes or None) of XYZ/CSV text laid out as
+    ``xyz_layout`` finds; a UTF-8 byte-order mark is skipped and empty fields are read as NaN
+    (``points.clean_points`` leaves those rows out, with a note)."""
     size = path.stat().st_size
     if size == 0:
         raise FloodMeshError(f"{path.name} is empty: it holds no points")
     # a line "x y z" takes at least about 20 characters at millimetre precision
     check_memory(points=size // 20, advice="split the point file into tiles and mesh them one "
                                            "by one")
-    with open(path, "r", errors="replace") as fh:
-        head = [fh.readline() for _ in range(5)]
-    delimiter, skip, columns = _xyz_layout(head)
+    with open(path, "rb") as fh:
+        start = fh.read(4096)
+    if start[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise FloodMeshError(f"{path.name} is UTF-16 text: save it as UTF-8 (or ASCII) text")
+    if b"\x00" in start:
+        raise FloodMeshError(f"{path.name} is not an XYZ text file: it holds binary data; give "
+                             "it its real extension")
+    with open(path, encoding="utf-8-sig", errors="replace") as fh:
+        layout = xyz_layout([fh.readline() for _ in range(XYZ_HEAD_LINES)], path.name)
+    columns = layout.columns + (() if layout.classes is None else (layout.classes,))
+    where = "the columns its header names" if layout.skip else "the first three columns"
     try:
-        data = np.loadtxt(path, delimiter=delimiter, skiprows=skip, usecols=columns or (0, 1, 2),
-                          ndmin=2)
-    except (ValueError, IndexError) as exc:
-        raise FloodMeshError(f"{path.name} is not an XYZ text file with x, y, z in the first "
-                             f"three columns ({exc})") from None
-    return data
+        try:
+            data = _load_text(path, layout, columns)
+        except ValueError as exc:
+            if "could not convert string ''" not in str(exc):
+                raise
+            data = _load_text(path, layout, columns, empty=np.nan)
+    except (ValueError, IndexError) as exc:  # a field that is no number, a row too short
+        raise FloodMeshError(f"{path.name} is not an XYZ text file with x, y, z in {where} "
+                             f"({_at_line(exc, path, layout)})") from None
+    if not len(data):
+        raise FloodMeshError(f"{path.name} holds no points, only its header line")
+    if layout.classes is None:
+        return data, None
+    return data[:, :3], _class_codes(data[:, 3], path.name)
 
 
-XYZ_HEADERS = (("x", "y", "z"), ("easting", "northing", "elevation"), ("east", "north", "height"),
-               ("lon", "lat", "z"))  # column names a header line of XYZ text may give
+def _load_text(path: Path, layout: XyzLayout, columns, empty=None) -> np.ndarray:
+    """The ``columns`` of XYZ text as float64 (numpy's compiled reader); ``empty``: what an
+    empty field reads as (None: refused), through a converter, some ten times slower."""
+    convert = None if empty is None else (lambda field: float(field) if field.strip() else empty)
+    with open(path, encoding="utf-8-sig", errors="replace") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "input contained no data": said below
+        return np.loadtxt(fh, delimiter=layout.delimiter, skiprows=layout.skip, usecols=columns,
+                          ndmin=2, converters=convert)
 
 
-def _fields(line: str) -> list[str]:
-    return line.replace(",", " ").replace(";", " ").split()
+def _at_line(exc: Exception, path: Path, layout: XyzLayout) -> str:
+    """numpy's reason, its row (of the lines after the skipped ones that are neither blank nor
+    # comments; from 1 where a row is too short, else from 0) told as the file's line."""
+    def line(match) -> str:
+        row = int(match.group(1)) - ("invalid column index" in str(exc))
+        with open(path, encoding="utf-8-sig", errors="replace") as fh:
+            for number, text in enumerate(fh, 1):
+                if number > layout.skip and text.strip() and not text.lstrip().startswith("#"):
+                    if row == 0:
+                        return f"on line {number}"
+                    row -= 1
+        return match.group(0)
+
+    return re.sub(r"at row (\d+)", line, str(exc)).rstrip(".")
 
 
-def _xyz_layout(head: list[str]):
-    """(delimiter, header lines to skip, x, y, z columns) of XYZ text from its first lines; a
-    first line that is not numbers is a header, and the columns are those it names (None when it
-    names none of ``XYZ_HEADERS``)."""
-    delimiter = "," if any("," in line for line in head) else (";" if any(";" in line for line in head) else None)
-    first = _fields(head[0])
+def _class_codes(values: np.ndarray, name: str) -> np.ndarray:
+    """A class column's values as LAS classes (0-255); refused where they are not."""
+    bad = ~np.isfinite(values) | (values < 0) | (values > 255) | (values != np.round(values))
+    if bad.any():
+        raise FloodMeshError(f"{name}: its classification column holds {values[bad][0]:g}, not "
+                             "a LAS class (0-255): correct the column or remove its name from "
+                             "the header line")
+    return values.astype(np.uint8)
+
+
+def _fields(line: str, delimiter: str | None) -> list[str]:
+    return line.split(delimiter) if delimiter else line.split()
+
+
+def _column_name(field: str) -> str:
+    """A header field as ``COLUMN_NAMES`` spells it: quotes, a unit ("[m]", "(m)", "_m") and
+    case cut."""
+    name = re.sub(r"[\[(].*", "", field.strip().strip("\"'")).strip().lower()
+    return re.sub(r"[ _]m$", "", name)
+
+
+def xyz_layout(head: list[str], name: str) -> XyzLayout:
+    """The layout of XYZ text from its first lines: fields split at commas, else semicolons, else
+    white space; a first line (after blank and # lines) that is not numbers is a header, whose
+    names (``COLUMN_NAMES``, in any order) give the columns; without one, the first three are
+    x, y, z. Refused, naming the fix: a header that does not name x, y and z, and numbers with a
+    decimal comma."""
+    lines = [(k, line) for k, line in enumerate(head) if line.strip()
+             and not line.lstrip().startswith("#")]
+    if not lines:
+        raise FloodMeshError(f"{name} holds no points in its first {len(head)} lines")
+    for _, line in lines:
+        fields = re.split(r"[;\t ]+", line.strip())
+        if len(fields) >= 3 and any("," in f for f in fields) and all(
+                _DECIMAL_COMMA.fullmatch(f) for f in fields):
+            raise FloodMeshError(f"{name} writes numbers with a decimal comma ({line.strip()!r}): "
+                                 "export it with a decimal point (e.g. in the spreadsheet's "
+                                 "language settings, or with sed 's/,/./g' IN > OUT)")
+    text = "".join(line for _, line in lines)
+    delimiter = "," if "," in text else (";" if ";" in text else None)
+    first, fields = lines[0][0], _fields(lines[0][1], delimiter)
     try:
-        [float(v) for v in first[:3]]
-        return delimiter, 0, (0, 1, 2)
-    except ValueError:  # a header line such as "x,y,z": take the columns it names
-        names = [name.strip("\"'").lower() for name in first]
-        for aliases in XYZ_HEADERS:
-            if all(a in names for a in aliases):
-                return delimiter, 1, tuple(names.index(a) for a in aliases)
-        return delimiter, 1, None
+        [float(v) for v in fields[:3]]
+        return XyzLayout(delimiter, first, (0, 1, 2))
+    except ValueError:  # a header line: the columns are those it names
+        pass
+    names = [_column_name(f) for f in fields]
+    found = {role: [k for k, n in enumerate(names) if n in aliases]
+             for role, aliases in COLUMN_NAMES.items()}
+    if any(len(found[role]) != 1 for role in "xyz") or len(found["class"]) > 1:
+        raise FloodMeshError(
+            f"{name}: its header line names the columns {', '.join(f.strip() for f in fields)}, "
+            "not one x, one y and one z column: name them x, y, z (or easting, northing, "
+            "elevation), or delete the header line to read the first three columns as x, y, z")
+    return XyzLayout(delimiter, first + 1, tuple(found[role][0] for role in "xyz"),
+                     found["class"][0] if found["class"] else None)
 
 
 TIFF_SIGNATURES = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # TIFF and BigTIFF
@@ -256,15 +434,16 @@ def file_format(path) -> str | None:
         return "raster"
     if ext not in POINT_EXTENSIONS or b"\x00" in head:
         return None
-    lines = head.decode("utf-8", "replace").splitlines()
-    lines = [line for line in lines[:-1 if len(head) == 4096 else None] if line.strip()][:5]
-    if not lines:
-        return None
-    _, skip, columns = _xyz_layout(lines)
-    rows = [_fields(line) for line in lines[skip:]]
+    lines = head.decode("utf-8-sig", "replace").splitlines()
+    lines = lines[:-1 if len(head) == 4096 else None][:XYZ_HEAD_LINES]
     try:
-        ok = bool(rows) and columns is not None and all(
-            [float(row[c]) for c in columns] for row in rows)
+        layout = xyz_layout(lines, path.name)
+    except FloodMeshError:
+        return None
+    rows = [_fields(line, layout.delimiter) for line in lines[layout.skip:]
+            if line.strip() and not line.lstrip().startswith("#")]
+    try:
+        ok = bool(rows) and all([float(row[c]) for c in layout.columns] for row in rows)
     except (ValueError, IndexError):
         return None
     return "xyz" if ok else None

@@ -47,7 +47,8 @@ def test_las_round_trip_reads_ground_class_by_default(tmp_path, ext):
 
 def test_class_flags_of_older_point_formats_do_not_change_the_class(tmp_path):
     """Point formats 0 to 5 keep three flags (synthetic, key-point, withheld) in the top bits
-    of the class byte: a flagged ground point is still ground, as laspy's own class says."""
+    of the class byte: a flagged ground point is still ground, as laspy's own class says, but
+    one flagged withheld is deleted by the LAS specification: left out, with a note."""
     import laspy
 
     cloud = _cloud(n=400)
@@ -55,19 +56,23 @@ def test_class_flags_of_older_point_formats_do_not_change_the_class(tmp_path):
     path = tmp_path / "flagged.laz"
     io.write_points_las(path, cloud, classes=classes)
     las = laspy.read(path)
+    withheld = np.arange(len(cloud)) % 5 == 0
     las.synthetic = np.arange(len(cloud)) % 2 == 0
-    las.withheld = np.arange(len(cloud)) % 5 == 0
+    las.withheld = withheld
     las.write(path)
     assert (np.asarray(laspy.read(path).points.array["raw_classification"]) > 31).any()
-    ground = io.read_points(path)
-    np.testing.assert_allclose(ground.xyz, cloud.xyz[classes == 2], rtol=0, atol=1e-3)
+    notes = []
+    ground = io.read_points(path, note=notes.append)
+    np.testing.assert_allclose(ground.xyz, cloud.xyz[(classes == 2) & ~withheld], rtol=0,
+                               atol=1e-3)
+    assert any(f"{withheld.sum()} points flagged withheld" in n for n in notes)
 
 
 def test_laz_of_las_1_4_layers_reads_its_ground_exactly(tmp_path):
     """A LAS 1.4 LAZ in point format 7 (its fields in layers compressed apart: FloodMesh
-    decompresses only x, y, z and the class) with every other field filled: the ground points
-    are those laspy reads with every layer, to the stored integer, and a class above 31 (which
-    only formats 6 to 10 hold) can be asked for."""
+    decompresses only x, y, z, the class and its flags) with every other field filled: the
+    ground points are those laspy reads with every layer, to the stored integer, but those
+    flagged withheld, and a class above 31 (which only formats 6 to 10 hold) can be asked for."""
     import laspy
 
     cloud = _cloud(n=500)
@@ -85,14 +90,18 @@ def test_laz_of_las_1_4_layers_reads_its_ground_exactly(tmp_path):
     las.number_of_returns = np.full(n, 3, np.uint8)
     las.scan_angle = rng.integers(-3000, 3000, n).astype(np.int16)
     las.red = las.green = las.blue = rng.integers(0, 65535, n).astype(np.uint16)
+    las.withheld = rng.random(n) < 0.1
     path = tmp_path / "points_1_4.laz"
     las.write(path)
 
     whole = laspy.read(path)
     stored = np.column_stack([whole.x, whole.y, whole.z])
+    kept = ~np.asarray(whole.withheld, bool)
+    assert not kept.all()
     for classes, want in ((None, 2), ((64,), 64)):
         read = io.read_points(path, classes=classes)
-        np.testing.assert_array_equal(read.xyz, stored[np.asarray(whole.classification) == want])
+        np.testing.assert_array_equal(
+            read.xyz, stored[(np.asarray(whole.classification) == want) & kept])
         assert read.crs == UTM32
 
 
@@ -124,6 +133,70 @@ def test_xyz_text_variants(tmp_path, name, text):
     points = io.read_points(path, crs="EPSG:25832")
     np.testing.assert_array_equal(points.xyz, XYZ)
     assert points.crs == UTM32
+
+
+def _rows(columns, sep=","):
+    return "".join(sep.join(f"{v}" for v in row) + "\n" for row in columns)
+
+
+@pytest.mark.parametrize("header, columns", [
+    ("Northing,Easting,Height", (1, 0, 2)),  # y first, as many surveyors write it
+    ("N,E,Z", (1, 0, 2)),
+    ("Elev,East,North", (1, 2, 0)),
+    ("X [m],Y [m],Z [m],Intensity,Classification", (0, 1, 2)),  # units, names with spaces
+    ("x (m),y (m),z (m)", (0, 1, 2)),
+    ("PointID,E,N,Z", (1, 2, 3)),
+    ("\ufeffz,x,y", (1, 2, 0)),  # Excel's "CSV UTF-8" begins with a byte-order mark
+])
+def test_xyz_header_names_its_columns_in_any_order(tmp_path, header, columns):
+    """The columns are those the header names, whatever their order, case, units or a
+    byte-order mark (the other columns, a class among them, hold 2)."""
+    rows = np.full((len(XYZ), header.count(",") + 1), 2.0)
+    rows[:, list(columns)] = XYZ
+    path = tmp_path / "points.csv"
+    path.write_text(header + "\n" + _rows(rows), encoding="utf-8")
+    np.testing.assert_array_equal(io.read_points(path, crs="EPSG:25832").xyz, XYZ)
+
+
+def test_xyz_byte_order_mark_without_header_keeps_every_point(tmp_path):
+    """A UTF-8 byte-order mark before the first number is no header: no point is lost."""
+    path = tmp_path / "points.xyz"
+    path.write_text("\ufeff" + _rows(XYZ, " "), encoding="utf-8")
+    np.testing.assert_array_equal(io.read_points(path, crs="EPSG:25832").xyz, XYZ)
+
+
+def test_xyz_class_column_keeps_the_ground(tmp_path):
+    """A classification column is read as LAS classes: the ground (2) when there is one, or the
+    classes asked for; without one, --classes is said not to apply."""
+    noise = XYZ - [0.0, 0.0, 20.0]
+    rows = np.vstack([np.column_stack([XYZ, np.full(4, 2)]), np.column_stack([noise,
+                                                                              np.full(4, 7)])])
+    path = tmp_path / "classified.csv"
+    path.write_text("x,y,z,classification\n" + _rows(rows))
+    np.testing.assert_array_equal(io.read_points(path, crs="EPSG:25832").xyz, XYZ)
+    np.testing.assert_array_equal(io.read_points(path, crs="EPSG:25832", classes=[7]).xyz, noise)
+    plain, notes = tmp_path / "plain.csv", []
+    plain.write_text("x,y,z\n" + _rows(XYZ))
+    io.read_points(plain, crs="EPSG:25832", classes=[2], note=notes.append)
+    assert any("no classification column" in n for n in notes)
+
+
+def test_xyz_empty_fields_are_left_out_with_a_note(tmp_path):
+    """A row with an empty field is left out, said in a note, as the user guide promises."""
+    path, notes = tmp_path / "gaps.csv", []
+    path.write_text(_rows(XYZ) + "412030.0,5652030.0,\n")
+    points = io.read_points(path, crs="EPSG:25832", note=notes.append)
+    np.testing.assert_array_equal(points.xyz, XYZ)
+    assert any("1 points without a finite x, y and z" in n for n in notes)
+
+
+def test_xyz_bad_row_is_named_by_its_line(tmp_path):
+    """A field that is no number is named by the file's own line number, header and comments
+    counted."""
+    path = tmp_path / "points.csv"
+    path.write_text("# survey\nx,y,z\n" + _rows(XYZ[:2]) + "412020.0,oops,9.75\n")
+    with pytest.raises(FloodMeshError, match="'oops' to float64 on line 5"):
+        io.read_points(path, crs="EPSG:25832")
 
 
 def test_xyz_without_crs_asks_for_crs(tmp_path):

@@ -188,6 +188,31 @@ def test_a_truncated_tile_is_named_with_the_option_that_leaves_it_out(delivery, 
                           equal_nan=True)
 
 
+def test_withheld_points_of_a_tile_are_not_gridded(delivery, tmp_path):
+    """Points flagged withheld (deleted, by the LAS specification; here a copy of a tile's
+    ground raised 30 m) grid to nothing: the DEM is that of the tiles without them."""
+    import laspy
+
+    names = ("T_1_1.laz", "T_1_2.laz", "T_2_1.laz", "T_2_2.laz")
+    flagged, plain = tmp_path / "flagged", tmp_path / "plain"
+    for folder in (flagged, plain):
+        folder.mkdir()
+        for name in names:
+            (folder / name).write_bytes((delivery / name).read_bytes())
+    las = laspy.read(str(delivery / "T_1_1.laz"))
+    raised = laspy.LasData(copy.deepcopy(las.header), las.points[las.classification == 2])
+    raised.z = np.asarray(raised.z) + 30.0
+    raised.withheld = np.ones(len(raised.points), bool)
+    both = laspy.ScaleAwarePointRecord(np.concatenate([las.points.array, raised.points.array]),
+                                       las.points.point_format, las.header.scales,
+                                       las.header.offsets)
+    laspy.LasData(copy.deepcopy(las.header), both).write(str(flagged / "T_1_1.laz"))
+    results = [_grid([folder], tmp_path / f"{folder.name}.tif") for folder in (flagged, plain)]
+    assert all(r.returncode == 0 for r in results), [r.stderr for r in results]
+    assert np.array_equal(_dem(tmp_path / "flagged.tif")[0], _dem(tmp_path / "plain.tif")[0],
+                          equal_nan=True)
+
+
 def test_a_file_is_a_tile_by_its_content(tmp_path):
     """Only LAS/LAZ ('LASF'), GeoTIFF (a TIFF header) and XYZ text of numbers are tiles; the
     rest of a folder is left out with one note; a .laz that is no LAS is a broken tile."""
