@@ -24,13 +24,18 @@ from ..steps.simplify import simplify_breaklines
 from .pipeline import run_inputs, trace_front
 from .source import open_source
 
-_OWN_MESH = re.compile(r"^mesh_.+\.2dm$")
+_OWN_MESH = re.compile(r"^mesh_.+\.(2dm|prj)$")
 SERIES_FILES = ("series.csv", "series.json", "series.png")
 
 
 def _is_own(name: str) -> bool:
     """Whether a series writes files of this name (see ``outputs.staged_folder``)."""
     return name in SERIES_FILES or bool(_OWN_MESH.match(name))
+
+
+def _mesh_files(labels) -> list[str]:
+    """The files of each labelled mesh: the 2DM and the .prj beside it."""
+    return [f"mesh_{label}.{ext}" for label in labels for ext in ("2dm", "prj")]
 
 
 COLUMNS = ("label", "max_area_m2", "simplification", "amount", "nodes", "triangles",
@@ -154,11 +159,11 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
                log: Callable[[str], None] | None = None,
                cancelled: Callable[[], bool] | None = None) -> dict:
     """Read, grid, slope, breakpoints and trace ``input_path`` once (as ``options`` say), then
-    mesh and assess once per setting; write ``SERIES_FILES`` and ``mesh_<label>.2dm`` per row
-    into ``out_dir``. Returns the series.json content."""
+    mesh and assess once per setting; write ``SERIES_FILES`` and ``mesh_<label>.2dm`` (its CRS
+    in ``mesh_<label>.prj``) per row into ``out_dir``. Returns the series.json content."""
     out, source = Path(out_dir), open_source(input_path)
     inputs = run_inputs(source, options)
-    check_output_folder(out, inputs, [*SERIES_FILES, *(f"mesh_{s.label}.2dm" for s in settings)])
+    check_output_folder(out, inputs, [*SERIES_FILES, *_mesh_files(s.label for s in settings)])
     front = trace_front(source, options, cancelled=cancelled)
     rows, meshes = scale_series(front.dem, front.traced, front.holdout.xyz, settings,
                                 min_angle=options.min_angle,
@@ -168,7 +173,8 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
     # the folder is replaced as a whole: an interrupt leaves the old series' files or these
     with staged_folder(out, own=_is_own, keep=inputs) as stage:
         for row, mesh in zip(rows, meshes):
-            io.write_mesh_2dm(stage / f"mesh_{row['label']}.2dm", mesh.nodes, mesh.triangles)
+            io.write_mesh_2dm(stage / f"mesh_{row['label']}.2dm", mesh.nodes, mesh.triangles,
+                              crs=front.dem.crs)
         n = max((r["n_assessed"] for r in rows), default=0)
         threshold = nssda_threshold_m(n)
         write_series_csv(stage / "series.csv", rows)
@@ -178,6 +184,6 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
                   "cell_size_m": front.dem.cell_size, "min_angle_deg": options.min_angle,
                   "n_holdout": len(front.holdout), "holdout_source": front.holdout_source,
                   "n_breaklines_traced": len(front.traced), "rows": rows,
-                  "files": [*SERIES_FILES, *(f"mesh_{r['label']}.2dm" for r in rows)]}
+                  "files": [*SERIES_FILES, *_mesh_files(r["label"] for r in rows)]}
         io.write_json(stage / "series.json", result)
     return io.jsonable(result)

@@ -120,3 +120,26 @@ def test_series_meshes_have_runs_spacing_for_a_flood_model(series_run, demo_poin
     r_spaced, r_plain = (inradii(nodes, tri) for nodes, tri in (spaced, unspaced))
     assert r_plain.min() < 0.15 <= r_spaced.min()
     assert plain["rows"][0]["nodes"] > result["rows"][0]["nodes"]
+
+
+def test_series_meshes_carry_their_crs_to_export(tmp_path, capsys):
+    """Every 2DM a series writes has its .prj beside it (as run's mesh.2dm): export then needs
+    no --crs and gives the DEM's CRS."""
+    import fiona
+    from pyproj import CRS
+
+    from floodmesh.core.frontends.cli import main
+
+    from .test_mesh import _plane_dem
+
+    dem, out = tmp_path / "dem.tif", tmp_path / "series"
+    io.write_raster(dem, _plane_dem())
+    assert main(["series", str(dem), "--out", str(out), "--max-areas", "100,50"]) == 0
+    for label in ("a100-k4", "a50-k4"):
+        wkt = io.read_prj(out / f"mesh_{label}.2dm")
+        assert wkt is not None and CRS.from_wkt(wkt) == CRS.from_epsg(25832), label
+    capsys.readouterr()
+    assert main(["export", str(out / "mesh_a50-k4.2dm"), str(tmp_path / "mesh.gpkg")]) == 0, \
+        capsys.readouterr().err
+    with fiona.open(tmp_path / "mesh.gpkg") as layer:
+        assert CRS.from_user_input(layer.crs_wkt) == CRS.from_epsg(25832)
