@@ -193,10 +193,10 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     flow_area = flow_area_for(flow_area, terrain.cell_size)
     # smaller triangles where water flows and the terrain needs them (see drainage)
     flow = None if flow_area is None else flow_size(terrain, flow_area=flow_area)
-    result_mesh, _, _ = flow_refined(lambda size, _: build_mesh(
+    result_mesh, _, _ = flow_refined(lambda size, _, told: build_mesh(
         terrain, lines, min_angle=min_angle, max_area=max_area, conforming=conforming,
-        domain=domain, size_field=size, max_triangles=max_triangles, note=note),
-        size, flow, None, terrain, lines=lines)
+        domain=domain, size_field=size, max_triangles=max_triangles, note=told),
+        size, flow, None, terrain, lines=lines, note=note)
     io.write_mesh_2dm(output, result_mesh.nodes, result_mesh.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "crs": terrain.crs.to_wkt()}
     if triangles:

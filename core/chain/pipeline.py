@@ -183,19 +183,19 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
                       spacing)
     kept = {}
 
-    def build(size, spacing):
+    def build(size, spacing, told):
         """The mesh of ``size``, its lines spaced for a flood model (see hydraulic_lines) and
-        thinned to the flow ``spacing`` (a Grid, or None)."""
+        thinned to the flow ``spacing`` (a Grid, or None), its repairs said to ``told``."""
         kept["lines"], kept["stats"] = (plain if spacing is None else _lines_for_flood(
             front, options, lines, domain, spacing, low_ground))
         return build_mesh(front.dem, kept["lines"] + front.own_lines,
                           min_angle=options.min_angle, max_area=max_area,
                           conforming=options.conforming, domain=domain, size_field=size,
                           max_triangles=options.max_triangles,
-                          corner_gap=options.min_spacing or None, note=note)
+                          corner_gap=options.min_spacing or None, note=told)
 
     mesh, size, flow_zone = steps.run("mesh", flow_refined, build, size, flow, spacing,
-                                      front.dem, lines=plain[0] + front.own_lines)
+                                      front.dem, lines=plain[0] + front.own_lines, note=note)
     detected, line_stats = kept["lines"], kept["stats"]
     mesh_lines = detected + front.own_lines
     mesh, rounds = _terrain_z(mesh, front, options, steps, fits, mesh_lines, domain, size,

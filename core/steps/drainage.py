@@ -235,16 +235,32 @@ def misfit_triangles(dem: Grid, cells: np.ndarray, nodes: np.ndarray, triangles:
 
 
 def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | None, dem: Grid,
-                 *, lines=()):
-    """(mesh, size field, figures or None): ``build(size, spacing)``, a Mesh of that size field
-    with its break lines thinned to the flow spacing ``spacing`` (a Grid, see ``flow_spacing``;
-    None: not thinned). Without a flow size ``flow`` (see ``flow_size``), that mesh without the
-    spacing; with one, first that mesh, whose triangles with relief that no plane follows
-    (``misfit_triangles`` on the flow zone, but the cells a cell or less from one of its
-    ``lines``, (k, 2+) arrays, where the DEM rounds the kink the line carries) then take the
-    flow size, and the lines the flow spacing within a flow triangle's side of them, and only
-    there. Figures: the shares of the DEM's valid cells in the flow zone, refined and thinned,
-    the DEM's noise and the tolerance (m)."""
+                 *, lines=(), note=None):
+    """(mesh, size field, figures or None): ``build(size, spacing, note)``, a Mesh of that size
+    field with its break lines thinned to the flow spacing ``spacing`` (a Grid, see
+    ``flow_spacing``; None: not thinned), its repairs told to ``note``. Without a flow size
+    ``flow`` (see ``flow_size``), that mesh without the spacing; with one, first that mesh,
+    whose triangles with relief that no plane follows (``misfit_triangles`` on the flow zone,
+    but the cells a cell or less from one of its ``lines``, (k, 2+) arrays, where the DEM
+    rounds the kink the line carries) then take the flow size, and the lines the flow spacing
+    within a flow triangle's side of them, and only there. Figures: the shares of the DEM's
+    valid cells in the flow zone, refined and thinned, the DEM's noise and the tolerance (m).
+    ``note`` hears the notes of the mesh returned only, not those of a first mesh built again
+    (the same repairs of nearly the same lines)."""
+    notes = []
+
+    def build_told(size, spacing):
+        notes.clear()
+        return build(size, spacing, notes.append)
+
+    result = _flow_refined(build_told, size, flow, spacing, dem, lines)
+    for message in notes if note else ():
+        note(message)
+    return result
+
+
+def _flow_refined(build, size, flow, spacing, dem: Grid, lines):
+    """``flow_refined``; ``build(size, spacing)`` tells its notes itself."""
     # lazy: SciPy loads only when this runs
     from scipy.ndimage import binary_dilation
 

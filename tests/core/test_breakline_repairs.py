@@ -1,6 +1,8 @@
 """User break lines that cross, touch, duplicate each other or meet at tiny angles, and DEMs with
 large nodata holes (water): each gives a valid mesh and says what was repaired, through
 ``floodmesh mesh --breaklines`` and through build_mesh."""
+import json
+
 import numpy as np
 import pytest
 from affine import Affine
@@ -11,6 +13,7 @@ from floodmesh.core.frontends.cli import main
 from floodmesh.core.steps.mesh import build_mesh, mesh_quality, triangle_angles, triangle_areas
 from floodmesh.core.raster import Grid
 
+from ..conftest import swaled
 from .test_mesh import ORIGIN, _covered_length, _edges, _line, _plane, _plane_dem
 
 CASES = {
@@ -153,3 +156,41 @@ def test_line_meeting_another_at_a_sharp_angle_is_shortened_not_dropped():
     # ends 2·snap (0.5 m) off the other line: 1.46 m of the 26.6 m inside the 59 m domain less
     length = np.hypot(*(b - a))
     assert _covered_length(mesh.nodes, edges, a, b) > length - 2.5
+
+
+def _swaled_valley():
+    """A 200 x 101 m valley falling 0.5 % east, its sides rising 5 %, with swales on its west
+    half's low ground (``swaled``): relief the flow area refines, so the mesh is built twice."""
+    east, north = np.meshgrid(np.arange(200) + 0.5, np.arange(101) + 0.5)
+    z = 0.005 * east + 0.05 * np.abs(north - 50.5)
+    dem = Grid(z.astype(np.float32), Affine(1.0, 0, ORIGIN[0], 0, -1.0, ORIGIN[1] + 101),
+               CRS.from_epsg(25832))
+    return swaled(dem)[0]
+
+
+@pytest.mark.parametrize("front_end", ["run", "Build mesh"])
+def test_a_repair_is_said_once_when_the_flow_area_meshes_again(front_end, tmp_path, capsys):
+    """Two crossing lines of the user's on a valley whose swales the flow area refines: the
+    mesh is built again with smaller triangles there, and the join is said once (on stderr and
+    in report.json for run; QGIS's Build mesh, which asks for the flow area, as well), not once
+    for each mesh built."""
+    from floodmesh.core.chain import files
+
+    dem, lines = tmp_path / "dem.tif", tmp_path / "lines.gpkg"
+    io.write_raster(dem, _swaled_valley())
+    io.write_lines_gpkg(lines, [_line([(20, 30), (80, 70)]), _line([(20, 70), (80, 30)])],
+                        CRS.from_epsg(25832))
+    if front_end == "run":
+        out = tmp_path / "out"
+        assert main(["run", str(dem), "--lines", str(lines), "--out", str(out)]) == 0
+        notes = [line.removeprefix("floodmesh: note: ")
+                 for line in capsys.readouterr().err.splitlines() if "note: " in line]
+        assert notes == json.loads((out / "report.json").read_text())["notes"]
+        assert json.loads((out / "report.json").read_text())["flow_zone"]["refined_share"] > 0
+    else:
+        notes = []
+        files.mesh(dem, tmp_path / "mesh.2dm", user_lines=lines, flow_area=None,
+                   note=notes.append)
+    assert [n for n in notes if "joined" in n] == [
+        "break lines were joined at 1 nodes where they cross or touch one another or the boundary"]
+    assert len(set(notes)) == len(notes), notes
