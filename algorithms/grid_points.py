@@ -1,10 +1,9 @@
 """Grid LiDAR points: points to a DEM by linear (TIN) interpolation."""
-from qgis.core import (QgsProcessingException, QgsProcessingParameterCrs,
-                       QgsProcessingParameterFile, QgsProcessingParameterNumber,
-                       QgsProcessingParameterRasterDestination, QgsProcessingParameterString,
-                       QgsProcessingParameterVectorDestination)
+from qgis.core import (QgsProcessingParameterCrs, QgsProcessingParameterFile,
+                       QgsProcessingParameterNumber, QgsProcessingParameterRasterDestination,
+                       QgsProcessingParameterString, QgsProcessingParameterVectorDestination)
 
-from ..core.options import check_cell_size, check_holdout, check_max_gap
+from ..core.options import check_cell_size, check_holdout, check_max_gap, parse_classes
 from .compat import DOUBLE, INTEGER
 from .base import FloodMeshAlgorithm, crs_or_none, distance, point_cloud_parameter
 from .tiles import add_tile_parameters, dask_settings, input_or_tiles, skip_unreadable
@@ -58,14 +57,10 @@ class GridPointsAlgorithm(FloodMeshAlgorithm):
         check_cell_size(self.parameterAsDouble(parameters, self.CELL_SIZE, context))
         check_max_gap(self.max_gap(parameters, context))
         check_holdout(self.parameterAsDouble(parameters, self.HOLDOUT, context))
+        parse_classes(self.parameterAsString(parameters, self.CLASSES, context))
 
     def process(self, parameters, context, feedback):
-        text = self.parameterAsString(parameters, self.CLASSES, context).strip()
-        try:
-            classes = [int(c) for c in text.split(",")] if text else None
-        except ValueError:
-            raise QgsProcessingException(f"LAS classes must be whole numbers separated by "
-                                         f"commas, e.g. 2,9; got {text!r}") from None
+        classes = parse_classes(self.parameterAsString(parameters, self.CLASSES, context))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
         holdout_out = self.parameterAsOutputLayer(parameters, self.HOLDOUT_OUTPUT, context)
         result = self.run_step("grid", {

@@ -12,7 +12,7 @@ from qgis.core import (QgsMeshLayer, QgsProcessing, QgsProcessingException, QgsP
 
 from ..core.errors import FloodMeshError
 from ..core.options import (BREAKPOINT_METHODS, EXPORT_FORMAT_LABELS, EXPORT_FORMATS, LOG_KERNELS,
-                            MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions)
+                            MAX_MIN_ANGLE, NODE_ELEVATIONS, RunOptions, parse_classes)
 from .compat import DOUBLE, INTEGER, VECTOR_LINE
 from .base import (FloodMeshAlgorithm, add_domain_parameters, crs_or_none, distance, domain_files,
                    labels, point_cloud_parameter)
@@ -190,14 +190,9 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
         """The chain's options from the parameters; RunOptions checks their ranges."""
         boundary, user_lines = domain_files(self, parameters, context)
         simplify = self.parameterAsEnum(parameters, self.SIMPLIFY, context)
-        text = self.parameterAsString(parameters, self.CLASSES, context).strip()
-        try:
-            classes = tuple(int(c) for c in text.split(",")) if text else None
-        except ValueError:
-            raise FloodMeshError(f"LAS classes must be whole numbers separated by commas, e.g. "
-                                 f"2,9; got {text!r}") from None
         return RunOptions(
-            classes=classes, max_gap=self.optional_number(parameters, self.MAX_GAP, context),
+            classes=parse_classes(self.parameterAsString(parameters, self.CLASSES, context)),
+            max_gap=self.optional_number(parameters, self.MAX_GAP, context),
             sigma=self.parameterAsDouble(parameters, self.SIGMA, context),
             sensitivity=self.parameterAsDouble(parameters, self.SENSITIVITY, context),
             log_kernel=LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL, context)],

@@ -9,6 +9,7 @@ command line, the pipeline and QGIS all give the same message for the same mista
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -208,6 +209,36 @@ def check_seed(value) -> int:
     return value
 
 
+_CLASSES_EXAMPLE = "e.g. 2 (ground) or 2,9 (ground and water)"
+
+
+def parse_classes(text) -> tuple[int, ...] | None:
+    """The LAS classes of ``"2,9"`` (``check_classes``); None for empty text (the default)."""
+    text = str(text or "").strip()
+    if not text:
+        return None
+    try:
+        classes = tuple(int(c) for c in text.split(","))
+    except ValueError:
+        raise FloodMeshError(f"LAS classes must be comma-separated class numbers 0-255, got "
+                             f"{text!r}: {_CLASSES_EXAMPLE}") from None
+    return check_classes(classes)
+
+
+def check_classes(classes) -> tuple[int, ...] | None:
+    """LAS classes to grid: whole numbers 0-255 (a LAS file has no others), or None."""
+    if classes is None:
+        return None
+    classes = tuple(classes)
+    bad = [c for c in classes if isinstance(c, bool) or not isinstance(c, numbers.Integral)
+           or not 0 <= c <= 255]
+    if bad or not classes:
+        raise FloodMeshError(f"LAS classes are whole numbers 0-255, got "
+                             f"{', '.join(map(str, bad)) if bad else 'none'}: give classes in "
+                             f"that range, {_CLASSES_EXAMPLE}")
+    return tuple(int(c) for c in classes)
+
+
 def check_positive_int(value, what: str, minimum: int = 1) -> int:
     value = _number(value, what)
     if not (value >= minimum and value == int(value)):
@@ -356,6 +387,7 @@ class RunOptions:
                                  f"(off) to 8, got {self.misfit_passes}; 1 is the default")
         check_holdout(self.holdout)
         check_seed(self.seed)
+        check_classes(self.classes)
         if self.workers is not None:
             check_positive_int(self.workers, "number of Dask workers")
         check_min_points(self.min_points)

@@ -15,9 +15,9 @@ from pathlib import Path
 
 from .. import io
 from ..io.outputs import check_outputs, require_suffix
-from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_holdout, check_max_area,
-                       check_max_gap, check_max_triangles, check_min_angle, check_seed,
-                       is_point_source)
+from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, check_holdout,
+                       check_max_area, check_max_gap, check_max_triangles, check_min_angle,
+                       check_seed, is_point_source)
 from ..points import PointCloud, split_holdout
 from ..raster import require_metric_crs
 from ..steps.breakpoints import breakpoints_file
@@ -51,7 +51,7 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     check_max_gap(max_gap)
     check_holdout(holdout)
     check_seed(seed)
-    classes = tuple(classes) if classes else None
+    classes = check_classes(classes) if classes else None
     # lazy: PROJ loads only when this runs
     from ..engine.tiles import grid_point_tiles, read_point_tiles
 

@@ -18,7 +18,7 @@ from ..chain import files as steps
 from ..errors import (Cancelled, FloodMeshError, Terminated, interrupts_unwrapped,
                       stop_signals_as_interrupts)
 from ..options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
-                       NODE_ELEVATIONS, RunOptions, parse_formats)
+                       NODE_ELEVATIONS, RunOptions, parse_classes, parse_formats)
 from .console import ProgressBar, print_note, print_notes
 from .flood_cli import add_flood_commands
 from .process import end_process, keep_freed_memory
@@ -48,6 +48,14 @@ def _list(kind):
     def parse(text):
         return tuple(kind(item) for item in text.split(",") if item.strip())
     return parse
+
+
+def _las_classes(text: str) -> tuple[int, ...] | None:
+    """``--classes 2,9``: comma-separated LAS class numbers 0-255 (``parse_classes``)."""
+    try:
+        return parse_classes(text)
+    except FloodMeshError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
@@ -114,7 +122,7 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
     p.add_argument("--seed", type=int, default=DEFAULTS.seed, help="random seed (default 0)")
     p.add_argument("--max-gap", type=float,
                    help="longest triangle edge bridged when gridding, m (default 10 cells)")
-    p.add_argument("--classes", type=lambda s: tuple(int(c) for c in s.split(",")),
+    p.add_argument("--classes", type=_las_classes,
                    help="LAS classes to grid, e.g. 2,9 (default: 2 when classified)")
     if not series:
         p.add_argument("--formats", default="",
@@ -434,7 +442,7 @@ def _add_step_commands(sub) -> None:
     p.add_argument("--out", required=True, help="DEM GeoTIFF")
     p.add_argument("--crs")
     p.add_argument("--max-gap", type=float)
-    p.add_argument("--classes", type=lambda s: tuple(int(c) for c in s.split(",")))
+    p.add_argument("--classes", type=_las_classes)
     p.add_argument("--holdout", type=float, default=0.0)
     p.add_argument("--holdout-out", help="held-out points (default holdout.gpkg beside --out)")
     p.add_argument("--seed", type=int, default=0)

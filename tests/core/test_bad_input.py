@@ -39,3 +39,25 @@ def test_usage_errors_are_one_line_too(args, capsys):
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("floodmesh: error: ")
     assert lines[0].endswith("--help)")
+
+
+@pytest.mark.parametrize("command", ["run", "grid"])
+@pytest.mark.parametrize("classes, words", [
+    ("ground", "LAS classes must be comma-separated class numbers 0-255, got 'ground'"),
+    ("2,300", "LAS classes are whole numbers 0-255, got 300"),
+])
+def test_las_classes_other_than_class_numbers_are_refused(command, classes, words, tmp_path,
+                                                          capsys):
+    """--classes takes comma-separated LAS class numbers 0-255 and says so: a name gave
+    'invalid <lambda> value', and a class out of range was left out without a word."""
+    from floodmesh.core.errors import FloodMeshError
+    from floodmesh.core.options import RunOptions
+
+    with pytest.raises(SystemExit) as exit_:
+        main([command, "points.laz", "--out", str(tmp_path / "out"), "--cell-size", "1",
+              "--classes", classes])
+    assert exit_.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0] and "e.g. 2 (ground)" in lines[0], lines
+    with pytest.raises(FloodMeshError, match="0-255, got 300"):  # the library's options
+        RunOptions(classes=(2, 300))
