@@ -68,11 +68,22 @@ def _check_area(xy: np.ndarray, source: str) -> None:
     span, across, along = spread(xy[:, 0], xy[:, 1], numba.get_num_threads())
     if span <= 0:
         raise FloodMeshError(f"{source}: all points lie at one place ({xy[0, 0]:.3f}, "
-                             f"{xy[0, 1]:.3f}); a terrain model needs points spread over an area")
+                             f"{xy[0, 1]:.3f}); a terrain model needs points spread over an area"
+                             f"{_degrees_hint(xy)}")
     if across <= max(1e-6 * along, 0.005):  # 5 mm: coordinates rounded to the millimetre
+        fix = _degrees_hint(xy) or ": check the file's x and y columns"
         raise FloodMeshError(f"{source}: all points lie on one straight line ({along:.3g} m long, "
                              f"{across:.2g} m across); a terrain model needs points spread over "
-                             "an area: check the file's x and y columns")
+                             f"an area{fix}")
+
+
+def _degrees_hint(xy: np.ndarray) -> str:
+    """What to say of points (n, 2) whose x all lie within ±180 and y within ±90: degrees of
+    longitude and latitude, which a CRS in metres makes a few millimetres across ("" else)."""
+    if np.abs(xy[:, 0]).max() <= 180 and np.abs(xy[:, 1]).max() <= 90:
+        return ("; the coordinates look like degrees (longitude/latitude): reproject the "
+                "points to a projected CRS in metres (e.g. the survey's UTM zone)")
+    return ""
 
 
 def repeated_positions_note(xyz: np.ndarray, source: str) -> str | None:

@@ -269,6 +269,21 @@ def _one_place_xyz(folder):
     return write_xyz(folder / "oneplace.xyz", xyz)
 
 
+def _degrees_xyz(folder):
+    """A 200 x 200 m survey written as longitude and latitude (degrees): given a CRS in metres,
+    a few millimetres, thinner than the line check's 5 mm."""
+    rng = np.random.default_rng(0)
+    lon, lat = 9.0 + rng.uniform(0, 0.0028, 5000), 50.0 + rng.uniform(0, 0.0018, 5000)
+    return write_xyz(folder / "lonlat.xyz", np.column_stack([lon, lat, rng.uniform(10, 12,
+                                                                                  5000)]))
+
+
+def _one_place_degrees_xyz(folder):
+    xyz = np.tile([9.0, 50.0, 10.0], (50, 1))
+    xyz[:, 2] += np.linspace(0, 1, 50)
+    return write_xyz(folder / "oneplace_lonlat.xyz", xyz)
+
+
 def _line_layer(folder):
     """A line layer where a polygon layer belongs (a domain boundary)."""
     import fiona
@@ -415,6 +430,15 @@ CASES = [
              _maker(_collinear_xyz, crs=UTM), _lidar(_collinear_xyz, crs=UTM)),
     BadInput("points-at-one-place", "all points lie at one place",
              _maker(_one_place_xyz, crs=UTM), _lidar(_one_place_xyz, crs=UTM)),
+    BadInput("points-in-degrees-with-a-crs-in-metres",
+             "m across); a terrain model needs points spread over an area; the coordinates "
+             "look like degrees (longitude/latitude): reproject the points to a projected CRS "
+             "in metres",
+             _maker(_degrees_xyz, crs=UTM), _lidar(_degrees_xyz, crs=UTM)),
+    BadInput("points-at-one-place-in-degrees",
+             "all points lie at one place (9.000, 50.000); a terrain model needs points spread "
+             "over an area; the coordinates look like degrees (longitude/latitude)",
+             _maker(_one_place_degrees_xyz, crs=UTM), _lidar(_one_place_degrees_xyz, crs=UTM)),
     BadInput("boundary-given-lines", "a model domain (boundary) must be polygons",
              lambda f: ["mesh", _tif("dem.tif")(f), "--boundary", _line_layer(f), "--out",
                         "{out}/mesh.2dm"]),
