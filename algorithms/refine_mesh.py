@@ -23,7 +23,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
             "exceeds the lower bound (m, default 0.10) get a quarter of their area as a local "
             "maximum. Stops when the target RMSE and/or maximum residual (m) holds, at the "
             "node budget, or after the last round. Check points, if given, are assessed each "
-            "round and never used for refinement.")
+            "round and never used for refinement: measured points at a check point's x, y are "
+            "left out of it.")
     DEM, BREAKLINES, POINTS, POINTS_FILE, CHECK = ("DEM", "BREAKLINES", "POINTS", "POINTS_FILE",
                                                    "CHECK")
     MIN_ANGLE, MAX_AREA, LOWER, UPPER, NOISE = ("MIN_ANGLE", "MAX_AREA", "LOWER", "UPPER",

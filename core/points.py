@@ -163,6 +163,14 @@ def place_hashes(xyz: np.ndarray, seed: int) -> np.ndarray:
     return point_hashes(np.ascontiguousarray(xyz, float), salt)
 
 
+def at_places_of(xyz: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """Which of the points (n, 3) lie at the x, y (to 0.1 mm) of one of ``others`` (k, 3), by
+    their ``place_hashes`` of x, y alone (a mask)."""
+    def flat(points):
+        return place_hashes(np.column_stack([points[:, :2], np.zeros(len(points))]), 0)
+    return np.isin(flat(xyz), flat(others))
+
+
 def holdout_candidates(hashes: np.ndarray, fraction: float) -> tuple[np.ndarray, int]:
     """(the indices of a part's candidates for the check points, the bound of their hashes):
     the points of one part of a survey (a tile of n = ``len(hashes)`` points, ``place_hashes``)

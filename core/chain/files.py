@@ -14,11 +14,12 @@ from dataclasses import asdict
 from pathlib import Path
 
 from .. import io
+from ..errors import FloodMeshError
 from ..io.outputs import check_outputs, require_suffix
 from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, check_holdout,
                        check_max_area, check_max_gap, check_max_triangles, check_min_angle,
                        check_seed, is_point_source)
-from ..points import PointCloud, split_holdout
+from ..points import PointCloud, at_places_of, split_holdout
 from ..raster import require_metric_crs
 from ..steps.breakpoints import breakpoints_file
 from ..steps.slope import slope_raster_file
@@ -237,6 +238,8 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
     terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
     measured = measured_points(points, crs, terrain.crs)[0]
     check_xyz = measured_points(check, crs, terrain.crs)[0] if check else None
+    if check_xyz is not None:
+        measured = _without_check_points(measured, check_xyz, points, check, note)
     refined, rounds = refine_mesh(terrain, lines, measured, check=check_xyz, domain=domain,
                                   min_angle=min_angle, max_area=max_area, lower=lower,
                                   upper=upper, target_rmse=target_rmse, target_max=target_max,
@@ -256,6 +259,22 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
               for k, r in enumerate(rounds, 1)]
     return {**result, "summary": "\n".join([*table, f"{len(refined.nodes)} nodes written to "
                                                     f"{output}"])}
+
+
+def _without_check_points(measured, check, points_path, check_path, note):
+    """The ``measured`` points (n, 3) less those at a check point's x, y (to 0.1 mm): a survey
+    given whole beside its held-out points (``grid --holdout``) would refine the mesh at the
+    check points and flatter their error."""
+    shared = at_places_of(measured, check)
+    if shared.all():
+        raise FloodMeshError(f"every measured point of {Path(points_path).name} is a check point "
+                             f"of {Path(check_path).name}: give the refinement the survey's "
+                             "points and the held-out ones as check points")
+    if shared.any() and note:
+        note(f"{int(shared.sum()):,} of the {len(measured):,} measured points of "
+             f"{Path(points_path).name} lie at check points of {Path(check_path).name} and were "
+             "left out of the refinement: check points are only measured, never inserted")
+    return measured[~shared] if shared.any() else measured
 
 
 def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=None,

@@ -169,6 +169,43 @@ def test_refine_command(terrain, tmp_path):
     assert "check RMSE" in out.stdout and f"{len(nodes)} nodes written" in out.stdout
 
 
+def _survey(tmp_path):
+    """survey.laz: 30,000 points of the hill; dem.tif gridded from it at 1 m with 5 % held out
+    to holdout.gpkg, as the user guide chains the steps."""
+    from floodmesh.core.points import PointCloud
+    from tests.core.test_cli import floodmesh
+
+    xy = np.random.default_rng(0).uniform([X0, Y0], [X0 + SIZE, Y0 + SIZE], (30_000, 2))
+    io.write_points_las(tmp_path / "survey.laz",
+                        PointCloud(np.column_stack([xy, hill(*xy.T)]), CRS.from_epsg(25832)))
+    floodmesh("grid", tmp_path / "survey.laz", "--cell-size", 1, "--holdout", 0.05,
+              "--out", tmp_path / "dem.tif")
+    return tmp_path / "survey.laz", tmp_path / "holdout.gpkg"
+
+
+def test_refine_leaves_the_check_points_out_of_the_survey_it_is_given(tmp_path):
+    """The documented chain: refine --points on the whole survey, --check on the points grid
+    held out of it. The check points in the survey are left out of the refinement, with a
+    note saying how many: none becomes a mesh node (before, 18 of the 1,500 did, and their
+    residual 0 flattered the check RMSE). Points that are all check points are refused."""
+    from tests.core.test_cli import floodmesh
+
+    survey, holdout = _survey(tmp_path)
+    out = floodmesh("refine", tmp_path / "dem.tif", "--points", survey, "--check", holdout,
+                    "--upper", 0.03, "--lower", 0.02, "--noise", 0, "--max-rounds", 3,
+                    "--out", tmp_path / "mesh.2dm")
+    nodes, _ = io.read_mesh_2dm(tmp_path / "mesh.2dm")
+    check = io.read_points_vector(holdout)
+    at_nodes = {tuple(p) for p in np.round(nodes[:, :2], 4)}
+    assert len(check) == 1500 and not at_nodes & {tuple(p) for p in np.round(check[:, :2], 4)}
+    assert ("1,500 of the 30,000 measured points of survey.laz lie at check points of "
+            "holdout.gpkg and were left out of the refinement") in out.stderr
+    bad = floodmesh("refine", tmp_path / "dem.tif", "--points", holdout, "--check", holdout,
+                    "--out", tmp_path / "bad.2dm", check=False)
+    assert bad.returncode == 2 and "every measured point of holdout.gpkg is a check point" in (
+        bad.stderr)
+
+
 def test_a_runs_mesh_follows_the_folds_where_a_road_crosses_a_levee(tmp_path):
     """From the user's side: LiDAR (9 points/m², 5 cm of noise) of a road embankment crossing
     a levee at 70° on dry ground. Where the two meet, and where the road's slopes run over the
