@@ -244,7 +244,7 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
                                   min_angle=min_angle, max_area=max_area, lower=lower,
                                   upper=upper, target_rmse=target_rmse, target_max=target_max,
                                   max_nodes=max_nodes, max_rounds=max_rounds, noise=noise,
-                                  progress=progress, cancelled=cancelled)
+                                  progress=progress, cancelled=cancelled, note=note)
     io.write_mesh_2dm(output, refined.nodes, refined.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "NODES": len(refined.nodes), "RMSE": rounds[-1].rmse_m,
               "crs": terrain.crs.to_wkt()}

@@ -199,7 +199,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     detected, line_stats = kept["lines"], kept["stats"]
     mesh_lines = detected + front.own_lines
     mesh, rounds = _terrain_z(mesh, front, options, steps, fits, mesh_lines, domain, size,
-                              max_area, cancelled, low_ground)
+                              max_area, cancelled, low_ground, note)
     # the terrain fits are done: their points and index go before the assessment and writing
     size = fits.index = front.measured = None
     res = steps.run("assess", residuals, mesh, front.holdout.xyz)
@@ -391,9 +391,10 @@ def _refining(options: RunOptions) -> bool:
 
 
 def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits,
-               mesh_lines, domain, size, max_area, cancelled, low_ground=None):
-    """(mesh, refinement rounds): refined on the points gridded until the bounds hold, or its
-    node z fitted on them (``node_elevation="plane"``); the held-out points stay independent."""
+               mesh_lines, domain, size, max_area, cancelled, low_ground=None, note=None):
+    """(mesh, refinement rounds): refined on the points gridded until the bounds hold (``note``
+    hears what they left), or its node z fitted on them (``node_elevation="plane"``); the
+    held-out points stay independent."""
     delta = front.dem.cell_size / 2
 
     def elevations(mesh):
@@ -413,6 +414,7 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
                   min_angle=options.min_angle, max_area=max_area, conforming=options.conforming,
                   elevations=elevations, max_nodes=options.max_triangles,
                   noise=fits.window.noise if fits.window else None, cancelled=cancelled,
+                  note=note,
                   mesh_options=dict(max_triangles=options.max_triangles,
                                     corner_gap=options.min_spacing or None))
     if options.refine:

@@ -28,8 +28,9 @@ from .mesh import Mesh, build_mesh, triangle_areas
 
 @dataclass(frozen=True)
 class RefineRound:
-    """One round: nodes, triangles, and RMSE / max |residual| (m) of the refinement points and
-    of the check points, with how many points it inserted and how many it refined around."""
+    """One round's mesh: nodes, triangles, and RMSE / max |residual| (m) of the refinement
+    points and of the check points, with how many points were inserted and how many triangles
+    refined around to make it (the previous round's picks; 0 in the first)."""
 
     nodes: int
     triangles: int
@@ -52,7 +53,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                 measure_last: bool = True,
                 floor_at: Callable[[np.ndarray], np.ndarray] | None = None,
                 progress: Callable[[float], None] | None = None,
-                cancelled: Callable[[], bool] | None = None) -> tuple[Mesh, list[RefineRound]]:
+                cancelled: Callable[[], bool] | None = None,
+                note: Callable[[str], None] | None = None) -> tuple[Mesh, list[RefineRound]]:
     """Refine until the target holds on ``points`` (n, 3), within ``max_nodes`` nodes and
     ``max_rounds`` rounds. Bounds and targets in metres (``upper`` None: no point is
     inserted); with no target, rounds go on until nothing is left to refine. ``noise`` (m): the
@@ -63,8 +65,9 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     ``most``: the share of a round's triangles split at most, the worst misfits first;
     ``measure_last`` False: the last of ``max_rounds`` rounds measures only the check points
     (its refinement points' figures NaN), as nothing is refined after it; ``floor_at(xy)``: the
-    floor (m²) at triangle centroids (k, 2), where it varies (None: ``floor`` everywhere).
-    Returns the last mesh within the budget and every round."""
+    floor (m²) at triangle centroids (k, 2), where it varies (None: ``floor`` everywhere);
+    ``note`` hears why the rounds stopped where points are left beyond ``upper`` or triangles
+    beyond ``lower``. Returns the last mesh within the budget and every round."""
     points = np.asarray(points, float)
     if points.ndim != 2 or points.shape[1] != 3 or not len(points):
         raise FloodMeshError("refinement needs measured points (x, y, z); none were given")
@@ -81,6 +84,10 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     inserted = np.empty((0, 3))
     local = np.empty((0, 3))  # x, y, local maximum area (m²) of every triangle refined so far
     rounds, best = [], None
+    picked = (0, 0)  # points to insert and triangles to refine, picked on the last mesh
+    left = None  # (points beyond upper, triangles beyond lower) of the best mesh
+    stop = (f"it reached its limit of {max_rounds} round{'s' if max_rounds != 1 else ''}, and "
+            "more would refine them")
     for k in range(max_rounds):
         if cancelled is not None and cancelled():
             raise Cancelled()
@@ -95,13 +102,16 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                 raise FloodMeshError(f"the unrefined mesh already has {len(mesh.nodes)} nodes, "
                                      f"over the budget of {max_nodes}; raise the budget or the "
                                      "maximum triangle area")
+            stop = f"refining them would pass the node budget of {max_nodes:,} nodes"
             break
         if rounds and len(mesh.nodes) == rounds[-1].nodes:
-            break  # what is left to insert lies too close to a node or the boundary
+            stop = ("a further round changed no node, what is left lying too close to a node, "
+                    "a line or the domain's edge to be inserted")
+            break
         if k == max_rounds - 1 and not measure_last:  # nothing is refined after it
             rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), np.nan, np.nan,
-                                      *_check_figures(mesh, check), 0, 0))
-            best = mesh
+                                      *_check_figures(mesh, check), *picked))
+            best, left = mesh, None
             break
         found, tin = locate(mesh.nodes, mesh.triangles, points, mesh.nodes[:, 2])
         res = points[:, 2] - tin
@@ -112,16 +122,32 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
                                                           * dem.cell_size ** 2))
         misfit = _misfit_triangles(mesh, found, res, lower, floor, noise, most, floor_at)
         rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), _rmse(res),
-                                  _max_abs(res), *_check_figures(mesh, check),
-                                  len(new_points), len(misfit)))
-        best = mesh
+                                  _max_abs(res), *_check_figures(mesh, check), *picked))
+        best, picked = mesh, (len(new_points), len(misfit))
+        left = (0 if upper is None else int(np.count_nonzero(np.abs(np.nan_to_num(res)) > upper)),
+                len(misfit))
         if progress is not None:
             progress((k + 1) / max_rounds)
-        if _met(res, target_rmse, target_max) or (not len(new_points) and not len(misfit)):
+        if _met(res, target_rmse, target_max):
+            stop = "the target holds"
+            break
+        if not len(new_points) and not len(misfit):
             break
         inserted = np.vstack([inserted, new_points])
         local = np.vstack([local, misfit])
+    if note is not None and upper is not None and left is not None and any(left):
+        note(_left_over(*left, upper, lower, stop))
     return best, rounds
+
+
+def _left_over(points: int, triangles: int, upper: float, lower: float, why: str) -> str:
+    """What to say of the ``points`` beyond ``upper`` m and the ``triangles`` beyond ``lower``
+    m that the refinement left, and ``why`` it stopped."""
+    beyond = [f"{points:,} measured point{'s' if points != 1 else ''} misfitting by more than "
+              f"the upper bound ({upper:g} m)"] if points else []
+    beyond += [f"{triangles:,} triangle{'s' if triangles != 1 else ''} whose points misfit by "
+               f"more than the lower bound ({lower:g} m beyond their noise)"] if triangles else []
+    return f"the refinement stopped with {' and '.join(beyond)}: {why}"
 
 
 def _check_figures(mesh: Mesh, check) -> tuple[float, float]:

@@ -179,7 +179,7 @@ def test_mesh_and_run_with_a_size_field(demo_points_file, tmp_path):
 def test_run_with_refinement(demo_points_file, tmp_path):
     """run --refine (step 9): the gridded points drive the rounds, the held-out ones are only
     assessed; the holdout error falls and no more held-out residuals exceed 25 cm than without
-    refinement; the report lists every round."""
+    refinement; the report lists every round, and a note what the rounds left."""
     floodmesh("run", demo_points_file, "--out", tmp_path / "plain", "--holdout", 0.01)
     floodmesh("run", demo_points_file, "--out", tmp_path / "refined", "--holdout", 0.01,
               "--refine")
@@ -195,6 +195,10 @@ def test_run_with_refinement(demo_points_file, tmp_path):
     assert refined["rmse_m"] < plain["rmse_m"]
     assert refined["classes"][">25 cm"] <= plain["classes"][">25 cm"]
     assert refined["n_below_min_angle"] == 0 and refined["max_area_m2"] <= 100
+    # gridded points left over the upper bound (13 on the demo) are said, with why
+    assert rounds[-1]["max_abs_m"] > 0.25 and any(
+        note.startswith("the refinement stopped with ") and "upper bound (0.25 m)" in note
+        for note in refined["notes"])
     bad = floodmesh("run", demo_points_file, "--out", tmp_path / "bad", "--refine",
                     "--lower", 0.3, "--upper", 0.2, check=False)
     assert bad.returncode == 2 and "lower bound" in bad.stderr
