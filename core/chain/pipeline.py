@@ -33,7 +33,7 @@ from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
 from ..raster import Grid, bilinear, nearest_value
-from ..steps.accuracy import accuracy_statistics, residuals
+from ..steps.accuracy import accuracy_statistics, outside_mesh_note, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
 from ..steps.drainage import (CHANNEL_AREA, flow_area_for, flow_refined, flow_size,
@@ -203,6 +203,9 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     # the terrain fits are done: their points and index go before the assessment and writing
     size = fits.index = front.measured = None
     res = steps.run("assess", residuals, mesh, front.holdout.xyz)
+    outside = outside_mesh_note(front.holdout.xyz, res, front.dem, front.domain is not None)
+    if outside:
+        note(outside)
 
     def write_all(stage, figures, pictures):
         exported = _write_outputs(stage, front, options, mesh, lines, res, confidence,

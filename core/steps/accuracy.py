@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from ..raster import Grid, nearest_value
 from .mesh import Mesh
 
 CLASS_LIMITS_M = (0.10, 0.25)
@@ -38,6 +39,24 @@ def assess(mesh: Mesh, points_xyz: np.ndarray, *, alpha: float | None = None,
     their statistics (``accuracy_statistics``: RMSE, NSSDA test, classes, E = RMSE + α·Δ)."""
     res = residuals(mesh, points_xyz)
     return res, accuracy_statistics(res, alpha=alpha, delta=delta)
+
+
+def outside_mesh_note(xyz: np.ndarray, res: np.ndarray, dem: Grid, boundary: bool = False):
+    """What to say of the check points (n, 3) outside the mesh (``res`` NaN), which no figure
+    of the assessment counts: how many, and why (the mesh spans the DEM's valid cell centres,
+    half a cell inside the survey's edge; and ``boundary``, the user's model domain); None
+    where every one is inside."""
+    outside = ~np.isfinite(res)
+    n = int(np.count_nonzero(outside))
+    if not n:
+        return None
+    in_gaps = int(np.count_nonzero(~np.isfinite(nearest_value(dem, *xyz[outside, :2].T))))
+    gaps = f", {in_gaps:,} of them in its data gaps" if in_gaps else ""
+    domain = " or the model domain (--boundary)" if boundary else ""
+    return (f"{n:,} of the {len(res):,} check points lie outside the mesh and were not "
+            f"assessed: the DEM's valid cell centres bound the mesh{domain}, half a cell "
+            f"({dem.cell_size / 2:g} m) inside the survey's edge{gaps}; a smaller cell size "
+            "meshes closer to the survey's edge (--cell-size, 'Grid cell size d' in QGIS)")
 
 
 def residual_class(res: np.ndarray) -> np.ndarray:

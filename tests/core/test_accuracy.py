@@ -1,4 +1,5 @@
 """Accuracy assessment (floodmesh.core.steps.accuracy): TIN residuals and their statistics."""
+import json
 import math
 
 import numpy as np
@@ -246,3 +247,25 @@ def test_all_outside_gives_no_figures():
     assert stats["n_outside_mesh"] == 3 and stats["n_assessed"] == 0
     assert stats["rmse_m"] is None and stats["max_abs_residual_m"] is None
     assert set(stats["classes"].values()) == {0.0}
+
+
+def test_a_run_says_how_many_check_points_lie_outside_its_mesh(tmp_path):
+    """Coarse cells on a 120 m square survey: the mesh spans the DEM's valid cell centres, half
+    a cell (5 m) inside the survey's edge, so the check points in that rim are not assessed.
+    The run says how many and why, in its notes and on the terminal (before, only the
+    summary's 'on n points' showed that a sixth of them were left out)."""
+    from floodmesh.core import io
+    from floodmesh.core.points import PointCloud
+    from tests.core.test_cli import floodmesh
+
+    points = plane_points(size=120.0, density=2.0, origin=tuple(ORIGIN))
+    io.write_points_las(tmp_path / "plane.laz", PointCloud(points, UTM))
+    run = floodmesh("run", tmp_path / "plane.laz", "--out", tmp_path / "run", "--cell-size", 10,
+                    "--holdout", 0.05)
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    n_out = report["n_outside_mesh"]
+    assert 0.1 * report["n_holdout"] < n_out < 0.25 * report["n_holdout"]  # 1 − (110/120)²
+    said = (f"{n_out:,} of the {report['n_holdout']:,} check points lie outside the mesh and "
+            "were not assessed: the DEM's valid cell centres bound the mesh, half a cell (5 m) "
+            "inside the survey's edge")
+    assert [note for note in report["notes"] if note.startswith(said)] and said in run.stderr
