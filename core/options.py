@@ -181,24 +181,17 @@ def holdout_count(fraction: float, n_points: int, note=None) -> int:
     n_out = int(round(fraction * n_points))
     if fraction > 0 and n_out < MIN_CHECK_POINTS:
         if n_points < 2 * MIN_CHECK_POINTS:
-            raise FloodMeshError(_too_few_check_points(fraction, n_out, n_points))
+            raise FloodMeshError(
+                f"a holdout fraction of {fraction:g} keeps {n_out} of {n_points:,} points back, "
+                f"but the FEMA/NSSDA accuracy test needs at least {MIN_CHECK_POINTS} check "
+                f"points: the file has too few points to hold {MIN_CHECK_POINTS} back; give "
+                "holdout 0 to skip the test")
         n_out = MIN_CHECK_POINTS
         if note:
             note(f"a holdout fraction of {fraction:g} keeps {int(round(fraction * n_points))} of "
                  f"{n_points:,} points back; raised to {n_out} ({n_out / n_points:.2g}), the "
                  f"fewest check points the FEMA/NSSDA accuracy test takes")
     return n_out
-
-
-def _too_few_check_points(fraction: float, n_out: int, n_points: int) -> str:
-    if n_points < 2 * MIN_CHECK_POINTS:
-        fix = (f"the file has too few points to hold {MIN_CHECK_POINTS} back; give holdout 0 "
-               "to skip the test")
-    else:
-        needed = math.ceil((MIN_CHECK_POINTS - 0.5) / n_points * 1e4) / 1e4
-        fix = f"give a holdout fraction of at least {needed:g}, or 0 to skip the test"
-    return (f"a holdout fraction of {fraction:g} keeps {n_out} of {n_points:,} points back, but "
-            f"the FEMA/NSSDA accuracy test needs at least {MIN_CHECK_POINTS} check points: {fix}")
 
 
 def check_seed(value) -> int:
