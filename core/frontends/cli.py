@@ -168,7 +168,7 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
 
 def _add_conforming(p: argparse.ArgumentParser):
     p.add_argument("--conforming-delaunay", dest="conforming", action="store_true",
-                   help="a conforming Delaunay mesh (Triangle's switch D; 8–17%% more nodes), "
+                   help="a conforming Delaunay mesh (Triangle's switch D; 10–20%% more nodes), "
                         "which some solvers want")
 
 
