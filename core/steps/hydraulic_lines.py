@@ -9,7 +9,8 @@ smallest spacing s (default: the cell size d):
 - a bridge that localisation laid across a crossing (``without_wet_bridges``) is left out
   where it lies on low ground;
 - a detected line that folds back (segments meeting at less than ``FOLD_ANGLE``) is cut there
-  into two lines;
+  into two lines, and one that climbs a wall (a segment steeper than ``JOIN_GRADE``, higher
+  than ``JOIN_RISE``) loses that segment (``split_at_walls``);
 - detected lines are clipped back ``clearance`` (default 2 s) from the domain edge; where the
   clip's end falls within the clearance of the line's last vertex, the line ends at that
   vertex (a short stub beside the edge's nodes made a flood's smallest wet triangle);
@@ -17,7 +18,8 @@ smallest spacing s (default: the cell size d):
   away (near-parallel lines merge into the longer one; crossings keep one line through them);
 - an end left within s of a line it meets at ``JOIN_ANGLE`` or more is moved onto that line
   (a junction; both pieces of a line cut at a crossing meet it at one point), so no gap of s
-  between an end and a line holds the mesh's smallest triangles;
+  between an end and a line holds the mesh's smallest triangles; not where that line lies
+  higher or lower than the end by a wall's height (``JOIN_RISE``, ``JOIN_GRADE``);
 - vertices closer than s to the previous kept vertex are dropped (the end points stay);
 - what is left shorter than 2 s is dropped.
 
@@ -44,6 +46,11 @@ FLOW_PLAN_TOLERANCE = 0.25   # cells: a vertex this close to the chord past it m
 FLOW_HEIGHT_TOLERANCE = 0.05  # m: ... if its height is this close too (a flood's wet depth)
 FOLD_ANGLE = 60.0  # degrees: a line whose segments meet at less folds back (the PSLG's corner)
 JOIN_ANGLE = 60.0  # degrees: a line ending a spacing off another at this or more joins it
+# ... unless the other line's z there lies farther from the end's than this rise (m) plus this
+# grade times the move: a climb steeper than 1:1 is a wall between them, no junction (the
+# corpus's and the real samples' joins climb at most 0.64 m in 1 m; a toe line ending at a
+# 10 m wall's top edge took its z and gave a 40 m segment a 10 m ramp)
+JOIN_RISE, JOIN_GRADE = 0.2, 1.0
 
 
 def thin_vertices(coords: np.ndarray, spacing, *, firm: float | None = None,
@@ -94,6 +101,23 @@ def split_at_folds(coords: np.ndarray, min_angle: float = FOLD_ANGLE) -> list[np
     return [coords[a:b + 1] for a, b in zip([0, *cuts], [*cuts, len(coords) - 1])]
 
 
+def split_at_walls(coords: np.ndarray) -> list[np.ndarray]:
+    """``coords`` (k, 3) cut into the pieces between its wall segments, which climb more than
+    ``JOIN_RISE`` plus ``JOIN_GRADE`` times their length: a crest or toe does not run up a
+    wall, and a mesh edge along one would give the nodes on it heights between its foot and
+    its top. Pieces of one vertex are left out."""
+    coords = np.asarray(coords, float)
+    if coords.shape[1] < 3 or len(coords) < 2:
+        return [coords]
+    rise = np.abs(np.diff(coords[:, 2]))
+    walls = np.flatnonzero(rise > JOIN_RISE + JOIN_GRADE * np.hypot(*np.diff(coords[:, :2],
+                                                                              axis=0).T))
+    if not len(walls):
+        return [coords]
+    starts, stops = [0, *(walls + 1).tolist()], [*(walls + 1).tolist(), len(coords)]
+    return [coords[a:b] for a, b in zip(starts, stops) if b - a >= 2]
+
+
 def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | None = None,
                          own_lines=(), within=None,
                          flow_spacing=None) -> tuple[list[np.ndarray], dict]:
@@ -117,7 +141,8 @@ def lines_for_hydraulics(lines, domain, *, spacing: float, clearance: float | No
     # a line folding back on itself is two lines: the shorter's part within the spacing of
     # the longer goes, as for any two lines (a fold's arms a fraction of a metre apart made
     # the mesh's smallest triangles)
-    pieces = [piece for c in lines for piece in split_at_folds(c)]
+    pieces = [piece for c in lines for fold in split_at_folds(c) for piece in
+              split_at_walls(fold)]
     taken_xyz = [np.asarray(c, float) for c in own_lines if len(c) >= 2]
     taken = [shapely.LineString(c[:, :2]) for c in taken_xyz]
     taken_bounds = shapely.bounds(taken).reshape(-1, 4)  # grown as lines are taken: an array
@@ -208,7 +233,8 @@ def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: np.nd
     the line it runs into leaves its end, the other line and the next line's end a spacing
     apart, the triangles there the mesh's smallest; joined, the lines meet in one vertex: a
     junction (``junctions``, points already made, taken within a spacing), else the other
-    line's vertex within a spacing, else the nearest point on it (z along it)."""
+    line's vertex within a spacing, else the nearest point on it (z along it); not where that
+    z differs from the end's by more than ``JOIN_RISE`` plus ``JOIN_GRADE`` times the move."""
     # lazy: GEOS loads only when this runs
     import shapely
 
@@ -247,6 +273,9 @@ def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: np.nd
         elif np.hypot(*(bar[vertex, :2] - target)) <= spacing:
             target = bar[vertex, :2]
             z = bar[vertex, 2] if bar.shape[1] > 2 else z
+        if coords.shape[1] > 2 and z is not None and abs(z - coords[end, 2]) > (
+                JOIN_RISE + JOIN_GRADE * np.hypot(*(target - e))):
+            continue  # the other line passes above or below: a wall, no junction
         if np.hypot(*(coords[inner, :2] - target)) < spacing and len(coords) > 2:
             coords = np.delete(coords, inner % len(coords), axis=0)  # no segment under it
         coords[end, :2] = target

@@ -334,3 +334,29 @@ def test_a_bridge_on_low_ground_is_left_out_of_the_mesh_lines_and_kept_on_high_g
     pieces = without_wet_bridges([line, line], [bridged, None], low)
     assert [list(p[:, 0]) for p in pieces] == [[0, 2, 4, 6], [10, 12, 14, 16, 18], list(x)]
     assert without_wet_bridges([line], [bridged], None)[0] is line  # no low ground known
+
+
+def test_a_wall_gives_no_node_a_height_between_its_foot_and_top(tmp_path):
+    """A DEM with a 10 m wall (a quay or a quarry face) across an embankment and a channel:
+    the embankment's toe line ends at the wall's foot, the wall's top edge is a line too. No
+    mesh node may take a height the ground around it does not have (the toe's end joined onto
+    the top edge gave a 40 m segment a 10 m ramp; a traced line stepping up the wall did the
+    same): every node lies within 1 m of the range of the DEM's 3 x 3 cells around it."""
+    import rasterio
+
+    rows, cols = 200, 300
+    x, y = np.meshgrid(np.arange(cols) + 0.5, rows - np.arange(rows) - 0.5)
+    z = (20.0 + 0.01 * x + np.clip((6.0 - np.abs(y - 90.0)) / 4.0, 0, 1) * 1.5
+         - np.clip((7.5 - np.abs(x - 80.0)) / 3.0, 0, 1) * 2.0 + np.where(x > 200, 10.0, 0.0))
+    dem = tmp_path / "wall.tif"
+    with rasterio.open(dem, "w", driver="GTiff", width=cols, height=rows, count=1,
+                       dtype="float32", crs="EPSG:25832",
+                       transform=Affine(1, 0, 500_000, 0, -1, 5_600_200)) as dst:
+        dst.write(z.astype("float32"), 1)
+    run_pipeline(dem, tmp_path / "out", RunOptions(max_area=100.0))
+    nodes, _ = io.read_mesh_2dm(tmp_path / "out" / "mesh.2dm")
+    col = np.clip((nodes[:, 0] - 500_000).astype(int), 1, cols - 2)
+    row = np.clip((5_600_200 - nodes[:, 1]).astype(int), 1, rows - 2)
+    around = np.stack([z[row + i, col + j] for i in (-1, 0, 1) for j in (-1, 0, 1)])
+    above, below = nodes[:, 2] - around.max(axis=0), around.min(axis=0) - nodes[:, 2]
+    assert max(above.max(), below.max()) < 1.0, (above.max(), below.max())
