@@ -44,8 +44,8 @@ from ..steps.hydraulic_lines import lines_for_hydraulics, without_wet_bridges
 from ..steps.hydraulics import hydraulic_checks
 from ..steps.joining import crossing_points
 from ..steps.localise import fit_node_elevations, fit_window, localise_traced
-from ..steps.mesh import (build_mesh, domain_from_dem, edge_tolerance, mesh_quality,
-                          size_from_slope, user_domain)
+from ..steps.mesh import (build_mesh, domain_from_dem, edge_tolerance, honoured_lines,
+                          mesh_quality, size_from_slope, user_domain)
 from ..steps.refine import refine_mesh
 from ..steps.simplify import max_deviation, simplify_breaklines
 from ..steps.sizing import far_field_size, finer
@@ -504,8 +504,9 @@ def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, re
     io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
     write_layer_definition(out, group=group, crs_wkt=dem.crs.to_wkt(),
                            elevation_range=(mesh.nodes[:, 2].min(), mesh.nodes[:, 2].max()))
+    # the lines as the mesh has them, own and detected, for a solver that meshes anew
     return (export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
-                           crs=dem.crs, breaklines=[line.coords for line in lines])
+                           crs=dem.crs, breaklines=honoured_lines(mesh))
             if options.formats else [])
 
 

@@ -692,6 +692,21 @@ def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
                                  pslg.segments.astype(np.int64)))
 
 
+def honoured_lines(mesh: Mesh) -> list[np.ndarray]:
+    """The break lines the mesh honours, as (k, 3) arrays of its nodes (x, y, z in m): its
+    input segments off its boundary (``build_pslg`` keeps every line inside the domain), joined
+    where two meet end to end. What a solver that builds its own mesh (HEC-RAS) is given."""
+    edges = np.sort(mesh.triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edges, count = np.unique(edges, axis=0, return_counts=True)
+    on_edge = np.zeros(len(mesh.nodes), bool)
+    on_edge[edges[count == 1].ravel()] = True
+    inner = mesh.segments[~on_edge[mesh.segments].any(axis=1)]
+    if not len(inner):
+        return []
+    merged = shapely.line_merge(shapely.MultiLineString(list(mesh.nodes[inner])))
+    return [np.asarray(part.coords) for part in shapely.get_parts(merged)]
+
+
 def in_spatial_order(mesh: Mesh) -> Mesh:
     """The mesh numbered for a solver: triangles along a Z-order curve (Morton 1966), nodes as
     the triangles first use them (``arrays.spatial_order``), the input segments renumbered with

@@ -104,3 +104,34 @@ def test_own_lines_far_off_the_ground_are_named(demo_points_file, tmp_path):
     named = [n for n in notes if n.startswith("own.gpkg: line(s)")]
     assert len(named) == 1 and "line(s) 1 lie -2" in named[0], notes
     assert "without Z" in named[0]
+
+
+def test_hec_ras_breaklines_are_the_lines_the_mesh_honours(demo_points_file, tmp_path):
+    """From the user's side: a domain with an own line across it, exported for HEC-RAS
+    (``--formats gpkg``), which builds its own mesh from mesh.gpkg's ``breaklines`` layer. The
+    layer left out the own line and held detected lines beyond the domain, few of whose
+    vertices were mesh nodes. It holds the own line, nothing outside the domain, and every
+    vertex is a node of the mesh with the node's z."""
+    import numpy as np
+
+    from floodmesh.core import io
+
+    xyz = io.read_points(demo_points_file).xyz
+    x0, y0 = xyz[:, 0].min(), xyz[:, 1].min()
+    own = [(x0 + 40, y0 + 30), (x0 + 160, y0 + 110)]
+    _lines(tmp_path / "own.gpkg", [("dyke", own)])
+    domain = shapely.geometry.box(x0 + 20, y0 + 10, x0 + 200, y0 + 150)
+    write_regions(tmp_path / "domain.gpkg", [(domain, 1)])
+    run = _run(demo_points_file, tmp_path / "out", "--lines", str(tmp_path / "own.gpkg"),
+               "--boundary", str(tmp_path / "domain.gpkg"), "--formats", "gpkg")
+    assert run.returncode == 0, run.stderr[-3000:]
+    with fiona.open(tmp_path / "out" / "mesh.gpkg", layer="breaklines") as src:
+        lines = [np.asarray(f["geometry"]["coordinates"], float) for f in src]
+    with fiona.open(tmp_path / "out" / "mesh.gpkg", layer="nodes") as src:
+        nodes = np.array([f["geometry"]["coordinates"] for f in src], float)
+    layer = shapely.MultiLineString([line[:, :2] for line in lines])
+    assert shapely.LineString(own).difference(layer.buffer(0.1)).length < 1.0  # noded on a grid
+    assert layer.difference(domain.buffer(1e-6)).length == 0
+    vertices = np.concatenate(lines)
+    index = {tuple(n[:2]): n[2] for n in nodes}
+    assert all(tuple(v[:2]) in index and index[tuple(v[:2])] == v[2] for v in vertices)
