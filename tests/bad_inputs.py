@@ -251,6 +251,12 @@ def _bowtie():
     return shapely.Polygon([(5, 5), (50, 50), (50, 5), (5, 50)])
 
 
+def _touching_holes(*holes):
+    """A 45 m square holding ``holes`` (local coordinates): valid to GEOS."""
+    import shapely
+    return shapely.Polygon(shapely.box(5, 5, 50, 50).exterior.coords, holes)
+
+
 def _box(x0, y0, x1, y1):
     import shapely
     return shapely.box(x0, y0, x1, y1)
@@ -326,6 +332,11 @@ CASES = [
                    _bowtie()),
     _boundary_case("boundary-off-the-data", "does not overlap the DEM's data",
                    _box(5000, 5000, 5100, 5100)),
+    _boundary_case("boundary-hole-at-the-outer-ring", "the domain touches itself at one point",
+                   _touching_holes([(5, 20), (20, 15), (20, 25)])),
+    _boundary_case("boundary-holes-meeting-at-a-corner", "the domain touches itself at one point",
+                   _touching_holes([(10, 10), (20, 10), (20, 20), (10, 20)],
+                                   [(20, 20), (30, 20), (30, 30), (20, 30)])),
     _boundary_case("boundary-in-another-crs", "reproject it to the DEM's CRS",
                    _box(5, 5, 50, 50), crs="EPSG:32633"),
     BadInput("missing-file", "does not exist",

@@ -157,9 +157,11 @@ def _refuse_pinched(boundary: "Boundary", nodes: np.ndarray) -> None:
     if (counts > 1).any():
         node = int(ids[np.argmax(counts > 1)])
         x, y = np.asarray(nodes)[node, :2]
+        more = int((counts > 1).sum()) - 1
+        others = f" and {more} other node{'s' if more > 1 else ''}" if more else ""
         raise FloodMeshError(
-            f"the mesh boundary touches itself at node {node + 1} ({x:.2f}, {y:.2f}) and "
-            f"{int((counts > 1).sum()) - 1} other nodes: solvers need boundaries that do not; "
+            f"the mesh boundary touches itself at node {node + 1} ({x:.2f}, {y:.2f}){others}: "
+            "solvers need boundaries that do not; "
             "separate the parts of the domain that touch there (remove a triangle at the node, "
             "or mesh again with a domain polygon that keeps them apart)")
 

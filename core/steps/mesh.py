@@ -76,6 +76,25 @@ def domain_from_dem(dem: Grid, *, min_area: float = 0.0, tolerance: float | None
     return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 
+def _refuse_touching_parts(domain, name: str) -> None:
+    """Refuse a domain whose rings touch at a point (two polygons meeting at a corner, a hole
+    at the outer ring or at another hole): valid to GEOS, but the mesh boundary then passes a
+    node twice, which no solver export takes."""
+    rings = [ring for polygon in getattr(domain, "geoms", [domain])
+             for ring in (polygon.exterior, *polygon.interiors)]
+    pairs = shapely.STRtree(rings).query(rings, predicate="intersects")
+    pairs = pairs[:, pairs[0] < pairs[1]]
+    if pairs.shape[1]:
+        touch = shapely.intersection(rings[pairs[0, 0]], rings[pairs[1, 0]])
+        x, y = shapely.get_coordinates(touch)[0]
+        more = f" and {pairs.shape[1] - 1} other place(s)" if pairs.shape[1] > 1 else ""
+        raise FloodMeshError(
+            f"{name}: the domain touches itself at one point, ({x:.2f}, {y:.2f}){more} "
+            "(polygons meeting at a corner, or a hole at the outer ring or at another hole), "
+            "which no solver's mesh boundary can; move the parts apart there, or join them "
+            "along an edge")
+
+
 def edge_tolerance(method: str, amount: float, cell_size: float) -> float:
     """The tolerance (m) a run straightens its domain edge within (``domain_from_dem``): its
     break lines' simplification tolerance α·Δ where it gives one ("douglas-peucker", "spline":
@@ -115,7 +134,9 @@ def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon",
         note(f"{clipped:,.0f} m² ({100 * clipped / boundary.area:.0f} %) of the model domain "
              f"{name} has no data (outside the survey, or in its gaps) and is left out of the "
              "mesh: extend the survey there, or draw the domain within the data")
-    return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
+    domain = shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
+    _refuse_touching_parts(domain, name)
+    return domain
 
 
 def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
