@@ -257,6 +257,21 @@ def _touching_holes(*holes):
     return shapely.Polygon(shapely.box(5, 5, 50, 50).exterior.coords, holes)
 
 
+def layered_boundary(folder):
+    """A GeoPackage of two polygon layers: ``buildings`` (one 5 m house) first, ``domain``."""
+    import fiona
+    import shapely
+    import shapely.affinity
+
+    path = folder / "layers.gpkg"
+    for layer, polygon in (("buildings", _box(20, 20, 25, 25)), ("domain", _box(5, 5, 50, 50))):
+        with fiona.open(path, "w", driver="GPKG", layer=layer, crs_wkt=CRS(UTM).to_wkt(),
+                        schema={"geometry": "Polygon", "properties": {}}) as dst:
+            moved = shapely.affinity.translate(polygon, *ORIGIN)
+            dst.write({"geometry": shapely.geometry.mapping(moved), "properties": {}})
+    return path
+
+
 def _box(x0, y0, x1, y1):
     import shapely
     return shapely.box(x0, y0, x1, y1)
@@ -450,6 +465,12 @@ CASES = [
              "all points lie at one place (9.000, 50.000); a terrain model needs points spread "
              "over an area; the coordinates look like degrees (longitude/latitude)",
              _maker(_one_place_degrees_xyz, crs=UTM), _lidar(_one_place_degrees_xyz, crs=UTM)),
+    BadInput("boundary-of-several-layers", "holds the layers buildings, domain; choose one",
+             lambda f: ["mesh", _tif("dem.tif")(f), "--boundary", layered_boundary(f), "--out",
+                        "{out}/mesh.2dm"]),
+    BadInput("boundary-layer-not-there", "but none named 'roads'",
+             lambda f: ["mesh", _tif("dem.tif")(f), "--boundary",
+                        f"{layered_boundary(f)}|layername=roads", "--out", "{out}/mesh.2dm"]),
     BadInput("boundary-given-lines", "a model domain (boundary) must be polygons",
              lambda f: ["mesh", _tif("dem.tif")(f), "--boundary", _line_layer(f), "--out",
                         "{out}/mesh.2dm"]),

@@ -558,7 +558,8 @@ def _fit_window(points, index, area, cell_size, *, node_radius, seed):
 def run_inputs(source: Source, options: RunOptions) -> list:
     """The files a run reads: never to be replaced by its outputs."""
     size = options.size_field if options.size_field != "slope" else None
-    return [*source.paths, options.boundary, options.user_lines, size]
+    own = [io.vector_path(p) for p in (options.boundary, options.user_lines) if p]
+    return [*source.paths, *own, size]
 
 
 def run_outputs(formats) -> list:

@@ -20,8 +20,8 @@ from .rasters import (INTEGER_COMPRESSION, RASTER_EXTENSIONS, TILE, no_valid_cel
                       raster_crs, raster_crs_wkt, raster_profile, read_band, read_input,
                       read_raster, write_raster)
 from .vectors import (read_boundary, read_breaklines, read_lines_gpkg, read_points_vector,
-                      read_regions, vector_crs, write_breaklines, write_gpkg, write_lines_gpkg,
-                      write_points_gpkg, write_residuals)
+                      read_regions, vector_crs, vector_path, write_breaklines, write_gpkg,
+                      write_lines_gpkg, write_points_gpkg, write_residuals)
 
 __all__ = [
     # points
@@ -34,8 +34,8 @@ __all__ = [
     "write_raster",
     # vectors
     "read_boundary", "read_breaklines", "read_lines_gpkg", "read_points_vector", "read_regions",
-    "vector_crs", "write_breaklines", "write_gpkg", "write_lines_gpkg", "write_points_gpkg",
-    "write_residuals",
+    "vector_crs", "vector_path", "write_breaklines", "write_gpkg", "write_lines_gpkg",
+    "write_points_gpkg", "write_residuals",
     # meshes
     "Mesh2DM", "read_2dm", "read_mesh_2dm", "read_prj", "write_mesh_2dm", "write_mesh_gpkg",
     "write_prj",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import math
 import sqlite3
+from pathlib import Path
 
 import numpy as np
 
@@ -342,6 +343,33 @@ def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:
                                   "class": residual_class(res)})
 
 
+def vector_path(source) -> Path:
+    """The file of a vector source: ``file.gpkg`` or, as QGIS writes a layer's source,
+    ``file.gpkg|layername=NAME``."""
+    return Path(str(source).split("|", 1)[0])
+
+
+def open_vector(source, what: str):
+    """``source`` (see ``vector_path``) opened with fiona: the layer it names, else the file's
+    only layer; refuses a file of several layers without a name, and a name it lacks."""
+    # lazy: OGR loads only when this runs
+    import fiona
+
+    path = require_file(vector_path(source), what)
+    options = dict(o.split("=", 1) for o in str(source).split("|")[1:] if "=" in o)
+    layer = options.get("layername")
+    try:
+        layers = fiona.listlayers(path)
+        if layer is None and len(layers) > 1 or layer is not None and layer not in layers:
+            raise FloodMeshError(
+                f"{path.name} holds the layers {', '.join(layers)}"
+                f"{'' if layer is None else f' but none named {layer!r}'}; choose one as "
+                f"QGIS names it: {path.name}|layername={layers[-1]}")
+        return fiona.open(path, layer=layer)
+    except fiona.errors.FionaError as exc:
+        raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
+
+
 def read_breaklines(path) -> list:
     """Read a line layer as BreakLines (slopes unknown: NaN; component from ``component_id``
     where the layer has it, else 0)."""
@@ -377,10 +405,10 @@ def _line_parts(path, note=None) -> list[tuple[np.ndarray, dict]]:
     # lazy: OGR loads only when this runs
     import fiona
 
-    path = require_file(path, "line file")
+    source, path = path, vector_path(path)
     parts_out, dropped = [], []
     try:
-        with fiona.open(path) as src:
+        with open_vector(source, "line file") as src:
             for number, feat in enumerate(src, 1):
                 geom = feat["geometry"]
                 if geom is None:
@@ -413,10 +441,10 @@ def read_regions(path, *, field: str | None = None, what: str = "regions") -> li
     import fiona
     import shapely.geometry
 
-    path = require_file(path, "region layer")
+    source, path = path, vector_path(path)
     regions = []
     try:
-        with fiona.open(path) as src:
+        with open_vector(source, "region layer") as src:
             fields = list(src.schema["properties"])
             if field and field not in fields:
                 raise FloodMeshError(f"{path.name} has no field {field!r} (its fields: "
@@ -468,9 +496,9 @@ def vector_crs(path):
     # lazy: OGR loads only when this runs
     import fiona
 
-    path = require_file(path, "vector layer")
     try:
-        with fiona.open(path) as src:
+        with open_vector(path, "vector layer") as src:
             return src.crs_wkt or None
     except fiona.errors.FionaError as exc:
-        raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
+        raise FloodMeshError(f"{vector_path(path).name} is not a readable vector file "
+                             f"({exc})") from None

@@ -135,3 +135,23 @@ def test_hec_ras_breaklines_are_the_lines_the_mesh_honours(demo_points_file, tmp
     vertices = np.concatenate(lines)
     index = {tuple(n[:2]): n[2] for n in nodes}
     assert all(tuple(v[:2]) in index and index[tuple(v[:2])] == v[2] for v in vertices)
+
+
+def test_boundary_layer_named_as_qgis_names_it(tmp_path):
+    """From the user's side: a GeoPackage holding ``buildings`` and then ``domain``, given as QGIS
+    writes a layer's source (``file.gpkg|layername=domain``). The first layer (one house) was
+    meshed silently; the mesh covers the named domain."""
+    import numpy as np
+
+    from floodmesh.core import io
+
+    from ..bad_inputs import ORIGIN, layered_boundary, slope_dem, write_tif
+
+    dem = write_tif(tmp_path / "dem.tif", slope_dem())
+    boundary = f"{layered_boundary(tmp_path)}|layername=domain"
+    run = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "mesh", str(dem),
+                          "--boundary", boundary, "--out", str(tmp_path / "mesh.2dm")],
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    nodes, _ = io.read_mesh_2dm(tmp_path / "mesh.2dm")
+    assert np.ptp(nodes[:, 0]) > 40 and nodes[:, 0].min() - ORIGIN[0] < 6
