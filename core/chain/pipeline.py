@@ -226,7 +226,8 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
                       lines=[line.coords for line in lines])
         later()
         deviation, quality, stats, hydraulics = steps.run(
-            "figures", _figures, front, options, simplified, mesh, res, detected, max_area)
+            "figures", _figures, front, options, simplified, mesh, res, detected, max_area,
+            note)
         figures = {"n_breakpoints": n_breakpoints, "deviation": deviation, "quality": quality,
                    "stats": stats, "rounds": rounds, "terrain_fit": fits.record(),
                    "line_stats": line_stats, "flow_zone": flow_zone, "hydraulics": hydraulics,
@@ -472,14 +473,15 @@ def _low_ground_floor(low_ground: Grid, lines, floor: float, reach: float):
     return floor_at
 
 
-def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected, max_area):
+def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected, max_area,
+             note=None):
     """(largest simplification deviation, mesh quality, accuracy statistics, hydraulic checks)."""
     method, amount = options.simplification()
     delta = front.dem.cell_size / 2
     deviation = max_deviation(front.traced, simplified)
     alpha = deviation / delta if method == "keep-every" else amount / delta
     return (deviation, mesh_quality(mesh, min_angle=options.min_angle, max_area=max_area),
-            accuracy_statistics(res, alpha=alpha, delta=delta),
+            accuracy_statistics(res, alpha=alpha, delta=delta, note=note),
             hydraulic_checks(mesh.nodes, mesh.triangles, own_lines=front.own_lines,
                              detected_lines=detected, dem=front.dem))
 

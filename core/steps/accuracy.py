@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from ..options import MIN_CHECK_POINTS
 from ..raster import Grid, nearest_value
 from .mesh import Mesh
 
@@ -78,8 +79,9 @@ def nssda_threshold_m(n: int) -> float:
 
 
 def accuracy_statistics(res: np.ndarray, *, alpha: float | None = None,
-                        delta: float | None = None) -> dict:
-    """Residual statistics in metres, with the NSSDA test and, given α and Δ, the vertex bound
+                        delta: float | None = None, note=None) -> dict:
+    """Residual statistics in metres, with the NSSDA test (null, said to ``note``, on fewer
+    than its ``MIN_CHECK_POINTS`` check points) and, given α and Δ, the vertex bound
     E = RMSE + α·Δ."""
     inside = res[np.isfinite(res)]
     n = int(inside.size)
@@ -99,9 +101,14 @@ def accuracy_statistics(res: np.ndarray, *, alpha: float | None = None,
         rmse_m=rmse, mean_m=mean, std_m=std, skew=skew, accuracy_95_m=1.96 * rmse,
         max_abs_residual_m=float(np.abs(inside).max()),
         nssda_threshold_m=None if math.isnan(threshold) else threshold,
-        nssda_pass=None if math.isnan(threshold) else bool(rmse <= threshold),
+        nssda_pass=(None if math.isnan(threshold) or n < MIN_CHECK_POINTS
+                    else bool(rmse <= threshold)),
         classes={name: float((cls == k).mean()) for k, name in enumerate(CLASS_NAMES)},
     )
+    if note and n < MIN_CHECK_POINTS:
+        note(f"{n} check points lie in the mesh, fewer than the {MIN_CHECK_POINTS} the FEMA/NSSDA "
+             "test needs (FGDC-STD-007.3-1998): nssda_pass is null; a larger domain or "
+             "--holdout keeps more")
     if alpha is not None and delta is not None:
         stats.update(alpha=float(alpha), delta_m=float(delta),
                      vertex_error_bound_m=rmse + float(alpha) * float(delta))

@@ -193,9 +193,9 @@ def test_statistics_of_a_known_vector():
     assert stats["skew"] == pytest.approx(skew, rel=1e-10)
     assert stats["accuracy_95_m"] == pytest.approx(1.96 * rmse, rel=1e-12)
     assert stats["max_abs_residual_m"] == pytest.approx(0.30, abs=1e-15)
-    # n = 10 assessed points: the NSSDA bound exists and the test is rmse <= bound
+    # n = 10 assessed points: the NSSDA bound exists, but the test needs 20 points
     assert stats["nssda_threshold_m"] == pytest.approx(nssda_threshold_m(10), rel=1e-15)
-    assert stats["nssda_pass"] is (rmse <= nssda_threshold_m(10))
+    assert stats["nssda_pass"] is None
     assert "vertex_error_bound_m" not in stats
 
 
@@ -269,3 +269,13 @@ def test_a_run_says_how_many_check_points_lie_outside_its_mesh(tmp_path):
             "were not assessed: the DEM's valid cell centres bound the mesh, half a cell (5 m) "
             "inside the survey's edge")
     assert [note for note in report["notes"] if note.startswith(said)] and said in run.stderr
+
+
+def test_nssda_verdict_needs_its_20_check_points():
+    """19 check points (a domain that leaves few): the FEMA/NSSDA test needs 20, so no verdict
+    (it was true), and a note says why; 20 give one."""
+    notes = []
+    few = accuracy_statistics(np.full(19, 0.01), note=notes.append)
+    assert few["nssda_pass"] is None and few["nssda_threshold_m"] is not None
+    assert len(notes) == 1 and "fewer than the 20" in notes[0]
+    assert accuracy_statistics(np.full(20, 0.01))["nssda_pass"] is True
