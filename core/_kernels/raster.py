@@ -182,15 +182,17 @@ def slope_kernel(padded, out, d, method, diagonal):
 
 
 @numba.njit(cache=True, nogil=True)
-def missing_to_nan(values, missing):
-    """NaN for ``missing`` and ±inf in a 2-D float array, in place; whether a finite cell is
-    left. (Selects, not branches: the row loops vectorise.)"""
+def missing_to_nan(values, low, high):
+    """NaN for the nodata tag's values (``low`` to ``high``; NaN: none) and ±inf in a 2-D float
+    array, in place; whether a finite cell is left. (Selects, not branches: the row loops
+    vectorise.)"""
     nan = values.dtype.type(np.nan)
     for i in range(values.shape[0]):
         row = values[i]
         for j in range(values.shape[1]):
             v = row[j]
-            row[j] = nan if (v == missing) | (v - v != 0) else v  # v - v: NaN for NaN, ±inf
+            # v - v: NaN for NaN, ±inf
+            row[j] = nan if ((v >= low) & (v <= high)) | (v - v != 0) else v
     for i in range(values.shape[0]):
         for j in range(values.shape[1]):
             if values[i, j] == values[i, j]:

@@ -20,8 +20,8 @@ import numpy as np
 
 from .._kernels.aot import kernel
 from ..errors import Cancelled, FloodMeshError
-from ..io import (atomic_output, no_valid_cells, raster_crs_wkt, raster_profile, read_band,
-                  require_file)
+from ..io import (atomic_output, no_valid_cells, nodata_range, raster_crs_wkt, raster_profile,
+                  read_band, require_file)
 
 DEFAULT_BLOCK_ROWS = 2048
 # File to file: strips of this many rows (a multiple of the tile size), the full width.
@@ -209,18 +209,12 @@ def _band_reader(src, dtype):
         def finite(padded):
             return np.dtype(dtype).kind != "f" or bool(np.isfinite(padded).any())
         return read, finite
-    # the nodata value as the file stores it, then as the buffer holds it (io.read_band)
-    missing = np.dtype(dtype).type(np.nan)
-    if src.nodata is not None and np.isfinite(src.nodata):
-        native = np.dtype(src.dtypes[0])
-        missing = np.dtype(dtype).type(native.type(src.nodata) if native.kind == "f"
-                                       else src.nodata)
-
+    low, high = (np.dtype(dtype).type(v) for v in nodata_range(src))
     missing_to_nan = _kernel("missing_to_nan", dtype)
 
     def read(view, window):
         src.read(1, window=window, out=view)
-    return read, lambda padded: missing_to_nan(padded, missing)
+    return read, lambda padded: missing_to_nan(padded, low, high)
 
 
 def _kernel(name: str, dtype):

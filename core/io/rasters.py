@@ -56,9 +56,37 @@ def no_valid_cells(path) -> FloodMeshError:
                           "check its nodata value and that it is the right file")
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+FLOAT32_EPS = float(np.finfo(np.float32).eps)
+
+
+def nodata_range(src) -> tuple[float, float]:
+    """(low, high): the values of band 1 of the open ``src`` that its nodata tag names, as
+    GDAL's mask (``gdalinfo -stats``, QGIS, rasterio's masked reads) takes them; (NaN, NaN)
+    without a finite tag. Integer bands: the tag. Float bands: within 4 float32 epsilons
+    (5·10⁻⁷ of it) of the tag in the band's own type, GDAL's ARE_REAL_EQUAL (to a float32 ulp
+    at the ends); in float32 GDAL's test also holds where cell plus tag overflows, which near
+    ±FLT_MAX reaches the tag: a tag written with six digits, -3.40282e+38 (gdal_edit.py
+    -a_nodata), names the -3.4028235e+38 that the cells hold."""
+    nodata = src.nodata
+    if nodata is None or not np.isfinite(nodata):  # NaN and ±inf cells are nodata anyway
+        return np.nan, np.nan
+    native = np.dtype(src.dtypes[0])
+    if native.kind != "f":
+        return float(nodata), float(nodata)
+    tag = float(native.type(nodata))
+    reach = 4 * FLOAT32_EPS * abs(tag)
+    low, high = tag - reach, tag + reach
+    edge = FLOAT32_MAX - abs(tag)  # cells of the tag's sign beyond it overflow the sum
+    if native == np.float32 and edge <= abs(tag) + reach:  # and that reaches the tag
+        low, high = (min(low, edge), FLOAT32_MAX) if tag > 0 else (-FLOAT32_MAX, max(high, -edge))
+    return low, high
+
+
 def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
-    """Band 1 (or a window of it) as ``dtype`` with NaN for nodata and ±inf, in one buffer (no
-    masked array) unless the file masks cells by a mask band rather than a nodata value."""
+    """Band 1 (or a window of it) as ``dtype`` with NaN for nodata (``nodata_range``) and ±inf,
+    in one buffer (no masked array) unless the file masks cells by a mask band rather than a
+    nodata value."""
     # lazy: GDAL loads only when this runs
     from rasterio.enums import MaskFlags
 
@@ -68,11 +96,9 @@ def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
     else:
         values = src.read(1, window=window, out_dtype=dtype)
     bad = ~np.isfinite(values)  # ±inf cells are nodata too
-    if src.nodata is not None and np.isfinite(src.nodata):
-        # compare in the file's own type: a float32 nodata written as text may not round-trip
-        native = np.dtype(src.dtypes[0])
-        nodata = native.type(src.nodata) if native.kind == "f" else src.nodata
-        bad |= values == values.dtype.type(nodata)
+    low, high = nodata_range(src)
+    if low == low:
+        bad |= (values >= low) & (values <= high)
     values[bad] = np.nan
     return values
 

@@ -55,8 +55,9 @@ def test_ahead_of_time_slope_equals_numba(aot, method):
 def test_ahead_of_time_nodata_conversions_equal_numba(aot):
     block = ragged_block()
     view, jit_view = block.copy()[2:50, 3:60], block.copy()[2:50, 3:60]  # strided, as read
-    assert aot.missing_to_nan_f32(view, np.float32(-9999.0)) \
-        == raster_kernels.missing_to_nan(jit_view, np.float32(-9999.0))
+    tag = np.float32(-9999.0)
+    assert aot.missing_to_nan_f32(view, tag, tag) \
+        == raster_kernels.missing_to_nan(jit_view, tag, tag)
     assert_array_equal(view, jit_view)
     assert not np.isin(view, [-9999.0, np.inf, -np.inf]).any() and np.isnan(view).any()
     values = np.ascontiguousarray(view)

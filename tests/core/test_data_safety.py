@@ -236,6 +236,22 @@ def test_the_slope_command_keeps_untagged_sentinels_out_of_the_slope(tmp_path, c
     assert np.nanmax(slope_deg) < 80.0  # the DEM's own steepest is 61°; a -9999 m pit: 89.99°
 
 
+def test_a_nodata_tag_written_with_six_digits_names_the_cells_gdal_masks(tmp_path, capsys):
+    # gdal_edit.py -a_nodata -3.40282e+38 on a float32 DEM whose holes hold -FLT_MAX: GDAL's
+    # mask (QGIS, gdalinfo -stats) leaves them out, so must run and slope, with nothing to say
+    values = slope_dem()
+    values[10:20, 10:20] = np.finfo(np.float32).min
+    dem = _raster(tmp_path / "tagged.tif", values, nodata=-3.40282e38)
+    assert main(["run", str(dem), "--out", str(tmp_path / "out")]) == 0
+    nodes, _ = io.read_mesh_2dm(tmp_path / "out" / "mesh.2dm")
+    assert nodes[:, 2].min() >= 10.0
+    out = tmp_path / "slope.tif"
+    assert main(["slope", str(dem), "--out", str(out)]) == 0
+    slope_deg = io.read_raster(out).values
+    assert np.isnan(slope_deg[10:20, 10:20]).all() and np.nanmax(slope_deg) < 80.0
+    assert "taken as nodata" not in capsys.readouterr().err
+
+
 def test_integer_and_multi_band_dems_get_a_note(tmp_path):
     notes = []
     io.read_input(_raster(tmp_path / "int.tif", np.round(slope_dem()), dtype="int16",
