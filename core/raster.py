@@ -16,6 +16,10 @@ METRE_NAMES = {"metre", "meter", "metres", "meters"}
 REPROJECT_POINTS = ("pdal translate IN OUT -f filters.reprojection "
                     "--filters.reprojection.out_srs=EPSG:{code}")
 REPROJECT_RASTER = "gdalwarp -t_srs EPSG:{code} IN OUT"
+# Elevations (m) no ground has: the lowest dry land, the Dead Sea shore, lies at -430 m and
+# Everest at 8849 m. They catch the no-data values that no nodata tag names, such as -9999,
+# -32768 and ±3.4e38 (cells outside them are nodata, with a note: io.read_raster).
+LOWEST_GROUND_M, HIGHEST_GROUND_M = -1000.0, 9000.0
 
 
 def _reproject_hint(kind: str | None, code: str = "XXXX") -> str:

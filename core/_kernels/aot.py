@@ -25,7 +25,7 @@ HERE = Path(__file__).resolve().parent
 # name → (numba signature, the kernel in raster_kernels); float32 C arrays, as map_raster has them
 EXPORTS = {
     "slope_f32": ("f4[:,::1](f4[:,::1], f4[:,::1], f8, i8, f8)", "slope_kernel"),
-    "missing_to_nan_f32": ("b1(f4[:,:], f4, f4)", "missing_to_nan"),
+    "missing_to_nan_f32": ("b1(f4[:,::1], f4, f4, f4, f4, i8, f8[::1])", "missing_to_nan"),
     "nan_to_value_f32": ("f4[:,::1](f4[:,::1], f4)", "nan_to_value"),
 }
 PREFIX = "_raster_aot_"

@@ -182,19 +182,39 @@ def slope_kernel(padded, out, d, method, diagonal):
 
 
 @numba.njit(cache=True, nogil=True)
-def missing_to_nan(values, low, high):
-    """NaN for the nodata tag's values (``low`` to ``high``; NaN: none) and ±inf in a 2-D float
-    array, in place; whether a finite cell is left. (Selects, not branches: the row loops
+def missing_to_nan(values, low, high, lowest, highest, halo, implausible):
+    """NaN, in place in a 2-D float array, for the nodata tag's values (``low`` to ``high``;
+    NaN: none), ±inf, and values outside ``lowest`` to ``highest``, of which those at least
+    ``halo`` cells in from every edge are gathered into ``implausible`` (float64: count, least,
+    greatest); whether a finite cell is left. (Selects, not branches: the row loops
     vectorise.)"""
     nan = values.dtype.type(np.nan)
-    for i in range(values.shape[0]):
+    rows, cols = values.shape
+    for i in range(rows):
         row = values[i]
-        for j in range(values.shape[1]):
+        for j in range(cols):
             v = row[j]
-            # v - v: NaN for NaN, ±inf
-            row[j] = nan if ((v >= low) & (v <= high)) | (v - v != 0) else v
-    for i in range(values.shape[0]):
-        for j in range(values.shape[1]):
+            row[j] = nan if ((v >= low) & (v <= high)) | (v - v != 0) else v  # v - v: ±inf
+    count = 0
+    for i in range(halo, rows - halo):
+        row = values[i, halo:cols - halo]
+        for j in range(row.shape[0]):
+            count += (row[j] < lowest) | (row[j] > highest)
+    if count:  # seldom: the extremes, for the note
+        implausible[0] += count
+        for i in range(halo, rows - halo):
+            row = values[i, halo:cols - halo]
+            for j in range(row.shape[0]):
+                if (row[j] < lowest) | (row[j] > highest):
+                    implausible[1] = min(implausible[1], row[j])
+                    implausible[2] = max(implausible[2], row[j])
+    for i in range(rows):
+        row = values[i]
+        for j in range(cols):
+            v = row[j]
+            row[j] = nan if (v < lowest) | (v > highest) else v
+    for i in range(rows):
+        for j in range(cols):
             if values[i, j] == values[i, j]:
                 return True
     return False

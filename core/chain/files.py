@@ -131,10 +131,11 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
     from ..steps.breaklines import trace_breaklines
 
     _files([breakpoints, slope, dem], [output])
-    points = io.read_raster(breakpoints, crs=crs)
+    points = io.read_raster(breakpoints, crs=crs, elevations=False)
     points = points.with_values((points.values == 1).astype("uint8"))
-    terrain = io.read_raster(dem, crs=crs)
-    lines = trace_breaklines(points, io.read_raster(slope, crs=crs), terrain, s_crit, mode=mode,
+    terrain = io.read_raster(dem, crs=crs, note=note)
+    slope_grid = io.read_raster(slope, crs=crs, elevations=False)
+    lines = trace_breaklines(points, slope_grid, terrain, s_crit, mode=mode,
                              min_points=min_points, min_length=min_length, join=join, seed=seed)
     io.write_breaklines(output, lines, terrain.crs)
     return {"OUTPUT": str(output), "crs": terrain.crs.to_wkt(),

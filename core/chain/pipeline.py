@@ -701,7 +701,7 @@ def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
     """A DEM (one raster, or DEM tiles mosaicked), its own cell size kept; check points are a
     seeded draw of its cells."""
     if source.tiled:
-        dem = steps.run("read", read_dem_tiles, source.paths, crs=options.crs)
+        dem = steps.run("read", read_dem_tiles, source.paths, crs=options.crs, note=note)
     else:
         dem = steps.run("read", io.read_raster, source.path, crs=options.crs, note=note)
     valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
@@ -803,7 +803,7 @@ def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: f
         slope_grid = slope(dem, "one-over-distance") if slope_grid is None else slope_grid
         return size_from_slope(slope_grid, max_area=max_area, s_crit=s_crit,
                                min_area=max_area / 25 if min_area is None else min_area)
-    field = io.read_raster(source, crs=dem.crs)
+    field = io.read_raster(source, crs=dem.crs, elevations=False)
     if not field.crs.equals(dem.crs, ignore_axis_order=True):
         raise FloodMeshError(f"the size field {Path(source).name} is in {field.crs.name}, the "
                              f"DEM in {dem.crs.name}; reproject it to the DEM's CRS")

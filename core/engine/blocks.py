@@ -20,8 +20,9 @@ import numpy as np
 
 from .._kernels.aot import kernel
 from ..errors import Cancelled, FloodMeshError
-from ..io import (atomic_output, no_valid_cells, nodata_range, raster_crs_wkt, raster_profile,
-                  read_band, require_file)
+from ..io import (atomic_output, dem_file, implausible_note, no_valid_cells, nodata_range,
+                  raster_crs_wkt, raster_profile, read_band, require_file)
+from ..raster import HIGHEST_GROUND_M, LOWEST_GROUND_M
 
 DEFAULT_BLOCK_ROWS = 2048
 # File to file: strips of this many rows (a multiple of the tile size), the full width.
@@ -130,14 +131,16 @@ def map_overlap(values: np.ndarray, func: Callable[[np.ndarray], np.ndarray], *,
 def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, halo: int,
                dtype="float32", nodata=None, windows: Iterable[Window] | None = None,
                block_rows: int = STREAM_BLOCK_ROWS, input_dtype=np.float32, crs=None,
+               elevations: bool = False, note: Callable[[str], None] | None = None,
                progress: Callable[[float], None] | None = None,
                cancelled: Callable[[], bool] | None = None) -> None:
     """Stream ``func`` (a kernel as for ``map_overlap``) from band 1 of ``src_path`` to a tiled
     GeoTIFF ``dst_path`` (``io.raster_profile``) on the same grid, window by window.
 
     The kernel receives ``input_dtype`` (float32) blocks with NaN for nodata, ±inf and beyond the
-    raster, and returns the interior in any dtype; NaN in a float result is written as
-    ``nodata`` (default −9999; 255 for integer outputs). ``windows`` are
+    raster (with ``elevations``, a DEM's, also for cells no ground has, which ``note`` is told
+    of as ``io.read_raster`` tells it), and returns the interior in any dtype; NaN in a float
+    result is written as ``nodata`` (default −9999; 255 for integer outputs). ``windows`` are
     (row_off, col_off, height, width) of the output (default: full-width strips of
     ``block_rows`` rows); windows not listed are left nodata, so tiles of one raster can be
     computed by separate calls into separate files. Peak memory is a few blocks. The output is
@@ -161,7 +164,7 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
         shape = (src.height, src.width)
         windows = row_windows(shape, block_rows) if windows is None else list(windows)
 
-        read_band, to_nan = _band_reader(src, input_dtype)
+        read_band, to_nan, implausible = _band_reader(src, input_dtype, halo, elevations)
         nan_to_value = _kernel("nan_to_value", dtype)
 
         def read_into(view, r0, r1, c0, c1):
@@ -188,33 +191,41 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
 
                 run_blocks(read_into, write, shape, compute, halo=halo, windows=windows,
                            dtype=input_dtype, progress=progress, cancelled=cancelled)
+            if implausible[0] and note:
+                note(implausible_note(dem_file(src_path.name, src.nodata), src_path.name,
+                                      int(implausible[0]), *implausible[1:]))
             if not valid[0]:
                 raise no_valid_cells(src_path)  # before the move: no output is left
 
 
-def _band_reader(src, dtype):
-    """``(read, to_nan)``: ``read(view, window)`` reads band 1 of the open ``src`` in ``window``
-    into the array ``view`` (any strides) as ``dtype``, straight into the caller's buffer;
-    ``to_nan(padded)``, on the whole padded buffer (NaN beyond the raster) in the worker thread,
-    makes nodata and ±inf NaN in floats and returns whether a finite cell is in it. Files that
+def _band_reader(src, dtype, halo: int, elevations: bool):
+    """``(read, to_nan, implausible)``: ``read(view, window)`` reads band 1 of the open ``src``
+    in ``window`` into the array ``view`` (any strides) as ``dtype``, straight into the caller's
+    buffer; ``to_nan(padded)``, on the whole padded buffer (NaN beyond the raster) in the worker
+    thread, makes nodata (``io.nodata_range``) and ±inf NaN in floats, with ``elevations`` also
+    cells no ground has, gathered in ``implausible`` (count, least, greatest; ``halo`` cells of
+    the buffer are another window's), and returns whether a finite cell is in it. Files that
     mask cells by a mask band rather than a nodata value are read masked (``io.read_band``)."""
     # lazy: GDAL loads only when this runs
     from rasterio.enums import MaskFlags
 
+    implausible = np.array([0.0, np.inf, -np.inf])
     flags = src.mask_flag_enums[0]
     if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags or np.dtype(dtype).kind != "f":
         def read(view, window):
             view[...] = read_band(src, window, dtype)
-
-        def finite(padded):
-            return np.dtype(dtype).kind != "f" or bool(np.isfinite(padded).any())
-        return read, finite
-    low, high = (np.dtype(dtype).type(v) for v in nodata_range(src))
+    else:
+        def read(view, window):
+            src.read(1, window=window, out=view)
+    if np.dtype(dtype).kind != "f":
+        return read, lambda padded: True, implausible
+    cast = np.dtype(dtype).type
+    low, high = (cast(v) for v in nodata_range(src))
+    lowest, highest = (cast(LOWEST_GROUND_M), cast(HIGHEST_GROUND_M)) if elevations else \
+        (cast(-np.inf), cast(np.inf))
     missing_to_nan = _kernel("missing_to_nan", dtype)
-
-    def read(view, window):
-        src.read(1, window=window, out=view)
-    return read, lambda padded: missing_to_nan(padded, low, high)
+    return read, lambda padded: missing_to_nan(padded, low, high, lowest, highest, halo,
+                                               implausible), implausible
 
 
 def _kernel(name: str, dtype):

@@ -45,8 +45,8 @@ from affine import Affine
 from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
-from ..io import (GROUND_CLASS, atomic_output, classes_kept, file_format, las_classes, las_crs,
-                  las_fields_read, las_xyz, read_band, read_las, read_xyz)
+from ..io import (GROUND_CLASS, atomic_output, classes_kept, drop_implausible, file_format,
+                  las_classes, las_crs, las_fields_read, las_xyz, read_band, read_las, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes
@@ -1112,9 +1112,10 @@ def write_front_rasters(files: dict, out) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # DEM tiles
-def read_dem_tiles(inputs, *, crs=None) -> Grid:
+def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
     """Several GeoTIFF DEM tiles (a folder, glob or list) as one Grid, after checking each: one
-    CRS in metres, the same cell size, cells aligned across tiles."""
+    CRS in metres, the same cell size, cells aligned across tiles; cells no ground has are
+    nodata, which ``note`` is told of (``io.drop_implausible``)."""
     # lazy: GDAL loads only when this runs
     import rasterio
     from rasterio.merge import merge
@@ -1162,6 +1163,7 @@ def read_dem_tiles(inputs, *, crs=None) -> Grid:
         mosaic, transform = merge(sources, nodata=np.nan, dtype="float64")
     values = mosaic[0].astype(np.float64)
     values[~np.isfinite(values)] = np.nan
+    drop_implausible(values, "the DEM tiles", "TILE", note)
     if not np.isfinite(values).any():
         raise FloodMeshError("the DEM tiles have no valid cells: check their nodata value")
     return Grid(values, transform, first[1])

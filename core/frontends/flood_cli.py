@@ -35,7 +35,7 @@ def cmd_flood(args):
 
 def _write_flow_fields(out: Path, wet_area: float, report: dict) -> str:
     """size_field.tif and wet_zone.gpkg from the run's max depth, for a second mesh."""
-    depth = io.read_raster(out / "max_depth.tif")
+    depth = io.read_raster(out / "max_depth.tif", elevations=False)
     wet = report["scenario"]["wet_depth_m"]
     io.write_raster(out / "size_field.tif", flood_size_field(depth, wet_area=wet_area,
                                                              wet_depth=wet))

@@ -11,15 +11,12 @@ import numpy as np
 from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import is_point_source
-from ..raster import Grid, METRE_NAMES, check_transform, require_metric_crs
+from ..raster import (HIGHEST_GROUND_M, LOWEST_GROUND_M, METRE_NAMES, Grid, check_transform,
+                      require_metric_crs)
 from .outputs import atomic_output, require_file
 from .points import read_points
 
 RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
-# values DEM exports use for "no data" without always saying so in the file's nodata tag
-NODATA_SENTINELS = (-9999.0, -99999.0, -32768.0, -32767.0, 32767.0, 65535.0,
-                    float(np.finfo(np.float32).min), float(np.finfo(np.float32).max))
-SENTINEL_GAP_M = 100.0  # an untagged sentinel is nodata when this far beyond every other cell
 
 
 def raster_crs(src, path: Path, crs=None):
@@ -103,25 +100,12 @@ def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
     return values
 
 
-def nodata_tagged(path) -> bool:
-    """Whether a raster file says which value is nodata (a tag or a mask band)."""
-    # lazy: GDAL loads only when this runs
-    import rasterio
-    from rasterio.enums import MaskFlags
-
-    try:
-        with rasterio.open(require_file(path, "raster")) as src:
-            return src.nodata is not None or MaskFlags.all_valid not in src.mask_flag_enums[0]
-    except rasterio.errors.RasterioIOError as exc:
-        raise FloodMeshError(f"{Path(path).name} is not a readable raster ({exc})") from None
-
-
-def read_raster(path, *, crs=None, note=None) -> Grid:
+def read_raster(path, *, crs=None, elevations: bool = True, note=None) -> Grid:
     """Read band 1 of a raster as a float64 Grid with NaN for nodata.
 
-    Without a nodata tag, cells holding a common sentinel (``NODATA_SENTINELS``) far beyond
-    every other cell are nodata too. ``note`` (given for DEMs) receives what was assumed: such
-    sentinels, further bands left unused, elevations stored as whole numbers.
+    With ``elevations`` (a DEM), cells no ground has are nodata too (``drop_implausible``).
+    ``note`` (given for DEMs) receives what was assumed: such cells, further bands left unused,
+    elevations stored as whole numbers.
     """
     # lazy: GDAL loads only when this runs
     import rasterio
@@ -133,11 +117,11 @@ def read_raster(path, *, crs=None, note=None) -> Grid:
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
             values = read_band(src)
-            tagged, count, dtype = src.nodata is not None, src.count, src.dtypes[0]
+            nodata, count, dtype = src.nodata, src.count, src.dtypes[0]
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
-    if not tagged:
-        _untagged_nodata(values, path.name, note)
+    if elevations:
+        drop_implausible(values, dem_file(path.name, nodata), path.name, note)
     if note and count > 1:
         note(f"raster {path.name} has {count} bands: band 1 is used as the elevations; "
              f"extract another one first if it holds them (gdal_translate -b N IN OUT)")
@@ -150,22 +134,33 @@ def read_raster(path, *, crs=None, note=None) -> Grid:
     return Grid(values, transform, crs)
 
 
-def _untagged_nodata(values: np.ndarray, name: str, note=None) -> None:
-    """Set to NaN the cells of an untagged raster holding a nodata sentinel that lies more
-    than ``SENTINEL_GAP_M`` beyond every other cell, and say so."""
-    for sentinel in NODATA_SENTINELS:
-        hit = values == sentinel
-        if not hit.any():
-            continue
-        rest = values[~hit & np.isfinite(values)]
-        if rest.size and not (rest.min() - SENTINEL_GAP_M > sentinel
-                              or rest.max() + SENTINEL_GAP_M < sentinel):
-            continue
-        values[hit] = np.nan
+def drop_implausible(values: np.ndarray, what: str, file: str, note=None) -> None:
+    """Set to NaN, in place, the cells of a DEM's ``values`` (m) below ``LOWEST_GROUND_M`` or
+    above ``HIGHEST_GROUND_M``: no ground lies there, they hold a no-data value that no tag
+    names. ``note`` is told (``implausible_note``: ``what``, ``file``)."""
+    outside = (values < LOWEST_GROUND_M) | (values > HIGHEST_GROUND_M)
+    count = int(np.count_nonzero(outside))
+    if count:
+        held = values[outside]
         if note:
-            note(f"raster {name} has no nodata value, but {int(hit.sum()):,} cells hold "
-                 f"{sentinel:g}, far from every other cell: they are taken as nodata; set it in "
-                 f"the file (gdal_edit.py -a_nodata {sentinel:g} {name}) to say so")
+            note(implausible_note(what, file, count, float(held.min()), float(held.max())))
+        values[outside] = np.nan
+
+
+def dem_file(name: str, nodata) -> str:
+    """``implausible_note``'s words for DEM file ``name`` with the nodata tag ``nodata``."""
+    return f"raster {name} ({'no nodata tag' if nodata is None else f'nodata tag {nodata:g}'})"
+
+
+def implausible_note(what: str, file: str, count: int, least: float, greatest: float) -> str:
+    """The note on ``count`` cells of ``what`` (``dem_file``, or the DEM tiles) holding
+    ``least`` to ``greatest``, beyond any ground, taken as nodata; ``file`` the name to tag."""
+    value = f"{least:g}" if least == greatest else "VALUE"
+    held = f"{value}, an elevation" if least == greatest else \
+        f"{least:g} to {greatest:g}, elevations"
+    return (f"{what}: {count:,} cells hold {held} no ground has (below {LOWEST_GROUND_M:g} m "
+            f"or above {HIGHEST_GROUND_M:g} m): they are taken as nodata; tag that value in "
+            f"the file to say so (gdal_edit.py -a_nodata {value} {file})")
 
 
 TILE = 256  # GeoTIFF tile size (cells)

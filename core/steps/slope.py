@@ -22,7 +22,6 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .. import io
 from .._kernels import aot as compiled
 from ..engine.blocks import cell_size, map_overlap, map_raster
 from ..errors import FloodMeshError
@@ -84,10 +83,11 @@ def slope(dem: Grid, method: str = "one-over-distance", *, diagonal_distance: bo
 
 
 def slope_file(dem_path, out_path, method: str = "one-over-distance", *,
-               diagonal_distance: bool = True, crs=None, windows=None, progress=None,
+               diagonal_distance: bool = True, crs=None, windows=None, note=None, progress=None,
                cancelled=None) -> None:
     """Slope (degrees, float32) of a DEM file into a GeoTIFF, streamed block by block in float32
-    (``blocks.map_raster``; ``windows`` as there); the same values as ``slope`` on the DEM."""
+    (``blocks.map_raster``; ``windows``, and ``note`` told of cells no ground has, as there);
+    the same values as ``slope`` on the DEM."""
     code, d = _method_code(method), cell_size(dem_path)
     diagonal = SQRT2 * d if diagonal_distance else d
     kernel = compiled.kernel("slope_f32")
@@ -107,7 +107,7 @@ def slope_file(dem_path, out_path, method: str = "one-over-distance", *,
 
     with ThreadPoolExecutor(max(helpers, 1), thread_name_prefix="floodmesh-slope") as pool:
         map_raster(dem_path, out_path, block, halo=1, crs=crs, windows=windows,
-                   progress=progress, cancelled=cancelled)
+                   elevations=True, note=note, progress=progress, cancelled=cancelled)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -133,9 +133,10 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
 
 
 def laplacian_of_gaussian_file(dem_path, out_path, sigma: float, *, kernel: str = "pratt",
-                               crs=None, windows=None, progress=None, cancelled=None) -> None:
+                               crs=None, windows=None, note=None, progress=None,
+                               cancelled=None) -> None:
     """``laplacian_of_gaussian`` of a DEM file into a float32 GeoTIFF, streamed block by block
-    (``blocks.map_raster``); the same values as in memory."""
+    (``blocks.map_raster``; ``note`` as there); the same values as in memory."""
     # lazy: GDAL loads only when this runs
     import rasterio
 
@@ -143,7 +144,7 @@ def laplacian_of_gaussian_file(dem_path, out_path, sigma: float, *, kernel: str 
         d, shape = float(src.transform.a), (src.height, src.width)
     block, halo = _log_block(sigma, d, kernel, shape)
     map_raster(dem_path, out_path, block, halo=halo, crs=crs, windows=windows,
-               progress=progress, cancelled=cancelled)
+               elevations=True, note=note, progress=progress, cancelled=cancelled)
 
 
 def _log_block(sigma: float, d: float, kernel: str, shape):
@@ -218,18 +219,11 @@ def _analytic_log_kernel(sigma, d, reach):
 def slope_raster_file(dem_path, out_path, method: str = "one-over-distance", *, sigma: float = 1.0,
                       log_kernel: str = "pratt", crs=None, note=None, progress=None,
                       cancelled=None) -> None:
-    """Slope (degrees) or, with ``method="log"``, the LoG response of a DEM file into a GeoTIFF:
-    streamed block by block, except a raster without a nodata tag, whose sentinels
-    (``io.read_raster``, which tells ``note``) are found on the whole raster in memory."""
-    if io.nodata_tagged(dem_path):
-        if method == "log":
-            laplacian_of_gaussian_file(dem_path, out_path, sigma, kernel=log_kernel, crs=crs,
-                                       progress=progress, cancelled=cancelled)
-        else:
-            slope_file(dem_path, out_path, method, crs=crs, progress=progress,
-                       cancelled=cancelled)
-        return
-    dem = io.read_raster(dem_path, crs=crs, note=note)
-    io.write_raster(out_path, laplacian_of_gaussian(dem, sigma, kernel=log_kernel,
-                                                    cancelled=cancelled)
-                    if method == "log" else slope(dem, method, cancelled=cancelled))
+    """Slope (degrees) or, with ``method="log"``, the LoG response of a DEM file into a GeoTIFF,
+    streamed block by block; ``note`` is told of cells no ground has, taken as nodata."""
+    if method == "log":
+        laplacian_of_gaussian_file(dem_path, out_path, sigma, kernel=log_kernel, crs=crs,
+                                   note=note, progress=progress, cancelled=cancelled)
+    else:
+        slope_file(dem_path, out_path, method, crs=crs, note=note, progress=progress,
+                   cancelled=cancelled)

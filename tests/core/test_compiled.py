@@ -10,6 +10,7 @@ from numpy.testing import assert_array_equal
 
 from floodmesh.core._kernels import aot as compiled, raster as raster_kernels
 from floodmesh.core import io
+from floodmesh.core.raster import HIGHEST_GROUND_M, LOWEST_GROUND_M
 from floodmesh.core.steps.slope import SLOPE_METHODS
 
 from .test_streaming import rough_dem
@@ -54,11 +55,16 @@ def test_ahead_of_time_slope_equals_numba(aot, method):
 
 def test_ahead_of_time_nodata_conversions_equal_numba(aot):
     block = ragged_block()
-    view, jit_view = block.copy()[2:50, 3:60], block.copy()[2:50, 3:60]  # strided, as read
+    block[20, 30] = block[40, 10] = 12000.0  # no ground's: NaN, and counted
+    view, jit_view = block[2:50, 3:60].copy(), block[2:50, 3:60].copy()  # the padded buffer
     tag = np.float32(-9999.0)
-    assert aot.missing_to_nan_f32(view, tag, tag) \
-        == raster_kernels.missing_to_nan(jit_view, tag, tag)
+    ground = np.float32(LOWEST_GROUND_M), np.float32(HIGHEST_GROUND_M)
+    seen, jit_seen = np.array([0.0, np.inf, -np.inf]), np.array([0.0, np.inf, -np.inf])
+    assert aot.missing_to_nan_f32(view, tag, tag, *ground, 1, seen) \
+        == raster_kernels.missing_to_nan(jit_view, tag, tag, *ground, 1, jit_seen)
     assert_array_equal(view, jit_view)
+    assert_array_equal(seen, jit_seen)
+    assert list(seen) == [2, 12000.0, 12000.0]
     assert not np.isin(view, [-9999.0, np.inf, -np.inf]).any() and np.isnan(view).any()
     values = np.ascontiguousarray(view)
     assert_array_equal(aot.nan_to_value_f32(values.copy(), np.float32(-9999.0)),

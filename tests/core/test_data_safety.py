@@ -236,6 +236,61 @@ def test_the_slope_command_keeps_untagged_sentinels_out_of_the_slope(tmp_path, c
     assert np.nanmax(slope_deg) < 80.0  # the DEM's own steepest is 61°; a -9999 m pit: 89.99°
 
 
+def _holes(tmp_path, case):
+    """A DEM (``slope_dem``, 10-16 m) whose 100 cells [10:20, 10:20] hold a no-data value no
+    tag names; (path, the value as the note writes it, extra run arguments)."""
+    values = slope_dem()
+    if case == "ascii":  # -3.40282e+38 as many writers print it, and no NODATA_value line
+        values[10:20, 10:20] = -3.40282e38
+        path = tmp_path / "holes.asc"
+        path.write_text(f"ncols 60\nnrows 60\nxllcorner {ORIGIN[0]}\nyllcorner {ORIGIN[1]}\n"
+                        "cellsize 1\n" + "\n".join(" ".join(f"{v:g}" for v in row)
+                                                    for row in values) + "\n")
+        return path, "-3.40282e+38", ["--crs", UTM]
+    if case == "float64":  # -3.4e38, not FLT_MAX bit for bit, untagged
+        values[10:20, 10:20] = -3.4e38
+        return _raster(tmp_path / "holes.tif", values, dtype="float64"), "-3.4e+38", []
+    values[10:20, 10:20] = -9999.0  # tagged, but with 0
+    return _raster(tmp_path / "holes.tif", values, nodata=0.0), "-9999", []
+
+
+@pytest.mark.parametrize("case", ["float64", "ascii", "wrong-tag"])
+def test_cells_no_ground_has_are_nodata_with_a_note(tmp_path, case, capsys):
+    dem, held, extra = _holes(tmp_path, case)
+    assert main(["run", str(dem), "--out", str(tmp_path / "out"), *extra]) == 0
+    nodes, _ = io.read_mesh_2dm(tmp_path / "out" / "mesh.2dm")
+    assert 10.0 <= nodes[:, 2].min() and nodes[:, 2].max() <= 16.0
+    err = capsys.readouterr().err
+    assert f"100 cells hold {held}, an elevation no ground has" in err
+    assert f"taken as nodata; tag that value in the file to say so (gdal_edit.py -a_nodata " \
+           f"{held} {dem.name})" in err
+
+
+def test_dem_tiles_keep_cells_no_ground_has_out_of_the_mesh(tmp_path, capsys):
+    values = slope_dem()
+    values[10:20, 10:20] = -9999.0
+    tiles = tmp_path / "tiles"
+    tiles.mkdir()
+    _raster(tiles / "west.tif", values[:, :30])  # untagged
+    with rasterio.open(_raster(tiles / "east.tif", values[:, 30:], nodata=-9999.0), "r+") as dst:
+        dst.transform = dst.transform * Affine.translation(30, 0)
+    assert main(["run", str(tiles), "--out", str(tmp_path / "out")]) == 0
+    nodes, _ = io.read_mesh_2dm(tmp_path / "out" / "mesh.2dm")
+    assert 10.0 <= nodes[:, 2].min()
+    assert "the DEM tiles: 100 cells hold -9999, an elevation no ground has" \
+           in capsys.readouterr().err
+
+
+def test_the_slope_command_keeps_cells_no_ground_has_out_of_a_tagged_dem(tmp_path, capsys):
+    # a tagged DEM is streamed block by block: the cells its tag does not name are found there
+    dem, _, _ = _holes(tmp_path, "wrong-tag")
+    out = tmp_path / "slope.tif"
+    assert main(["slope", str(dem), "--out", str(out)]) == 0
+    slope_deg = io.read_raster(out).values
+    assert np.isnan(slope_deg[10:20, 10:20]).all() and np.nanmax(slope_deg) < 80.0
+    assert "(nodata tag 0): 100 cells hold -9999" in capsys.readouterr().err
+
+
 def test_a_nodata_tag_written_with_six_digits_names_the_cells_gdal_masks(tmp_path, capsys):
     # gdal_edit.py -a_nodata -3.40282e+38 on a float32 DEM whose holes hold -FLT_MAX: GDAL's
     # mask (QGIS, gdalinfo -stats) leaves them out, so must run and slope, with nothing to say
