@@ -69,6 +69,7 @@ def parse_formats(text) -> tuple[str, ...]:
 
 MAX_MIN_ANGLE = 34.0  # Triangle's refinement stops terminating reliably above about 33.8 degrees
 DEFAULT_MAX_TRIANGLES = 5_000_000
+DEFAULT_CELL_SIZE = 1.0  # m: the grid of points; a DEM keeps its own cells
 # localised break-line pieces are joined across gaps of up to this many cell sizes (--join-gap);
 # chosen on the evaluation corpus (benchmarks/RESULTS.md, "The evaluation corpus")
 JOIN_GAP_CELLS = 10.0
@@ -293,7 +294,7 @@ LOCAL_CLUSTER = "local"
 class RunOptions:
     """Parameters of the whole chain; the defaults are the method's reference case."""
 
-    cell_size: float = 1.0          # d, m
+    cell_size: float = DEFAULT_CELL_SIZE  # d, m
     slope_method: str = "one-over-distance"  # or "log": breakpoints from the LoG response
     s_crit: float = 10.0            # critical slope, degrees
     sigma: float = 1.0              # LoG smoothing, m

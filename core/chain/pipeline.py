@@ -27,9 +27,10 @@ from ..io.outputs import check_output_folder, scratch_folder, staged_folder
 from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
 from ..io.report_process import PicturesApart
 from ..io.report_html import HTML_NAME, write_report_html
-from ..options import (BRIDGE_GAP_CELLS, EXPORT_EXTENSIONS, EXPORT_FORMATS, JOIN_GAP_CELLS,
-                       MISFIT_CROSSING_CELLS, MISFIT_DENSITY, MISFIT_EXCESS, MISFIT_FLOOR_CELLS,
-                       MISFIT_LOW_FLOOR, MISFIT_SHARE, RunOptions, check_sigma_fits)
+from ..options import (BRIDGE_GAP_CELLS, DEFAULT_CELL_SIZE, EXPORT_EXTENSIONS, EXPORT_FORMATS,
+                       JOIN_GAP_CELLS, MISFIT_CROSSING_CELLS, MISFIT_DENSITY, MISFIT_EXCESS,
+                       MISFIT_FLOOR_CELLS, MISFIT_LOW_FLOOR, MISFIT_SHARE, RunOptions,
+                       check_sigma_fits)
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
 from ..raster import Grid, bilinear, nearest_value
@@ -698,12 +699,18 @@ def _grid_in_memory(gridding: PointCloud, holdout: PointCloud, holdout_source: s
 
 def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
               note) -> _Terrain:
-    """A DEM (one raster, or DEM tiles mosaicked), its own cell size kept; check points are a
-    seeded draw of its cells."""
+    """A DEM (one raster, or DEM tiles mosaicked), its own cell size kept (``note`` is told
+    when another was given: one other than the default, as QGIS passes the default as a value);
+    check points are a seeded draw of its cells."""
     if source.tiled:
         dem = steps.run("read", read_dem_tiles, source.paths, crs=options.crs, note=note)
     else:
         dem = steps.run("read", io.read_raster, source.path, crs=options.crs, note=note)
+    given = options.cell_size
+    if note and given != DEFAULT_CELL_SIZE and not np.isclose(given, dem.cell_size, rtol=1e-9):
+        note(f"the input is a DEM: its own cells of {dem.cell_size:g} m are used, not the cell "
+             f"size of {given:g} m given, which grids points; resample the DEM for other cells "
+             f"(gdalwarp -tr {given:g} {given:g} IN OUT)")
     valid_area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
     triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
     check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,

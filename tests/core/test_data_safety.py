@@ -307,6 +307,17 @@ def test_a_nodata_tag_written_with_six_digits_names_the_cells_gdal_masks(tmp_pat
     assert "taken as nodata" not in capsys.readouterr().err
 
 
+def test_a_cell_size_given_for_a_dem_is_named_as_unused(tmp_path, capsys):
+    dem = _raster(tmp_path / "dem.tif", slope_dem())  # 1 m cells
+    assert main(["run", str(dem), "--out", str(tmp_path / "out"), "--cell-size", "2"]) == 0
+    said = "the input is a DEM: its own cells of 1 m are used, not the cell size of 2 m given"
+    assert said in capsys.readouterr().err
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert any(said in n for n in report["notes"]) and report["grid"]["cell_size_m"] == 1.0
+    assert main(["run", str(dem), "--out", str(tmp_path / "default")]) == 0
+    assert "the input is a DEM" not in capsys.readouterr().err
+
+
 def test_integer_and_multi_band_dems_get_a_note(tmp_path):
     notes = []
     io.read_input(_raster(tmp_path / "int.tif", np.round(slope_dem()), dtype="int16",
