@@ -97,6 +97,34 @@ def check_transform(t: Affine, what: str = "the raster") -> None:
             f"cells first (gdalwarp -tr D D IN OUT, e.g. D = {min(t.a, -t.e):g})")
 
 
+# m: LiDAR DEMs have cells of centimetres to metres; cells under a millimetre are coordinates
+# in degrees (or another unit) under a CRS that says metres
+SMALLEST_DEM_CELL_M = 0.001
+# cells each way a DEM's data must span to be meshed: the domain lies half a cell inside the
+# outer cell centres and must exceed 4 cells (steps.mesh.domain_from_dem), which 3 x 3 does not
+MIN_DEM_CELLS_ACROSS = 4
+
+
+def check_dem_size(values: np.ndarray, cell_size: float, what: str) -> None:
+    """Refuse a DEM (``values`` with NaN for nodata, cells of ``cell_size`` m) whose cells are
+    far smaller than a LiDAR DEM's, a CRS or unit mistake, or whose data spans too few cells to
+    mesh, saying how much ground its data covers."""
+    valid = np.isfinite(values)
+    rows, cols = np.flatnonzero(valid.any(axis=1)), np.flatnonzero(valid.any(axis=0))
+    across = (cols[-1] - cols[0] + 1, rows[-1] - rows[0] + 1) if rows.size else (0, 0)
+    width, height = across[0] * cell_size, across[1] * cell_size
+    if cell_size < SMALLEST_DEM_CELL_M:
+        raise FloodMeshError(
+            f"{what} has cells of {cell_size:g} m, far smaller than a LiDAR DEM's (centimetres "
+            f"to metres), so its data covers only {width:.3g} x {height:.3g} m: check its CRS "
+            "and units (coordinates in degrees under a CRS in metres give such cells)")
+    if min(across) < MIN_DEM_CELLS_ACROSS:
+        raise FloodMeshError(
+            f"the data of {what} covers only {width:g} x {height:g} m, fewer than "
+            f"{MIN_DEM_CELLS_ACROSS} cells of {cell_size:g} m each way: too little to mesh; "
+            "check that it is the right file")
+
+
 @dataclass(frozen=True)
 class Grid:
     """A north-up raster with square cells: ``values`` (rows, cols), NaN where there is no data.

@@ -20,7 +20,7 @@ from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, ch
                        check_max_area, check_max_gap, check_max_triangles, check_min_angle,
                        check_seed, is_point_source)
 from ..points import PointCloud, at_places_of, split_holdout
-from ..raster import require_metric_crs
+from ..raster import check_dem_size, require_metric_crs
 from ..steps.breakpoints import breakpoints_file
 from ..steps.slope import slope_raster_file
 
@@ -166,6 +166,7 @@ def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
     from .pipeline import mesh_constraints
 
     terrain = io.read_raster(dem, crs=crs, note=note)
+    check_dem_size(terrain.values, terrain.cell_size, f"raster {Path(dem).name}")
     lines = io.read_lines_gpkg(breaklines) if breaklines else []
     domain, own = mesh_constraints(terrain, boundary, user_lines, note=note)
     return terrain, lines + own, domain

@@ -33,7 +33,7 @@ from ..options import (BRIDGE_GAP_CELLS, DEFAULT_CELL_SIZE, EXPORT_EXTENSIONS, E
                        check_sigma_fits)
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
-from ..raster import Grid, bilinear, nearest_value
+from ..raster import Grid, bilinear, check_dem_size, nearest_value
 from ..steps.accuracy import accuracy_statistics, outside_mesh_note, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
@@ -706,6 +706,8 @@ def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
         dem = steps.run("read", read_dem_tiles, source.paths, crs=options.crs, note=note)
     else:
         dem = steps.run("read", io.read_raster, source.path, crs=options.crs, note=note)
+    check_dem_size(dem.values, dem.cell_size,
+                   "the DEM tiles" if source.tiled else f"raster {source.path.name}")
     given = options.cell_size
     if note and given != DEFAULT_CELL_SIZE and not np.isclose(given, dem.cell_size, rtol=1e-9):
         note(f"the input is a DEM: its own cells of {dem.cell_size:g} m are used, not the cell "
