@@ -8,7 +8,7 @@ import numpy as np
 
 from .errors import FloodMeshError
 from .options import check_seed, holdout_count
-from .raster import require_metric_crs
+from .raster import HIGHEST_GROUND_M, LOWEST_GROUND_M, require_metric_crs
 
 if TYPE_CHECKING:  # pyproj is imported where a CRS is checked: it costs 0.1 s of start-up
     from pyproj import CRS
@@ -31,23 +31,28 @@ class PointCloud:
 
 def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
                  note=None, *, repeats: bool = True) -> PointCloud:
-    """Drop non-finite points and check what is left is usable terrain data; ``note``
-    receives what was left out or found doubtful (points without x, y or z, points at one x, y
+    """Drop non-finite points and those with a z no ground has (``usable_rows``) and check what
+    is left is usable terrain data; ``note`` receives what was left out or found doubtful
+    (points without x, y or z, or with a no-data z such as -9999, points at one x, y
     with different z: ``repeats=False`` leaves that check to the caller,
     ``repeated_positions_note``)."""
     crs = require_metric_crs(crs, source, kind)
-    # lazy: numba loads only where points are read
-    import numba
-
-    from ._kernels.points import finite_rows
-
     xyz = np.asarray(xyz, dtype=np.float64)
-    finite = finite_rows(xyz, numba.get_num_threads())
-    if finite is not None:
+    usable = usable_rows(xyz)
+    if usable is not None:
         if note:
-            note(f"{source}: {int((~finite).sum()):,} points without a finite x, y and z "
-                 "(empty or NaN values) were left out")
-        xyz = xyz[finite]
+            left = xyz[~usable]
+            empty = int((~np.isfinite(left).all(axis=1)).sum())
+            if empty:
+                note(f"{source}: {empty:,} points without a finite x, y and z (empty or NaN "
+                     "values) were left out")
+            if len(left) > empty:
+                z = left[np.isfinite(left).all(axis=1), 2]
+                note(f"{source}: {len(z):,} points with a z no ground has ({z.min():g}"
+                     f"{'' if z.min() == z.max() else f' to {z.max():g}'} m; below "
+                     f"{LOWEST_GROUND_M:g} m or above {HIGHEST_GROUND_M:g} m: no-data values) "
+                     "were left out")
+        xyz = xyz[usable]
     if len(xyz) < 3:
         raise FloodMeshError(f"{source} has {len(xyz)} usable points (finite x, y, z); at least 3 "
                              "are needed to make a terrain model. Check the file and its classes")
@@ -56,6 +61,18 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
     if message:
         note(message)
     return PointCloud(xyz, crs)
+
+
+def usable_rows(xyz: np.ndarray) -> np.ndarray | None:
+    """Which points (n, 3) have a finite x, y, z and a z some ground has (``LOWEST_GROUND_M``
+    to ``HIGHEST_GROUND_M``: -9999 and the like are no-data values); None where all do."""
+    # lazy: numba loads only where points are read
+    import numba
+
+    from ._kernels.points import usable_rows as rows
+
+    return rows(np.ascontiguousarray(xyz, np.float64), LOWEST_GROUND_M, HIGHEST_GROUND_M,
+                numba.get_num_threads())
 
 
 def _check_area(xy: np.ndarray, source: str) -> None:

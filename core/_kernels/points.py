@@ -304,26 +304,31 @@ def split_rows(xyz, taken, blocks):
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def finite_rows(xyz, blocks):
-    """Which rows of ``xyz`` are finite throughout; None where all are (no mask made). Each
-    of ``blocks`` threads looks through a block of the rows."""
+def usable_rows(xyz, lowest, highest, blocks):
+    """Which rows of ``xyz`` are finite throughout with z (column 2) within [``lowest``,
+    ``highest``]; None where all are (no mask made). Each of ``blocks`` threads looks through a
+    block of the rows."""
     n, m = xyz.shape
-    finite = np.ones(blocks, np.bool_)
+    usable = np.ones(blocks, np.bool_)
     for b in prange(blocks):
         for p in range(b * n // blocks, (b + 1) * n // blocks):
-            for k in range(m):
-                if not np.isfinite(xyz[p, k]):
-                    finite[b] = False
-            if not finite[b]:
+            if not _usable_row(xyz, p, m, lowest, highest):
+                usable[b] = False
                 break
-    if finite.all():
+    if usable.all():
         return None
     rows = np.ones(n, np.bool_)
     for p in prange(n):
-        for k in range(m):
-            if not np.isfinite(xyz[p, k]):
-                rows[p] = False
+        rows[p] = _usable_row(xyz, p, m, lowest, highest)
     return rows
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _usable_row(xyz, p, m, lowest, highest):
+    for k in range(m):
+        if not np.isfinite(xyz[p, k]):
+            return False
+    return lowest <= xyz[p, 2] <= highest
 
 
 _MIX_X = np.uint64(0x9E3779B97F4A7C15)

@@ -190,6 +190,15 @@ def test_xyz_empty_fields_are_left_out_with_a_note(tmp_path):
     assert any("1 points without a finite x, y and z" in n for n in notes)
 
 
+def test_points_at_a_no_data_z_are_left_out_with_a_note(tmp_path):
+    """Points exported with z -9999 (a survey's no-data value) are no ground: left out, said."""
+    path, notes = tmp_path / "gaps.xyz", []
+    path.write_text(_rows(XYZ, " ") + "412030.0 5652030.0 -9999\n412031.0 5652030.0 -9999\n")
+    points = io.read_points(path, crs="EPSG:25832", note=notes.append)
+    np.testing.assert_array_equal(points.xyz, XYZ)
+    assert any("2 points with a z no ground has (-9999 m" in n for n in notes), notes
+
+
 def test_xyz_bad_row_is_named_by_its_line(tmp_path):
     """A field that is no number is named by the file's own line number, header and comments
     counted."""

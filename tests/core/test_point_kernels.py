@@ -126,12 +126,12 @@ def test_split_and_scaled_rows_are_numpy_indexing_in_any_blocks(n, blocks):
 
 @pytest.mark.parametrize("blocks", [1, 2, 3, 16])
 @pytest.mark.parametrize("n", [1, 5, 10_007])
-def test_extent_bins_and_finite_rows_are_numpy_in_any_blocks(n, blocks):
-    """The bounding box, the occupied bins of the footprint and the finite rows, each block of
-    points on a thread, give numpy's: a non-finite value in the first, a middle or the last
-    row, or in none."""
-    from floodmesh.core._kernels.points import (extent, extent_on_threads, finite_rows,
-                                                occupied_bins)
+def test_extent_bins_and_usable_rows_are_numpy_in_any_blocks(n, blocks):
+    """The bounding box, the occupied bins of the footprint and the usable rows (finite, z in
+    range), each block of points on a thread, give numpy's: a non-finite value or a z out of
+    range in the first, a middle or the last row, or in none."""
+    from floodmesh.core._kernels.points import (extent, extent_on_threads, occupied_bins,
+                                                usable_rows)
 
     rng = np.random.default_rng(n * blocks)
     xyz = rng.uniform(0.0, 50.0, (n, 3)) + [600_000.0, 5_700_000.0, 0.0]
@@ -143,8 +143,10 @@ def test_extent_bins_and_finite_rows_are_numpy_in_any_blocks(n, blocks):
     bins = np.unique(((y - y.min()) / size).astype(np.int64) * cols
                      + ((x - x.min()) / size).astype(np.int64))
     assert occupied_bins(x, y, x.min(), y.min(), size, cols, rows, blocks) == len(bins)
-    assert finite_rows(xyz, blocks) is None
-    for row, column, value in ((0, 2, np.nan), (n // 2, 0, np.inf), (n - 1, 1, -np.inf)):
+    assert usable_rows(xyz, -1000.0, 9000.0, blocks) is None
+    for row, column, value in ((0, 2, np.nan), (n // 2, 0, np.inf), (n - 1, 1, -np.inf),
+                               (n // 3, 2, -9999.0), (n - 1, 2, 9000.5)):
         broken = xyz.copy()
         broken[row, column] = value
-        assert np.array_equal(finite_rows(broken, blocks), np.isfinite(broken).all(axis=1))
+        want = np.isfinite(broken).all(axis=1) & (np.abs(broken[:, 2] - 4000) <= 5000)
+        assert np.array_equal(usable_rows(broken, -1000.0, 9000.0, blocks), want)
