@@ -1,6 +1,7 @@
 """The small georeferenced grid type every raster step takes and returns."""
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -40,24 +41,43 @@ class RefusedCRS:
     reason: str
 
 
+# How --crs may name a CRS: PROJ matches any other word to the nearest CRS name it knows
+# ('foo' gives Amersfoort), which no user means
+CRS_FORMS = re.compile(r"""\d+                       # a bare EPSG code
+                           |[A-Za-z]+:\S+            # AUTHORITY:CODE, URN, URL
+                           |[A-Za-z_]+\s*\[.*        # WKT
+                           |\+.*|proj=.*             # a PROJ string
+                           |\{.*                     # PROJJSON""", re.VERBOSE | re.DOTALL)
+
+
+def parse_crs(crs, what: str) -> CRS:
+    """``crs`` (a CRS object, an authority code such as EPSG:25832 or 25832, WKT, a PROJ string
+    or PROJJSON) as a pyproj CRS; a name ("Amersfoort", "foo") is refused, as PROJ would
+    take the nearest name it knows."""
+    # lazy: PROJ loads only when this runs
+    from pyproj import CRS
+
+    if isinstance(crs, str) and not CRS_FORMS.fullmatch(crs.strip()):
+        raise FloodMeshError(f"{what}: {crs!r} is not a CRS code: give it as EPSG:XXXX (or WKT, "
+                             "a PROJ string), not as a name")
+    try:
+        return CRS.from_user_input(crs.strip() if isinstance(crs, str) else crs)
+    except Exception as exc:  # pyproj raises CRSError with a technical message
+        raise FloodMeshError(f"{what}: cannot understand the CRS {crs!r} ({exc}); "
+                             "give it as EPSG:XXXX") from None
+
+
 def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     """Return ``crs`` as a pyproj CRS, refusing none, geographic, and horizontal or vertical
     units other than metres. ``kind`` ("points" or "raster") picks the reprojection command the
     message suggests."""
-    # lazy: PROJ loads only when this runs
-    from pyproj import CRS
-
     if isinstance(crs, RefusedCRS):
         raise FloodMeshError(f"{what} {crs.reason}")
     if crs is None:
         raise FloodMeshError(
             f"{what} has no coordinate reference system: give one (--crs EPSG:XXXX, or the CRS "
             "parameter in QGIS), a projected CRS in metres such as the survey's UTM zone")
-    try:
-        crs = CRS.from_user_input(crs)
-    except Exception as exc:  # pyproj raises CRSError with a technical message
-        raise FloodMeshError(f"{what}: cannot understand the CRS {crs!r} ({exc}); "
-                             "give it as EPSG:XXXX") from None
+    crs = parse_crs(crs, what)
     horizontal = crs.sub_crs_list[0] if crs.is_compound and crs.sub_crs_list else crs
     if crs.is_geographic or horizontal.is_geographic:
         raise FloodMeshError(

@@ -411,6 +411,7 @@ CASES = [
     BadInput("feet-real-autzen", "horizontal units of 'foot'", _maker(_autzen), _lidar(_autzen)),
     BadInput("vertical-feet", "elevations in 'US survey foot'", _maker(_las_vertical_feet),
              _lidar(_las_vertical_feet)),
+    BadInput("crs-given-as-a-name", "give it as EPSG:XXXX", _maker(_xyz, crs="foo")),
     BadInput("no-crs-text", "no coordinate reference system", _maker(_xyz), _lidar(_xyz)),
     BadInput("no-crs-las", "no coordinate reference system", _maker(_las_without_crs),
              _lidar(_las_without_crs)),

@@ -26,7 +26,7 @@ from .. import io
 from ..engine.arrays import unique_rows
 from ..errors import FloodMeshError
 from ..options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
-from ..raster import require_metric_crs
+from ..raster import parse_crs, require_metric_crs
 from .mesh import boundary_loops
 
 ADCIRC_MAINLAND, ADCIRC_ISLAND = 20, 21  # no normal flow, natural (weak), free tangential slip
@@ -170,14 +170,7 @@ def _crs(crs):
     """The mesh's CRS: projected, in metres, as FloodMesh's meshes are."""
     if crs is None:
         return None
-    # lazy: PROJ loads only when this runs
-    from pyproj import CRS
-    from pyproj.exceptions import CRSError
-
-    try:
-        parsed = CRS.from_user_input(crs)
-    except CRSError as exc:
-        raise FloodMeshError(f"{crs!r} is not a CRS ({exc}); give one such as EPSG:25832") from None
+    parsed = parse_crs(crs, "the mesh's CRS")
     try:
         return require_metric_crs(parsed, f"the mesh's CRS {parsed.name}")
     except FloodMeshError:
