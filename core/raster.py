@@ -68,9 +68,10 @@ def parse_crs(crs, what: str) -> CRS:
 
 
 def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
-    """Return ``crs`` as a pyproj CRS, refusing none, geographic, and horizontal or vertical
-    units other than metres. ``kind`` ("points" or "raster") picks the reprojection command the
-    message suggests."""
+    """Return ``crs`` as a pyproj CRS, refusing none (and a ``RefusedCRS``), geographic,
+    geocentric and vertical ones (only a projected CRS, or a local engineering one, places x, y
+    on a plane), and horizontal or vertical units other than metres. ``kind`` ("points" or
+    "raster") picks the reprojection command the message suggests."""
     if isinstance(crs, RefusedCRS):
         raise FloodMeshError(f"{what} {crs.reason}")
     if crs is None:
@@ -84,6 +85,11 @@ def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
             f"{what} is in a geographic CRS ({crs.name}, degrees): slopes and areas need metres. "
             f"Reproject it to a projected CRS in metres (e.g. the UTM zone) first: "
             f"{_reproject_hint(kind)}")
+    if not (horizontal.is_projected or horizontal.is_engineering):
+        raise FloodMeshError(
+            f"{what} is in {crs.name}, a {horizontal.type_name.replace(' CRS', '').lower()} "
+            "CRS, not a projected one: FloodMesh needs x, y on a map in metres, such as the "
+            "survey's UTM zone (EPSG:XXXX; with its heights EPSG:XXXX+VVVV)")
     for axis in crs.axis_info:
         if axis.unit_conversion_factor == 1.0 and axis.unit_name.lower() in METRE_NAMES:
             continue
