@@ -21,10 +21,13 @@ REPROJECT_RASTER = "gdalwarp -t_srs EPSG:{code} IN OUT"
 # Everest at 8849 m. They catch the no-data values that no nodata tag names, such as -9999,
 # -32768 and ±3.4e38 (cells outside them are nodata, with a note: io.read_raster).
 LOWEST_GROUND_M, HIGHEST_GROUND_M = -1000.0, 9000.0
+SCALE_Z_POINTS = ('pdal translate IN OUT -f filters.assign '
+                  '--filters.assign.value="Z = Z * {factor:.7g}"')
+SCALE_Z_RASTER = 'gdal_calc.py -A IN --calc "A*{factor:.7g}" --outfile OUT'
 
 
-def _reproject_hint(kind: str | None, code: str = "XXXX") -> str:
-    points, raster = REPROJECT_POINTS.format(code=code), REPROJECT_RASTER.format(code=code)
+def _for_kind(kind: str | None, points: str, raster: str) -> str:
+    """The command for points or rasters (``kind``), or both where the kind is not known."""
     if kind == "points":
         return f"`{points}`"
     if kind == "raster":
@@ -39,6 +42,16 @@ class RefusedCRS:
     projection, elevations in feet); ``require_metric_crs`` refuses it, as it would the CRS."""
 
     reason: str
+
+
+def _reproject_hint(kind: str | None, code: str = "XXXX") -> str:
+    return _for_kind(kind, REPROJECT_POINTS.format(code=code), REPROJECT_RASTER.format(code=code))
+
+
+def _scale_z_hint(kind: str | None, factor: float) -> str:
+    """How to turn z in a unit of ``factor`` m into metres."""
+    return _for_kind(kind, SCALE_Z_POINTS.format(factor=factor),
+                     SCALE_Z_RASTER.format(factor=factor))
 
 
 # How --crs may name a CRS: PROJ matches any other word to the nearest CRS name it knows
@@ -71,7 +84,7 @@ def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     """Return ``crs`` as a pyproj CRS, refusing none (and a ``RefusedCRS``), geographic,
     geocentric and vertical ones (only a projected CRS, or a local engineering one, places x, y
     on a plane), and horizontal or vertical units other than metres. ``kind`` ("points" or
-    "raster") picks the reprojection command the message suggests."""
+    "raster") picks the commands the message suggests."""
     if isinstance(crs, RefusedCRS):
         raise FloodMeshError(f"{what} {crs.reason}")
     if crs is None:
@@ -101,9 +114,9 @@ def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
                 "VVVV a vertical CRS in metres")
         raise FloodMeshError(
             f"{what} has horizontal units of '{unit}' ({crs.name}); FloodMesh works in metres "
-            "and does not convert, as a file in feet may hold elevations in either unit: "
-            f"reproject x, y and z to metres first, e.g. {_reproject_hint(kind)} with a CRS in "
-            "metres (the UTM zone)")
+            "and does not convert: reproject x, y to metres, e.g. "
+            f"{_reproject_hint(kind)} (the UTM zone), and if z is in '{unit}' too scale it, "
+            f"e.g. {_scale_z_hint(kind, axis.unit_conversion_factor)}")
     return crs
 
 
