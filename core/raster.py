@@ -80,6 +80,27 @@ def parse_crs(crs, what: str) -> CRS:
                              "give it as EPSG:XXXX") from None
 
 
+def horizontal_crs(crs: CRS) -> CRS:
+    """The horizontal part of a compound CRS (e.g. RD New of RD New + NAP height), else
+    ``crs``."""
+    return crs.sub_crs_list[0] if crs.is_compound and crs.sub_crs_list else crs
+
+
+def _vertical_crs(crs: CRS) -> CRS | None:
+    """The vertical part of a compound CRS, else None."""
+    return crs.sub_crs_list[-1] if crs.is_compound and len(crs.sub_crs_list) > 1 else None
+
+
+def same_place(a: CRS, b: CRS, *, heights: bool = False) -> bool:
+    """Whether data in ``a`` and ``b`` lie alike: the same horizontal CRS (a DEM in RD New + NAP
+    height and a boundary in RD New do); with ``heights``, also the same vertical CRS where
+    both name one."""
+    if not horizontal_crs(a).equals(horizontal_crs(b), ignore_axis_order=True):
+        return False
+    va, vb = _vertical_crs(a), _vertical_crs(b)
+    return not heights or va is None or vb is None or va.equals(vb)
+
+
 def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     """Return ``crs`` as a pyproj CRS, refusing none (and a ``RefusedCRS``), geographic,
     geocentric and vertical ones (only a projected CRS, or a local engineering one, places x, y
@@ -92,7 +113,7 @@ def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
             f"{what} has no coordinate reference system: give one (--crs EPSG:XXXX, or the CRS "
             "parameter in QGIS), a projected CRS in metres such as the survey's UTM zone")
     crs = parse_crs(crs, what)
-    horizontal = crs.sub_crs_list[0] if crs.is_compound and crs.sub_crs_list else crs
+    horizontal = horizontal_crs(crs)
     if crs.is_geographic or horizontal.is_geographic:
         raise FloodMeshError(
             f"{what} is in a geographic CRS ({crs.name}, degrees): slopes and areas need metres. "

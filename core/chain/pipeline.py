@@ -11,7 +11,6 @@ from typing import Callable
 
 import numpy as np
 import shapely
-from pyproj import CRS
 
 from .. import io
 from ..engine.compiles import CompileWatch
@@ -33,7 +32,7 @@ from ..options import (BRIDGE_GAP_CELLS, DEFAULT_CELL_SIZE, EXPORT_EXTENSIONS, E
                        check_sigma_fits)
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
-from ..raster import Grid, bilinear, check_dem_size, nearest_value
+from ..raster import Grid, bilinear, check_dem_size, nearest_value, parse_crs, same_place
 from ..steps.accuracy import accuracy_statistics, outside_mesh_note, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
@@ -813,7 +812,7 @@ def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: f
         return size_from_slope(slope_grid, max_area=max_area, s_crit=s_crit,
                                min_area=max_area / 25 if min_area is None else min_area)
     field = io.read_raster(source, crs=dem.crs, elevations=False)
-    if not field.crs.equals(dem.crs, ignore_axis_order=True):
+    if not same_place(field.crs, dem.crs):
         raise FloodMeshError(f"the size field {Path(source).name} is in {field.crs.name}, the "
                              f"DEM in {dem.crs.name}; reproject it to the DEM's CRS")
     return field
@@ -823,16 +822,17 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
                      tolerance: float | None = None, note=None):
     """(domain, lines) from a user's boundary polygon file (None: the DEM's data) and a file of
     their own break or structure lines (2-D lines take z from the DEM), both checked against the
-    DEM's CRS; ``tolerance`` (m) as ``user_domain``'s; ``note`` hears of line parts left out
-    (zero length, not numbers) and of domain left without data."""
-    for path, what in ((boundary, "boundary polygon"), (user_lines, "user line")):
-        if path is not None:
-            crs = io.vector_crs(path)
-            if crs is not None and not dem.crs.equals(CRS.from_user_input(crs),
-                                                      ignore_axis_order=True):
-                raise FloodMeshError(f"the {what} file {Path(path).name} is in "
-                                     f"{CRS.from_user_input(crs).name}, the DEM in "
-                                     f"{dem.crs.name}; reproject it to the DEM's CRS")
+    DEM's CRS (their horizontal parts; the lines' heights too where both name them);
+    ``tolerance`` (m) as ``user_domain``'s; ``note`` hears of line parts left out (zero length,
+    not numbers) and of domain left without data."""
+    for path, what, heights in ((boundary, "boundary polygon", False),
+                                (user_lines, "user line", True)):
+        if path is None:
+            continue
+        name, crs = Path(path).name, io.vector_crs(path)
+        if crs is not None and not same_place(parse_crs(crs, name), dem.crs, heights=heights):
+            raise FloodMeshError(f"the {what} file {name} is in {parse_crs(crs, name).name}, "
+                                 f"the DEM in {dem.crs.name}; reproject it to the DEM's CRS")
     domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name,
                           tolerance=tolerance, note=note) if boundary is not None else None)
     lines = io.read_lines_gpkg(user_lines, note) if user_lines is not None else []

@@ -50,7 +50,7 @@ from ..io import (GROUND_CLASS, atomic_output, classes_kept, drop_implausible, f
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_rows
-from ..raster import Grid, check_transform, require_metric_crs
+from ..raster import Grid, check_transform, require_metric_crs, same_place
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
 from .limits import BYTES_PER_FITTED_CELL, check_memory, fits_in_memory, footprint
@@ -285,7 +285,8 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
                       ) -> tuple[list[PointTile], CRS, list[str]]:
     """Read every tile's header; refuse, naming the tile, one that is unreadable (or leave it out
     with a note, ``skip_unreadable``), without a CRS (unless ``crs`` is given), in a CRS not in
-    metres, or in another CRS than the first. An empty tile is left out with a note; a COPC file
+    metres, or in another horizontal CRS than the first or with other heights
+    (``same_place``). An empty tile is left out with a note; a COPC file
     of more than ``WINDOW_POINTS`` points becomes its windows (``copc_windows``). Returns the
     tiles, their CRS and the notes."""
     tiles, first, notes = [], None, []
@@ -303,7 +304,7 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
                                       kind="points")
         if first is None:
             first = (name, tile_crs)
-        elif not tile_crs.equals(first[1], ignore_axis_order=True):
+        elif not same_place(tile_crs, first[1], heights=True):
             raise FloodMeshError(
                 f"tile {name} is in {tile_crs.name}, but tile {first[0]} is in {first[1].name}: "
                 f"all tiles must share one CRS; reproject {name} to the others' CRS first (pdal "
@@ -1141,7 +1142,7 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
             if first is None:
                 first = (name, tile_crs, src.transform)
             else:
-                if not tile_crs.equals(first[1], ignore_axis_order=True):
+                if not same_place(tile_crs, first[1], heights=True):
                     raise FloodMeshError(
                         f"tile {name} is in {tile_crs.name}, but tile {first[0]} is in "
                         f"{first[1].name}: all tiles must share one CRS; reproject {name} first "

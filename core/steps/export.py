@@ -26,7 +26,7 @@ from .. import io
 from ..engine.arrays import unique_rows
 from ..errors import FloodMeshError
 from ..options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
-from ..raster import parse_crs, require_metric_crs
+from ..raster import parse_crs, require_metric_crs, same_place
 from .mesh import boundary_loops
 
 ADCIRC_MAINLAND, ADCIRC_ISLAND = 20, 21  # no normal flow, natural (weak), free tangential slip
@@ -267,7 +267,7 @@ def layers_crs(crs, layers: dict):
         layer = _crs(wkt)
         if chosen is None:
             chosen = layer
-        elif not chosen.equals(layer, ignore_axis_order=True):
+        elif not same_place(chosen, layer):
             raise FloodMeshError(f"the {name} layer {Path(path).name} is in {layer.name}, the mesh "
                                  f"in {chosen.name}: reproject the layer to the mesh's CRS")
     return chosen

@@ -1,16 +1,72 @@
-"""CRSs as users give them: what the messages for feet tell the user to do."""
+"""CRSs as users give them: compound DEMs with layers in their horizontal CRS, tiles that differ
+only in naming their heights, and what the messages for feet tell the user to do."""
+import fiona
 import numpy as np
 import pytest
+import shapely
+from affine import Affine
+from pyproj import CRS
 
 from floodmesh.core.frontends.cli import main
 
-from ..bad_inputs import plane_xyz, slope_dem, write_tif
+from ..bad_inputs import plane_xyz, slope_dem, write_las, write_tif
+
+RD = (155_000.0, 463_000.0)  # in the Netherlands, RD New (EPSG:28992)
 
 
 def floodmesh(args, capsys):
     """(exit code, stderr lines) of the command ``args`` run in this process."""
     code = main([str(a) for a in args])
     return code, capsys.readouterr().err.strip().splitlines()
+
+
+def write_polygon(path, polygon, crs=None):
+    """A polygon layer (GeoPackage or shapefile, by extension) in ``crs``, or without a CRS."""
+    driver = "ESRI Shapefile" if path.suffix == ".shp" else "GPKG"
+    options = {"crs_wkt": CRS.from_user_input(crs).to_wkt()} if crs else {}
+    with fiona.open(path, "w", driver=driver, schema={"geometry": "Polygon", "properties": {}},
+                    **options) as dst:
+        dst.write({"geometry": shapely.geometry.mapping(polygon), "properties": {}})
+    return path
+
+
+def write_line(path, coords, crs):
+    with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(crs).to_wkt(),
+                    schema={"geometry": "LineString", "properties": {}}) as dst:
+        dst.write({"geometry": {"type": "LineString", "coordinates": coords}, "properties": {}})
+    return path
+
+
+def rd_dem(path, crs="EPSG:7415"):
+    """The bank DEM (60 x 60 m) in the Netherlands, by default in RD New + NAP height."""
+    return write_tif(path, slope_dem(), crs=crs,
+                     transform=Affine(1.0, 0.0, RD[0], 0.0, -1.0, RD[1] + 60))
+
+
+@pytest.mark.parametrize("option", ["--boundary", "--lines"])
+def test_compound_dem_takes_layers_in_its_horizontal_crs(tmp_path, capsys, option):
+    """A LiDAR DEM in RD New + NAP height and a boundary or lines drawn in RD New: meshed."""
+    dem = rd_dem(tmp_path / "dem.tif")
+    layer = (write_polygon(tmp_path / "b.gpkg", shapely.box(RD[0] + 5, RD[1] + 5, RD[0] + 55,
+                                                             RD[1] + 55), "EPSG:28992")
+             if option == "--boundary" else
+             write_line(tmp_path / "l.gpkg", [(RD[0] + 10, RD[1] + 10), (RD[0] + 50, RD[1] + 50)],
+                        "EPSG:28992"))
+    code, err = floodmesh(["mesh", dem, option, layer, "--out", tmp_path / "m.2dm"], capsys)
+    assert code == 0, err
+    assert (tmp_path / "m.2dm").exists()
+
+
+def test_tiles_that_differ_only_in_naming_their_heights_grid_as_one(tmp_path, capsys):
+    """Two tiles of one delivery, one tagged UTM 32N + DHHN92 height, one UTM 32N alone."""
+    xyz = plane_xyz()
+    west = xyz[:, 0] < xyz[:, 0].mean()
+    write_las(tmp_path / "west.laz", xyz[west], crs="EPSG:25832+5783")
+    write_las(tmp_path / "east.laz", xyz[~west], crs="EPSG:25832")
+    code, err = floodmesh(["grid", tmp_path / "west.laz", tmp_path / "east.laz",
+                           "--cell-size", 1, "--out", tmp_path / "dem.tif"], capsys)
+    assert code == 0, err
+    assert (tmp_path / "dem.tif").exists()
 
 
 @pytest.mark.parametrize("kind, crs, words", [
