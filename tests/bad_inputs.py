@@ -212,12 +212,21 @@ def _options_case(id_, words, **parameters):
                     _lidar(_xyz, crs=UTM, **parameters))
 
 
-def _mesh_step(cli_options, qgis_parameters):
-    """``floodmesh mesh`` and QGIS's Build mesh on the bank DEM with the given options."""
+def _mesh_step(cli_options, qgis_parameters, size_field=None):
+    """``floodmesh mesh`` and QGIS's Build mesh on the bank DEM with the given options (and
+    the size field ``size_field(folder)`` writes)."""
     dem = _tif("dem.tif")
-    return (lambda f: ["mesh", dem(f), *cli_options, "--out", "{out}/mesh.2dm"],
-            lambda f: ("floodmesh:buildmesh", {"DEM": str(dem(f)), **qgis_parameters,
-                                               "OUTPUT": str(f / "qgis-out" / "mesh.2dm")}))
+
+    def cli(f):
+        size = ["--size-field", size_field(f)] if size_field else []
+        return ["mesh", dem(f), *cli_options, *size, "--out", "{out}/mesh.2dm"]
+
+    def qgis(f):
+        size = {"SIZE_FIELD": str(size_field(f))} if size_field else {}
+        return "floodmesh:buildmesh", {"DEM": str(dem(f)), **qgis_parameters, **size,
+                                       "OUTPUT": str(f / "qgis-out" / "mesh.2dm")}
+
+    return cli, qgis
 
 
 def _boundary_case(id_, words, polygon, crs=UTM):
@@ -444,6 +453,9 @@ CASES = [
     BadInput("mesh-step-too-many-triangles", "more than the limit of 1,000",
              *_mesh_step(["--max-area", 0.5, "--max-triangles", 1000],
                          {"MAX_AREA": 0.5, "MAX_TRIANGLES": 1000})),
+    BadInput("size-field-in-another-crs", "reproject it to the DEM's CRS",
+             *_mesh_step([], {}, size_field=_tif("size.tif", lambda: np.full((60, 60), 20.0),
+                                                 crs="EPSG:25833"))),
     BadInput("mesh-step-min-angle", "at most 34 degrees",
              *_mesh_step(["--min-angle", 35], {"MIN_ANGLE": 35.0})),
     _options_case("max-triangles-zero", "maximum number of triangles must be a whole number",

@@ -804,14 +804,14 @@ def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: f
                min_area: float | None = None, s_crit: float = 10.0) -> Grid | None:
     """The size field a user asked for: None, "slope" (from ``slope_grid``, or the DEM's
     one-over-distance slope; ``min_area`` defaults to ``max_area``/25) or a raster file of local
-    maximum areas (m²) in the DEM's CRS."""
+    maximum areas (m²) in the DEM's CRS (taken where it has none)."""
     if source is None:
         return None
     if source == "slope":
         slope_grid = slope(dem, "one-over-distance") if slope_grid is None else slope_grid
         return size_from_slope(slope_grid, max_area=max_area, s_crit=s_crit,
                                min_area=max_area / 25 if min_area is None else min_area)
-    field = io.read_raster(source, crs=dem.crs, elevations=False)
+    field = io.read_raster(source, default_crs=dem.crs, elevations=False)
     if not same_place(field.crs, dem.crs):
         raise FloodMeshError(f"the size field {Path(source).name} is in {field.crs.name}, the "
                              f"DEM in {dem.crs.name}; reproject it to the DEM's CRS")

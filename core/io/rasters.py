@@ -19,9 +19,10 @@ from .points import read_points
 RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
 
 
-def raster_crs(src, path: Path, crs=None):
-    """The checked CRS of an open rasterio dataset (``crs`` overrides the file's): refuses
-    control-point georeferencing, rotated or non-square grids, and CRSs not in metres."""
+def raster_crs(src, path: Path, crs=None, default_crs=None):
+    """The checked CRS of an open rasterio dataset (``crs`` overrides the file's;
+    ``default_crs`` is taken where it has none): refuses control-point georeferencing, rotated
+    or non-square grids, and CRSs not in metres."""
     transform, file_crs = src.transform, src.crs
     if src.gcps[0] and transform.is_identity:
         raise FloodMeshError(
@@ -29,7 +30,7 @@ def raster_crs(src, path: Path, crs=None):
             "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
     check_transform(transform, f"raster {path.name}")
     return require_metric_crs(crs if crs is not None else
-                              (file_crs.to_wkt() if file_crs else None),
+                              (file_crs.to_wkt() if file_crs else default_crs),
                               f"raster {path.name}", kind="raster")
 
 
@@ -100,8 +101,9 @@ def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
     return values
 
 
-def read_raster(path, *, crs=None, elevations: bool = True, note=None) -> Grid:
-    """Read band 1 of a raster as a float64 Grid with NaN for nodata.
+def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_crs=None) -> Grid:
+    """Read band 1 of a raster as a float64 Grid with NaN for nodata, in ``crs``, else its own
+    CRS, else ``default_crs`` (``raster_crs``).
 
     With ``elevations`` (a DEM), cells no ground has are nodata too (``drop_implausible``).
     ``note`` (given for DEMs) receives what was assumed: such cells, further bands left unused,
@@ -113,7 +115,7 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None) -> Grid:
     path = require_file(path, "raster")
     try:
         with rasterio.open(path) as src:
-            transform, crs = src.transform, raster_crs(src, path, crs)
+            transform, crs = src.transform, raster_crs(src, path, crs, default_crs=default_crs)
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
             values = read_band(src)
