@@ -822,15 +822,21 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
                      tolerance: float | None = None, note=None):
     """(domain, lines) from a user's boundary polygon file (None: the DEM's data) and a file of
     their own break or structure lines (2-D lines take z from the DEM), both checked against the
-    DEM's CRS (their horizontal parts; the lines' heights too where both name them);
-    ``tolerance`` (m) as ``user_domain``'s; ``note`` hears of line parts left out (zero length,
-    not numbers) and of domain left without data."""
+    DEM's CRS (their horizontal parts; the lines' heights too where both name them); a layer
+    without a CRS is taken in the DEM's, as QGIS takes it in the project's; ``tolerance`` (m) as
+    ``user_domain``'s; ``note`` hears of that, of line parts left out (zero length, not
+    numbers) and of domain left without data."""
     for path, what, heights in ((boundary, "boundary polygon", False),
                                 (user_lines, "user line", True)):
         if path is None:
             continue
         name, crs = Path(path).name, io.vector_crs(path)
-        if crs is not None and not same_place(parse_crs(crs, name), dem.crs, heights=heights):
+        if crs is None:
+            if note:
+                note(f"the {what} file {name} has no CRS: it is taken to be in the DEM's, "
+                     f"{dem.crs.name}; if it is not, assign its own (ogr2ogr -a_srs EPSG:XXXX "
+                     "OUT IN, or in QGIS: Assign projection)")
+        elif not same_place(parse_crs(crs, name), dem.crs, heights=heights):
             raise FloodMeshError(f"the {what} file {name} is in {parse_crs(crs, name).name}, "
                                  f"the DEM in {dem.crs.name}; reproject it to the DEM's CRS")
     domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name,

@@ -491,14 +491,21 @@ def read_boundary(path) -> list:
     return [geometry for geometry, _ in read_regions(path, what="a model domain (boundary)")]
 
 
+# The CRSs a GeoPackage layer without one is given (its spec's srs_id 0 and -1)
+UNDEFINED_SRS = ("undefined geographic srs", "undefined cartesian srs")
+
+
 def vector_crs(path):
-    """The CRS (WKT) of a vector file, or None where it has none."""
+    """The CRS (WKT) of a vector file, or None where it has none (a shapefile without .prj, a
+    GeoPackage layer in an undefined SRS)."""
     # lazy: OGR loads only when this runs
     import fiona
 
     try:
         with open_vector(path, "vector layer") as src:
-            return src.crs_wkt or None
+            wkt = src.crs_wkt
     except fiona.errors.FionaError as exc:
         raise FloodMeshError(f"{vector_path(path).name} is not a readable vector file "
                              f"({exc})") from None
+    name = wkt.split('"')[1].lower() if wkt.count('"') >= 2 else ""  # WKT names its CRS first
+    return None if not wkt or name in UNDEFINED_SRS else wkt

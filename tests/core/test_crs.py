@@ -1,5 +1,6 @@
 """CRSs as users give them: compound DEMs with layers in their horizontal CRS, tiles that differ
-only in naming their heights, and what the messages for feet tell the user to do."""
+only in naming their heights, layers without a CRS, and what the messages for feet tell the user
+to do."""
 import fiona
 import numpy as np
 import pytest
@@ -67,6 +68,20 @@ def test_tiles_that_differ_only_in_naming_their_heights_grid_as_one(tmp_path, ca
                            "--cell-size", 1, "--out", tmp_path / "dem.tif"], capsys)
     assert code == 0, err
     assert (tmp_path / "dem.tif").exists()
+
+
+@pytest.mark.parametrize("name", ["b.gpkg", "b.shp"])
+def test_boundary_without_crs_is_taken_in_the_dems_with_a_note(tmp_path, capsys, name):
+    """A GeoPackage layer in an undefined SRS and a shapefile without .prj alike: meshed in the
+    DEM's CRS, as QGIS draws them over it, and the user told so."""
+    dem = rd_dem(tmp_path / "dem.tif", crs="EPSG:28992")
+    boundary = write_polygon(tmp_path / name, shapely.box(RD[0] + 5, RD[1] + 5, RD[0] + 55,
+                                                          RD[1] + 55))
+    code, err = floodmesh(["mesh", dem, "--boundary", boundary, "--out", tmp_path / "m.2dm"],
+                          capsys)
+    assert code == 0, err
+    assert any(f"{name} has no CRS: it is taken to be in the DEM's, Amersfoort / RD New" in line
+               and "ogr2ogr -a_srs EPSG:XXXX" in line for line in err), err
 
 
 @pytest.mark.parametrize("kind, crs, words", [
