@@ -8,7 +8,8 @@ import numpy as np
 
 from .errors import FloodMeshError
 from .options import check_seed, holdout_count
-from .raster import HIGHEST_GROUND_M, LOWEST_GROUND_M, require_metric_crs
+from .raster import (HIGHEST_GROUND_M, LOWEST_GROUND_M, check_scale, corners_and_centre,
+                     require_metric_crs)
 
 if TYPE_CHECKING:  # pyproj is imported where a CRS is checked: it costs 0.1 s of start-up
     from pyproj import CRS
@@ -30,10 +31,11 @@ class PointCloud:
 
 
 def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
-                 note=None, *, repeats: bool = True) -> PointCloud:
+                 note=None, *, repeats: bool = True, scale: bool = True) -> PointCloud:
     """Drop non-finite points and those with a z no ground has (``usable_rows``) and check what
-    is left is usable terrain data; ``note`` receives what was left out or found doubtful
-    (points without x, y or z, or with a no-data z such as -9999, points at one x, y
+    is left is usable terrain data in a CRS true to scale there (``scale=False`` leaves that
+    check to the caller, ``raster.check_scale``); ``note`` receives what was left out or found
+    doubtful (points without x, y or z, or with a no-data z such as -9999, points at one x, y
     with different z: ``repeats=False`` leaves that check to the caller,
     ``repeated_positions_note``)."""
     crs = require_metric_crs(crs, source, kind)
@@ -57,6 +59,8 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
         raise FloodMeshError(f"{source} has {len(xyz)} usable points (finite x, y, z); at least 3 "
                              "are needed to make a terrain model. Check the file and its classes")
     _check_area(xyz[:, :2], source)
+    if scale:
+        check_scale(crs, *corners_and_centre(*_sampled_bounds(xyz)), source, kind)
     message = repeated_positions_note(xyz, source) if note and repeats else None
     if message:
         note(message)
@@ -73,6 +77,13 @@ def usable_rows(xyz: np.ndarray) -> np.ndarray | None:
 
     return rows(np.ascontiguousarray(xyz, np.float64), LOWEST_GROUND_M, HIGHEST_GROUND_M,
                 numba.get_num_threads())
+
+
+def _sampled_bounds(xyz: np.ndarray, sample: int = 65_536) -> tuple[float, ...]:
+    """(xmin, ymin, xmax, ymax) of about ``sample`` of the points, evenly through the file: the
+    extent where ``check_scale`` looks, without a pass over them all."""
+    xy = xyz[::max(1, len(xyz) // sample), :2]
+    return (*xy.min(axis=0), *xy.max(axis=0))
 
 
 def _check_area(xy: np.ndarray, source: str) -> None:

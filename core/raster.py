@@ -141,6 +141,53 @@ def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     return crs
 
 
+# A projected CRS's scale at the data may differ from true by this fraction: UTM zones and
+# national grids stay within 0.1 %; Web Mercator's is 1.56 at 50° N, where its metre is 0.64 m
+SCALE_TOLERANCE = 0.02
+
+
+def check_scale(crs: CRS, x, y, what: str, kind: str | None = None) -> None:
+    """Refuse a projected CRS whose scale at map points ``x``, ``y`` (m; e.g. the data's
+    corners and centre) differs from true by more than ``SCALE_TOLERANCE``: slopes, areas and
+    cell sizes would be off by as much. Points off the projection's domain are not judged."""
+    # lazy: PROJ loads only when this runs
+    from pyproj import Proj
+    from pyproj.exceptions import CRSError, ProjError
+
+    horizontal = horizontal_crs(crs)
+    if not horizontal.is_projected:  # a local engineering CRS has no place on the earth
+        return
+    try:
+        projection = Proj(horizontal)
+    except (CRSError, ProjError):  # a projection PROJ cannot run backwards: not judged
+        return
+    lon, lat = projection(np.asarray(x, float), np.asarray(y, float), inverse=True)
+    factors = projection.get_factors(lon, lat, errcheck=False)
+    scales = np.concatenate([np.atleast_1d(factors.meridional_scale),
+                             np.atleast_1d(factors.parallel_scale)])
+    scales = scales[np.isfinite(scales) & (scales > 0)]
+    if not scales.size:
+        return
+    worst = float(scales[np.argmax(np.abs(np.log(scales)))])
+    if abs(worst - 1.0) <= SCALE_TOLERANCE:
+        return
+    lon0, lat0 = float(np.nanmean(lon)), float(np.nanmean(lat))
+    zone = int((lon0 + 180.0) // 6.0) % 60 + 1
+    code = f"{326 if lat0 >= 0 else 327}{zone:02d}"
+    raise FloodMeshError(
+        f"{what} is in {crs.name}, whose metre is {1.0 / worst:.2f} m on the ground at the "
+        f"data (scale {worst:.3f}): slopes, areas and cell sizes would be off by as much. "
+        f"Reproject it to the UTM zone first, e.g. EPSG:{code} (WGS 84 / UTM zone {zone}"
+        f"{'N' if lat0 >= 0 else 'S'}): {_reproject_hint(kind, code)}")
+
+
+def corners_and_centre(xmin: float, ymin: float, xmax: float, ymax: float):
+    """(x, y) of a box's corners and centre, where ``check_scale`` looks."""
+    x = np.array([xmin, xmax, xmin, xmax, (xmin + xmax) / 2])
+    y = np.array([ymin, ymin, ymax, ymax, (ymin + ymax) / 2])
+    return x, y
+
+
 def check_transform(t: Affine, what: str = "the raster") -> None:
     """Refuse geotransforms that are not north-up with square cells, naming the GDAL fix."""
     if t.b != 0 or t.d != 0:

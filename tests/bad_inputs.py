@@ -185,6 +185,10 @@ def _tif(name, values_fn=slope_dem, **kwargs):
     return make
 
 
+# Web Mercator at 50° N, where its metre is 0.64 m on the ground
+WEB_MERCATOR_50N = Affine(1.0, 0.0, 1_001_875.0, 0.0, -1.0, 6_446_475.0)
+
+
 def _autzen(folder):
     return REAL_DATA / "autzen_trim.laz"
 
@@ -425,6 +429,11 @@ CASES = [
     BadInput("vertical-only-crs", "a vertical CRS, not a projected one",
              _maker(_xyz, crs="EPSG:5783")),
     BadInput("crs-given-as-a-name", "give it as EPSG:XXXX", _maker(_xyz, crs="foo")),
+    BadInput("web-mercator-raster", "whose metre is 0.64 m on the ground at the data",
+             _maker(_tif("webmerc.tif", transform=WEB_MERCATOR_50N, crs="EPSG:3857")),
+             _lidar(_tif("webmerc.tif", transform=WEB_MERCATOR_50N, crs="EPSG:3857"))),
+    BadInput("web-mercator-points", "Reproject it to the UTM zone first",
+             _maker(_xyz, crs="EPSG:3857"), _lidar(_xyz, crs="EPSG:3857")),
     BadInput("no-crs-text", "no coordinate reference system", _maker(_xyz), _lidar(_xyz)),
     BadInput("no-crs-las", "no coordinate reference system", _maker(_las_without_crs),
              _lidar(_las_without_crs)),

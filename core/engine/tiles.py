@@ -50,7 +50,8 @@ from ..io import (GROUND_CLASS, atomic_output, classes_kept, drop_implausible, f
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_rows
-from ..raster import Grid, check_transform, require_metric_crs, same_place
+from ..raster import (Grid, check_scale, check_transform, corners_and_centre, require_metric_crs,
+                      same_place)
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
 from .limits import BYTES_PER_FITTED_CELL, check_memory, fits_in_memory, footprint
@@ -285,10 +286,10 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
                       ) -> tuple[list[PointTile], CRS, list[str]]:
     """Read every tile's header; refuse, naming the tile, one that is unreadable (or leave it out
     with a note, ``skip_unreadable``), without a CRS (unless ``crs`` is given), in a CRS not in
-    metres, or in another horizontal CRS than the first or with other heights
-    (``same_place``). An empty tile is left out with a note; a COPC file
-    of more than ``WINDOW_POINTS`` points becomes its windows (``copc_windows``). Returns the
-    tiles, their CRS and the notes."""
+    metres, in another horizontal CRS than the first or with other heights (``same_place``), or
+    in a CRS not true to scale there. An empty tile is left out with a note; a COPC file of more
+    than ``WINDOW_POINTS`` points becomes its windows (``copc_windows``). Returns the tiles,
+    their CRS and the notes."""
     tiles, first, notes = [], None, []
     for path in map(Path, paths):
         name = path.name
@@ -316,7 +317,17 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
     if not tiles:
         raise FloodMeshError(f"none of the {len(paths)} tiles holds points that can be read: "
                              "check the tiles")
+    _check_tiles_scale(first[1], [t.bounds for t in tiles], f"tile {first[0]}", "points")
     return tiles, first[1], notes
+
+
+def _check_tiles_scale(crs: CRS, bounds: list, what: str, kind: str) -> None:
+    """``check_scale`` over the extent of all the tiles' ``bounds`` (xmin, ymin, xmax, ymax;
+    None where unknown: text tiles, not read yet, are not checked)."""
+    known = np.array([b for b in bounds if b is not None], float).reshape(-1, 4)
+    if len(known):
+        low, high = known[:, :2].min(axis=0), known[:, 2:].max(axis=0)
+        check_scale(crs, *corners_and_centre(*low, *high), what, kind)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -370,7 +381,8 @@ def _usable(xyz: np.ndarray, crs_wkt: str, name: str, notes: list) -> tuple[np.n
     model alone): ``points.clean_points``' checks and notes, but a sparse tile's points are kept
     for its neighbours' blocks to grid."""
     try:
-        return clean_points(xyz, crs_wkt, f"tile {name}", note=notes.append).xyz, False
+        return clean_points(xyz, crs_wkt, f"tile {name}", note=notes.append,
+                            scale=False).xyz, False  # checked on the headers' extent
     except FloodMeshError:  # fewer than 3, or at one place or on one line
         usable = usable_rows(xyz)
         return (xyz if usable is None else xyz[usable]), True
@@ -1117,8 +1129,8 @@ def write_front_rasters(files: dict, out) -> None:
 # DEM tiles
 def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
     """Several GeoTIFF DEM tiles (a folder, glob or list) as one Grid, after checking each: one
-    CRS in metres, the same cell size, cells aligned across tiles; cells no ground has are
-    nodata, which ``note`` is told of (``io.drop_implausible``)."""
+    CRS in metres true to scale there, the same cell size, cells aligned across tiles; cells no
+    ground has are nodata, which ``note`` is told of (``io.drop_implausible``)."""
     # lazy: GDAL loads only when this runs
     import rasterio
     from rasterio.merge import merge
@@ -1160,6 +1172,7 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
         xmax = max(s.bounds.right for s in sources)
         ymin = min(s.bounds.bottom for s in sources)
         ymax = max(s.bounds.top for s in sources)
+        _check_tiles_scale(first[1], [(xmin, ymin, xmax, ymax)], f"tile {first[0]}", "raster")
         d = first[2].a
         check_memory(cells=int(math.ceil((xmax - xmin) / d) * math.ceil((ymax - ymin) / d)),
                      advice="resample the DEM tiles to larger cells")

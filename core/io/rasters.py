@@ -4,6 +4,7 @@ written as tiled GeoTIFFs (``raster_profile``, ``write_raster``); ``read_input``
 file or a DEM."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +12,8 @@ import numpy as np
 from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import is_point_source
-from ..raster import (HIGHEST_GROUND_M, LOWEST_GROUND_M, METRE_NAMES, Grid, check_transform,
-                      require_metric_crs)
+from ..raster import (HIGHEST_GROUND_M, LOWEST_GROUND_M, METRE_NAMES, SCALE_TOLERANCE, Grid,
+                      check_scale, check_transform, corners_and_centre, require_metric_crs)
 from .outputs import atomic_output, require_file
 from .points import read_points
 
@@ -22,28 +23,52 @@ RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
 def raster_crs(src, path: Path, crs=None, default_crs=None):
     """The checked CRS of an open rasterio dataset (``crs`` overrides the file's;
     ``default_crs`` is taken where it has none): refuses control-point georeferencing, rotated
-    or non-square grids, and CRSs not in metres."""
+    or non-square grids, CRSs not in metres and those whose scale at the raster is far from
+    true."""
     transform, file_crs = src.transform, src.crs
     if src.gcps[0] and transform.is_identity:
         raise FloodMeshError(
             f"raster {path.name} is georeferenced by control points, not a geotransform: "
             "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
     check_transform(transform, f"raster {path.name}")
-    return require_metric_crs(crs if crs is not None else
-                              (file_crs.to_wkt() if file_crs else default_crs),
-                              f"raster {path.name}", kind="raster")
+    what = f"raster {path.name}"
+    checked = require_metric_crs(crs if crs is not None else
+                                 (file_crs.to_wkt() if file_crs else default_crs), what,
+                                 kind="raster")
+    check_scale(checked, *corners_and_centre(*src.bounds), what, kind="raster")
+    return checked
+
+
+# A Transverse Mercator's scale at d m from its central meridian is k0 (1 + d² / 2R²) to 0.01 %
+# out to 1000 km (0.9996 to 1.001 across a UTM zone): the fast path below takes only what lies
+# within half SCALE_TOLERANCE of true by it, and leaves the rest to PROJ (``check_scale``)
+EARTH_RADIUS_M = 6_371_000.0
+
+
+def _transverse_mercator_scale(wkt: str, bounds) -> float | None:
+    """The largest departure from true scale of a WKT1 Transverse Mercator (UTM, national
+    grids) across ``bounds``, from its parameters alone (no PROJ); None for other
+    projections."""
+    if 'PROJECTION["Transverse_Mercator"]' not in wkt:
+        return None
+    parameters = dict(re.findall(r'PARAMETER\["(\w+)",([-+\d.eE]+)\]', wkt))
+    k0 = float(parameters.get("scale_factor", 1.0))
+    d = max(abs(x - float(parameters.get("false_easting", 0.0))) for x in bounds[::2])
+    return abs(k0 * (1.0 + 0.5 * (d / EARTH_RADIUS_M) ** 2) - 1.0)
 
 
 def raster_crs_wkt(src, path: Path, crs=None) -> str:
     """``raster_crs`` as WKT, for a raster step that passes the CRS through: the file's own WKT
-    where GDAL reads it as a projected (not compound) CRS in metres, without pyproj (0.1 s of
-    start-up, a fifth of ``floodmesh slope``'s at 6000²); else ``raster_crs``, its checks and
-    messages."""
+    where GDAL reads it as a Transverse Mercator (not compound) CRS in metres true to scale
+    across the raster, without pyproj (0.1 s of start-up, a fifth of ``floodmesh slope``'s at
+    6000²); else ``raster_crs``, its checks and messages."""
     file_crs = src.crs
     if crs is None and file_crs and not src.gcps[0]:
         wkt = file_crs.to_wkt()
         unit, factor = file_crs.linear_units_factor if wkt.startswith("PROJCS[") else ("", 0)
-        if factor == 1.0 and unit.lower() in METRE_NAMES:
+        scale = _transverse_mercator_scale(wkt, src.bounds)
+        if (factor == 1.0 and unit.lower() in METRE_NAMES and scale is not None
+                and scale <= SCALE_TOLERANCE / 2):
             check_transform(src.transform, f"raster {path.name}")
             return wkt
     return raster_crs(src, path, crs).to_wkt()

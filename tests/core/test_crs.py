@@ -1,6 +1,6 @@
 """CRSs as users give them: compound DEMs with layers in their horizontal CRS, tiles that differ
-only in naming their heights, layers without a CRS, and what the messages for feet tell the user
-to do."""
+only in naming their heights, layers without a CRS, and what the messages for feet and for a
+projection far from true scale tell the user to do."""
 import fiona
 import numpy as np
 import pytest
@@ -99,3 +99,28 @@ def test_feet_message_says_how_to_bring_z_to_metres(tmp_path, capsys, kind, crs,
         args = ["run", write_tif(tmp_path / "dem.tif", slope_dem(), crs=crs)]
     code, err = floodmesh([*args, "--out", tmp_path / "out"], capsys)
     assert code == 2 and len(err) == 1 and words in err[0], err
+
+
+@pytest.mark.parametrize("crs, transform", [
+    ("EPSG:3857", Affine(1.0, 0.0, 1_001_875.0, 0.0, -1.0, 6_446_475.0)),  # 50° N
+    ("EPSG:25832", Affine(1.0, 0.0, -2_500_000.0, 0.0, -1.0, 5_600_060.0)),  # 3000 km off
+])
+def test_slope_step_refuses_a_raster_far_from_true_scale(tmp_path, capsys, crs, transform):
+    """``floodmesh slope`` passes the CRS through without PROJ where it can: not for a
+    projection whose metre is not a metre on the ground there."""
+    dem = write_tif(tmp_path / "dem.tif", slope_dem(), crs=crs, transform=transform)
+    code, err = floodmesh(["slope", dem, "--out", tmp_path / "s.tif"], capsys)
+    assert code == 2 and "on the ground at the data" in err[-1], err
+    assert not (tmp_path / "s.tif").exists()
+
+
+def test_point_tiles_far_from_true_scale_are_refused_from_their_headers(tmp_path, capsys):
+    """Two LAZ tiles in Web Mercator at 50° N: refused before any tile is read whole."""
+    xyz = plane_xyz() - [412_000.0 - 1_001_875.0, 5_652_000.0 - 6_446_275.0, 0.0]
+    west = xyz[:, 0] < xyz[:, 0].mean()
+    write_las(tmp_path / "west.laz", xyz[west], crs="EPSG:3857")
+    write_las(tmp_path / "east.laz", xyz[~west], crs="EPSG:3857")
+    code, err = floodmesh(["grid", tmp_path / "west.laz", tmp_path / "east.laz",
+                           "--cell-size", 1, "--out", tmp_path / "dem.tif"], capsys)
+    assert code == 2 and "whose metre is 0.64 m on the ground at the data" in err[-1], err
+    assert not (tmp_path / "dem.tif").exists()
