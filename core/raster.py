@@ -101,6 +101,23 @@ def same_place(a: CRS, b: CRS, *, heights: bool = False) -> bool:
     return not heights or va is None or vb is None or va.equals(vb)
 
 
+def chosen_crs(given, own, what: str, note=None):
+    """The CRS to take: ``given`` (--crs, QGIS's CRS parameter) over the file's ``own``, where
+    ``note`` hears that it replaces a different one; ``own`` when none is given."""
+    if given is None or own is None or note is None:
+        return own if given is None else given
+    given_crs = parse_crs(given, what)
+    try:
+        own_crs = parse_crs(own, what)
+    except FloodMeshError:  # a CRS the file holds but PROJ cannot read: the reason to give one
+        own_crs = None
+    if own_crs is None or not given_crs.equals(own_crs, ignore_axis_order=True):
+        said = f"is in {own_crs.name}" if own_crs is not None else "has a CRS PROJ cannot read"
+        note(f"{what} {said}, but the CRS given is used: {given_crs.name} (--crs, or the CRS "
+             "parameter in QGIS); leave that out to keep the file's")
+    return given
+
+
 def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
     """Return ``crs`` as a pyproj CRS, refusing none (and a ``RefusedCRS``), geographic,
     geocentric and vertical ones (only a projected CRS, or a local engineering one, places x, y

@@ -20,7 +20,7 @@ from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, ch
                        check_max_area, check_max_gap, check_max_triangles, check_min_angle,
                        check_seed, is_point_source)
 from ..points import PointCloud, at_places_of, split_holdout
-from ..raster import check_dem_size, require_metric_crs
+from ..raster import check_dem_size, chosen_crs, require_metric_crs
 from ..steps.breakpoints import breakpoints_file
 from ..steps.slope import slope_raster_file
 
@@ -150,7 +150,8 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
     from ..steps.simplify import simplify_breaklines
 
     _files([input], [output])
-    crs = require_metric_crs(crs or io.vector_crs(input), Path(input).name)
+    name = Path(input).name
+    crs = require_metric_crs(chosen_crs(crs, io.vector_crs(input), name, note), name)
     lines = io.read_breaklines(input)
     simple = simplify_breaklines(lines, method, amount, min_distance=min_distance)
     io.write_breaklines(output, simple, crs)
@@ -212,15 +213,16 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
                        f"to {output}"}
 
 
-def measured_points(path, crs=None, fallback=None):
+def measured_points(path, crs=None, fallback=None, note=None):
     """(xyz, CRS) of measured points: a LiDAR point file (LAS/LAZ ground, XYZ/CSV; ``crs``
-    overrides its own) or a point layer (GeoPackage, Shapefile, GeoJSON; ``crs``, else its own,
-    else ``fallback``, the mesh's or DEM's)."""
+    overrides its own) or a point layer (GeoPackage, Shapefile, GeoJSON; ``crs``, which
+    ``note`` hears replace its own, else its own, else ``fallback``, the mesh's or DEM's)."""
     if is_point_source(path):
         cloud = io.read_points(path, crs=crs)
         return cloud.xyz, cloud.crs
+    name = Path(path).name
     return io.read_points_vector(path), require_metric_crs(
-        crs or io.vector_crs(path) or fallback, Path(path).name)
+        chosen_crs(crs, io.vector_crs(path), name, note) or fallback, name)
 
 
 def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=None, check=None,
@@ -238,8 +240,8 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
 
     _files([dem, points, check, breaklines, boundary, user_lines], [output, report])
     terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
-    measured = measured_points(points, crs, terrain.crs)[0]
-    check_xyz = measured_points(check, crs, terrain.crs)[0] if check else None
+    measured = measured_points(points, crs, terrain.crs, note)[0]
+    check_xyz = measured_points(check, crs, terrain.crs, note)[0] if check else None
     if check_xyz is not None:
         measured = _without_check_points(measured, check_xyz, points, check, note)
     refined, rounds = refine_mesh(terrain, lines, measured, check=check_xyz, domain=domain,
@@ -290,7 +292,7 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
 
     _files([mesh, points], [output, report])
     read = io.read_2dm(mesh)
-    xyz, points_crs = measured_points(points, crs, read.crs)
+    xyz, points_crs = measured_points(points, crs, read.crs, note)
     res = residuals(Mesh(read.nodes, read.triangles, points_crs), xyz)
     io.write_residuals(output, xyz, res, points_crs)
     stats = accuracy_statistics(res)

@@ -50,8 +50,8 @@ from ..io import (GROUND_CLASS, atomic_output, classes_kept, drop_implausible, f
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_rows
-from ..raster import (Grid, check_scale, check_transform, corners_and_centre, require_metric_crs,
-                      same_place)
+from ..raster import (Grid, check_scale, check_transform, chosen_crs, corners_and_centre,
+                      require_metric_crs, same_place)
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
 from .limits import BYTES_PER_FITTED_CELL, check_memory, fits_in_memory, footprint
@@ -285,12 +285,12 @@ def _tile_header(path: Path) -> tuple[int, object, tuple | None, bool]:
 def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool = False
                       ) -> tuple[list[PointTile], CRS, list[str]]:
     """Read every tile's header; refuse, naming the tile, one that is unreadable (or leave it out
-    with a note, ``skip_unreadable``), without a CRS (unless ``crs`` is given), in a CRS not in
-    metres, in another horizontal CRS than the first or with other heights (``same_place``), or
-    in a CRS not true to scale there. An empty tile is left out with a note; a COPC file of more
-    than ``WINDOW_POINTS`` points becomes its windows (``copc_windows``). Returns the tiles,
-    their CRS and the notes."""
-    tiles, first, notes = [], None, []
+    with a note, ``skip_unreadable``), without a CRS (unless ``crs`` is given, which replaces
+    theirs with a note), in a CRS not in metres, in another horizontal CRS than the first or
+    with other heights (``same_place``), or in a CRS not true to scale there. An empty tile is
+    left out with a note; a COPC file of more than ``WINDOW_POINTS`` points becomes its windows
+    (``copc_windows``). Returns the tiles, their CRS and the notes."""
+    tiles, first, notes, replaced = [], None, [], []
     for path in map(Path, paths):
         name = path.name
         try:
@@ -301,8 +301,8 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
         if count == 0:
             notes.append(f"tile {name} holds no points (its header counts 0): it adds none")
             continue
-        tile_crs = require_metric_crs(crs if crs is not None else file_crs, f"tile {name}",
-                                      kind="points")
+        tile_crs = require_metric_crs(chosen_crs(crs, file_crs, f"tile {name}", replaced.append),
+                                      f"tile {name}", kind="points")
         if first is None:
             first = (name, tile_crs)
         elif not same_place(tile_crs, first[1], heights=True):
@@ -318,7 +318,15 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
         raise FloodMeshError(f"none of the {len(paths)} tiles holds points that can be read: "
                              "check the tiles")
     _check_tiles_scale(first[1], [t.bounds for t in tiles], f"tile {first[0]}", "points")
-    return tiles, first[1], notes
+    return tiles, first[1], notes + _replaced_note(replaced)
+
+
+def _replaced_note(replaced: list) -> list:
+    """The first tile's note that the CRS given replaces its own (``chosen_crs``), and how many
+    more it replaces, as one note."""
+    n = len(replaced) - 1
+    more = f" (and that of {n} more tile{'s' if n > 1 else ''})" if n > 0 else ""
+    return [replaced[0] + more] if replaced else []
 
 
 def _check_tiles_scale(crs: CRS, bounds: list, what: str, kind: str) -> None:
@@ -1129,8 +1137,9 @@ def write_front_rasters(files: dict, out) -> None:
 # DEM tiles
 def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
     """Several GeoTIFF DEM tiles (a folder, glob or list) as one Grid, after checking each: one
-    CRS in metres true to scale there, the same cell size, cells aligned across tiles; cells no
-    ground has are nodata, which ``note`` is told of (``io.drop_implausible``)."""
+    CRS in metres (``crs`` replaces theirs, which ``note`` hears of) true to scale there, the
+    same cell size, cells aligned across tiles; cells no ground has are nodata, which ``note``
+    is told of too (``io.drop_implausible``)."""
     # lazy: GDAL loads only when this runs
     import rasterio
     from rasterio.merge import merge
@@ -1138,7 +1147,7 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
     paths = expand_tiles(inputs)
     if tile_kind(paths[0]) != "dem":
         raise FloodMeshError("expected DEM tiles (GeoTIFF); these are point tiles")
-    first, sources = None, []
+    first, sources, replaced = None, [], []
     with contextlib.ExitStack() as stack:
         for path in paths:
             name = path.name
@@ -1148,8 +1157,8 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
                 raise FloodMeshError(f"tile {name} is not a readable raster ({exc}): replace it "
                                      "or leave it out") from None
             check_transform(src.transform, f"tile {name}")
-            tile_crs = require_metric_crs(crs if crs is not None else
-                                          (src.crs.to_wkt() if src.crs else None),
+            own = src.crs.to_wkt() if src.crs else None
+            tile_crs = require_metric_crs(chosen_crs(crs, own, f"tile {name}", replaced.append),
                                           f"tile {name}", kind="raster")
             if first is None:
                 first = (name, tile_crs, src.transform)
@@ -1173,6 +1182,8 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
         ymin = min(s.bounds.bottom for s in sources)
         ymax = max(s.bounds.top for s in sources)
         _check_tiles_scale(first[1], [(xmin, ymin, xmax, ymax)], f"tile {first[0]}", "raster")
+        for message in _replaced_note(replaced) if note else ():
+            note(message)
         d = first[2].a
         check_memory(cells=int(math.ceil((xmax - xmin) / d) * math.ceil((ymax - ymin) / d)),
                      advice="resample the DEM tiles to larger cells")

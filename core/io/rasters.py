@@ -13,18 +13,19 @@ from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import is_point_source
 from ..raster import (HIGHEST_GROUND_M, LOWEST_GROUND_M, METRE_NAMES, SCALE_TOLERANCE, Grid,
-                      check_scale, check_transform, corners_and_centre, require_metric_crs)
+                      check_scale, check_transform, chosen_crs, corners_and_centre,
+                      require_metric_crs)
 from .outputs import atomic_output, require_file
 from .points import read_points
 
 RASTER_EXTENSIONS = (".tif", ".tiff", ".asc", ".img", ".vrt", ".nc")
 
 
-def raster_crs(src, path: Path, crs=None, default_crs=None):
-    """The checked CRS of an open rasterio dataset (``crs`` overrides the file's;
-    ``default_crs`` is taken where it has none): refuses control-point georeferencing, rotated
-    or non-square grids, CRSs not in metres and those whose scale at the raster is far from
-    true."""
+def raster_crs(src, path: Path, crs=None, note=None, default_crs=None):
+    """The checked CRS of an open rasterio dataset (``crs`` overrides the file's, which
+    ``note`` hears of; ``default_crs`` is taken where it has none): refuses control-point
+    georeferencing, rotated or non-square grids, CRSs not in metres and those whose scale at
+    the raster is far from true."""
     transform, file_crs = src.transform, src.crs
     if src.gcps[0] and transform.is_identity:
         raise FloodMeshError(
@@ -32,8 +33,8 @@ def raster_crs(src, path: Path, crs=None, default_crs=None):
             "warp it to a north-up grid first (gdalwarp -tr D D IN OUT)")
     check_transform(transform, f"raster {path.name}")
     what = f"raster {path.name}"
-    checked = require_metric_crs(crs if crs is not None else
-                                 (file_crs.to_wkt() if file_crs else default_crs), what,
+    own = file_crs.to_wkt() if file_crs else None
+    checked = require_metric_crs(chosen_crs(crs, own, what, note) or default_crs, what,
                                  kind="raster")
     check_scale(checked, *corners_and_centre(*src.bounds), what, kind="raster")
     return checked
@@ -140,7 +141,7 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
     path = require_file(path, "raster")
     try:
         with rasterio.open(path) as src:
-            transform, crs = src.transform, raster_crs(src, path, crs, default_crs=default_crs)
+            transform, crs = src.transform, raster_crs(src, path, crs, note, default_crs)
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
             values = read_band(src)

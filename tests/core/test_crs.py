@@ -1,6 +1,6 @@
 """CRSs as users give them: compound DEMs with layers in their horizontal CRS, tiles that differ
-only in naming their heights, layers without a CRS, and what the messages for feet and for a
-projection far from true scale tell the user to do."""
+only in naming their heights, layers without a CRS, a --crs that replaces a file's own, and
+what the messages for feet and for a projection far from true scale tell the user to do."""
 import fiona
 import numpy as np
 import pytest
@@ -82,6 +82,32 @@ def test_boundary_without_crs_is_taken_in_the_dems_with_a_note(tmp_path, capsys,
     assert code == 0, err
     assert any(f"{name} has no CRS: it is taken to be in the DEM's, Amersfoort / RD New" in line
                and "ogr2ogr -a_srs EPSG:XXXX" in line for line in err), err
+
+
+def test_crs_given_for_a_raster_with_its_own_is_noted(tmp_path, capsys):
+    """--crs replaces the file's CRS: said where it differs, not where it is the same."""
+    dem = rd_dem(tmp_path / "dem.tif", crs="EPSG:25832")
+    code, err = floodmesh(["mesh", dem, "--crs", "EPSG:25833", "--out", tmp_path / "m.2dm"],
+                          capsys)
+    assert code == 0, err
+    assert ("floodmesh: note: raster dem.tif is in ETRS89 / UTM zone 32N, but the CRS given is "
+            "used: ETRS89 / UTM zone 33N") in "\n".join(err)
+    code, err = floodmesh(["mesh", dem, "--crs", "EPSG:25832", "--out", tmp_path / "m2.2dm"],
+                          capsys)
+    assert code == 0 and not any("CRS given" in line for line in err), err
+
+
+def test_crs_given_for_point_tiles_with_their_own_is_noted_once(tmp_path, capsys):
+    """One note for the tiles, not one a tile."""
+    xyz = plane_xyz()
+    west = xyz[:, 0] < xyz[:, 0].mean()
+    for name, part in (("west.laz", xyz[west]), ("east.laz", xyz[~west])):
+        write_las(tmp_path / name, part, crs="EPSG:25832")
+    code, err = floodmesh(["grid", tmp_path / "west.laz", tmp_path / "east.laz", "--crs",
+                           "EPSG:25833", "--cell-size", 1, "--out", tmp_path / "dem.tif"], capsys)
+    assert code == 0, err
+    noted = [line for line in err if "but the CRS given is used" in line]
+    assert len(noted) == 1 and "(and that of 1 more tile)" in noted[0], err
 
 
 @pytest.mark.parametrize("kind, crs, words", [
