@@ -15,7 +15,7 @@ from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import EPT_NAME, POINT_EXTENSIONS
 from ..points import PointCloud, clean_points
-from ..raster import RefusedCRS
+from ..raster import RefusedCRS, chosen_crs
 from .outputs import atomic_output, require_file
 
 GROUND_CLASS = 2
@@ -26,15 +26,17 @@ def read_points(path, *, crs=None, classes=None, note=None, repeats: bool = True
     """Read ground points from LAS/LAZ or an EPT index (class 2 when classified, or ``classes``)
     or XYZ/CSV text.
 
-    ``crs`` overrides the file's own CRS (needed for text files, which carry none). ``note``
-    receives what was assumed on the user's behalf (e.g. an unclassified file used whole), and
-    what was found doubtful (``points.clean_points``; ``repeats=False`` leaves the check of
-    repeated positions to the caller).
+    ``crs`` overrides the file's own CRS (needed for text files, which carry none; ``note``
+    hears where it replaces a different one). ``note`` receives what was assumed on the user's
+    behalf (e.g. an unclassified file used whole), and what was found doubtful
+    (``points.clean_points``; ``repeats=False`` leaves the check of repeated positions to the
+    caller).
     """
     path = require_file(path, "point file")
     xyz, file_crs = read_point_file(path, classes, note)
-    return clean_points(xyz, crs if crs is not None else file_crs, point_file_name(path),
-                        kind="points", note=note, repeats=repeats)
+    name = point_file_name(path)
+    return clean_points(xyz, chosen_crs(crs, file_crs, name, note), name, kind="points",
+                        note=note, repeats=repeats)
 
 
 def point_file_name(path) -> str:

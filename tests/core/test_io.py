@@ -105,6 +105,18 @@ def test_laz_of_las_1_4_layers_reads_its_ground_exactly(tmp_path):
         assert read.crs == UTM32
 
 
+def test_crs_given_for_a_las_in_another_is_said(tmp_path):
+    """--crs over a LAS's own, different CRS is used, and said; the same CRS is said nothing."""
+    path = tmp_path / "points.laz"
+    io.write_points_las(path, _cloud())
+    notes = []
+    assert io.read_points(path, crs="EPSG:25833", note=notes.append).crs.to_epsg() == 25833
+    assert any("is in ETRS89 / UTM zone 32N, but the CRS given is used" in n for n in notes)
+    notes.clear()
+    io.read_points(path, crs="EPSG:25832", note=notes.append)
+    assert not any("the CRS given" in n for n in notes)
+
+
 def test_las_absent_classes_are_refused_with_the_present_ones(tmp_path):
     """Asking for classes the file lacks raises FloodMeshError listing the classes present (1, 2)."""
     cloud = _cloud()
