@@ -355,6 +355,20 @@ def _existing_file(folder):
     return path
 
 
+def _check_points_xyz(folder):
+    """30 check points on _mesh_2dm's square."""
+    xyz = plane_xyz(n=30, size=10.0)
+    xyz[:, 2] = 1.0
+    return write_xyz(folder / "check.xyz", xyz)
+
+
+def _assess_pictures_into(png):
+    """``floodmesh assess`` with residuals and statistics into {out} and the pictures into
+    ``png(folder)``."""
+    return lambda f: ["assess", _mesh_2dm(f), "--points", _check_points_xyz(f), "--crs", UTM,
+                      "--out", "{out}/res.gpkg", "--report", "{out}/stats.json", "--png", png(f)]
+
+
 CASES = [
     _boundary_case("boundary-self-intersecting", "is not a valid polygon (Self-intersection",
                    _bowtie()),
@@ -486,6 +500,10 @@ CASES = [
              lambda f: ["run", _xyz(f), "--crs", UTM, "--out", _existing_file(f)],
              lambda f: ("floodmesh:lidartomesh", {"INPUT": str(_xyz(f)), "CRS": UTM,
                                                   "OUTPUT_FOLDER": str(_existing_file(f))})),
+    BadInput("assess-pictures-folder-is-a-file", "is a file, not a folder",
+             _assess_pictures_into(_existing_file)),
+    BadInput("assess-pictures-folder-not-writable", "cannot write to the output folder",
+             _assess_pictures_into(lambda f: "/proc/floodmesh-pictures")),
     BadInput("output-folder-not-writable", "cannot write to the output folder",
              lambda f: ["run", _xyz(f), "--crs", UTM, "--out", "/proc/floodmesh-out"],
              _lidar(_xyz, crs=UTM, OUTPUT_FOLDER="/proc/floodmesh-out")),

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from .. import io
 from ..errors import FloodMeshError
-from ..io.outputs import check_outputs, require_suffix
+from ..io.outputs import check_output_folder, check_outputs, require_suffix
 from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, check_holdout,
                        check_max_area, check_max_gap, check_max_triangles, check_min_angle,
                        check_seed, is_point_source)
@@ -287,10 +287,13 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
     (RMSE, NSSDA test, classes) to ``report`` (JSON) and the residual map and histogram into the
     folder ``png``."""
     # lazy: PROJ and GEOS load only when this runs
+    from ..io.report import HISTOGRAM_PNG, MAP_PNG, write_report_pngs
     from ..steps.accuracy import accuracy_statistics, residuals
     from ..steps.mesh import Mesh
 
     _files([mesh, points], [output, report])
+    if png:  # a folder, made if missing
+        check_output_folder(png, [mesh, points], [HISTOGRAM_PNG, MAP_PNG])
     read = io.read_2dm(mesh)
     xyz, points_crs = measured_points(points, crs, read.crs, note)
     res = residuals(Mesh(read.nodes, read.triangles, points_crs), xyz)
@@ -301,9 +304,6 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
         io.write_json(report, stats)
         result["REPORT"] = str(report)
     if png:
-        # lazy: PROJ and GEOS load only when this runs
-        from ..io.report import write_report_pngs
-
         Path(png).mkdir(parents=True, exist_ok=True)
         result["figures"] = [str(p) for p in write_report_pngs(png, read.nodes, read.triangles,
                                                                xyz, res)]

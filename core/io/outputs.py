@@ -98,7 +98,7 @@ def check_writable(folder) -> None:
 
 
 def check_output_folder(out, inputs, names) -> None:
-    """Refuse, before any work, a run's output folder ``out`` that is a file, lies in a folder
+    """Refuse, before any work, an output folder ``out`` that is a file, lies in a folder
     that cannot be written, or whose outputs ``names`` would replace one of ``inputs``."""
     out = Path(out)
     for source in (str(p) for p in inputs if p):
@@ -106,8 +106,8 @@ def check_output_folder(out, inputs, names) -> None:
             raise FloodMeshError(f"the output folder {out} is the input {source}: give a "
                                  "folder for the outputs")
     if out.exists() and not out.is_dir():
-        raise FloodMeshError(f"{out} is a file, not a folder: give --out a folder for the "
-                             "run's outputs (it is created if missing)")
+        raise FloodMeshError(f"{out} is a file, not a folder: give a folder for the outputs "
+                             "(it is created if missing)")
     parent = _existing_ancestor(out)
     if parent == Path(os.path.abspath(out)):
         check_outputs(inputs, [out / name for name in names])
