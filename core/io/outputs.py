@@ -17,6 +17,7 @@ import json
 import os
 import re
 import shutil
+import stat
 import tempfile
 import uuid
 from pathlib import Path
@@ -292,11 +293,12 @@ def staged_folder(out, own=(), keep=()):
 
     ``own``: names (or a test of a name) of files FloodMesh writes into such a folder (left
     out of the new one when this run did not write them again, so that the folder holds one
-    run); other files of
-    ``out``, and the inputs ``keep`` inside it, are carried into the new folder as hard links.
-    Where ``out`` cannot be swapped as a whole (see ``_swap_possible``), the staging folder
-    lies inside ``out`` and its files replace the old ones one by one. Leftovers of a killed
-    earlier run (``_clean_run_leftovers``) are removed first.
+    run); other files of ``out``, and the inputs ``keep`` inside it, are carried into the new
+    folder as hard links. The new folder takes the old one's owner, group and permissions;
+    where it cannot (``_made_like``) or ``out`` cannot be swapped as a whole
+    (``_swap_possible``), the staging folder lies inside ``out`` and its files replace the old
+    ones one by one. Leftovers of a killed earlier run (``_clean_run_leftovers``) are removed
+    first.
     """
     out = Path(os.path.abspath(out))
     _clean_run_leftovers(out)
@@ -310,6 +312,12 @@ def staged_folder(out, own=(), keep=()):
     try:  # an interrupt as soon as it is made removes it too
         staging.mkdir(parents=True)
         _ACTIVE.add(str(staging))
+        if swap and out.exists() and not _made_like(staging, out):
+            os.rmdir(staging)
+            _ACTIVE.discard(str(staging))
+            swap, staging = False, out / staging.name
+            staging.mkdir()
+            _ACTIVE.add(str(staging))
         yield staging
         if swap:
             _swap_in(out, staging, own, keep, tag)
@@ -318,6 +326,27 @@ def staged_folder(out, own=(), keep=()):
     finally:
         shutil.rmtree(staging, ignore_errors=True)
         _ACTIVE.discard(str(staging))
+
+
+def _made_like(new: Path, old: Path) -> bool:
+    """Give the folder ``new`` the owner, group and permissions (setgid and sticky bits too) of
+    ``old``, which it is to replace, so that a private or a group's folder stays so; False where
+    it cannot have them (another user's folder, a group this user is not in) or ``old`` has
+    access control lists."""
+    try:
+        acl = any(name.startswith("system.posix_acl") for name in os.listxattr(old))
+    except OSError:  # a file system without extended attributes
+        acl = False
+    if acl:
+        return False
+    was = os.stat(old)
+    try:
+        os.chown(new, was.st_uid, was.st_gid)
+        os.chmod(new, stat.S_IMODE(was.st_mode))
+        now = os.stat(new)
+    except OSError:
+        return False
+    return (now.st_uid, now.st_gid, now.st_mode) == (was.st_uid, was.st_gid, was.st_mode)
 
 
 def _carried(out: Path, new: set, own, keep: set) -> list:

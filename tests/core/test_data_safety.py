@@ -152,6 +152,54 @@ def test_a_folder_with_folders_of_the_users_is_replaced_file_by_file(tmp_path, m
     assert (tmp_path / "report.json").read_text() == "new"
 
 
+def _other_group() -> int:
+    """A group other than this user's own that this user may give a folder (any, for root)."""
+    if os.geteuid() == 0:
+        return 4242
+    groups = [g for g in os.getgroups() if g != os.getegid()]
+    if not groups:
+        pytest.skip("this user is in no group but its own")
+    return groups[0]
+
+
+def _small_run(folder, out):
+    points = write_xyz(folder / "pts.xyz", plane_xyz(n=4000, size=30.0))
+    return main(["run", str(points), "--crs", UTM, "--cell-size", "2", "--out", str(out)])
+
+
+@pytest.mark.parametrize("kind", ["private", "group"])
+def test_run_keeps_its_folders_permissions_group_and_setgid_bit(tmp_path, kind):
+    """A private folder (700) stays private; a group's folder (2770, setgid) keeps its group and
+    setgid bit, and the files the run writes into it get the group."""
+    out = tmp_path / "out"
+    out.mkdir()
+    mode, group = (0o700, os.getegid()) if kind == "private" else (0o2770, _other_group())
+    os.chown(out, -1, group)
+    os.chmod(out, mode)
+    assert _small_run(tmp_path, out) == 0
+    assert (oct(out.stat().st_mode & 0o7777), out.stat().st_gid) == (oct(mode), group)
+    assert (out / "mesh.2dm").stat().st_gid == group
+
+
+def test_run_keeps_the_access_control_list_of_its_folder(tmp_path):
+    """A folder shared by an access control list (user 4242 may write) keeps it."""
+    import struct
+
+    out = tmp_path / "out"
+    out.mkdir()
+    # POSIX ACL xattr, version 2: (tag, permissions, id) for the owner, user 4242, the group,
+    # the mask and others
+    entries = [(0x01, 7, 0xFFFFFFFF), (0x02, 7, 4242), (0x04, 5, 0xFFFFFFFF),
+               (0x10, 7, 0xFFFFFFFF), (0x20, 5, 0xFFFFFFFF)]
+    acl = struct.pack("<I", 2) + b"".join(struct.pack("<HHI", *e) for e in entries)
+    try:
+        os.setxattr(out, "system.posix_acl_access", acl)
+    except OSError as exc:
+        pytest.skip(f"no access control lists here ({exc.strerror})")
+    assert _small_run(tmp_path, out) == 0
+    assert os.getxattr(out, "system.posix_acl_access") == acl
+
+
 # ---------------------------------------------------------------------------------------------
 # 2. holdout 0
 @pytest.mark.parametrize("command", ["run", "series"])
