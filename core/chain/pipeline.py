@@ -2,6 +2,7 @@
 with every intermediate written to an output folder and a report of figures and timings."""
 from __future__ import annotations
 
+import re
 import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing
@@ -219,7 +220,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
 
     # the folder is replaced as a whole: an interrupt leaves the old run's files or these
     # and the picture process, drawing into it, ended before an interrupted run removes it
-    with (staged_folder(out, own=run_outputs(EXPORT_FORMATS), keep=inputs) as stage,
+    with (staged_folder(out, own=folder_output, keep=inputs) as stage,
           closing(pictures)):
         # drawn in the picture process meanwhile, beside the figures and the files' writing
         pictures.draw(stage, mesh.nodes, mesh.triangles, front.holdout.xyz, res, dem=front.dem,
@@ -568,6 +569,20 @@ def run_outputs(formats) -> list:
     """The names a run with these solver formats writes into its folder."""
     return [*OUTPUT_FILES, *(f"mesh{EXPORT_EXTENSIONS[f]}" for f in formats),
             *(["mesh.cli"] if "slf" in formats else [])]
+
+
+# a scale series' files (``series``): its table, record and plot, and a mesh per setting named
+# by ``series.Setting.label`` (a100-k4, a50-dp0.5, a200-sp1e-05)
+SERIES_FILES = ("series.csv", "series.json", "series.png")
+SERIES_MESH = re.compile(r"^mesh_a[0-9.e+-]+-(?:k|dp|sp)[0-9.e+-]+\.(?:2dm|prj)$")
+
+
+def folder_output(name: str) -> bool:
+    """Whether ``run`` or ``series`` writes a file of this name into its output folder: an
+    earlier one's that this one does not write again goes (``outputs.staged_folder``), so that
+    the folder holds one command's files, never a run's mesh beside a series' table."""
+    return (name in run_outputs(EXPORT_FORMATS) or name in SERIES_FILES
+            or bool(SERIES_MESH.match(name)))
 
 
 @dataclass

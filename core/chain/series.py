@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import itertools
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -21,17 +20,8 @@ from ..steps.accuracy import accuracy_statistics, nssda_threshold_m, residuals
 from ..steps.hydraulic_lines import lines_for_hydraulics
 from ..steps.mesh import Mesh, build_mesh, domain_from_dem, edge_tolerance
 from ..steps.simplify import simplify_breaklines
-from .pipeline import run_inputs, trace_front
+from .pipeline import SERIES_FILES, folder_output, run_inputs, trace_front
 from .source import open_source
-
-_OWN_MESH = re.compile(r"^mesh_.+\.(2dm|prj)$")
-SERIES_FILES = ("series.csv", "series.json", "series.png")
-
-
-def _is_own(name: str) -> bool:
-    """Whether a series writes files of this name (see ``outputs.staged_folder``)."""
-    return name in SERIES_FILES or bool(_OWN_MESH.match(name))
-
 
 def _mesh_files(labels) -> list[str]:
     """The files of each labelled mesh: the 2DM and the .prj beside it."""
@@ -171,7 +161,7 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
                                 own_lines=front.own_lines, min_spacing=options.min_spacing,
                                 log=log)
     # the folder is replaced as a whole: an interrupt leaves the old series' files or these
-    with staged_folder(out, own=_is_own, keep=inputs) as stage:
+    with staged_folder(out, own=folder_output, keep=inputs) as stage:
         for row, mesh in zip(rows, meshes):
             io.write_mesh_2dm(stage / f"mesh_{row['label']}.2dm", mesh.nodes, mesh.triangles,
                               crs=front.dem.crs)

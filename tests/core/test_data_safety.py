@@ -162,9 +162,28 @@ def _other_group() -> int:
     return groups[0]
 
 
-def _small_run(folder, out):
+def _small_run(folder, out, command="run", *extra):
     points = write_xyz(folder / "pts.xyz", plane_xyz(n=4000, size=30.0))
-    return main(["run", str(points), "--crs", UTM, "--cell-size", "2", "--out", str(out)])
+    return main([command, str(points), "--crs", UTM, "--cell-size", "2", "--out", str(out),
+                 *extra])
+
+
+def test_run_and_series_into_one_folder_leave_one_commands_files(tmp_path):
+    """A series into a run's folder replaces the run's files, a run the series' (never a mix);
+    files of the user's stay, one named like a series mesh too."""
+    from floodmesh.core.chain.pipeline import OUTPUT_FILES
+    from floodmesh.core.chain.series import SERIES_FILES
+
+    out = tmp_path / "out"
+    assert _small_run(tmp_path, out) == 0
+    mine = ["notes.txt", "mesh_v1.2dm"]
+    for name in mine:
+        (out / name).write_text("mine\n")
+    assert _small_run(tmp_path, out, "series", "--max-areas", "100") == 0
+    assert sorted(os.listdir(out)) == sorted([*SERIES_FILES, "mesh_a100-k4.2dm", *mine])
+    assert _small_run(tmp_path, out) == 0
+    assert sorted(os.listdir(out)) == sorted([*OUTPUT_FILES, *mine])
+    assert all((out / name).read_text() == "mine\n" for name in mine)
 
 
 @pytest.mark.parametrize("kind", ["private", "group"])
