@@ -24,15 +24,20 @@ from ..raster import check_dem_size, chosen_crs, require_metric_crs
 from ..steps.breakpoints import breakpoints_file
 from ..steps.slope import slope_raster_file
 
-GEOTIFF = (".tif", ".tiff")
+# the formats the steps write: the extensions an output's name may end in, and its name
+GEOTIFF = ((".tif", ".tiff"), "a GeoTIFF")
+GEOPACKAGE = ((".gpkg",), "a GeoPackage")
+SMS_2DM = ((".2dm",), "an SMS 2DM mesh")
 
 
-def _files(reads, writes, *, geotiff=()) -> None:
+def _files(reads, writes, *, geotiff=(), gpkg=(), sms=()) -> None:
     """Before any work: no output may be (or replace) an input, each output's folder must be
-    writable, and the rasters written are GeoTIFFs."""
+    writable, and the names of the rasters, layers and meshes written (None: not written) end
+    in their format's extension."""
     check_outputs([r for r in reads if r], [w for w in writes if w])
-    for path in geotiff:
-        require_suffix(path, GEOTIFF, "a GeoTIFF")
+    for paths, (suffixes, what) in ((geotiff, GEOTIFF), (gpkg, GEOPACKAGE), (sms, SMS_2DM)):
+        for path in (p for p in paths if p):
+            require_suffix(path, suffixes, what)
 
 
 def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=None,
@@ -47,7 +52,7 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     from .source import open_source
 
     source = open_source(input, skip_unreadable=skip_unreadable)
-    _files(source.paths, [output, holdout_output], geotiff=[output])
+    _files(source.paths, [output, holdout_output], geotiff=[output], gpkg=[holdout_output])
     check_cell_size(cell_size)
     check_max_gap(max_gap)
     check_holdout(holdout)
@@ -130,7 +135,7 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
     # lazy: numba loads only when this runs
     from ..steps.breaklines import trace_breaklines
 
-    _files([breakpoints, slope, dem], [output])
+    _files([breakpoints, slope, dem], [output], gpkg=[output])
     points = io.read_raster(breakpoints, crs=crs, elevations=False)
     points = points.with_values((points.values == 1).astype("uint8"))
     terrain = io.read_raster(dem, crs=crs, note=note)
@@ -149,7 +154,7 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
     # lazy: numba and GEOS load only when this runs
     from ..steps.simplify import simplify_breaklines
 
-    _files([input], [output])
+    _files([input], [output], gpkg=[output])
     name = Path(input).name
     crs = require_metric_crs(chosen_crs(crs, io.vector_crs(input), name, note), name)
     lines = io.read_breaklines(input)
@@ -188,7 +193,7 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     from .pipeline import size_field as size_from
 
     _files([dem, breaklines, boundary, user_lines, size_field if size_field != "slope" else None],
-           [output, triangles])
+           [output, triangles], sms=[output], gpkg=[triangles])
     check_min_angle(min_angle)
     check_max_area(max_area)
     check_max_triangles(max_triangles)
@@ -238,7 +243,8 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
     from ..steps.mesh import mesh_quality
     from ..steps.refine import refine_mesh
 
-    _files([dem, points, check, breaklines, boundary, user_lines], [output, report])
+    _files([dem, points, check, breaklines, boundary, user_lines], [output, report],
+           sms=[output])
     terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
     measured = measured_points(points, crs, terrain.crs, note)[0]
     check_xyz = measured_points(check, crs, terrain.crs, note)[0] if check else None
@@ -291,7 +297,7 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
     from ..steps.accuracy import accuracy_statistics, residuals
     from ..steps.mesh import Mesh
 
-    _files([mesh, points], [output, report])
+    _files([mesh, points], [output, report], gpkg=[output])
     if png:  # a folder, made if missing
         check_output_folder(png, [mesh, points], [HISTOGRAM_PNG, MAP_PNG])
     read = io.read_2dm(mesh)
