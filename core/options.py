@@ -277,7 +277,8 @@ def check_sigma_fits(sigma: float, rows: int, cols: int, cell_size: float) -> fl
 
 
 def check_sensitivity(value) -> float:
-    return _positive(value, "LoG sensitivity", "metres", zero=True)
+    return _positive(value, "LoG sensitivity", "metres",
+                     "the |response| a breakpoint reaches (0.02 is the method's reference)")
 
 
 def check_choice(value, choices, what: str) -> str:
