@@ -281,6 +281,34 @@ def check_sensitivity(value) -> float:
                      "the |response| a breakpoint reaches (0.02 is the method's reference)")
 
 
+def check_refine_bounds(lower, upper) -> tuple[float, float | None]:
+    """The refinement's bounds in metres: 0 < ``lower`` <= ``upper`` (None: no point is
+    inserted)."""
+    lower = _positive(lower, "refinement lower bound", "metres")
+    if upper is None:
+        return lower, None
+    upper = _positive(upper, "refinement upper bound", "metres")
+    if lower > upper:
+        raise FloodMeshError(f"the refinement lower bound ({lower:g} m) is above the upper bound "
+                             f"({upper:g} m); 0.10 and 0.25 are usual")
+    return lower, upper
+
+
+def check_refinement(lower, upper, *, target_rmse=None, target_max=None, noise=None,
+                     max_rounds: int = 8, max_nodes: int = 1_000_000) -> None:
+    """A refinement's bounds (``check_refine_bounds``), targets (m; None: none), the points'
+    noise (m; 0: exact points, None: estimated) and budget of rounds and nodes."""
+    check_refine_bounds(lower, upper)
+    for value, what in ((target_rmse, "target RMSE"), (target_max, "target maximum residual")):
+        if value is not None:
+            _positive(value, what, "metres", "leave it out to refine until the bounds hold")
+    if noise is not None:
+        _positive(noise, "noise of the points", "metres",
+                  "leave it out to estimate it from the points", zero=True)
+    check_positive_int(max_rounds, "number of refinement rounds")
+    check_positive_int(max_nodes, "node budget", 3)
+
+
 def check_choice(value, choices, what: str) -> str:
     if value not in choices:
         raise FloodMeshError(f"unknown {what} {value!r}; choose one of {', '.join(choices)}")
@@ -372,11 +400,7 @@ class RunOptions:
             _positive(self.min_area, "minimum area of the size field", "m²")
         check_max_triangles(self.max_triangles)
         if self.refine:
-            lower = _positive(self.refine_lower, "refinement lower bound", "metres")
-            upper = _positive(self.refine_upper, "refinement upper bound", "metres")
-            if lower > upper:
-                raise FloodMeshError(f"the refinement lower bound ({lower:g} m) is above the "
-                                     f"upper bound ({upper:g} m); 0.10 and 0.25 are usual")
+            check_refine_bounds(self.refine_lower, self.refine_upper)
         if not (isinstance(self.misfit_passes, int) and 0 <= self.misfit_passes <= 8):
             raise FloodMeshError(f"the misfit refinement passes must be a whole number from 0 "
                                  f"(off) to 8, got {self.misfit_passes}; 1 is the default")

@@ -349,6 +349,12 @@ def _export_case(id_, words, crs):
                         "OUTPUT": str(f / "qgis-out" / "mesh.nc")}))
 
 
+def _refine(folder, *extra):
+    """``floodmesh refine`` of the bank DEM with the plane's points and ``extra`` options."""
+    return ["refine", _tif("dem.tif")(folder), "--points", _xyz(folder), "--crs", UTM,
+            *extra, "--out", "{out}/refined.2dm"]
+
+
 def _existing_file(folder):
     path = folder / "results"
     path.write_text("a file where the output folder should be\n")
@@ -526,6 +532,12 @@ CASES = [
     BadInput("breakpoints-sensitivity-zero", "LoG sensitivity must be a positive number",
              lambda f: ["breakpoints", _tif("log.tif")(f), "--sensitivity", 0, "--out",
                         "{out}/bp.tif"]),
+    BadInput("refine-negative-noise", "noise of the points must be zero or a positive number",
+             lambda f: _refine(f, "--noise", -1)),
+    BadInput("refine-negative-target", "target RMSE must be a positive number",
+             lambda f: _refine(f, "--target-rmse", -1)),
+    BadInput("refine-no-rounds", "number of refinement rounds must be a whole number of at "
+             "least 1", lambda f: _refine(f, "--max-rounds", 0)),
     BadInput("points-on-one-tilted-line", "all points lie on one straight line",
              _maker(_collinear_xyz, crs=UTM), _lidar(_collinear_xyz, crs=UTM)),
     BadInput("points-at-one-place", "all points lie at one place",

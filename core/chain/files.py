@@ -18,7 +18,7 @@ from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, check_outputs, require_suffix
 from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, check_holdout,
                        check_max_area, check_max_gap, check_max_triangles, check_min_angle,
-                       check_seed, is_point_source)
+                       check_refinement, check_seed, is_point_source)
 from ..points import PointCloud, at_places_of, split_holdout
 from ..raster import check_dem_size, chosen_crs, require_metric_crs
 from ..steps.breakpoints import breakpoints_file
@@ -245,6 +245,10 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
 
     _files([dem, points, check, breaklines, boundary, user_lines], [output, report],
            sms=[output])
+    check_min_angle(min_angle)
+    check_max_area(max_area)
+    check_refinement(lower, upper, target_rmse=target_rmse, target_max=target_max, noise=noise,
+                     max_rounds=max_rounds, max_nodes=max_nodes)
     terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
     measured = measured_points(points, crs, terrain.crs, note)[0]
     check_xyz = measured_points(check, crs, terrain.crs, note)[0] if check else None

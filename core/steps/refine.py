@@ -20,6 +20,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import Cancelled, FloodMeshError
+from ..options import check_refinement
 from ..raster import Grid
 from .accuracy import residuals
 from .localise import beyond_noise, estimate_noise
@@ -71,11 +72,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     points = np.asarray(points, float)
     if points.ndim != 2 or points.shape[1] != 3 or not len(points):
         raise FloodMeshError("refinement needs measured points (x, y, z); none were given")
-    if not 0 < lower <= (np.inf if upper is None else upper):
-        raise FloodMeshError(f"refinement bounds must satisfy 0 < lower <= upper, got lower "
-                             f"{lower} m and upper {upper} m (10 and 25 cm are usual)")
-    if max_rounds < 1 or max_nodes < 3:
-        raise FloodMeshError("give at least one round and a node budget of at least 3")
+    check_refinement(lower, upper, target_rmse=target_rmse, target_max=target_max, noise=noise,
+                     max_rounds=max_rounds, max_nodes=max_nodes)
     # no refinement below the DEM's own resolution
     floor = dem.cell_size ** 2 / 2 if floor is None else floor
     # lazy: numba loads only when this runs

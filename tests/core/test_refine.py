@@ -137,9 +137,12 @@ def test_the_node_budget_holds(terrain):
 
 
 @pytest.mark.parametrize("kwargs, words", [
-    ({"lower": 0.3, "upper": 0.2}, "lower <= upper"),
-    ({"lower": 0.0}, "lower <= upper"),
-    ({"max_rounds": 0}, "at least one round"),
+    ({"lower": 0.3, "upper": 0.2}, "lower bound .* is above the upper bound"),
+    ({"lower": 0.0}, "lower bound must be a positive number"),
+    ({"max_rounds": 0}, "number of refinement rounds must be a whole number of at least 1"),
+    ({"max_nodes": 2}, "node budget must be a whole number of at least 3"),
+    ({"noise": -0.1}, "noise of the points must be zero or a positive number"),
+    ({"target_max": 0.0}, "target maximum residual must be a positive number"),
 ])
 def test_bad_refinement_settings(terrain, kwargs, words):
     dem, points, _ = terrain
