@@ -199,7 +199,8 @@ def check_seed(value) -> int:
     """A random seed: a whole number of at least 0 (numpy's generators take no negative one)."""
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
         raise FloodMeshError(f"the random seed must be a whole number of at least 0, got "
-                             f"{value!r}: any such number gives a reproducible split (0 is usual)")
+                             f"{value!r}: any such number makes the result reproducible (0 is "
+                             "usual)")
     return value
 
 

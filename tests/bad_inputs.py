@@ -538,6 +538,13 @@ CASES = [
              lambda f: _refine(f, "--target-rmse", -1)),
     BadInput("refine-no-rounds", "number of refinement rounds must be a whole number of at "
              "least 1", lambda f: _refine(f, "--max-rounds", 0)),
+    BadInput("breaklines-negative-seed", "random seed must be a whole number of at least 0",
+             lambda f: ["breaklines", _tif("bp.tif")(f), "--slope", _tif("slope.tif")(f),
+                        "--dem", _tif("dem.tif")(f), "--seed", -1, "--out",
+                        "{out}/lines.gpkg"]),
+    BadInput("series-area-twice", "maximum area 100 is given more than once",
+             lambda f: ["series", _xyz(f), "--crs", UTM, "--max-areas", "100,100", "--out",
+                        "{out}"]),
     BadInput("points-on-one-tilted-line", "all points lie on one straight line",
              _maker(_collinear_xyz, crs=UTM), _lidar(_collinear_xyz, crs=UTM)),
     BadInput("points-at-one-place", "all points lie at one place",

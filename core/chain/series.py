@@ -15,7 +15,7 @@ from .. import io
 from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, staged_folder
 from ..io.report import new_figure, save_png
-from ..options import RunOptions
+from ..options import RunOptions, check_max_area
 from ..steps.accuracy import accuracy_statistics, nssda_threshold_m, residuals
 from ..steps.hydraulic_lines import lines_for_hydraulics
 from ..steps.mesh import Mesh, build_mesh, domain_from_dem, edge_tolerance
@@ -56,8 +56,14 @@ def settings_grid(max_areas, method: str = "keep-every", amounts=(4,)) -> list[S
     if method not in _SHORT:
         raise FloodMeshError(f"unknown simplification {method!r}; choose from "
                              f"{', '.join(_SHORT)}")
-    if min(max_areas) <= 0:
-        raise FloodMeshError(f"maximum areas must be positive m², got {list(max_areas)}")
+    for area in max_areas:
+        check_max_area(area)
+    for what, values in (("maximum area", max_areas), ("simplification amount", amounts)):
+        values = [float(v) for v in values]
+        twice = sorted({v for v in values if values.count(v) > 1})
+        if twice:
+            raise FloodMeshError(f"the {what} {', '.join(f'{v:g}' for v in twice)} is given "
+                                 "more than once: give each once (each gives one mesh)")
     return [Setting(float(a), method, float(n)) for a, n in itertools.product(max_areas, amounts)]
 
 

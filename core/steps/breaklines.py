@@ -33,7 +33,8 @@ import numba
 import numpy as np
 
 from ..errors import FloodMeshError
-from ..options import TRACING_MODES, check_choice, check_min_length, check_min_points, check_s_crit
+from ..options import (TRACING_MODES, check_choice, check_min_length, check_min_points,
+                       check_s_crit, check_seed)
 from ..raster import Grid
 
 MODES = TRACING_MODES
@@ -82,6 +83,7 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     s_crit = check_s_crit(s_crit)
     min_points = check_min_points(min_points)
     min_length = check_min_length(min_length)
+    seed = check_seed(seed)
     if breakpoints.shape != slope.shape or slope.shape != dem.shape:
         raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
                              f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")
