@@ -255,14 +255,19 @@ def _add_dask_options(p: argparse.ArgumentParser):
 
 
 def _summary(report: dict, out: Path) -> str:
-    rmse = report.get("rmse_m")
-    rmse_text = f"{100 * rmse:.1f} cm" if rmse is not None else "n/a"
-    classes = report.get("classes", {})
+    n, held = report["n_assessed"], report["n_holdout"]
+    if n:
+        classes = report["classes"]
+        accuracy = (f"holdout RMSE {100 * report['rmse_m']:.1f} cm on {n} points, "
+                    f"{100 * classes['<10 cm']:.0f}% under 10 cm, "
+                    f"{100 * classes['>25 cm']:.1f}% over 25 cm")
+    elif held:
+        accuracy = f"not assessed: none of the {held} held-out points lies inside the mesh"
+    else:
+        accuracy = "not assessed: no check points were held out"
     return (f"{report['nodes']} nodes, {report['triangles']} triangles "
             f"(min angle {report['min_angle_deg']:.1f}°, max area {report['max_area_m2']:.1f} m²), "
-            f"{report['n_breaklines']} break lines; holdout RMSE {rmse_text} on "
-            f"{report['n_assessed']} points, {100 * classes.get('<10 cm', 0):.0f}% under 10 cm, "
-            f"{100 * classes.get('>25 cm', 0):.1f}% over 25 cm\nwritten to {out}/")
+            f"{report['n_breaklines']} break lines; {accuracy}\nwritten to {out}/")
 
 
 def cmd_run(args):
@@ -295,11 +300,11 @@ def cmd_series(args):
         bar.close()
     print(f"{'setting':<14}{'nodes':>8}{'RMSE cm':>9}{'max cm':>8}{'>25 cm':>8}")
     for row in result["rows"]:
-        rmse, top = row["rmse_m"], row["max_abs_m"]
+        rmse, top, over = row["rmse_m"], row["max_abs_m"], row["share_over_25cm"]
         print(f"{row['label']:<14}{row['nodes']:>8}"
               f"{'n/a' if rmse is None else format(100 * rmse, '.1f'):>9}"
               f"{'n/a' if top is None else format(100 * top, '.1f'):>8}"
-              f"{100 * row['share_over_25cm']:>7.1f}%")
+              f"{'n/a' if over is None else format(100 * over, '.1f') + '%':>8}")
     print(f"series.csv, series.json, series.png and {len(result['rows'])} meshes written to "
           f"{args.out}/")
 

@@ -89,7 +89,7 @@ def accuracy_statistics(res: np.ndarray, *, alpha: float | None = None,
     if n == 0:
         stats.update(rmse_m=None, mean_m=None, std_m=None, skew=None, accuracy_95_m=None,
                      max_abs_residual_m=None, nssda_threshold_m=None, nssda_pass=None,
-                     classes={name: 0.0 for name in CLASS_NAMES})
+                     classes={name: None for name in CLASS_NAMES})
         return stats
     rmse = float(np.sqrt(np.mean(inside ** 2)))
     mean = float(inside.mean())

@@ -242,11 +242,12 @@ def test_vertex_error_bound():
 
 
 def test_all_outside_gives_no_figures():
-    """When every point is outside the mesh the figures are None and the shares 0."""
+    """When every point is outside the mesh the figures and the classes' shares are None (null
+    in JSON): there is no share of no residuals."""
     stats = accuracy_statistics(np.array([np.nan, np.nan, np.nan]))
     assert stats["n_outside_mesh"] == 3 and stats["n_assessed"] == 0
     assert stats["rmse_m"] is None and stats["max_abs_residual_m"] is None
-    assert set(stats["classes"].values()) == {0.0}
+    assert set(stats["classes"].values()) == {None}
 
 
 def test_a_run_says_how_many_check_points_lie_outside_its_mesh(tmp_path):

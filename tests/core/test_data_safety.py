@@ -222,17 +222,25 @@ def test_run_keeps_the_access_control_list_of_its_folder(tmp_path):
 # ---------------------------------------------------------------------------------------------
 # 2. holdout 0
 @pytest.mark.parametrize("command", ["run", "series"])
-def test_holdout_zero_runs_through(tmp_path, command, capsys):
+def test_holdout_zero_runs_through_and_says_it_did_not_assess(tmp_path, command, capsys):
+    """No check points: the summary says the mesh was not assessed (no '0% under 10 cm'), and
+    the shares of the residual classes are null, not 0."""
     points = write_xyz(tmp_path / "pts.xyz", plane_xyz(n=4000, size=30.0))
     extra = ["--max-areas", "100"] if command == "series" else []
     code = main([command, str(points), "--crs", UTM, "--cell-size", "2", "--holdout", "0",
                  "--out", str(tmp_path / "out"), *extra])
-    assert code == 0, capsys.readouterr().err
+    said = capsys.readouterr()
+    assert code == 0, said.err
     if command == "run":
-        import json
-
         report = json.loads((tmp_path / "out" / "report.json").read_text())
         assert report["n_holdout"] == 0 and report["rmse_m"] is None
+        assert set(report["classes"].values()) == {None}
+        assert "not assessed: no check points were held out" in said.out
+        assert "%" not in said.out and "n/a" not in said.out
+    else:
+        (row,) = json.loads((tmp_path / "out" / "series.json").read_text())["rows"]
+        assert row["rmse_m"] is None and row["share_over_25cm"] is None
+        assert said.out.splitlines()[1].split()[2:] == ["n/a", "n/a", "n/a"]
 
 
 # ---------------------------------------------------------------------------------------------
