@@ -333,8 +333,9 @@ def export(mesh, output, *, fmt=None, crs=None, open_boundaries=None, snap: floa
     _files([mesh, open_boundaries, regions, breaklines],
            [output, Path(output).with_suffix(".cli") if fmt == "slf" else None])
     read = io.read_2dm(mesh)
-    crs = layers_crs(crs or read.crs, {"open boundary": open_boundaries, "region": regions,
-                                       "break line": breaklines})
+    crs = layers_crs(chosen_crs(crs, read.crs, f"mesh {Path(mesh).name}", note),
+                     {"open boundary": open_boundaries, "region": regions,
+                      "break line": breaklines})
     written = export_mesh(
         output, read.nodes, read.triangles, fmt=fmt, crs=crs,
         open_lines=io.read_lines_gpkg(open_boundaries) if open_boundaries else (),

@@ -27,6 +27,7 @@ from ..engine.arrays import unique_rows
 from ..errors import FloodMeshError
 from ..options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
 from ..raster import parse_crs, require_metric_crs, same_place
+from .accuracy import tin_elevation
 from .mesh import boundary_loops
 
 ADCIRC_MAINLAND, ADCIRC_ISLAND = 20, 21  # no normal flow, natural (weak), free tangential slip
@@ -553,5 +554,17 @@ def write_gpkg(path, mesh: SolverMesh, *, breaklines=()) -> None:
             "island": np.array([s.island for s in segments]),
             "n_nodes": np.array([len(s.nodes) for s in segments])})
         if len(breaklines):
-            io.write_lines_gpkg(tmp, [np.asarray(b, float) for b in breaklines], mesh.crs,
+            io.write_lines_gpkg(tmp, [_with_mesh_z(b, mesh) for b in breaklines], mesh.crs,
                                 layer="breaklines", atomic=False)
+
+
+def _with_mesh_z(line, mesh: SolverMesh) -> np.ndarray:
+    """A break line (k, 2|3) as x, y, z, where it has no z (a 2-D line, read with NaN z) the
+    mesh's TIN z there (NaN outside the mesh): HEC-RAS takes break lines' z as terrain."""
+    line = np.asarray(line, float)
+    xyz = np.column_stack([line[:, :2], line[:, 2] if line.shape[1] > 2
+                           else np.full(len(line), np.nan)])
+    missing = ~np.isfinite(xyz[:, 2])
+    if missing.any():
+        xyz[missing, 2] = tin_elevation(mesh, xyz[missing, 0], xyz[missing, 1])
+    return xyz

@@ -667,3 +667,34 @@ def test_every_format_is_written_in_spatial_order(demo_points_file, tmp_path):
     centres = nodes[triangles["2dm"]][:, :, :2].mean(axis=1)
     step = np.linalg.norm(np.diff(centres, axis=0), axis=1)
     assert np.median(step) < 2 * np.sqrt(np.median(triangle_areas(nodes, triangles["2dm"])))
+
+
+def test_export_of_2d_break_lines_gives_them_the_mesh_z_and_says_a_crs_over_the_prj(tmp_path):
+    """`floodmesh export MESH x.gpkg --breaklines L` with a 2-D line layer (as drawn in QGIS):
+    HEC-RAS takes the lines' z as terrain, so each vertex gets the mesh's TIN z there (they
+    were NaN). And --crs over a mesh whose .prj names another CRS is said in a note."""
+    from floodmesh.core.steps.accuracy import tin_elevation
+    from floodmesh.core.steps.mesh import Mesh
+
+    nodes, tris = write_export_inputs(tmp_path, 2)
+    io.write_prj(tmp_path / "mesh.prj", UTM32)
+    x0, y0 = UTM_ORIGIN
+    drawn = np.array([[x0 + 5, y0 + 5], [x0 + 20, y0 + 30], [x0 + 45, y0 + 53]])
+    with fiona.open(tmp_path / "drawn.gpkg", "w", driver="GPKG", crs=UTM32.to_wkt(),
+                    schema={"geometry": "LineString", "properties": {}}) as dst:
+        dst.write({"geometry": {"type": "LineString", "coordinates": drawn.tolist()},
+                   "properties": {}})
+    out = tmp_path / "out.gpkg"
+    result = subprocess.run([FLOODMESH, "export", tmp_path / "mesh.2dm", out, "--breaklines",
+                             tmp_path / "drawn.gpkg"], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    with fiona.open(out, layer="breaklines") as src:
+        written = np.array(next(iter(src))["geometry"]["coordinates"])
+    want = tin_elevation(Mesh(nodes, tris, UTM32), drawn[:, 0], drawn[:, 1])
+    assert np.isfinite(want).all()
+    np.testing.assert_allclose(written[:, 2], want, atol=1e-3)  # the 2DM keeps 0.1 mm
+
+    other = subprocess.run([FLOODMESH, "export", tmp_path / "mesh.2dm", tmp_path / "o.gpkg",
+                            "--crs", "EPSG:25833"], capture_output=True, text=True)
+    assert other.returncode == 0, other.stderr
+    assert "mesh mesh.2dm is in ETRS89 / UTM zone 32N, but the CRS given is used" in other.stderr
