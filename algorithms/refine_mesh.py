@@ -5,6 +5,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
                        QgsProcessingParameterNumber, QgsProcessingParameterRasterLayer)
 
 from ..core.errors import FloodMeshError
+from ..core.options import check_refinement
 from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POINT
 from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args,
                    point_cloud_file, point_cloud_parameter)
@@ -90,8 +91,19 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
                                  "LiDAR file")
         return given[0]
 
+    def refinement(self, parameters, context) -> dict:
+        """The refinement's bounds, noise and targets (m) and budget, as core takes them."""
+        return {"lower": self.parameterAsDouble(parameters, self.LOWER, context),
+                "upper": self.parameterAsDouble(parameters, self.UPPER, context),
+                "noise": self.optional_number(parameters, self.NOISE, context),
+                "target_rmse": self.optional_number(parameters, self.TARGET_RMSE, context),
+                "target_max": self.optional_number(parameters, self.TARGET_MAX, context),
+                "max_nodes": self.parameterAsInt(parameters, self.MAX_NODES, context),
+                "max_rounds": self.parameterAsInt(parameters, self.MAX_ROUNDS, context)}
+
     def check_values(self, parameters, context):
         self.measured_points(parameters, context)
+        check_refinement(**self.refinement(parameters, context))
 
     def process(self, parameters, context, feedback):
         def points(name, what):
@@ -106,14 +118,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
             "check": points(self.CHECK, "Check points"),
             "min_angle": self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
             "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
-            "lower": self.parameterAsDouble(parameters, self.LOWER, context),
-            "upper": self.parameterAsDouble(parameters, self.UPPER, context),
-            "noise": self.optional_number(parameters, self.NOISE, context),
-            "target_rmse": self.optional_number(parameters, self.TARGET_RMSE, context),
-            "target_max": self.optional_number(parameters, self.TARGET_MAX, context),
-            "max_nodes": self.parameterAsInt(parameters, self.MAX_NODES, context),
-            "max_rounds": self.parameterAsInt(parameters, self.MAX_ROUNDS, context),
-            "output": out, "report": report or None}, feedback, out, report)
+            **self.refinement(parameters, context), "output": out,
+            "report": report or None}, feedback, out, report)
         load_mesh(context, out, "Refined mesh", self.OUTPUT, result["crs"])
         return {k: v for k, v in result.items()
                 if k in (self.OUTPUT, self.NODES, self.RMSE, self.REPORT)}

@@ -5,7 +5,7 @@ from qgis.core import (QgsProcessingParameterBoolean, QgsProcessingParameterDefi
 from .compat import DOUBLE, INTEGER, VECTOR_LINE
 
 from ..core.options import TRACING_MODES as MODES
-from ..core.options import check_min_points, check_s_crit
+from ..core.options import check_min_points, check_s_crit, check_seed
 from .base import FloodMeshAlgorithm, distance, labels, layer_file
 from .styles import style_breaklines, style_when_loaded
 
@@ -55,6 +55,7 @@ class TraceBreaklinesAlgorithm(FloodMeshAlgorithm):
     def check_values(self, parameters, context):
         check_s_crit(self.parameterAsDouble(parameters, self.CRITICAL_SLOPE, context))
         check_min_points(self.parameterAsDouble(parameters, self.MIN_POINTS, context))
+        check_seed(self.parameterAsInt(parameters, self.SEED, context))
 
     def process(self, parameters, context, feedback):
         def raster(name, what):

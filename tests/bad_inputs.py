@@ -15,6 +15,8 @@ import rasterio
 from affine import Affine
 from pyproj import CRS
 
+from floodmesh.core.options import BREAKPOINT_METHODS
+
 REAL_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "real"
 UTM = "EPSG:25832"
 ORIGIN = (412_000.0, 5_652_000.0)
@@ -203,6 +205,18 @@ def _maker(fn, *extra, crs=None):
     return lambda folder: _run(fn(folder), *extra, crs=crs)
 
 
+def _qgis(algorithm, **parameters):
+    """QGIS's ``floodmesh:algorithm`` with ``parameters``: a callable value is an input made in
+    the folder, a text holding {out} an output in the folder's qgis-out."""
+    def qgis(folder):
+        out = str(folder / "qgis-out")
+        return f"floodmesh:{algorithm}", {
+            name: str(value(folder)) if callable(value)
+            else value.replace("{out}", out) if isinstance(value, str) else value
+            for name, value in parameters.items()}
+    return qgis
+
+
 # LiDAR to mesh's parameters and the command-line options that set the same RunOptions field
 OPTION_FLAGS = {"CELL_SIZE": "--cell-size", "CRITICAL_SLOPE": "--s-crit",
                 "MIN_ANGLE": "--min-angle", "MAX_AREA": "--max-area",
@@ -355,6 +369,21 @@ def _refine(folder, *extra):
             *extra, "--out", "{out}/refined.2dm"]
 
 
+def _qgis_refine(**parameters):
+    """QGIS's Refine mesh as ``_refine``."""
+    return _qgis("refinemesh", DEM=_tif("dem.tif"), POINTS_FILE=_xyz, **parameters,
+                 OUTPUT="{out}/refined.2dm")
+
+
+# the bank DEM as breakpoints, slope and DEM: ``floodmesh breaklines`` and Trace break lines
+_TRACED = {"BREAKPOINTS": _tif("bp.tif"), "SLOPE": _tif("slope.tif"), "DEM": _tif("dem.tif")}
+
+
+def _trace(folder, *extra):
+    return ["breaklines", _TRACED["BREAKPOINTS"](folder), "--slope", _TRACED["SLOPE"](folder),
+            "--dem", _TRACED["DEM"](folder), *extra]
+
+
 def _existing_file(folder):
     path = folder / "results"
     path.write_text("a file where the output folder should be\n")
@@ -396,14 +425,17 @@ CASES = [
     BadInput("xyz-holding-binary", "not an XYZ text file",
              _maker(_binary_xyz, crs=UTM), _lidar(_binary_xyz, crs=UTM)),
     BadInput("xyz-header-without-x-y-z", "its header line names the columns Elev, Punkt",
-             _maker(_text("named.csv", "Elev;Punkt;Wert\n" + _ROWS), crs=UTM)),
+             _maker(_text("named.csv", "Elev;Punkt;Wert\n" + _ROWS), crs=UTM),
+             _lidar(_text("named.csv", "Elev;Punkt;Wert\n" + _ROWS), crs=UTM)),
     BadInput("xyz-decimal-comma", "decimal comma",
-             _maker(_text("comma.csv", _ROWS.replace(".", ",")), crs=UTM)),
-    BadInput("xyz-utf16", "is UTF-16 text", _maker(_text("utf16.xyz", _ROWS), crs=UTM)),
+             _maker(_text("comma.csv", _ROWS.replace(".", ",")), crs=UTM),
+             _lidar(_text("comma.csv", _ROWS.replace(".", ",")), crs=UTM)),
+    BadInput("xyz-utf16", "is UTF-16 text", _maker(_text("utf16.xyz", _ROWS), crs=UTM),
+             _lidar(_text("utf16.xyz", _ROWS), crs=UTM)),
     BadInput("las-cut-short", "its header counts 20,000 points, the file holds 15,000",
-             _maker(_las_cut_short)),
+             _maker(_las_cut_short), _lidar(_las_cut_short)),
     BadInput("vertical-feet-geotiff-keys", "has elevations in US survey foot",
-             _maker(_las_vertical_feet_keys)),
+             _maker(_las_vertical_feet_keys), _lidar(_las_vertical_feet_keys)),
     BadInput("empty-xyz", "is empty", _maker(_empty_xyz, crs=UTM), _lidar(_empty_xyz, crs=UTM)),
     BadInput("empty-las", "holds no points", _maker(_empty_las), _lidar(_empty_las)),
     BadInput("no-ground-points", "no ground points", _maker(_no_ground_las),
@@ -499,15 +531,19 @@ CASES = [
              lambda f: ["grid", _xyz(f), "--crs", UTM, "--cell-size", 1, "--out",
                         "{out}/dem.laz"]),
     BadInput("mesh-output-named-slf", "this writes an SMS 2DM mesh",
-             lambda f: ["mesh", _tif("dem.tif")(f), "--out", "{out}/mesh.slf"]),
+             lambda f: ["mesh", _tif("dem.tif")(f), "--out", "{out}/mesh.slf"],
+             _qgis("buildmesh", DEM=_tif("dem.tif"), OUTPUT="{out}/mesh.slf")),
     BadInput("mesh-triangles-named-shp", "this writes a GeoPackage",
              lambda f: ["mesh", _tif("dem.tif")(f), "--out", "{out}/mesh.2dm", "--gpkg",
-                        "{out}/triangles.shp"]),
+                        "{out}/triangles.shp"],
+             _qgis("buildmesh", DEM=_tif("dem.tif"), OUTPUT="{out}/mesh.2dm",
+                   TRIANGLES="{out}/triangles.shp")),
     BadInput("simplify-output-named-tif", "this writes a GeoPackage",
-             lambda f: ["simplify", _line_layer(f), "--out", "{out}/simple.tif"]),
+             lambda f: ["simplify", _line_layer(f), "--out", "{out}/simple.tif"],
+             _qgis("simplifybreaklines", INPUT=_line_layer, OUTPUT="{out}/simple.tif")),
     BadInput("breaklines-output-named-shp", "this writes a GeoPackage",
-             lambda f: ["breaklines", _tif("bp.tif")(f), "--slope", _tif("slope.tif")(f),
-                        "--dem", _tif("dem.tif")(f), "--out", "{out}/lines.shp"]),
+             lambda f: _trace(f, "--out", "{out}/lines.shp"),
+             _qgis("tracebreaklines", **_TRACED, OUTPUT="{out}/lines.shp")),
     BadInput("run-output-folder-holds-the-input", "FloodMesh never overwrites an input",
              lambda f: ["run", _tif("dem.tif")(f), "--out", f],
              lambda f: ("floodmesh:lidartomesh", {"INPUT": str(_tif("dem.tif")(f)),
@@ -528,20 +564,23 @@ CASES = [
     BadInput("log-sigma-beyond-the-data", "no cell would get a response",
              _maker(_xyz, "--slope-method", "log", "--sigma", 1000, crs=UTM)),
     BadInput("log-sensitivity-zero", "LoG sensitivity must be a positive number",
-             _maker(_xyz, "--slope-method", "log", "--sensitivity", 0, crs=UTM)),
+             _maker(_xyz, "--slope-method", "log", "--sensitivity", 0, crs=UTM),
+             _lidar(_xyz, crs=UTM, SLOPE_METHOD=BREAKPOINT_METHODS.index("log"),
+                    SENSITIVITY=0.0)),
     BadInput("breakpoints-sensitivity-zero", "LoG sensitivity must be a positive number",
              lambda f: ["breakpoints", _tif("log.tif")(f), "--sensitivity", 0, "--out",
-                        "{out}/bp.tif"]),
+                        "{out}/bp.tif"],
+             _qgis("classifybreakpoints", INPUT=_tif("log.tif"), LOG_SENSITIVITY=0.0,
+                   OUTPUT="{out}/bp.tif")),
     BadInput("refine-negative-noise", "noise of the points must be zero or a positive number",
-             lambda f: _refine(f, "--noise", -1)),
+             lambda f: _refine(f, "--noise", -1), _qgis_refine(NOISE=-1.0)),
     BadInput("refine-negative-target", "target RMSE must be a positive number",
-             lambda f: _refine(f, "--target-rmse", -1)),
+             lambda f: _refine(f, "--target-rmse", -1), _qgis_refine(TARGET_RMSE=-1.0)),
     BadInput("refine-no-rounds", "number of refinement rounds must be a whole number of at "
-             "least 1", lambda f: _refine(f, "--max-rounds", 0)),
+             "least 1", lambda f: _refine(f, "--max-rounds", 0), _qgis_refine(MAX_ROUNDS=0)),
     BadInput("breaklines-negative-seed", "random seed must be a whole number of at least 0",
-             lambda f: ["breaklines", _tif("bp.tif")(f), "--slope", _tif("slope.tif")(f),
-                        "--dem", _tif("dem.tif")(f), "--seed", -1, "--out",
-                        "{out}/lines.gpkg"]),
+             lambda f: _trace(f, "--seed", -1, "--out", "{out}/lines.gpkg"),
+             _qgis("tracebreaklines", **_TRACED, SEED=-1, OUTPUT="{out}/lines.gpkg")),
     BadInput("series-area-twice", "maximum area 100 is given more than once",
              lambda f: ["series", _xyz(f), "--crs", UTM, "--max-areas", "100,100", "--out",
                         "{out}"]),
