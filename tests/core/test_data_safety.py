@@ -180,7 +180,8 @@ def test_run_and_series_into_one_folder_leave_one_commands_files(tmp_path):
     for name in mine:
         (out / name).write_text("mine\n")
     assert _small_run(tmp_path, out, "series", "--max-areas", "100") == 0
-    assert sorted(os.listdir(out)) == sorted([*SERIES_FILES, "mesh_a100-k4.2dm", *mine])
+    assert sorted(os.listdir(out)) == sorted([*SERIES_FILES, "mesh_a100-k4.2dm",
+                                              "mesh_a100-k4.prj", *mine])
     assert _small_run(tmp_path, out) == 0
     assert sorted(os.listdir(out)) == sorted([*OUTPUT_FILES, *mine])
     assert all((out / name).read_text() == "mine\n" for name in mine)

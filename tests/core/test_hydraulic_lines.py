@@ -36,7 +36,8 @@ def test_a_line_crossing_itself_well_inside_is_split_at_the_crossing():
 def test_lines_keep_clear_of_the_edge_and_of_other_lines():
     domain = shapely.box(0, 0, 100, 50)
     along_edge = np.array([[10, 0.4, 1], [90, 0.4, 1]])          # 0.4 m inside the edge
-    crossing = np.array([[50, 5, 2], [50, 45, 2]])               # crosses the own line
+    # crosses the own line and the longer one at their heights, climbing 3 m between them
+    crossing = np.array([[50, 5, 0], [50, 20, 0], [50, 30, 3], [50, 45, 3]])
     parallel = np.array([[20, 30.5, 3], [80, 30.5, 3]])          # 0.5 m from a longer line
     longer = np.array([[10, 30, 3], [90, 30, 3]])
     own = [np.array([[5, 20, 0], [95, 20, 0]])]
@@ -282,7 +283,7 @@ def test_a_line_running_into_another_ends_on_it_not_a_spacing_short():
     the cut end now joins the other line, the z along it."""
     dem = Grid(np.zeros((60, 80)), Affine(1, 0, 0, 0, -1, 60), CRS.from_epsg(32633))
     bar = np.array([[5, 30, 2], [75, 30, 4]])
-    stem = np.array([[40, 5, 1], [40, 18, 1], [40, 29.6, 1]])
+    stem = np.array([[40, 5, 1], [40, 18, 2], [40, 29.6, 2.9]])  # rising to the bar's 3 m
     out, stats = lines_for_hydraulics([bar, stem], None, spacing=1.0)
     joined = [c for c in out if np.allclose(c[:, 0], 40)][0]
     assert stats["ends_joined"] == 1
@@ -291,6 +292,10 @@ def test_a_line_running_into_another_ends_on_it_not_a_spacing_short():
     as_before, now = (build_mesh(dem, lines, max_area=100) for lines in (gap_left, out))
     assert inradii(as_before.nodes, as_before.triangles).min() < 0.4
     assert inradii(now.nodes, now.triangles).min() > 0.6
+    # a line 2 m below the bar where it ends 0.4 m short of it meets a wall, not the bar
+    below = np.array([[40, 5, 1], [40, 18, 1], [40, 29.6, 1]])
+    _, stats = lines_for_hydraulics([bar, below], None, spacing=1.0)
+    assert stats["ends_joined"] == 0
     # a line meeting another at a glancing angle keeps its gap (the PSLG's corner rule)
     glancing = np.array([[10, 20, 1], [40, 29.2, 1]])
     _, stats = lines_for_hydraulics([bar, glancing], None, spacing=1.0)
