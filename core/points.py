@@ -79,6 +79,12 @@ def usable_rows(xyz: np.ndarray) -> np.ndarray | None:
                 numba.get_num_threads())
 
 
+def usable_points(xyz: np.ndarray) -> np.ndarray:
+    """The points (n, 3) that ``usable_rows`` keeps (``xyz`` itself where all are)."""
+    usable = usable_rows(xyz)
+    return xyz if usable is None else xyz[usable]
+
+
 def _sampled_bounds(xyz: np.ndarray, sample: int = 65_536) -> tuple[float, ...]:
     """(xmin, ymin, xmax, ymax) of about ``sample`` of the points, evenly through the file: the
     extent where ``check_scale`` looks, without a pass over them all."""

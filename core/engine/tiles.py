@@ -49,7 +49,7 @@ from ..io import (GROUND_CLASS, atomic_output, classes_kept, drop_implausible, f
                   las_classes, las_crs, las_fields_read, las_xyz, read_band, read_las, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
-from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_rows
+from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_points
 from ..raster import (Grid, check_scale, check_transform, chosen_crs, corners_and_centre,
                       require_metric_crs, same_place)
 from ..steps.slope import slope_block
@@ -392,8 +392,7 @@ def _usable(xyz: np.ndarray, crs_wkt: str, name: str, notes: list) -> tuple[np.n
         return clean_points(xyz, crs_wkt, f"tile {name}", note=notes.append,
                             scale=False).xyz, False  # checked on the headers' extent
     except FloodMeshError:  # fewer than 3, or at one place or on one line
-        usable = usable_rows(xyz)
-        return (xyz if usable is None else xyz[usable]), True
+        return usable_points(xyz), True
 
 
 def _digest(xyz: np.ndarray, chunk: int = 1 << 20) -> tuple[int, int]:
@@ -436,8 +435,7 @@ def _tile_points(path: str, crs_wkt: str, classes, held_below: int | None, seed:
     xyz, cls = _read_raw(Path(path))
     kept = _kept(xyz, cls, classes, Path(path).name)[0]
     del xyz, cls
-    usable = usable_rows(kept)
-    kept = kept if usable is None else kept[usable]
+    kept = usable_points(kept)
     held = _held(kept, held_below, seed)
     return kept[~held], kept[held]
 

@@ -193,7 +193,8 @@ def las_xyz(las, cls: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
 
 def las_fields_read(laspy) -> dict:
     """laspy.open's arguments that decompress only what FloodMesh reads (x, y, z, the class
-    and its flags, withheld among them) of a LAZ in a layered point format (6 to 10, LAS 1.4's): on 9 M points in format 7
+    and its flags, withheld among them) of a LAZ in a layered point format (6 to 10, LAS
+    1.4's): on 9 M points in format 7
     (with intensity, GPS time, scan angle and colour) 1.5–1.9 s where the whole point took
     2.3 s. Other formats are decompressed whole whatever is asked; laspy before 2.2 cannot
     choose."""
@@ -344,7 +345,7 @@ def _at_line(exc: Exception, path: Path, layout: XyzLayout) -> str:
         row = int(match.group(1)) - ("invalid column index" in str(exc))
         with open(path, encoding="utf-8-sig", errors="replace") as fh:
             for number, text in enumerate(fh, 1):
-                if number > layout.skip and text.strip() and not text.lstrip().startswith("#"):
+                if number > layout.skip and _holds_data(text):
                     if row == 0:
                         return f"on line {number}"
                     row -= 1
@@ -361,6 +362,11 @@ def _class_codes(values: np.ndarray, name: str) -> np.ndarray:
                              "a LAS class (0-255): correct the column or remove its name from "
                              "the header line")
     return values.astype(np.uint8)
+
+
+def _holds_data(line: str) -> bool:
+    """Whether a line of XYZ text is neither blank nor a # comment (which numpy skips)."""
+    return bool(line.strip()) and not line.lstrip().startswith("#")
 
 
 def _fields(line: str, delimiter: str | None) -> list[str]:
@@ -380,8 +386,7 @@ def xyz_layout(head: list[str], name: str) -> XyzLayout:
     names (``COLUMN_NAMES``, in any order) give the columns; without one, the first three are
     x, y, z. Refused, naming the fix: a header that does not name x, y and z, and numbers with a
     decimal comma."""
-    lines = [(k, line) for k, line in enumerate(head) if line.strip()
-             and not line.lstrip().startswith("#")]
+    lines = [(k, line) for k, line in enumerate(head) if _holds_data(line)]
     if not lines:
         raise FloodMeshError(f"{name} holds no points in its first {len(head)} lines")
     for _, line in lines:
@@ -442,8 +447,7 @@ def file_format(path) -> str | None:
         layout = xyz_layout(lines, path.name)
     except FloodMeshError:
         return None
-    rows = [_fields(line, layout.delimiter) for line in lines[layout.skip:]
-            if line.strip() and not line.lstrip().startswith("#")]
+    rows = [_fields(line, layout.delimiter) for line in lines[layout.skip:] if _holds_data(line)]
     try:
         ok = bool(rows) and all([float(row[c]) for c in layout.columns] for row in rows)
     except (ValueError, IndexError):

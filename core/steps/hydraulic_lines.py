@@ -101,6 +101,12 @@ def split_at_folds(coords: np.ndarray, min_angle: float = FOLD_ANGLE) -> list[np
     return [coords[a:b + 1] for a, b in zip([0, *cuts], [*cuts, len(coords) - 1])]
 
 
+def _wall(rise, run):
+    """Whether a climb of ``rise`` m over ``run`` m in plan is a wall's: more than
+    ``JOIN_RISE`` plus ``JOIN_GRADE`` times the run."""
+    return np.abs(rise) > JOIN_RISE + JOIN_GRADE * run
+
+
 def split_at_walls(coords: np.ndarray) -> list[np.ndarray]:
     """``coords`` (k, 3) cut into the pieces between its wall segments, which climb more than
     ``JOIN_RISE`` plus ``JOIN_GRADE`` times their length: a crest or toe does not run up a
@@ -109,9 +115,8 @@ def split_at_walls(coords: np.ndarray) -> list[np.ndarray]:
     coords = np.asarray(coords, float)
     if coords.shape[1] < 3 or len(coords) < 2:
         return [coords]
-    rise = np.abs(np.diff(coords[:, 2]))
-    walls = np.flatnonzero(rise > JOIN_RISE + JOIN_GRADE * np.hypot(*np.diff(coords[:, :2],
-                                                                              axis=0).T))
+    step = np.diff(coords, axis=0)
+    walls = np.flatnonzero(_wall(step[:, 2], np.hypot(step[:, 0], step[:, 1])))
     if not len(walls):
         return [coords]
     starts, stops = [0, *(walls + 1).tolist()], [*(walls + 1).tolist(), len(coords)]
@@ -273,8 +278,8 @@ def _joined_ends(coords: np.ndarray, lines: list, lines_xyz: list, bounds: np.nd
         elif np.hypot(*(bar[vertex, :2] - target)) <= spacing:
             target = bar[vertex, :2]
             z = bar[vertex, 2] if bar.shape[1] > 2 else z
-        if coords.shape[1] > 2 and z is not None and abs(z - coords[end, 2]) > (
-                JOIN_RISE + JOIN_GRADE * np.hypot(*(target - e))):
+        if coords.shape[1] > 2 and z is not None and _wall(z - coords[end, 2],
+                                                           np.hypot(*(target - e))):
             continue  # the other line passes above or below: a wall, no junction
         if np.hypot(*(coords[inner, :2] - target)) < spacing and len(coords) > 2:
             coords = np.delete(coords, inner % len(coords), axis=0)  # no segment under it
