@@ -131,13 +131,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     """
     options.validate()
     started = time.perf_counter()
-    notes = []
-
-    def note(message: str):
-        notes.append(message)
-        if log:
-            log(f"note: {message}")
-
+    note = Notes(log)
     out, source = Path(out_dir), open_source(input_path)
     inputs = run_inputs(source, options)
     check_output_folder(out, inputs, run_outputs(options.formats))
@@ -146,8 +140,22 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
           without_huge_pages()):
         steps = _Steps(_step_weights(options), progress, cancelled, log, background)
         with interrupts_unwrapped():  # between steps too: the background thread is joined next
-            return _run(source, out, inputs, options, steps, pictures, started, notes, note,
-                        cancelled, log)
+            return _run(source, out, inputs, options, steps, pictures, started, note.said,
+                        note, cancelled, log)
+
+
+class Notes:
+    """What was assumed or repaired on the user's behalf (``said``, in order): called with a
+    message, keeps it and tells ``log`` as ``note: …``, which the front ends show as a note
+    (the CLI's ``print_notes``, the QGIS worker's ``note`` lines)."""
+
+    def __init__(self, log: Callable[[str], None] | None = None):
+        self.log, self.said = log, []
+
+    def __call__(self, message: str) -> None:
+        self.said.append(message)
+        if self.log:
+            self.log(f"note: {message}")
 
 
 def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
@@ -175,7 +183,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     simplified, lines, confidence = _break_lines(front, options, steps, fits, index)
     # the input's checks, which only add notes, beside the single-threaded meshing: the
     # gridding and the terrain fits before it keep both cores busy
-    later = _say_later(front, steps, note)
+    later = say_later(front, note, steps)
     size, flow, spacing, max_area = _size_fields(front, options, fits.window, hand, flow_area)
     low_ground = spacing  # finite on low ground (see drainage.flow_spacing)
     hand = None  # the flow zone's work is in the flow size and spacing now
@@ -241,9 +249,11 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     return report
 
 
-def _say_later(front: Front, steps: _Steps, note) -> Callable[[], None]:
-    """Start ``front.later``'s checks on the background thread (after the work already queued
-    there); the callable returned waits for them and gives their notes to ``note``."""
+def say_later(front: Front, note, steps: _Steps | None = None) -> Callable[[], None]:
+    """Start ``front.later``'s checks on ``steps``' background thread (after the work already
+    queued there; None: run at the call); the callable returned waits for them and gives their
+    notes to ``note``."""
+    steps = steps or _Steps({}, None, None, None)
     started = [steps.ahead(name, func, *args) for name, func, args in front.later]
     front.later = []
 
@@ -602,7 +612,7 @@ class Front:
     # (a DEM, or point tiles too many for memory), drawn from it when a fit needs them
     measured: np.ndarray | None = None
     files: dict | None = None  # point tiles: slope and breakpoints files (and their folder)
-    # checks of the input whose notes are said later, beside other steps (``_say_later``):
+    # checks of the input whose notes are said later, beside other steps (``say_later``):
     # (step name, function, arguments), the function giving a note or None
     later: list = field(default_factory=list)
     index: Callable | None = None  # gives the index of ``measured`` (``_point_index_ahead``)

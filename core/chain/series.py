@@ -16,11 +16,12 @@ from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, staged_folder
 from ..io.report import new_figure, save_png
 from ..options import RunOptions, check_max_area
-from ..steps.accuracy import accuracy_statistics, nssda_threshold_m, residuals
+from ..steps.accuracy import (accuracy_statistics, nssda_threshold_m, outside_mesh_note,
+                              residuals)
 from ..steps.hydraulic_lines import lines_for_hydraulics
 from ..steps.mesh import Mesh, build_mesh, domain_from_dem, edge_tolerance
 from ..steps.simplify import simplify_breaklines
-from .pipeline import SERIES_FILES, folder_output, run_inputs, trace_front
+from .pipeline import SERIES_FILES, Notes, folder_output, run_inputs, say_later, trace_front
 from .source import open_source
 
 def _mesh_files(labels) -> list[str]:
@@ -70,19 +71,22 @@ def settings_grid(max_areas, method: str = "keep-every", amounts=(4,)) -> list[S
 def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Setting], *,
                  min_angle: float = 25.0, min_distance: float | None = None, domain=None,
                  own_lines: list = (), min_spacing: float | None = None,
-                 log: Callable[[str], None] | None = None) -> tuple[list[dict], list[Mesh]]:
+                 log: Callable[[str], None] | None = None,
+                 note: Callable[[str], None] | None = None) -> tuple[list[dict], list[Mesh]]:
     """Mesh ``dem`` with the ``traced`` break lines once per setting and assess each mesh on the
     check points ``check_xyz`` (n, 3; m). ``min_distance`` (m) defaults to half a cell;
     ``domain`` and ``own_lines`` as for ``build_mesh`` (a user's domain and lines);
     ``min_spacing`` (m; default the cell size, 0 off) as ``run``'s: the detected lines made
-    affordable for a flood model (``hydraulic_lines``).
+    affordable for a flood model (``hydraulic_lines``). ``note`` hears, after the last mesh,
+    what the meshes and their assessments say as ``run``'s do, each once, naming the meshes
+    that say it where not every mesh does (``series_notes``).
 
     Returns one row per setting (``COLUMNS``: errors in metres, ``share_over_25cm`` a fraction)
     and the meshes, in the order of ``settings``."""
     min_distance = dem.cell_size / 2 if min_distance is None else min_distance
     spacing = dem.cell_size if min_spacing is None else min_spacing
     simplified, domains = {}, {}
-    rows, meshes = [], []
+    rows, meshes, said = [], [], {}
     for setting in settings:
         if log:
             log(f"mesh {setting.label}...")
@@ -96,9 +100,14 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
             if spacing > 0:
                 simplified[key], _ = lines_for_hydraulics(
                     simplified[key], domains[key], spacing=spacing, own_lines=own_lines)
+        told = said[setting.label] = []
         mesh = build_mesh(dem, simplified[key] + list(own_lines), min_angle=min_angle,
-                          max_area=setting.max_area, domain=domains[key])
-        stats = accuracy_statistics(residuals(mesh, check_xyz))
+                          max_area=setting.max_area, domain=domains[key], note=told.append)
+        res = residuals(mesh, check_xyz)
+        outside = outside_mesh_note(check_xyz, res, dem, domain is not None)
+        if outside:
+            told.append(outside)
+        stats = accuracy_statistics(res, note=told.append)
         rows.append({"label": setting.label, "max_area_m2": setting.max_area,
                      "simplification": setting.method, "amount": setting.amount,
                      "nodes": int(len(mesh.nodes)), "triangles": int(len(mesh.triangles)),
@@ -107,7 +116,20 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
                      "share_over_25cm": stats["classes"][">25 cm"],
                      "nssda_pass": stats["nssda_pass"]})
         meshes.append(mesh)
+    for message in series_notes(said) if note else ():
+        note(message)
     return rows, meshes
+
+
+def series_notes(said: dict) -> list[str]:
+    """The notes of a series' meshes ({label: [notes]}, in order), each once: as it is where
+    every mesh says it, else naming the meshes that do (``meshes a200-k2, a100-k2: …``)."""
+    notes = []
+    for message in dict.fromkeys(m for messages in said.values() for m in messages):
+        labels = [label for label, messages in said.items() if message in messages]
+        notes.append(message if len(labels) == len(said) else
+                     f"mesh{'es' if len(labels) > 1 else ''} {', '.join(labels)}: {message}")
+    return notes
 
 
 def write_series_csv(path, rows: list[dict]) -> Path:
@@ -156,16 +178,20 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
                cancelled: Callable[[], bool] | None = None) -> dict:
     """Read, grid, slope, breakpoints and trace ``input_path`` once (as ``options`` say), then
     mesh and assess once per setting; write ``SERIES_FILES`` and ``mesh_<label>.2dm`` (its CRS
-    in ``mesh_<label>.prj``) per row into ``out_dir``. Returns the series.json content."""
+    in ``mesh_<label>.prj``) per row into ``out_dir``. ``log`` receives each mesh's name and,
+    as ``run_pipeline``'s, the notes (``note: …``), which series.json's ``notes`` holds too.
+    Returns the series.json content."""
+    note = Notes(log)
     out, source = Path(out_dir), open_source(input_path)
     inputs = run_inputs(source, options)
     check_output_folder(out, inputs, [*SERIES_FILES, *_mesh_files(s.label for s in settings)])
-    front = trace_front(source, options, cancelled=cancelled)
+    front = trace_front(source, options, cancelled=cancelled, note=note)
+    say_later(front, note)()
     rows, meshes = scale_series(front.dem, front.traced, front.holdout.xyz, settings,
                                 min_angle=options.min_angle,
                                 min_distance=options.min_distance, domain=front.domain,
                                 own_lines=front.own_lines, min_spacing=options.min_spacing,
-                                log=log)
+                                log=log, note=note)
     # the folder is replaced as a whole: an interrupt leaves the old series' files or these
     with staged_folder(out, own=folder_output, keep=inputs) as stage:
         for row, mesh in zip(rows, meshes):
@@ -179,7 +205,7 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
         result = {"input": source.named, "crs": front.dem.crs.to_string(),
                   "cell_size_m": front.dem.cell_size, "min_angle_deg": options.min_angle,
                   "n_holdout": len(front.holdout), "holdout_source": front.holdout_source,
-                  "n_breaklines_traced": len(front.traced), "rows": rows,
+                  "n_breaklines_traced": len(front.traced), "rows": rows, "notes": note.said,
                   "files": [*SERIES_FILES, *_mesh_files(r["label"] for r in rows)]}
         io.write_json(stage / "series.json", result)
     return io.jsonable(result)

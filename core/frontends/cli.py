@@ -298,6 +298,7 @@ def cmd_series(args):
         result = run_series(_input(args), args.out, _options(args), settings, log=bar.log)
     finally:
         bar.close()
+    print_notes(result["notes"])
     print(f"{'setting':<14}{'nodes':>8}{'RMSE cm':>9}{'max cm':>8}{'>25 cm':>8}")
     for row in result["rows"]:
         rmse, top, over = row["rmse_m"], row["max_abs_m"], row["share_over_25cm"]

@@ -32,7 +32,8 @@ def test_smaller_triangles_give_more_nodes_and_no_larger_error(series_run):
     _, result, steps = series_run
     rows = result["rows"]
     assert [r["max_area_m2"] for r in rows] == list(AREAS)
-    assert steps == [f"mesh {r['label']}..." for r in rows]
+    assert [s for s in steps if not s.startswith("note: ")] == [f"mesh {r['label']}..."
+                                                                for r in rows]
     nodes = [r["nodes"] for r in rows]
     rmse = [r["rmse_m"] for r in rows]
     assert nodes[0] < nodes[1] < nodes[2]
@@ -143,3 +144,31 @@ def test_series_meshes_carry_their_crs_to_export(tmp_path, capsys):
         capsys.readouterr().err
     with fiona.open(tmp_path / "mesh.gpkg") as layer:
         assert CRS.from_user_input(layer.crs_wkt) == CRS.from_epsg(25832)
+
+
+def test_series_says_the_notes_run_says_each_once(demo_points_file, tmp_path, capsys):
+    """floodmesh series says what it assumed or repaired on the user's behalf as run does (a
+    row without z left out, the break lines' repairs), on the terminal and in series.json,
+    each once: a note of the input as run says it, one that only some meshes say naming
+    them."""
+    from floodmesh.core.frontends.cli import main
+
+    points = io.read_points(demo_points_file)
+    table = tmp_path / "points.csv"
+    rows = [f"{x:.3f},{y:.3f},{z:.3f}" for x, y, z in points.xyz]
+    table.write_text("x,y,z\n" + "\n".join(rows) + f"\n{points.xyz[0, 0] + 0.1:.3f},1,\n")
+    common = ["--crs", "EPSG:25832", "--holdout", "0.01"]
+    assert main(["run", str(table), "--out", str(tmp_path / "run"), *common]) == 0
+    run_notes = json.loads((tmp_path / "run" / "report.json").read_text())["notes"]
+    capsys.readouterr()
+    assert main(["series", str(table), "--out", str(tmp_path / "series"), *common,
+                 "--max-areas", "200,100", "--keep-every", "2,8"]) == 0
+    printed = [line.removeprefix("floodmesh: note: ")
+               for line in capsys.readouterr().err.splitlines()
+               if line.startswith("floodmesh: note: ")]
+    notes = json.loads((tmp_path / "series" / "series.json").read_text())["notes"]
+    assert printed == notes and len(set(notes)) == len(notes)
+    left_out = [n for n in run_notes if "without a finite x, y and z" in n]
+    assert len(left_out) == 1 and left_out[0] in notes
+    named = [n for n in notes if n.startswith("mesh")]
+    assert named and all(n.startswith("meshes a200-k2, a100-k2: ") for n in named), notes
