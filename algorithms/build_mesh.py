@@ -5,8 +5,8 @@ from qgis.core import (QgsProcessingOutputNumber, QgsProcessingParameterDefiniti
                        QgsProcessingParameterVectorDestination)
 from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POLYGON
 
-from ..core.options import (DEFAULT_MAX_TRIANGLES, MAX_MIN_ANGLE, check_max_area,
-                            check_max_triangles, check_min_angle)
+from ..core.options import (DEFAULT_MAX_TRIANGLES, MAX_MIN_ANGLE, check_flow_area,
+                            check_max_area, check_max_triangles, check_min_angle)
 from .base import FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args
 from .styles import load_mesh
 
@@ -60,6 +60,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         check_min_angle(self.parameterAsDouble(parameters, self.MIN_ANGLE, context))
         check_max_area(self.parameterAsDouble(parameters, self.MAX_AREA, context))
         check_max_triangles(self.parameterAsInt(parameters, self.MAX_TRIANGLES, context))
+        check_flow_area(self.optional_number(parameters, self.FLOW_AREA, context))
 
     def process(self, parameters, context, feedback):
         size_layer = self.parameterAsRasterLayer(parameters, self.SIZE_FIELD, context)

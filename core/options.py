@@ -165,6 +165,14 @@ def check_max_triangles(value) -> int:
     return int(value)
 
 
+def check_flow_area(value) -> float | None:
+    """The flow area (m²): None (the default, 23 cells) or 0 (off) or more."""
+    if value is not None and not (math.isfinite(value) and value >= 0):
+        raise FloodMeshError(f"the flow area must be 0 (off) or more m², got {value}; 23 cells "
+                             "is the default")
+    return value
+
+
 def check_holdout(fraction) -> float:
     fraction = _number(fraction, "holdout fraction")
     if not 0 <= fraction < 1:
@@ -418,10 +426,7 @@ class RunOptions:
                                               and self.join_gap >= 0):
             raise FloodMeshError(f"the join gap must be 0 (off) or more metres, got "
                                  f"{self.join_gap}; ten cell sizes is the default")
-        if self.flow_area is not None and not (math.isfinite(self.flow_area)
-                                               and self.flow_area >= 0):
-            raise FloodMeshError(f"the flow area must be 0 (off) or more m², got "
-                                 f"{self.flow_area}; 23 cells is the default")
+        check_flow_area(self.flow_area)
         if self.far_field_area is not None:
             far = _positive(self.far_field_area, "far-field area", "m²")
             if far < self.max_area:

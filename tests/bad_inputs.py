@@ -519,6 +519,8 @@ CASES = [
                                                  crs="EPSG:25833"))),
     BadInput("mesh-step-min-angle", "at most 34 degrees",
              *_mesh_step(["--min-angle", 35], {"MIN_ANGLE": 35.0})),
+    BadInput("mesh-step-flow-area-negative", "the flow area must be 0 (off) or more",
+             *_mesh_step(["--flow-area", -5], {"FLOW_AREA": -5.0})),
     _options_case("max-triangles-zero", "maximum number of triangles must be a whole number",
                   MAX_TRIANGLES=0),
     _options_case("holdout-one", "holdout fraction must be at least 0 and below 1",

@@ -16,9 +16,9 @@ from pathlib import Path
 from .. import io
 from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, check_outputs, require_suffix
-from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, check_holdout,
-                       check_max_area, check_max_gap, check_max_triangles, check_min_angle,
-                       check_refinement, check_seed, is_point_source)
+from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, check_flow_area,
+                       check_holdout, check_max_area, check_max_gap, check_max_triangles,
+                       check_min_angle, check_refinement, check_seed, is_point_source)
 from ..points import PointCloud, at_places_of, split_holdout
 from ..raster import check_dem_size, chosen_crs, require_metric_crs
 from ..steps.breakpoints import breakpoints_file
@@ -179,7 +179,7 @@ def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
 
 
 def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_field=None,
-         min_area=None, flow_area: float | None = 0.0, conforming: bool = False,
+         min_area=None, flow_area: float | None = None, conforming: bool = False,
          min_angle: float = 25.0, max_area: float = 100.0,
          max_triangles: int = DEFAULT_MAX_TRIANGLES, triangles=None, crs=None, progress=None,
          cancelled=None, note=None) -> dict:
@@ -197,6 +197,7 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     check_min_angle(min_angle)
     check_max_area(max_area)
     check_max_triangles(max_triangles)
+    check_flow_area(flow_area)
     terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
     size = size_from(size_field, terrain, max_area=max_area, min_area=min_area)
     flow_area = flow_area_for(flow_area, terrain.cell_size)

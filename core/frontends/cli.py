@@ -158,12 +158,19 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
     p.add_argument("--far-field-area", type=float,
                    help="larger triangles, up to this many m², away from the break lines where "
                         "the terrain is plane (default: max area everywhere)")
+    _add_flow_area(p, thinned=True)
+    _add_conforming(p)
+
+
+def _add_flow_area(p: argparse.ArgumentParser, *, thinned: bool = False):
+    """--flow-area of run and the mesh step (and QGIS's FLOW_AREA); ``thinned``: run's, which
+    also thins the break lines there."""
+    lines = ("; break lines where a flood may go thinned to that triangle's side where "
+             "straight and even" if thinned else "")
     p.add_argument("--flow-area", type=float,
                    help="smaller triangles, at most this many m², where water flows: ground "
-                        "less than 1 m above a drainage line draining 5000 m²; break lines "
-                        "where a flood may go thinned to that triangle's side where straight "
-                        "and even (default 23 cells: 23 m² at 1 m; 0: off)")
-    _add_conforming(p)
+                        f"less than 1 m above a drainage line draining 5000 m²{lines} (default "
+                        "23 cells: 23 m² at 1 m; 0: off)")
 
 
 def _add_conforming(p: argparse.ArgumentParser):
@@ -374,7 +381,7 @@ def cmd_simplify(args):
 def cmd_mesh(args):
     _step("mesh", steps.mesh, args.dem, args.out, breaklines=args.breaklines,
           boundary=args.boundary, user_lines=args.user_lines, size_field=args.size_field,
-          min_area=args.min_area, flow_area=0.0, conforming=args.conforming,
+          min_area=args.min_area, flow_area=args.flow_area, conforming=args.conforming,
           min_angle=args.min_angle, max_area=args.max_area, max_triangles=args.max_triangles,
           triangles=args.gpkg, crs=args.crs)
 
@@ -516,6 +523,7 @@ def _add_mesh_commands(sub) -> None:
     _add_size_options(p)
     p.add_argument("--min-angle", type=float, default=DEFAULTS.min_angle)
     p.add_argument("--max-area", type=float, default=DEFAULTS.max_area)
+    _add_flow_area(p)
     _add_conforming(p)
     _add_max_triangles(p)
     p.add_argument("--out", required=True, help="SMS 2DM mesh")

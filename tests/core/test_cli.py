@@ -176,6 +176,31 @@ def test_mesh_and_run_with_a_size_field(demo_points_file, tmp_path):
     assert report["options"]["size_field"] == "slope" and report["nodes"] > 1.5 * len(plain)
 
 
+def test_the_mesh_step_meshes_as_build_mesh_in_qgis(demo_points_file, tmp_path):
+    """floodmesh mesh and QGIS's Build mesh (the worker's job as the algorithm sends it, FLOW_AREA
+    left empty) give the same mesh: both finer where water flows (23 cells, as run); --flow-area
+    0 turns that off as FLOW_AREA 0 does."""
+    import io as stdio
+
+    from floodmesh.core.frontends.worker import Channel, run_job
+
+    t = tmp_path
+    floodmesh("grid", demo_points_file, "--cell-size", 1, "--out", t / "dem.tif")
+    meshes = {}
+    for name, flow_area in (("default", None), ("off", 0.0)):
+        flag = [] if flow_area is None else ["--flow-area", flow_area]
+        floodmesh("mesh", t / "dem.tif", *flag, "--out", t / f"cli_{name}.2dm")
+        job = {"step": "build_mesh", "args": {
+            "dem": str(t / "dem.tif"), "breaklines": None, "boundary": None, "user_lines": None,
+            "min_angle": 25.0, "max_area": 100.0, "size_field": None, "max_triangles": 5_000_000,
+            "flow_area": flow_area, "output": str(t / f"qgis_{name}.2dm"), "triangles": None}}
+        assert run_job(job, Channel(stdio.StringIO())) == 0
+        cli, qgis = (io.read_mesh_2dm(t / f"{who}_{name}.2dm") for who in ("cli", "qgis"))
+        assert len(cli[0]) == len(qgis[0]) and np.array_equal(cli[1], qgis[1]), name
+        meshes[name] = cli
+    assert len(meshes["default"][0]) > 1.5 * len(meshes["off"][0])
+
+
 def test_run_with_refinement(demo_points_file, tmp_path):
     """run --refine (step 9): the gridded points drive the rounds, the held-out ones are only
     assessed; the holdout error falls and no more held-out residuals exceed 25 cm than without
