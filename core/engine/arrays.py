@@ -72,6 +72,28 @@ def spatial_order(nodes, triangles, bits: int = 16) -> tuple[np.ndarray, np.ndar
     return order, number[triangles]
 
 
+def boundary_edges(triangles: np.ndarray) -> np.ndarray:
+    """(k, 3) rows (triangle, edge, 0) of the edges that belong to one triangle only; edge e of
+    a triangle is the one opposite its vertex e (ANUGA's convention)."""
+    tri = np.asarray(triangles)
+    m = len(tri)
+    if not m:
+        return np.zeros((0, 3), np.intp)
+    a = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
+    b = np.concatenate([tri[:, 2], tri[:, 0], tri[:, 1]])
+    key = np.minimum(a, b).astype(np.int64) * (tri.max() + 1) + np.maximum(a, b)
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    once = np.nonzero(counts[inverse] == 1)[0]
+    return np.column_stack([once % m, once // m, np.zeros_like(once)])
+
+
+def edge_nodes(triangles: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """The two node indices (k, 2) of edges given as (triangle, edge) rows, in the triangle's
+    counter-clockwise order (so the outside lies to the right)."""
+    t, e = edges[:, 0], edges[:, 1]
+    return np.column_stack([triangles[t, (e + 1) % 3], triangles[t, (e + 2) % 3]])
+
+
 @contextmanager
 def without_huge_pages():
     """Within the block, numpy allocates its large arrays on ordinary 4 KiB pages.

@@ -29,12 +29,11 @@ from typing import Callable
 import numpy as np
 
 from .. import io
-from ..engine.arrays import spatial_order
+from ..engine.arrays import boundary_edges, edge_nodes, spatial_order
 from ..errors import Cancelled, FloodMeshError
 from ..options import RESULT_RASTERS
 from ..raster import Grid, require_metric_crs
-from ..steps.hydraulics import (boundary_edges, collinear_wall_stencils, edge_nodes,
-                                hydraulic_checks, inradii, neighbours)
+from ..steps.hydraulics import collinear_wall_stencils, hydraulic_checks, inradii, neighbours
 
 BOUNDARY_KINDS = ("wall", "outflow", "level")
 SIDES = ("north", "south", "east", "west")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..engine.arrays import boundary_edges, edge_nodes
 from ..raster import bilinear
 
 G = 9.81
@@ -32,26 +33,6 @@ def cfl_time_step(inradius: np.ndarray, depth: float = CHECK_DEPTH_M, speed: flo
     """The explicit time step (s) the smallest of ``inradius`` (m) allows at water ``depth``
     (m) and flow ``speed`` (m/s): C · r_in / (|u| + √(g·h))."""
     return float(courant * np.min(inradius) / (speed + np.sqrt(G * depth)))
-
-
-def boundary_edges(triangles: np.ndarray) -> np.ndarray:
-    """(k, 3) rows (triangle, edge, 0) of the edges that belong to one triangle only; edge e of
-    a triangle is the one opposite its vertex e (ANUGA's convention)."""
-    tri = np.asarray(triangles)
-    m = len(tri)
-    a = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])
-    b = np.concatenate([tri[:, 2], tri[:, 0], tri[:, 1]])
-    key = np.minimum(a, b).astype(np.int64) * (tri.max() + 1) + np.maximum(a, b)
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    once = np.nonzero(counts[inverse] == 1)[0]
-    return np.column_stack([once % m, once // m, np.zeros_like(once)])
-
-
-def edge_nodes(triangles: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """The two node indices (k, 2) of edges given as (triangle, edge) rows, in the triangle's
-    counter-clockwise order (so the outside lies to the right)."""
-    t, e = edges[:, 0], edges[:, 1]
-    return np.column_stack([triangles[t, (e + 1) % 3], triangles[t, (e + 2) % 3]])
 
 
 def neighbours(triangles):

@@ -11,7 +11,7 @@ import numpy as np
 import shapely
 from pyproj import CRS
 
-from ..engine.arrays import spatial_order, unique_rows
+from ..engine.arrays import boundary_edges, edge_nodes, spatial_order, unique_rows
 from ..engine.limits import check_triangles
 from ..errors import FloodMeshError
 from ..options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles, check_min_angle,
@@ -717,10 +717,8 @@ def honoured_lines(mesh: Mesh) -> list[np.ndarray]:
     """The break lines the mesh honours, as (k, 3) arrays of its nodes (x, y, z in m): its
     input segments off its boundary (``build_pslg`` keeps every line inside the domain), joined
     where two meet end to end. What a solver that builds its own mesh (HEC-RAS) is given."""
-    edges = np.sort(mesh.triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    edges, count = np.unique(edges, axis=0, return_counts=True)
     on_edge = np.zeros(len(mesh.nodes), bool)
-    on_edge[edges[count == 1].ravel()] = True
+    on_edge[edge_nodes(mesh.triangles, boundary_edges(mesh.triangles)).ravel()] = True
     inner = mesh.segments[~on_edge[mesh.segments].any(axis=1)]
     if not len(inner):
         return []

@@ -3,8 +3,9 @@ crossings of own and detected lines) and the repair of boundary fans that ANUGA 
 import numpy as np
 import pytest
 
+from floodmesh.core.engine.arrays import boundary_edges
 from floodmesh.core.flood.model import merge_wall_fans
-from floodmesh.core.steps.hydraulics import (boundary_edges, cfl_time_step, collinear_wall_stencils,
+from floodmesh.core.steps.hydraulics import (cfl_time_step, collinear_wall_stencils,
                                              hydraulic_checks, inradii)
 from floodmesh.core.steps.mesh import triangle_areas
 
