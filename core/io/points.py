@@ -270,6 +270,7 @@ def _read_ept(path: Path, classes, note=None):
 
 
 XYZ_HEAD_LINES = 5  # lines of XYZ text looked at for its layout
+HEAD_BYTES = 4096  # bytes of a file read to tell what it holds
 COLUMN_NAMES = {  # what a header line of XYZ text may call each column, once unit and case are cut
     "x": ("x", "easting", "east", "e", "lon", "long", "longitude"),
     "y": ("y", "northing", "north", "n", "lat", "latitude"),
@@ -301,14 +302,17 @@ def read_xyz(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     check_memory(points=size // 20, advice="split the point file into tiles and mesh them one "
                                            "by one")
     with open(path, "rb") as fh:
-        start = fh.read(4096)
-    if start[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        raise FloodMeshError(f"{path.name} is UTF-16 text: save it as UTF-8 (or ASCII) text")
-    if b"\x00" in start:
-        raise FloodMeshError(f"{path.name} is not an XYZ text file: it holds binary data; give "
-                             "it its real extension")
-    with open(path, encoding="utf-8-sig", errors="replace") as fh:
-        layout = xyz_layout([fh.readline() for _ in range(XYZ_HEAD_LINES)], path.name)
+        head = fh.read(HEAD_BYTES)
+        if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+            raise FloodMeshError(f"{path.name} is UTF-16 text: save it as UTF-8 (or ASCII) text")
+        if b"\x00" in head:
+            raise FloodMeshError(f"{path.name} is not an XYZ text file: it holds binary data; "
+                                 "give it its real extension")
+        whole = len(head) < HEAD_BYTES
+        while not whole and len(_head_lines(head, whole)) < XYZ_HEAD_LINES:  # long lines
+            more = fh.read(HEAD_BYTES)
+            head, whole = head + more, len(more) < HEAD_BYTES
+    layout = xyz_layout(_head_lines(head, whole), path.name)
     columns = layout.columns + (() if layout.classes is None else (layout.classes,))
     where = "the columns its header names" if layout.skip else "the first three columns"
     try:
@@ -362,6 +366,16 @@ def _class_codes(values: np.ndarray, name: str) -> np.ndarray:
                              "a LAS class (0-255): correct the column or remove its name from "
                              "the header line")
     return values.astype(np.uint8)
+
+
+def _head_lines(head: bytes, whole: bool) -> list[str]:
+    """The first ``XYZ_HEAD_LINES`` lines of text that begins with the bytes ``head`` (UTF-8, a
+    byte-order mark skipped; ``whole``: all of it), split as numpy's reader splits them (at
+    \\n, \\r\\n or \\r); a line the head cuts off left out, empty ones after the text's end."""
+    lines = re.split(r"\r\n|\r|\n", head.decode("utf-8-sig", "replace"))
+    if not (whole and lines[-1]):  # cut off, or after the last line's end
+        lines.pop()
+    return (lines + [""] * XYZ_HEAD_LINES if whole else lines)[:XYZ_HEAD_LINES]
 
 
 def _holds_data(line: str) -> bool:
@@ -429,7 +443,7 @@ def file_format(path) -> str | None:
     path = Path(path)
     try:
         with open(path, "rb") as fh:
-            head = fh.read(4096)
+            head = fh.read(HEAD_BYTES)
     except OSError:
         return None
     if head[:4] == b"LASF":
@@ -441,8 +455,7 @@ def file_format(path) -> str | None:
         return "raster"
     if ext not in POINT_EXTENSIONS or b"\x00" in head:
         return None
-    lines = head.decode("utf-8-sig", "replace").splitlines()
-    lines = lines[:-1 if len(head) == 4096 else None][:XYZ_HEAD_LINES]
+    lines = _head_lines(head, len(head) < HEAD_BYTES)
     try:
         layout = xyz_layout(lines, path.name)
     except FloodMeshError:
