@@ -1,5 +1,7 @@
 """The floodmesh command as scripts use it: the whole chain, each step, errors and Ctrl-C."""
+import argparse
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -227,3 +229,32 @@ def test_run_with_refinement(demo_points_file, tmp_path):
     bad = floodmesh("run", demo_points_file, "--out", tmp_path / "bad", "--refine",
                     "--lower", 0.3, "--upper", 0.2, check=False)
     assert bad.returncode == 2 and "lower bound" in bad.stderr
+
+
+PARAMETERS_MD = Path(__file__).resolve().parents[2] / "docs" / "parameters.md"
+
+
+def _documented(command: str, page: str) -> str:
+    """The part of docs/parameters.md that lists ``command``'s options: the chain's table for
+    run, series and demo, else the step commands' row of ``floodmesh COMMAND``."""
+    if command in ("run", "series", "demo"):
+        return page.split("## The chain", 1)[1].split("\n## ", 1)[0]
+    rows = re.findall(rf"^\| `floodmesh {command}\b.*$", page, re.M)
+    assert rows, f"docs/parameters.md has no row for floodmesh {command}"
+    return rows[0]
+
+
+def test_the_parameters_page_lists_every_option_of_every_command():
+    """docs/parameters.md, the page of every option, names each option `floodmesh COMMAND
+    --help` lists where that command's options are: a new option (--skip-unreadable-tiles of
+    run, series and grid was missed) fails here until it is documented."""
+    from floodmesh.core.frontends.cli import build_parser
+
+    page = PARAMETERS_MD.read_text(encoding="utf-8")
+    commands = next(a for a in build_parser()._actions
+                    if isinstance(a, argparse._SubParsersAction)).choices
+    missing = [f"{command} {option}" for command, parser in commands.items()
+               for action in parser._actions for option in action.option_strings
+               if option.startswith("--") and option != "--help"
+               and not re.search(rf"`{re.escape(option)}[` ]", _documented(command, page))]
+    assert not missing, f"not in docs/parameters.md: {', '.join(missing)}"
