@@ -7,20 +7,21 @@ elevation (the worst one per triangle and round); a triangle whose points' mean 
 exceeds the survey's noise² by more than ``lower``² (a systematic misfit, a fold the lines
 missed, not noise: the excess must also stand three standard errors above the noise of that
 many points) gets a quarter of its area as its local maximum. Rounds stop when the target holds
-(RMSE and/or largest |residual| of the refinement points), when the node budget would be
-passed, or when nothing is left to refine.
+(RMSE and/or largest |residual| of the refinement points), at the node budget (the last round
+taking the worst of its picks that fit within it), or when nothing is left to refine.
 Check points (held out, never used for refinement) are assessed every round, so the error
 reported is independent of the refinement.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_refinement
+from ..points import at_places_of
 from ..raster import Grid
 from .accuracy import residuals
 from .localise import beyond_noise, estimate_noise
@@ -30,8 +31,9 @@ from .mesh import Mesh, build_mesh, triangle_areas
 @dataclass(frozen=True)
 class RefineRound:
     """One round's mesh: nodes, triangles, and RMSE / max |residual| (m) of the refinement
-    points and of the check points, with how many points were inserted and how many triangles
-    refined around to make it (the previous round's picks; 0 in the first)."""
+    points and of the check points, with how many measured points went into it as nodes and how
+    many triangles were refined around to make it (of the previous round's picks; 0 in the
+    first): a picked point too close to a node, a line or an edge is not inserted."""
 
     nodes: int
     triangles: int
@@ -68,7 +70,9 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     (its refinement points' figures NaN), as nothing is refined after it; ``floor_at(xy)``: the
     floor (m²) at triangle centroids (k, 2), where it varies (None: ``floor`` everywhere);
     ``note`` hears why the rounds stopped where points are left beyond ``upper`` or triangles
-    beyond ``lower``. Returns the last mesh within the budget and every round."""
+    beyond ``lower``, and how many picked points were too close to a node, a line or an edge to
+    be inserted. A round whose picks would pass ``max_nodes`` takes the worst of them that fit
+    (``_within_budget``) and is the last. Returns the last mesh and every round."""
     points = np.asarray(points, float)
     if points.ndim != 2 or points.shape[1] != 3 or not len(points):
         raise FloodMeshError("refinement needs measured points (x, y, z); none were given")
@@ -79,49 +83,77 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     # lazy: numba loads only when this runs
     from .._kernels.mesh import locate
 
-    inserted = np.empty((0, 3))
+    inserted = np.empty((0, 3))  # measured points put into the TIN so far
     local = np.empty((0, 3))  # x, y, local maximum area (m²) of every triangle refined so far
     rounds, best = [], None
-    picked = (0, 0)  # points to insert and triangles to refine, picked on the last mesh
+    picks = _Picks.none(points)  # points to insert and triangles to refine, of the last mesh
+    taken = tried = 0  # measured points in the last mesh; points picked so far
+    full = False  # whether the node budget cut a round's picks
     left = None  # (points beyond upper, triangles beyond lower) of the best mesh
     stop = (f"it reached its limit of {max_rounds} round{'s' if max_rounds != 1 else ''}, and "
             "more would refine them")
+
+    def build(picked: _Picks) -> Mesh:
+        """The mesh with the points and triangles of earlier rounds and ``picked``."""
+        mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area,
+                          points=np.vstack([inserted, picked.points]),
+                          local_areas=np.vstack([local, picked.triangles]), domain=domain,
+                          size_field=size_field, conforming=conforming, **(mesh_options or {}))
+        return mesh if elevations is None else elevations(mesh)  # node z from a terrain fit
+
     for k in range(max_rounds):
         if cancelled is not None and cancelled():
             raise Cancelled()
-        mesh = first if k == 0 and first is not None else build_mesh(
-            dem, lines, min_angle=min_angle, max_area=max_area, points=inserted,
-            local_areas=local, domain=domain, size_field=size_field, conforming=conforming,
-            **(mesh_options or {}))
-        if elevations is not None:  # node z from a terrain fit, each round
-            mesh = elevations(mesh)
+        if k == 0 and first is not None:
+            mesh = first if elevations is None else elevations(first)
+        else:
+            mesh = build(picks)
         if len(mesh.nodes) > max_nodes:
             if best is None:
                 raise FloodMeshError(f"the unrefined mesh already has {len(mesh.nodes)} nodes, "
                                      f"over the budget of {max_nodes}; raise the budget or the "
                                      "maximum triangle area")
-            stop = f"refining them would pass the node budget of {max_nodes:,} nodes"
-            break
+            mesh, within = _within_budget(build, picks, rounds[-1].nodes, len(mesh.nodes),
+                                          max_nodes)
+            if mesh is None:
+                stop = (f"refining them would pass the node budget of {max_nodes:,} nodes, "
+                        "even with only the worst of them")
+                break
+            stop = (f"it reached the node budget of {max_nodes:,} nodes, which let its last "
+                    f"round take only the worst {len(within.points):,} of the "
+                    f"{len(picks.points):,} points and {len(within.triangles):,} of the "
+                    f"{len(picks.triangles):,} triangles picked")
+            picks, full = within, True
+        inserted = np.vstack([inserted, picks.points])
+        local = np.vstack([local, picks.triangles])
+        tried += len(picks.points)
+        # the picked points Triangle took in (none too close to a node, a line or an edge)
+        now = int(at_places_of(mesh.nodes, inserted).sum()) if len(inserted) else 0
+        added, taken = now - taken, now
         if rounds and len(mesh.nodes) == rounds[-1].nodes:
             stop = ("a further round changed no node, what is left lying too close to a node, "
                     "a line or the domain's edge to be inserted")
             break
         if k == max_rounds - 1 and not measure_last:  # nothing is refined after it
             rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), np.nan, np.nan,
-                                      *_check_figures(mesh, check), *picked))
+                                      *_check_figures(mesh, check), added,
+                                      len(picks.triangles)))
             best, left = mesh, None
             break
         found, tin = locate(mesh.nodes, mesh.triangles, points, mesh.nodes[:, 2])
         res = points[:, 2] - tin
-        new_points = (points[:0] if upper is None
-                      else _worst_per_triangle(points, res, found, upper))
         if noise is None:  # from planes fitted to some 30 points each (as the run's window)
             noise = estimate_noise(points, len(points) / (np.isfinite(dem.values).sum()
                                                           * dem.cell_size ** 2))
-        misfit = _misfit_triangles(mesh, found, res, lower, floor, noise, most, floor_at)
+        misfit, excess = _misfit_triangles(mesh, found, res, lower, floor, noise, most,
+                                           floor_at)
         rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), _rmse(res),
-                                  _max_abs(res), *_check_figures(mesh, check), *picked))
-        best, picked = mesh, (len(new_points), len(misfit))
+                                  _max_abs(res), *_check_figures(mesh, check), added,
+                                  len(picks.triangles)))
+        best = mesh
+        picks = _Picks.none(points) if upper is None else _worst_per_triangle(points, res,
+                                                                              found, upper)
+        picks = _Picks(picks.points, picks.score, misfit, excess)
         left = (0 if upper is None else int(np.count_nonzero(np.abs(np.nan_to_num(res)) > upper)),
                 len(misfit))
         if progress is not None:
@@ -129,13 +161,71 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         if _met(res, target_rmse, target_max):
             stop = "the target holds"
             break
-        if not len(new_points) and not len(misfit):
+        if full:  # this round took what the budget allowed
             break
-        inserted = np.vstack([inserted, new_points])
-        local = np.vstack([local, misfit])
+        if not len(picks.points) and not len(misfit):
+            break
+    if note is not None and tried > taken:
+        note(_not_inserted(tried, taken))
     if note is not None and upper is not None and left is not None and any(left):
         note(_left_over(*left, upper, lower, stop))
     return best, rounds
+
+
+@dataclass(frozen=True)
+class _Picks:
+    """What a round picked on its mesh: ``points`` (k, 3) to insert and ``triangles`` (j, 3:
+    centroid x, y and local maximum area m²) to refine, each with a ``score`` of how badly it
+    misfits (|residual| m; the excess mean square over the area, m²·m²)."""
+
+    points: np.ndarray
+    score: np.ndarray
+    triangles: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
+    excess: np.ndarray = field(default_factory=lambda: np.empty(0))
+
+    @classmethod
+    def none(cls, points) -> "_Picks":
+        return cls(points[:0], np.empty(0))
+
+    def worst(self, share: float) -> "_Picks":
+        """The worst ``share`` of the points and of the triangles, in their order."""
+        def keep(score):
+            mask = np.zeros(len(score), bool)
+            mask[np.argsort(-score, kind="stable")[:int(share * len(score))]] = True
+            return mask
+        points, triangles = keep(self.score), keep(self.excess)
+        return _Picks(self.points[points], self.score[points], self.triangles[triangles],
+                      self.excess[triangles])
+
+
+# tries at a round that passes the node budget with a share of its picks (the worst first)
+BUDGET_TRIES = 4
+
+
+def _within_budget(build, picks: _Picks, before: int, after: int, max_nodes: int):
+    """(mesh, the picks it took): the mesh of the worst share of ``picks`` that stays within
+    ``max_nodes`` where all of them made ``after`` nodes from ``before``, the share shrunk to
+    what the nodes added say would fit, 10 % under, for up to ``BUDGET_TRIES`` meshes; (None,
+    None) where none fits."""
+    share = 1.0
+    for _ in range(BUDGET_TRIES):
+        share *= 0.9 * (max_nodes - before) / (after - before)
+        within = picks.worst(share)
+        if not len(within.points) and not len(within.triangles):
+            break
+        mesh = build(within)
+        if len(mesh.nodes) <= max_nodes:
+            return mesh, within
+        after = len(mesh.nodes)
+    return None, None
+
+
+def _not_inserted(tried: int, taken: int) -> str:
+    """What to say of the measured points picked for insertion that Triangle did not take."""
+    return (f"{tried - taken:,} of the {tried:,} measured points the refinement picked for "
+            "insertion lay too close to a node, a line, the domain's edge or another picked "
+            f"point to be inserted; the mesh took in the other {taken:,} (the rounds' "
+            "'inserted')")
 
 
 def _left_over(points: int, triangles: int, upper: float, lower: float, why: str) -> str:
@@ -154,25 +244,25 @@ def _check_figures(mesh: Mesh, check) -> tuple[float, float]:
     return _rmse(res), _max_abs(res)
 
 
-def _worst_per_triangle(points, res, found, upper) -> np.ndarray:
+def _worst_per_triangle(points, res, found, upper) -> _Picks:
     """The point of largest |residual| in each triangle, where it exceeds ``upper``: one new
     vertex per triangle and round, as greedy TIN insertion does (its neighbours' residuals
-    change once it is in)."""
+    change once it is in); its |residual| (m) the score."""
     big = np.flatnonzero((np.abs(np.nan_to_num(res)) > upper) & (found >= 0))
     if not len(big):
-        return points[:0]
+        return _Picks.none(points)
     order = big[np.lexsort((-np.abs(res[big]), found[big]))]
-    first = np.r_[True, found[order][1:] != found[order][:-1]]
-    return points[order[first]]
+    worst = order[np.r_[True, found[order][1:] != found[order][:-1]]]
+    return _Picks(points[worst], np.abs(res[worst]))
 
 
 def _misfit_triangles(mesh: Mesh, found, res, lower, floor, noise, most=None,
-                      floor_at=None) -> np.ndarray:
+                      floor_at=None) -> tuple[np.ndarray, np.ndarray]:
     """Centroid x, y and a quarter of the area of each triangle whose points' mean square
     residual exceeds ``noise``² by more than ``lower``² and by three standard errors of that
     many points' (χ²: noise²·√(2/n)), where that quarter is at least ``floor`` m²; of them, the
     share ``most`` of all triangles (None: every one) whose excess over the triangle's area
-    (m²·m²) is largest."""
+    (m²·m²) is largest; and that excess of each."""
     ok = (found >= 0) & np.isfinite(res)
     n_tri = len(mesh.triangles)
     count = np.bincount(found[ok], minlength=n_tri)
@@ -191,7 +281,7 @@ def _misfit_triangles(mesh: Mesh, found, res, lower, floor, noise, most=None,
         worst = np.argsort(np.where(pick, -excess * quarter, np.inf))[:int(most * n_tri)]
         pick = np.zeros_like(pick)
         pick[worst] = True
-    return np.column_stack([centroid[pick], quarter[pick]])
+    return np.column_stack([centroid[pick], quarter[pick]]), (excess * quarter)[pick]
 
 
 def _met(res, target_rmse, target_max) -> bool:

@@ -222,6 +222,13 @@ def test_run_with_refinement(demo_points_file, tmp_path):
     assert refined["rmse_m"] < plain["rmse_m"]
     assert refined["classes"][">25 cm"] <= plain["classes"][">25 cm"]
     assert refined["n_below_min_angle"] == 0 and refined["max_area_m2"] <= 100
+    # each round's 'inserted' is what its mesh took in: the written mesh's nodes at survey points
+    # (before, the points tried: 449 for a last round 2 nodes larger on Topography.laz)
+    from floodmesh.core.points import at_places_of
+
+    nodes, _ = io.read_mesh_2dm(tmp_path / "refined" / "mesh.2dm")
+    survey = io.read_points(demo_points_file).xyz
+    assert at_places_of(nodes, survey).sum() == sum(r["inserted"] for r in rounds) > 0
     # gridded points left over the upper bound (13 on the demo) are said, with why
     assert rounds[-1]["max_abs_m"] > 0.25 and any(
         note.startswith("the refinement stopped with ") and "upper bound (0.25 m)" in note

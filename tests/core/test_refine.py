@@ -1,5 +1,6 @@
 """Error-driven refinement (floodmesh.core.steps.refine) on surfaces whose true error is known."""
 import json
+import re
 
 import numpy as np
 import pytest
@@ -8,6 +9,7 @@ from pyproj import CRS
 
 from floodmesh.core import io
 from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.points import at_places_of
 from floodmesh.core.steps.mesh import triangle_angles, triangle_areas
 from floodmesh.core.raster import Grid
 from floodmesh.core.steps.refine import refine_mesh
@@ -231,6 +233,54 @@ def test_the_rounds_table_gives_what_made_each_mesh_and_a_note_what_is_left(tmp_
     first, second = json.loads((tmp_path / "two.json").read_text())["rounds"]
     assert first["inserted"] == first["refined"] == 0
     assert second["inserted"] > 0 and second["refined"] > 0 and second["nodes"] > first["nodes"]
+
+
+def _refine(tmp_path, *extra):
+    """refine on ``_survey``'s files as the user guide chains it: (stdout table rows, stderr,
+    the rounds of its report, the nodes of its mesh, the survey's points)."""
+    import laspy
+
+    from tests.core.test_cli import floodmesh
+
+    survey, holdout = _survey(tmp_path)
+    out = floodmesh("refine", tmp_path / "dem.tif", "--points", survey, "--check", holdout,
+                    "--upper", 0.03, "--lower", 0.02, "--noise", 0, "--out", tmp_path / "m.2dm",
+                    "--report", tmp_path / "m.json", *extra)
+    las = laspy.read(str(survey))
+    rows = [line.split() for line in out.stdout.splitlines()[1:-1]]
+    return (rows, out.stderr, json.loads((tmp_path / "m.json").read_text())["rounds"],
+            io.read_mesh_2dm(tmp_path / "m.2dm")[0], np.column_stack([las.x, las.y, las.z]))
+
+
+def test_inserted_counts_the_points_the_mesh_took_in_and_a_note_the_others(tmp_path):
+    """A round's 'inserted' (table and report) is how many measured points went into its mesh
+    as nodes, not how many it tried: the written mesh holds as many nodes at survey points as
+    the rounds say, and the picked points too close to a node, a line or another point are
+    counted in a note (before, a last round said 'inserted 49' for a mesh 2 nodes larger)."""
+    rows, err, rounds, nodes, survey = _refine(tmp_path, "--max-rounds", 3)
+    inserted = [r["inserted"] for r in rounds]
+    assert [int(row[-2]) for row in rows] == inserted and inserted[1] > 0
+    assert at_places_of(nodes, survey).sum() == sum(inserted)
+    refused = re.search(r"note: ([\d,]+) of the ([\d,]+) measured points the refinement picked "
+                        r"for insertion lay too close to a node, a line, the domain's edge or "
+                        r"another picked point to be inserted; the mesh took in the other "
+                        r"([\d,]+) \(the rounds' 'inserted'\)", err)
+    assert refused, err
+    tried, taken = (int(refused[k].replace(",", "")) for k in (2, 3))
+    assert int(refused[1]) > 0 and taken == sum(inserted) == tried - int(refused[1])
+
+
+def test_a_round_past_the_node_budget_takes_the_worst_of_its_picks_that_fit(tmp_path):
+    """The node budget caps the mesh, not the refinement: a round whose picks would pass it
+    takes the worst of them that fit, and a note says so (before, with a budget between the
+    first mesh and the second round's, refine stopped with the first mesh unrefined)."""
+    rows, err, rounds, nodes, _ = _refine(tmp_path, "--max-nodes", 600)
+    assert len(rounds) == 2 and rounds[0]["nodes"] < len(nodes) == rounds[1]["nodes"] <= 600
+    assert rounds[1]["inserted"] > 0 and rounds[1]["refined"] > 0
+    assert rounds[1]["rmse_m"] < rounds[0]["rmse_m"]
+    assert re.search(r"it reached the node budget of 600 nodes, which let its last round take "
+                     r"only the worst \d+ of the \d+ points and \d+ of the \d+ triangles "
+                     r"picked", err), err
 
 
 def test_a_runs_mesh_follows_the_folds_where_a_road_crosses_a_levee(tmp_path):
