@@ -49,10 +49,11 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     interpolation; ``holdout`` of the points held back and written to ``holdout_output``
     (GeoPackage)."""
     # lazy: PROJ loads only when this runs
-    from .source import open_source
+    from .source import check_outputs_apart, open_source
 
     source = open_source(input, skip_unreadable=skip_unreadable)
     _files(source.paths, [output, holdout_output], geotiff=[output], gpkg=[holdout_output])
+    check_outputs_apart(source, [output])
     check_cell_size(cell_size)
     check_max_gap(max_gap)
     check_holdout(holdout)

@@ -51,7 +51,8 @@ from ..steps.refine import refine_mesh
 from ..steps.simplify import max_deviation, simplify_breaklines
 from ..steps.sizing import far_field_size, finer
 from ..steps.slope import laplacian_of_gaussian, slope
-from .source import DEM, DEM_TILES, POINTS, POINT_TILES, Source, open_source
+from .source import (DEM, DEM_TILES, POINTS, POINT_TILES, Source, check_outputs_apart,
+                     open_source)
 
 OUTPUT_FILES = ("dem.tif", "slope.tif", "breakpoints.tif", "breaklines.gpkg", "mesh.2dm",
                 "mesh.prj", "mesh.gpkg", "residuals.gpkg", HISTOGRAM_PNG, MAP_PNG,
@@ -135,6 +136,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     out, source = Path(out_dir), open_source(input_path)
     inputs = run_inputs(source, options)
     check_output_folder(out, inputs, run_outputs(options.formats))
+    check_outputs_apart(source, [out / name for name in run_outputs(options.formats)])
     # every step makes its large arrays afresh: see without_huge_pages
     with (ThreadPoolExecutor(max_workers=1) as background, PicturesApart() as pictures,
           without_huge_pages()):

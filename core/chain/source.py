@@ -7,7 +7,8 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..engine.tiles import TileSet, expand_tiles, is_large_copc, is_tile_set, tile_kind
+from ..engine.tiles import (TileSet, expand_tiles, first_names, is_large_copc, is_tile_set,
+                            listed_as_tiles, tile_kind)
 from ..errors import FloodMeshError
 from ..io import RASTER_EXTENSIONS, require_file
 from ..options import is_point_source
@@ -69,3 +70,16 @@ def open_source(given, *, skip_unreadable: bool = False) -> Source:
     require_file(path, "input")
     raise FloodMeshError(f"{path.name}: unknown input type '{path.suffix.lower()}'; give a "
                          "LAS/LAZ or XYZ/CSV point file, or a GeoTIFF/ASCII-grid DEM")
+
+
+def check_outputs_apart(source: Source, outputs) -> None:
+    """Refuse, before any work, ``outputs`` (paths) that would land among the tiles the input
+    names (a run written into its own tile folder): the next run on it would read the DEM,
+    slope and breakpoint rasters as tiles."""
+    among = listed_as_tiles(source.given, outputs) if source.tiled else []
+    if among:
+        raise FloodMeshError(
+            f"{first_names([p.name for p in among])} would be written into the tile folder "
+            f"{among[0].parent}, and the next run on it would read "
+            f"{'them' if len(among) > 1 else 'it'} as tiles: write the outputs into another "
+            "folder (beside the tile folder, or one inside it)")

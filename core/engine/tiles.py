@@ -100,12 +100,16 @@ def is_tile(path: Path) -> bool:
                                                       and file_format(path) == "xyz")
 
 
+def _is_pattern(item: str) -> bool:
+    return any(ch in item for ch in GLOB_CHARACTERS) and not Path(item).exists()
+
+
 def _listed(item: str) -> list[Path]:
     """The files one input names: a folder's (not recursive), a glob pattern's, or the file."""
     path = Path(item)
     if path.is_dir():
         return sorted(p for p in path.iterdir() if p.is_file())
-    if any(ch in item for ch in GLOB_CHARACTERS) and not path.exists():
+    if _is_pattern(item):
         found = sorted(Path(p) for p in glob.glob(item) if Path(p).is_file())
         if not found:
             raise FloodMeshError(f"no file matches {item}: check the pattern (quote it so the "
@@ -114,6 +118,28 @@ def _listed(item: str) -> list[Path]:
     if not path.is_file():
         raise FloodMeshError(f"tile {path} does not exist or is not a file: check the path")
     return [path]
+
+
+def listed_as_tiles(inputs, outputs) -> list[Path]:
+    """Those of the ``outputs`` (paths, written or not) that the folders and glob patterns of
+    ``inputs`` take as tiles by their name alone (LAS/LAZ, DEM rasters): written there, they
+    would be read as tiles by the next run on the same input."""
+    found = []
+    for item in ([] if isinstance(inputs, TileSet) else _items(inputs)):
+        for path in map(Path, outputs):
+            if path.suffix.lower() not in LAS_EXTENSIONS + DEM_EXTENSIONS or path in found:
+                continue
+            if (Path(item).is_dir() and Path(path.absolute().parent).resolve()
+                    == Path(item).resolve()
+                    or _is_pattern(item) and path.absolute().match(os.path.abspath(item))):
+                found.append(path)
+    return found
+
+
+def first_names(names: Sequence[str], shown: int = 3) -> str:
+    """The first ``shown`` names, and how many more."""
+    more = len(names) - shown
+    return ", ".join(names[:shown]) + (f" and {more} more" if more > 0 else "")
 
 
 def _listing(names: list[str]) -> str:
@@ -152,11 +178,30 @@ def expand_tiles(inputs, *, skip_unreadable: bool = False) -> TileSet:
     taken = set(tiles)
     others = sorted(p.name for p in dict.fromkeys(others) if p not in taken)
     if len({tile_kind(p) for p in tiles}) > 1:
-        raise FloodMeshError("the tiles mix point files and DEM rasters: give one kind (a folder "
-                             "or pattern of LAS/LAZ/XYZ tiles, or of GeoTIFF DEM tiles)")
+        raise FloodMeshError(_mixed_kinds(tiles, inputs))
     notes = [f"{len(others)} files beside the tiles are not tiles (LAS/LAZ, GeoTIFF or XYZ text "
              f"of x, y, z) and were left out: {_listing(others)}"] if others else []
     return TileSet(tiles, notes, skip_unreadable)
+
+
+def _mixed_kinds(tiles: list[Path], inputs) -> str:
+    """The error for point tiles beside DEM rasters: the fewer kind named (a DEM or overview
+    beside LAS tiles, or LAS files beside DEM tiles), and a pattern that takes the others."""
+    rasters = [p for p in tiles if tile_kind(p) == "dem"]
+    points = [p for p in tiles if tile_kind(p) == "points"]
+    if len(rasters) <= len(points):
+        stray, kept, what, others = rasters, points, "DEM raster", "point tiles"
+    else:
+        stray, kept, what, others = points, rasters, "point file", "DEM tiles"
+    items = _items(inputs)
+    folder = items[0] if len(items) == 1 and Path(items[0]).is_dir() else str(kept[0].parent)
+    suffixes = [p.suffix for p in kept]
+    pattern = Path(folder) / f"*{max(set(suffixes), key=suffixes.count)}"
+    s = "s" if len(stray) > 1 else ""
+    return (f"the tiles mix point files and DEM rasters: {len(stray)} {what}{s} "
+            f"({first_names([p.name for p in stray])}) beside {len(kept)} {others}: move "
+            f"{'them' if s else 'it'} out of {folder}, or give the {others} as a quoted "
+            f"pattern, e.g. '{pattern}'")
 
 
 def tile_kind(path: Path) -> str:

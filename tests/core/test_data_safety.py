@@ -21,7 +21,8 @@ from floodmesh.core.errors import FloodMeshError
 from floodmesh.core.steps.export import export_mesh, mesh_boundary
 from floodmesh.core.points import PointCloud
 
-from ..bad_inputs import ORIGIN, UTM, plane_xyz, slope_dem, write_tif, write_xyz
+from ..bad_inputs import (ORIGIN, UTM, plane_xyz, slope_dem, write_las, write_tif,
+                          write_xyz)
 from ..conftest import plane_points
 
 FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
@@ -98,6 +99,61 @@ def test_run_into_the_folder_of_its_dem_and_export_onto_its_mesh_are_refused(dem
     assert main(["export", str(mesh), str(mesh)]) == 2
     assert "never overwrites an input" in capsys.readouterr().err
     assert _digest(mesh) == before
+
+
+def _las_tiles(folder, n=2):
+    """``n`` LAS tiles of ``plane_xyz`` cut in x, in ``folder`` (made)."""
+    folder.mkdir()
+    xyz = plane_xyz()
+    cut = np.linspace(xyz[:, 0].min(), xyz[:, 0].max() + 1, n + 1)
+    for k in range(n):
+        write_las(folder / f"T{k}.las", xyz[(xyz[:, 0] >= cut[k]) & (xyz[:, 0] < cut[k + 1])])
+    return folder
+
+
+@pytest.mark.parametrize("rasters, named", [
+    (["overview.tif"], "1 DEM raster (overview.tif)"),
+    (["a.tif", "b.tif", "c.tif", "d.tif"], "4 DEM rasters (a.tif, b.tif, c.tif and 1 more)")])
+def test_rasters_beside_point_tiles_are_named_with_the_fix(tmp_path, capsys, monkeypatch,
+                                                           rasters, named):
+    """An overview GeoTIFF shipped beside LAS tiles stops the run naming it, how many there are,
+    and a pattern that takes the LAS tiles alone, which then grid."""
+    monkeypatch.chdir(tmp_path)
+    _las_tiles(Path("tiles"), 5)
+    for name in rasters:
+        write_tif(Path("tiles") / name, slope_dem())
+    assert main(["run", "tiles", "--out", "out"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert f"the tiles mix point files and DEM rasters: {named} beside 5 point tiles: move " \
+           f"{'it' if len(rasters) == 1 else 'them'} out of tiles, or give the point tiles as " \
+           "a quoted pattern, e.g. 'tiles/*.las'" in err, err
+    assert not Path("out").exists()
+    assert main(["grid", "tiles/*.las", "--cell-size", "1", "--out", "dem.tif"]) == 0
+
+
+def test_a_run_into_its_own_tile_folder_is_refused_before_any_work(tmp_path, capsys):
+    """Outputs written among the tiles would be read as tiles by the next run on the folder (a
+    DEM, slope and breakpoints beside LAS tiles; silently among DEM tiles): refused up front,
+    the folder left as it was; a folder inside the tile folder is not read with it."""
+    tiles = _las_tiles(tmp_path / "tiles")
+    dem_tiles = tmp_path / "dem_tiles"
+    dem_tiles.mkdir()
+    write_tif(dem_tiles / "west.tif", slope_dem())
+    write_tif(dem_tiles / "east.tif", slope_dem(),
+              transform=Affine(1.0, 0.0, ORIGIN[0] + 60, 0.0, -1.0, ORIGIN[1] + 60))
+    before = {p: _digest(p) for folder in (tiles, dem_tiles) for p in folder.iterdir()}
+    for args in (["run", tiles, "--out", tiles], ["run", f"{tiles}/*", "--out", tiles],
+                 ["run", f"{dem_tiles}/", "--out", dem_tiles],
+                 ["grid", tiles, "--cell-size", "1", "--out", tiles / "dem.tif"]):
+        assert main(list(map(str, args))) == 2, args
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1, err
+        assert "dem.tif" in err and "would be written into the tile folder" in err and \
+            "next run on it would read" in err and "into another folder" in err, err
+    assert {p: _digest(p) for folder in (tiles, dem_tiles) for p in folder.iterdir()} == before
+    assert main(["grid", str(tiles), "--cell-size", "1", "--out", str(tiles / "run" / "dem.tif")]
+                ) == 0
 
 
 def test_run_keeps_the_users_files_in_its_folder_and_drops_its_own_stale_ones(tmp_path):
