@@ -5,6 +5,7 @@ line, tests/qgis/test_bad_input.py through QGIS, and both compare the messages.
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -404,7 +405,56 @@ def _assess_pictures_into(png):
                       "--out", "{out}/res.gpkg", "--report", "{out}/stats.json", "--png", png(f)]
 
 
+def _flood_case(id_, words, scenario: dict, files: dict | None = None):
+    """``floodmesh flood`` and Flood on mesh with ``_mesh_2dm`` and the scenario (its ``files``,
+    name: text, beside it); the scenario is refused before ANUGA is looked for."""
+    def scenario_file(folder):
+        for name, text in (files or {}).items():
+            (folder / name).write_text(text)
+        path = folder / "scenario.json"
+        path.write_text(json.dumps(scenario))
+        return path
+    return BadInput(id_, words,
+                    lambda f: ["flood", _mesh_2dm(f), "--scenario", scenario_file(f), "--out",
+                               "{out}", "--crs", UTM],
+                    _qgis("floodonmesh", MESH=_mesh_2dm, SCENARIO=scenario_file, CRS=UTM,
+                          OUTPUT_FOLDER="{out}"))
+
+
+_CIRCLE = {"circle": {"centre": [ORIGIN[0] + 5, ORIGIN[1] + 5], "radius": 3}}
+_FLOOD = {"duration_s": 20, "output_interval_s": 10}
+_SQUARE = [[ORIGIN[0], ORIGIN[1]], [ORIGIN[0] + 5, ORIGIN[1]], [ORIGIN[0] + 5, ORIGIN[1] + 5]]
+
 CASES = [
+    _flood_case("flood-scenario-misspelt-keys",
+                "'initial_stage' at its top level (did you mean 'initial_stage_m'? it takes "
+                "duration_s, output_interval_s",
+                {**_FLOOD, "initial_stage": 30.0, "inflows": [{**_CIRCLE, "discharge_m3s": 1}],
+                 "boundaries": [{"kind": "outflow", "sides": ["east"], "snap": 50}]}),
+    _flood_case("flood-scenario-rain", "'rain_mm_h' at its top level: rain is not supported: "
+                "give it as an inflow", {**_FLOOD, "rain_mm_h": 50}),
+    _flood_case("flood-inflow-discharge-misspelt",
+                "'discharge' in inflow 1 (did you mean 'discharge_m3s'?",
+                {**_FLOOD, "inflows": [{**_CIRCLE, "discharge": 5}]}),
+    _flood_case("flood-inflow-without-discharge",
+                "inflow 1 has no discharge: give it a discharge_m3s (m³/s) or a hydrograph",
+                {**_FLOOD, "inflows": [_CIRCLE]}),
+    _flood_case("flood-roughness-n-for-manning",
+                "'n' in roughness zone 1 (did you mean 'manning'? it takes polygons, file, "
+                "manning)", {**_FLOOD, "roughness": [{"polygons": [_SQUARE], "n": 0.02}]}),
+    _flood_case("flood-hydrograph-missing", "inflow 1's hydrograph names nope.csv, which does "
+                "not exist in", {**_FLOOD, "inflows": [{**_CIRCLE, "hydrograph": "nope.csv"}]}),
+    _flood_case("flood-hydrograph-not-numbers", "inflow 1's hydrograph, q.csv, has 'ten,2' on "
+                "line 3", {**_FLOOD, "inflows": [{**_CIRCLE, "hydrograph": "q.csv"}]},
+                {"q.csv": "t,q\n0,1\nten,2\n"}),
+    _flood_case("flood-hydrograph-semicolons", "inflow 1's hydrograph, q.csv, has '10;2' on "
+                "line 2: each line must be time s, m³/s, 2 comma-separated numbers",
+                {**_FLOOD, "inflows": [{**_CIRCLE, "hydrograph": "q.csv"}]},
+                {"q.csv": "0;1\n10;2\n"}),
+    _flood_case("flood-levels-times-not-increasing", "the times in boundary 1's levels, h.csv, "
+                "must increase from row to row: row 3 (5 s) follows row 2 (10 s)",
+                {**_FLOOD, "boundaries": [{"kind": "level", "sides": ["east"],
+                                           "levels": "h.csv"}]}, {"h.csv": "0,1\n10,2\n5,3\n"}),
     _boundary_case("boundary-self-intersecting", "is not a valid polygon (Self-intersection",
                    _bowtie()),
     _boundary_case("boundary-off-the-data", "does not overlap the DEM's data",

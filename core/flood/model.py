@@ -34,6 +34,7 @@ from ..errors import Cancelled, FloodMeshError
 from ..options import RESULT_RASTERS
 from ..raster import Grid, require_metric_crs
 from ..steps.hydraulics import collinear_wall_stencils, hydraulic_checks, inradii, neighbours
+from .scenario_keys import check_keys, entries
 
 BOUNDARY_KINDS = ("wall", "outflow", "level")
 SIDES = ("north", "south", "east", "west")
@@ -107,13 +108,17 @@ class Scenario:
         if self.output_interval_s > self.duration_s:
             raise FloodMeshError(f"the scenario's output interval ({self.output_interval_s} s) "
                                  f"is longer than its duration ({self.duration_s} s)")
-        for inflow in self.inflows:
+        for k, inflow in enumerate(self.inflows, 1):
             if len(inflow.region) < 2:
-                raise FloodMeshError("an inflow needs a line (2 points) or a region (3 or more "
-                                     "points, or a circle)")
-            if (inflow.discharge_m3s is None) == (not inflow.hydrograph):
-                raise FloodMeshError("an inflow needs either a discharge (m³/s) or a "
-                                     "hydrograph, not both")
+                raise FloodMeshError(f"inflow {k} needs a line (2 points) or a region (3 or "
+                                     "more points, or a circle)")
+            if inflow.discharge_m3s is None and not inflow.hydrograph:
+                raise FloodMeshError(f"inflow {k} has no discharge: give it a discharge_m3s "
+                                     "(m³/s) or a hydrograph (a CSV of time s, m³/s, or "
+                                     "[[t, q], ...])")
+            if inflow.discharge_m3s is not None and inflow.hydrograph:
+                raise FloodMeshError(f"inflow {k} has both a discharge_m3s and a hydrograph: "
+                                     "give one")
         for b in self.boundaries:
             if b.kind not in BOUNDARY_KINDS:
                 raise FloodMeshError(f"boundary kind {b.kind!r} is not one of "
@@ -133,19 +138,19 @@ class Scenario:
                 raise FloodMeshError(f"a roughness polygon has Manning's n {n}; it must be > 0")
 
 
-def _polygon_list(spec, base: Path) -> list:
+def _polygon_list(spec, base: Path, where: str = "the scenario") -> list:
     """Polygons from a scenario entry: a list of coordinate lists, or {"file": …} naming a
     vector file or a glob of x,y CSV files (one polygon each, a header row allowed)."""
     if isinstance(spec, dict) and "file" in spec:
         pattern = str(base / spec["file"])
         paths = sorted(glob.glob(pattern))
         if not paths:
-            raise FloodMeshError(f"the scenario names {spec['file']}, which matches no file "
-                                 f"beside it ({base}): check the path")
+            raise FloodMeshError(f"{where} names {spec['file']}, which matches no file "
+                                 f"beside the scenario ({base}): check the path")
         polygons = []
         for path in paths:
             if path.lower().endswith((".csv", ".txt")):
-                polygons.append(_read_xy_csv(path))
+                polygons.append(_read_xy_csv(path, f"{where}'s file"))
             else:
                 # lazy: GEOS loads only when this runs
                 import shapely
@@ -154,82 +159,206 @@ def _polygon_list(spec, base: Path) -> list:
                         polygons.append(shapely.get_coordinates(part.exterior))
         return polygons
     if isinstance(spec, dict) and "circle" in spec:
-        return [_circle(spec["circle"])]
-    return [np.asarray(p, float) for p in spec]
+        return [_circle(spec["circle"], f"{where}'s circle")]
+    if not isinstance(spec, list):
+        raise FloodMeshError(f"{where} must be a list of polygons ([[[x, y], ...], ...]), "
+                             f"{{\"file\": ...}} or {{\"circle\": ...}}, got {spec!r:.60}")
+    return [_points(p, f"polygon {k + 1} of {where}", 3) for k, p in enumerate(spec)]
 
 
-def _read_xy_csv(path) -> np.ndarray:
+def _points(value, where: str, least: int) -> np.ndarray:
+    """(k, 2+) finite coordinates from a list of [x, y] points, at least ``least`` of them."""
+    try:
+        xy = np.asarray(value, float)
+    except (TypeError, ValueError):
+        xy = np.empty(0)
+    if xy.ndim != 2 or xy.shape[1] < 2 or len(xy) < least or not np.isfinite(xy).all():
+        raise FloodMeshError(f"{where} must be a list of {least} or more [x, y] points, got "
+                             f"{value!r:.60}")
+    return xy
+
+
+def _read_xy_csv(path, what: str = "the polygon file", columns: str = "x, y",
+                 exact: bool = False) -> np.ndarray:
+    """The rows of a CSV of two numbers a line (``columns``; more with ``exact`` False): a
+    header line first allowed, blank lines skipped; ``what`` names it in errors (the
+    scenario's key that names the file)."""
+    path = Path(path)
+    if path.is_dir():
+        raise FloodMeshError(f"{what} names {path.name}, a folder: name a CSV file of {columns}")
+    if not path.is_file():
+        raise FloodMeshError(f"{what} names {path.name}, which does not exist in "
+                             f"{path.parent.resolve()}: check the path (a scenario's file "
+                             "names are relative to its folder)")
     rows = []
-    with open(path, newline="") as fh:
-        for row in csv.reader(fh):
-            try:
-                rows.append((float(row[0]), float(row[1])))
-            except (ValueError, IndexError):
-                continue  # a header
+    try:
+        with open(path, newline="") as fh:
+            for line, row in enumerate(csv.reader(fh), 1):
+                if not "".join(row).strip():
+                    continue
+                try:
+                    values = [float(v) for v in row]
+                except ValueError:
+                    if not rows and line == 1:
+                        continue  # a header
+                    values = []
+                if len(values) < 2 or (exact and len(values) > 2) or \
+                        not np.isfinite(values).all():
+                    raise FloodMeshError(
+                        f"{what}, {path.name}, has {','.join(row)!r} on line {line}: each "
+                        f"line must be {columns}, {len(columns.split(','))} comma-separated "
+                        "numbers (a header line first allowed)")
+                rows.append(values[:2])
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FloodMeshError(f"{what}, {path.name}, cannot be read as text "
+                             f"({getattr(exc, 'strerror', None) or exc}): give a CSV of "
+                             f"{columns}") from None
     if len(rows) < 2:
-        raise FloodMeshError(f"{Path(path).name} holds fewer than 2 x,y rows")
+        raise FloodMeshError(f"{what}, {path.name}, holds fewer than 2 rows of {columns}")
     return np.array(rows)
 
 
-def _circle(spec, n: int = 32) -> np.ndarray:
-    cx, cy = spec["centre"]
-    r = float(spec["radius"])
+def _series(value, base: Path, what: str, columns: str) -> tuple:
+    """((time s, value), ...) from a CSV file name or a list of pairs, times increasing."""
+    if isinstance(value, str):
+        rows = _read_xy_csv(base / value, what, columns, exact=True)
+    else:
+        try:
+            rows = np.asarray(value, float)
+        except (TypeError, ValueError):
+            rows = np.empty(0)
+        if rows.ndim != 2 or rows.shape[1] != 2 or len(rows) < 2 or \
+                not np.isfinite(rows).all():
+            raise FloodMeshError(f"{what} must be a CSV file name or a list of 2 or more "
+                                 f"[{columns}] pairs, got {value!r:.60}")
+    late = np.flatnonzero(np.diff(rows[:, 0]) <= 0)
+    if len(late):
+        k = int(late[0]) + 1
+        named = f"{what}, {value}," if isinstance(value, str) else what
+        raise FloodMeshError(f"the times in {named} must increase from row to row: row "
+                             f"{k + 1} ({rows[k, 0]:g} s) follows row {k} ({rows[k - 1, 0]:g} s)")
+    return tuple(map(tuple, rows))
+
+
+def _circle(spec, where: str = "a circle", n: int = 32) -> np.ndarray:
+    if not isinstance(spec, dict) or "centre" not in spec or "radius" not in spec:
+        raise FloodMeshError(f"{where} must be {{\"centre\": [x, y], \"radius\": m}}, got "
+                             f"{spec!r:.60}")
+    (cx, cy), = _points([spec["centre"]], f"{where}'s centre", 1)[:, :2]
+    r = _number(spec, "radius", where, positive=True)
     a = np.linspace(0, 2 * np.pi, n, endpoint=False)
     return np.column_stack([cx + r * np.cos(a), cy + r * np.sin(a)])
 
 
-def _region(spec, base: Path) -> tuple:
+_REQUIRED = object()
+
+
+def _number(entry: dict, key: str, where: str, default=_REQUIRED, positive: bool = False):
+    """``entry[key]`` as a finite float (above 0 with ``positive``); ``default`` when it is
+    absent or null, an error naming it where there is none."""
+    value = entry.get(key)
+    if value is None:
+        if default is _REQUIRED:
+            raise FloodMeshError(f"{where} lacks {key!r}: see the scenario example in "
+                                 "docs/user-guide.md")
+        return default
+    try:
+        number = float(value) if not isinstance(value, (bool, list, dict)) else np.nan
+    except ValueError:
+        number = np.nan
+    if not np.isfinite(number) or (positive and number <= 0):
+        raise FloodMeshError(f"{where}'s {key} must be a{' positive' * positive} number, got "
+                             f"{value!r:.60}")
+    return number
+
+
+def _region(item: dict, where: str, base: Path) -> tuple:
+    """An inflow's region (polygon), circle or line (2 points) as coordinates."""
+    given = [key for key in ("region", "line", "circle") if item.get(key) is not None]
+    if len(given) != 1:
+        raise FloodMeshError(f"{where} needs one of region (a polygon), circle or line (2 "
+                             f"points) to flow into; it has {' and '.join(given) or 'none'}")
+    spec = item[given[0]]
+    if given[0] == "circle":
+        return tuple(map(tuple, _circle(spec, f"{where}'s circle")))
     if isinstance(spec, dict):
-        return tuple(map(tuple, _polygon_list(spec, base)[0]))
-    return tuple(map(tuple, np.asarray(spec, float)))
+        polygons = _polygon_list(spec, base, f"{where}'s {given[0]}")
+        if len(polygons) != 1:
+            raise FloodMeshError(f"{where}'s {given[0]} holds {len(polygons)} polygons; an "
+                                 "inflow flows into one: give each its own inflow")
+        return tuple(map(tuple, polygons[0][:, :2]))
+    xy = _points(spec, f"{where}'s {given[0]}", 2 if given[0] == "line" else 3)
+    if given[0] == "line" and len(xy) != 2:
+        raise FloodMeshError(f"{where}'s line has {len(xy)} points; an inflow line has 2 "
+                             "(its ends): give a polygon as region instead")
+    return tuple(map(tuple, xy[:, :2]))
+
+
+def _inflow(item: dict, where: str, base: Path) -> Inflow:
+    hydrograph = item.get("hydrograph")
+    return Inflow(_region(item, where, base), _number(item, "discharge_m3s", where, None),
+                  () if hydrograph is None else
+                  _series(hydrograph, base, f"{where}'s hydrograph", "time s, m³/s"))
+
+
+def _boundary(item: dict, where: str, base: Path) -> Boundary:
+    if "kind" not in item:
+        raise FloodMeshError(f"{where} lacks 'kind' ({', '.join(BOUNDARY_KINDS)})")
+    sides = item.get("sides") or ()
+    levels = item.get("levels")
+    return Boundary(str(item["kind"]), (sides,) if isinstance(sides, str) else tuple(sides),
+                    tuple(map(tuple, _points(item["line"], f"{where}'s line", 2)))
+                    if item.get("line") is not None else (),
+                    _number(item, "level_m", where, None),
+                    _number(item, "snap_m", where, 1.0, positive=True),
+                    () if levels is None else
+                    _series(levels, base, f"{where}'s levels", "time s, level m"))
+
+
+def _roughness(zone: dict, where: str, base: Path) -> list:
+    n = _number(zone, "manning", where, positive=True)
+    if "file" in zone:
+        polygons = _polygon_list(zone, base, where)
+    elif zone.get("polygons") is not None:
+        polygons = _polygon_list(zone["polygons"], base, f"{where}'s polygons")
+    else:
+        raise FloodMeshError(f"{where} needs its polygons ([[[x, y], ...], ...]) or a file")
+    return [(tuple(map(tuple, polygon)), n) for polygon in polygons]
 
 
 def scenario_from_dict(data: dict, base=".") -> Scenario:
     """A Scenario from its JSON form (see docs/user-guide.md, The scenario); file names are
-    relative to ``base``."""
+    relative to ``base``. A key it does not read, at any level, is an error."""
     base = Path(base)
+    check_keys(data)
     try:
-        inflows = []
-        for item in data.get("inflows", []):
-            region = item.get("region") or item.get("line")
-            if region is None and "circle" in item:
-                region = {"circle": item["circle"]}
-            hydro = item.get("hydrograph", ())
-            if isinstance(hydro, str):
-                hydro = _read_xy_csv(base / hydro)
-            inflows.append(Inflow(_region(region or [], base), item.get("discharge_m3s"),
-                                  tuple(map(tuple, np.asarray(hydro, float).reshape(-1, 2)))))
-        boundaries = [Boundary(b["kind"], tuple(b.get("sides", ())),
-                               tuple(map(tuple, b.get("line", ()))), b.get("level_m"),
-                               float(b.get("snap_m", 1.0)),
-                               tuple(map(tuple, np.asarray(
-                                   _read_xy_csv(base / b["levels"]) if isinstance(
-                                       b.get("levels"), str) else b.get("levels", ()),
-                                   float).reshape(-1, 2))))
-                      for b in data.get("boundaries", [])]
-        roughness = []
-        for zone in data.get("roughness", []):
-            for polygon in _polygon_list(zone.get("polygons", zone.get("polygon")), base) \
-                    if "file" not in zone else _polygon_list(zone, base):
-                roughness.append((tuple(map(tuple, polygon)), float(zone["manning"])))
+        inflows = tuple(_inflow(item, f"inflow {k + 1}", base)
+                        for k, item in enumerate(entries(data, "inflows", "inflow")))
+        boundaries = tuple(_boundary(item, f"boundary {k + 1}", base)
+                           for k, item in enumerate(entries(data, "boundaries", "boundary")))
+        roughness = tuple(polygon for k, zone in enumerate(
+            entries(data, "roughness", "roughness zone"))
+            for polygon in _roughness(zone, f"roughness zone {k + 1}", base))
         b = data.get("buildings") or {}
         buildings = Buildings(tuple(tuple(map(tuple, p)) for p in
-                                    (_polygon_list(b["polygons"], base) if "polygons" in b
-                                     else [])),
-                              b.get("mode", "raised"), float(b.get("height_m", 3.0)))
-        points = tuple((str(p.get("name", k + 1)), float(p["x"]), float(p["y"]))
-                       for k, p in enumerate(data.get("observation_points", [])))
-        return Scenario(duration_s=float(data["duration_s"]), inflows=tuple(inflows),
-                        boundaries=tuple(boundaries), manning=float(data.get("manning", 0.04)),
-                        roughness=tuple(roughness), buildings=buildings,
-                        initial_stage_m=data.get("initial_stage_m"),
-                        output_interval_s=float(data.get("output_interval_s", 10.0)),
-                        wet_depth_m=float(data.get("wet_depth_m", 0.05)),
-                        unstable_speed_m_s=float(data.get("unstable_speed_m_s", 20.0)),
-                        observation_points=points, cell_size_m=data.get("cell_size_m"))
-    except KeyError as exc:
-        raise FloodMeshError(f"the scenario lacks {exc}: see the scenario example "
-                             "in docs/user-guide.md") from None
+                                    (_polygon_list(b["polygons"], base, "the buildings' "
+                                                   "polygons") if "polygons" in b else [])),
+                              b.get("mode", "raised"),
+                              _number(b, "height_m", "the buildings", 3.0))
+        points = tuple((str(p.get("name", k + 1)), _number(p, "x", f"observation point {k + 1}"),
+                        _number(p, "y", f"observation point {k + 1}"))
+                       for k, p in enumerate(entries(data, "observation_points",
+                                                     "observation point")))
+        where = "the scenario"
+        return Scenario(duration_s=_number(data, "duration_s", where), inflows=inflows,
+                        boundaries=boundaries, manning=_number(data, "manning", where, 0.04),
+                        roughness=roughness, buildings=buildings,
+                        initial_stage_m=_number(data, "initial_stage_m", where, None),
+                        output_interval_s=_number(data, "output_interval_s", where, 10.0),
+                        wet_depth_m=_number(data, "wet_depth_m", where, 0.05),
+                        unstable_speed_m_s=_number(data, "unstable_speed_m_s", where, 20.0),
+                        observation_points=points,
+                        cell_size_m=_number(data, "cell_size_m", where, None, positive=True))
     except (TypeError, ValueError) as exc:
         if isinstance(exc, FloodMeshError):
             raise

@@ -321,6 +321,59 @@ def test_bad_scenarios_are_refused_with_the_fix(tmp_path):
         load_scenario(_write_text(tmp_path / "bad.json", "{"))
 
 
+def test_a_misspelt_key_at_any_level_is_refused_naming_it_where_and_the_right_one(tmp_path):
+    """A key FloodMesh does not read left its default in force without a word ('initial_stage':
+    a dry start; 'snap': 1 m): each is named, where it is, with the closest key, in one line."""
+    circle = {"center": [X0, Y0], "radius": 5}
+    path = _write(tmp_path / "s.json", {
+        "duration_s": 10, "inflows": [{"circle": circle, "discharge_m3s": 1, "Q": 2}],
+        "roughness": [{"file": "zones.gpkg", "manning": 0.1, "mannings": 0.2}],
+        "buildings": {"polygons": [], "height": 4},
+        "observation_points": [{"name": "a", "x": X0, "y": Y0, "z": 1}]})
+    with pytest.raises(FloodMeshError) as refused:
+        load_scenario(path)
+    message = str(refused.value)
+    for part in ("'center' in inflow 1's circle (did you mean 'centre'?",
+                 "'Q' in inflow 1 (did you mean 'discharge_m3s'?",
+                 "'mannings' in roughness zone 1 (did you mean 'manning'?",
+                 "'height' in the buildings (did you mean 'height_m'? it takes polygons, mode, "
+                 "height_m)", "'z' in observation point 1 (it takes name, x, y)"):
+        assert part in message
+    assert "\n" not in message
+
+
+def test_every_key_of_the_documented_scenario_is_read():
+    """The user guide's example scenario holds only keys FloodMesh reads."""
+    from floodmesh.core.flood import scenario_keys
+
+    guide = (Path(__file__).parents[2] / "docs" / "user-guide.md").read_text()
+    example = guide.split("### The scenario")[1].split("```json")[1].split("```")[0]
+    known = {key for name in ("SCENARIO", "INFLOW", "BOUNDARY", "ROUGHNESS", "BUILDINGS",
+                              "POINT", "CIRCLE", "SHAPES")
+             for key in getattr(scenario_keys, name)}
+    assert set(re.findall(r'"(\w+)":', example)) <= known
+
+
+def test_wrong_kinds_of_value_are_named_not_a_traceback(tmp_path):
+    """A list where an object belongs, text for a number, a second region: one line each."""
+    for scenario, words in [
+            ({"duration_s": 10, "inflows": {"line": [[0, 0], [1, 1]]}},
+             "the scenario's inflows must be a list of objects"),
+            ({"duration_s": 10, "manning": "n=0.03"},
+             "the scenario's manning must be a number, got 'n=0.03'"),
+            ({"duration_s": 10, "inflows": [{"line": [[0, 0], [1, 1], [2, 0]],
+                                             "discharge_m3s": 1}]},
+             "inflow 1's line has 3 points; an inflow line has 2"),
+            ({"duration_s": 10, "inflows": [{"line": [[0, 0], [1, 1]], "discharge_m3s": 1,
+                                             "circle": {"centre": [0, 0], "radius": 1}}]},
+             "inflow 1 needs one of region (a polygon), circle or line"),
+            ({"duration_s": 10, "inflows": [{"line": [[0, 0], [1, 1]],
+                                             "hydrograph": [[0, 1], [10, 2], [10, 3]]}]},
+             "the times in inflow 1's hydrograph must increase from row to row: row 3 (10 s)")]:
+        with pytest.raises(FloodMeshError, match=re.escape(words)):
+            load_scenario(_write(tmp_path / "s.json", scenario))
+
+
 def test_missing_anuga_is_one_line_naming_the_fix(tmp_path):
     rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0 * x)
     _write(tmp_path / "s.json", {"duration_s": 10})
