@@ -62,9 +62,17 @@ def _summary(report: dict, out) -> str:
              f"{report['cpu_s']:.1f} s CPU, {report['time_steps']} steps (mean "
              f"{report['mean_time_step_s']:.3g} s; smallest inradius {h['min_inradius_m']:.3g} m); "
              f"flooded {report['flooded_area_m2']:.0f} m², max depth {report['max_depth_m']:.2f} "
-             f"m, mass balance error {mb['error_m3']:.3g} m³ ({100 * mb['relative_error']:.2g} %)",
+             f"m, mass balance error {mb['error_m3']:.3g} m³ ({_share(mb)})",
              time_step_summary(report), f"written to {out}/"]
     return "\n".join(line for line in lines if line)
+
+
+def _share(mb: dict) -> str:
+    """The mass balance error's share, or why there is none."""
+    if mb["relative_error"] is None:
+        return (f"no share: under {mb['relative_error_floor_m3']:.3g} m³, 1 mm over the mesh, "
+                "came in or was there")
+    return f"{100 * mb['relative_error']:.2g} %"
 
 
 def _comparison(c: dict) -> str:
