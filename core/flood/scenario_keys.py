@@ -24,6 +24,7 @@ SYNONYMS = {"n": "manning", "mannings_n": "manning", "q": "discharge_m3s",
 RAIN = ("rain is not supported: give it as an inflow into the catchment's region, a "
         "discharge_m3s of intensity (mm/h) × area (m²) / 3,600,000, or a hydrograph of it")
 DOCS = "see docs/user-guide.md, The scenario"
+COMMENT = "_"  # JSON has no comments: a key beginning with it ("_comment", "_source") is one
 
 
 def check_keys(data) -> None:
@@ -92,7 +93,7 @@ def _shape(spec, where: str, found: list) -> None:
 
 def _unknown(entry: dict, known: tuple, where: str, found: list) -> None:
     for key in entry:
-        if key in known:
+        if key in known or str(key).startswith(COMMENT):
             continue
         if "rain" in str(key).lower() or "precip" in str(key).lower():
             found.append(f"{key!r} {where}: {RAIN}")

@@ -342,6 +342,16 @@ def test_a_misspelt_key_at_any_level_is_refused_naming_it_where_and_the_right_on
     assert "\n" not in message
 
 
+def test_keys_beginning_with_an_underscore_are_comments():
+    """JSON has no comments: modellers write "_comment" keys, at any level; they are read over,
+    and the scenario is the same as without them."""
+    plain = {"duration_s": 10, "boundaries": [{"kind": "outflow", "sides": ["east"]}]}
+    commented = {"_comment": "design flood", "duration_s": 10,
+                 "boundaries": [{"_why": "the river leaves east", "kind": "outflow",
+                                 "sides": ["east"]}]}
+    assert scenario_from_dict(commented) == scenario_from_dict(plain)
+
+
 def test_every_key_of_the_documented_scenario_is_read():
     """The user guide's example scenario holds only keys FloodMesh reads."""
     from floodmesh.core.flood import scenario_keys
