@@ -248,6 +248,24 @@ def _mesh_step(cli_options, qgis_parameters, size_field=None):
     return cli, qgis
 
 
+def _mesh_layer_case(id_, words, option, parameter, write):
+    """``floodmesh mesh`` and Build mesh on the bank DEM given, as ``option`` and ``parameter``,
+    the layer ``write(path)`` writes (once) into the case's folder."""
+    dem = _tif("dem.tif")
+
+    def layer(folder):
+        path = folder / f"{id_}.gpkg"
+        if not path.exists():
+            write(path)
+        return path
+
+    return BadInput(id_, words,
+                    lambda f: ["mesh", dem(f), option, layer(f), "--out", "{out}/mesh.2dm"],
+                    lambda f: ("floodmesh:buildmesh", {
+                        "DEM": str(dem(f)), parameter: str(layer(f)),
+                        "OUTPUT": str(f / "qgis-out" / "mesh.2dm")}))
+
+
 def _boundary_case(id_, words, polygon, crs=UTM):
     """``floodmesh mesh --boundary`` and Build mesh's BOUNDARY with a polygon layer holding
     ``polygon`` (local coordinates from ORIGIN) on the bank DEM."""
@@ -255,23 +273,33 @@ def _boundary_case(id_, words, polygon, crs=UTM):
     import shapely
     import shapely.affinity
 
-    dem = _tif("dem.tif")
+    def write(path):
+        with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(crs).to_wkt(),
+                        schema={"geometry": "Polygon", "properties": {}}) as dst:
+            moved = shapely.affinity.translate(polygon, *ORIGIN)
+            dst.write({"geometry": shapely.geometry.mapping(moved), "properties": {}})
 
-    def boundary(folder):
-        path = folder / f"{id_}.gpkg"
-        if not path.exists():
-            with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(crs).to_wkt(),
-                            schema={"geometry": "Polygon", "properties": {}}) as dst:
-                moved = shapely.affinity.translate(polygon, *ORIGIN)
-                dst.write({"geometry": shapely.geometry.mapping(moved), "properties": {}})
-        return path
+    return _mesh_layer_case(id_, words, "--boundary", "BOUNDARY", write)
 
-    return BadInput(id_, words,
-                    lambda f: ["mesh", dem(f), "--boundary", boundary(f), "--out",
-                               "{out}/mesh.2dm"],
-                    lambda f: ("floodmesh:buildmesh", {
-                        "DEM": str(dem(f)), "BOUNDARY": str(boundary(f)),
-                        "OUTPUT": str(f / "qgis-out" / "mesh.2dm")}))
+
+def _own_lines_case(id_, words, lines):
+    """``floodmesh mesh --lines`` and Build mesh's USER_LINES with a layer of 3-D lines
+    ``lines`` ((x, y, z) vertices, x and y local from ORIGIN) on the bank DEM."""
+    import fiona
+
+    def write(path):
+        with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(UTM).to_wkt(),
+                        schema={"geometry": "3D LineString", "properties": {}}) as dst:
+            for line in lines:
+                dst.write({"geometry": {"type": "LineString", "coordinates": [
+                    (x + ORIGIN[0], y + ORIGIN[1], z) for x, y, z in line]}, "properties": {}})
+
+    return _mesh_layer_case(id_, words, "--lines", "USER_LINES", write)
+
+
+# a road's line on the bank DEM's ground (z = 10 + 0.05 x) and a bridge deck's 7 m above it
+_ROAD = [(5, 30, 10.25), (25, 30, 11.25)]
+_DECK = [(20, 10, 18.0), (20, 50, 18.0)]
 
 
 def _bowtie():
@@ -466,6 +494,12 @@ CASES = [
                                    [(20, 20), (30, 20), (30, 30), (20, 30)])),
     _boundary_case("boundary-in-another-crs", "reproject it to the DEM's CRS",
                    _box(5, 5, 50, 50), crs="EPSG:32633"),
+    _own_lines_case("own-line-z-not-a-number",
+                    "feature 2, vertex 2 of 3 at (412020.00, 5652030.00), has a z of nan, not a "
+                    "number", [_DECK, [(5, 30, 10.25), (20, 30, np.nan), (25, 30, 11.25)]]),
+    _own_lines_case("own-line-x-not-a-number",
+                    "feature 1, vertex 2 of 3, has an x of nan, not a number",
+                    [[(5, 30, 10.25), (np.nan, 30, 11.0), (25, 30, 11.25)]]),
     BadInput("missing-file", "does not exist",
              lambda f: _run(f / "missing.laz"), _lidar(lambda f: f / "missing.laz")),
     BadInput("laz-holding-text", "not a readable LAS/LAZ",

@@ -850,9 +850,9 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
     """(domain, lines) from a user's boundary polygon file (None: the DEM's data) and a file of
     their own break or structure lines (2-D lines take z from the DEM), both checked against the
     DEM's CRS (their horizontal parts; the lines' heights too where both name them); a layer
-    without a CRS is taken in the DEM's, as QGIS takes it in the project's; ``tolerance`` (m) as
-    ``user_domain``'s; ``note`` hears of that, of line parts left out (zero length, not
-    numbers) and of domain left without data."""
+    without a CRS is taken in the DEM's, as QGIS takes it in the project's; lines with a
+    coordinate that is no number are refused; ``tolerance`` (m) as ``user_domain``'s; ``note``
+    hears of that, of line parts left out (zero length) and of domain left without data."""
     for path, what, heights in ((boundary, "boundary polygon", False),
                                 (user_lines, "user line", True)):
         if path is None:
@@ -868,7 +868,7 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
                                  f"the DEM in {dem.crs.name}; reproject it to the DEM's CRS")
     domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name,
                           tolerance=tolerance, note=note) if boundary is not None else None)
-    lines = io.read_lines_gpkg(user_lines, note) if user_lines is not None else []
+    lines = io.read_own_lines(user_lines, note)[0] if user_lines is not None else []
     if lines and note:
         _note_own_z_off_the_ground(lines, dem, Path(user_lines).name, note)
     return domain, lines

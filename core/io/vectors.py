@@ -378,14 +378,23 @@ def read_breaklines(path) -> list:
 
     return [BreakLine(coords, np.full(len(coords), np.nan),
                       int(properties.get("component_id") or 0))
-            for coords, properties in _line_parts(path)]
+            for coords, properties, _ in _line_parts(path)]
 
 
 def read_lines_gpkg(path, note=None) -> list[np.ndarray]:
     """Read the line features of a vector file as (k, 3) arrays (z = NaN where 2-D); parts that
     are no line (non-finite, or fewer than two distinct vertices) are left out, said to
     ``note``."""
-    return [coords for coords, _ in _line_parts(path, note)]
+    return [coords for coords, _, _ in _line_parts(path, note)]
+
+
+def read_own_lines(path, note=None) -> tuple[list[np.ndarray], list[int]]:
+    """A modeller's own lines as ``read_lines_gpkg`` reads them, and the number of the feature
+    (1, 2, … in the layer's order) each came from. A vertex whose x, y or z (where the layer
+    has z) is no finite number is refused, naming it: the line it belongs to is a structure
+    the modeller drew, which neither a note nor the DEM's z at one vertex may stand in for."""
+    parts = _line_parts(path, note, finite=True)
+    return [coords for coords, _, _ in parts], [number for _, _, number in parts]
 
 
 def _line_part(part, z_missing=np.nan) -> np.ndarray | None:
@@ -400,8 +409,11 @@ def _line_part(part, z_missing=np.nan) -> np.ndarray | None:
     return arr if len(arr) >= 2 else None
 
 
-def _line_parts(path, note=None) -> list[tuple[np.ndarray, dict]]:
-    """Each part of each line feature as ((k, 3) coordinates, the feature's attributes)."""
+def _line_parts(path, note=None, *,
+                finite: bool = False) -> list[tuple[np.ndarray, dict, int]]:
+    """Each part of each line feature as ((k, 3) coordinates, the feature's attributes, its
+    number: 1, 2, … in the layer's order); with ``finite``, a vertex whose x, y or z (where
+    given) is no finite number is refused (``_refuse_non_finite``)."""
     # lazy: OGR loads only when this runs
     import fiona
 
@@ -419,12 +431,15 @@ def _line_parts(path, note=None) -> list[tuple[np.ndarray, dict]]:
                     raise FloodMeshError(f"{path.name} holds {geom['type']} features; "
                                          "break lines must be lines")
                 properties = dict(feat["properties"])
-                for part in parts:
+                for k, part in enumerate(parts, 1):
+                    if finite:
+                        _refuse_non_finite(part, f"{path.name}: feature {number}"
+                                           f"{f' (part {k})' if len(parts) > 1 else ''}")
                     arr = _line_part(part)
                     if arr is None:
                         dropped.append(number)
                     else:
-                        parts_out.append((arr, properties))
+                        parts_out.append((arr, properties, number))
     except fiona.errors.FionaError as exc:
         raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
     if dropped and note:
@@ -432,6 +447,24 @@ def _line_parts(path, note=None) -> list[tuple[np.ndarray, dict]]:
              f"{', '.join(map(str, sorted(set(dropped))[:10]))} left out: zero length (fewer "
              "than two distinct vertices) or coordinates that are not numbers")
     return parts_out
+
+
+def _refuse_non_finite(part, where: str) -> None:
+    """Refuse a line ``part`` (vertices of 2 or 3 coordinates) holding a coordinate that is no
+    finite number (NaN, infinite), naming the vertex (1, 2, … along the line) of the feature
+    ``where`` names, with its x, y where those are numbers."""
+    for k, vertex in enumerate(part, 1):
+        bad = [(axis, value) for axis, value in zip("xyz", vertex[:3]) if not math.isfinite(value)]
+        if not bad:
+            continue
+        axis, value = bad[0]
+        article = "an" if axis == "x" else "a"
+        place = (f" at ({vertex[0]:.2f}, {vertex[1]:.2f})"
+                 if all(math.isfinite(v) for v in vertex[:2]) else "")
+        fix = ("give it its height, or save the layer without Z to give the lines the DEM's z"
+               if axis == "z" else "move or delete that vertex (QGIS: Vertex tool)")
+        raise FloodMeshError(f"{where}, vertex {k} of {len(part)}{place}, has {article} {axis} of "
+                             f"{value}, not a number; {fix}")
 
 
 def read_regions(path, *, field: str | None = None, what: str = "regions") -> list:

@@ -1,7 +1,8 @@
-"""The modeller's own lines and domain, checked on entry: a zero-length line, repeated vertices
-or coordinates that are no numbers are left out with a note naming the feature (a zero-length
-line beside a good one ended a run with a GEOS traceback after the mesh was built); a domain
-reaching beyond the data is clipped with a note giving the area left out."""
+"""The modeller's own lines and domain, checked on entry: a zero-length line or repeated
+vertices are left out with a note naming the feature (a zero-length line beside a good one ended
+a run with a GEOS traceback after the mesh was built); a coordinate that is no number is refused
+(tests/bad_inputs.py); a domain reaching beyond the data is clipped with a note giving the area
+left out."""
 import json
 import subprocess
 import sys
