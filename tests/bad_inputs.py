@@ -494,6 +494,9 @@ CASES = [
                                    [(20, 20), (30, 20), (30, 30), (20, 30)])),
     _boundary_case("boundary-in-another-crs", "reproject it to the DEM's CRS",
                    _box(5, 5, 50, 50), crs="EPSG:32633"),
+    _own_lines_case("own-lines-crossing-at-two-heights",
+                    "features 1 and 2 cross at (412020.00, 5652030.00) at heights 11.00 and "
+                    "18.00 m, 7.00 m apart", [_ROAD, _DECK]),
     _own_lines_case("own-line-z-not-a-number",
                     "feature 2, vertex 2 of 3 at (412020.00, 5652030.00), has a z of nan, not a "
                     "number", [_DECK, [(5, 30, 10.25), (20, 30, np.nan), (25, 30, 11.25)]]),

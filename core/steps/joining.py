@@ -394,3 +394,74 @@ def crossing_points(lines, *, min_angle: float = 30.0, reach: float = 2.0) -> np
 
     cos = np.abs((direction(first[which]) * direction(second[which])).sum(axis=1))
     return points[cos < np.cos(np.radians(min_angle))]
+
+
+def height_clashes(lines, *, near: float, rise: float) -> np.ndarray:
+    """Where two of ``lines`` ((k, 3) arrays, m; a line with NaN z, 2-D, is passed over), or two
+    segments of one line that do not follow each other, cross or come within ``near`` m in
+    plan at heights (each along its own line) more than ``rise`` m apart: one mesh node there
+    can take one z only. Rows (c, 6) of x, y, the one line's z, the other's, and the two
+    lines' indices, the largest height difference first."""
+    # lazy: GEOS loads only when this runs
+    import shapely
+
+    segments, owner, order = [], [], []
+    for i, c in enumerate(lines):
+        c = np.asarray(c, float)
+        if c.ndim != 2 or c.shape[1] < 3 or len(c) < 2 or not np.isfinite(c[:, 2]).all():
+            continue
+        segments.append(np.stack([c[:-1, :3], c[1:, :3]], axis=1))
+        owner.append(np.full(len(c) - 1, i))
+        order.append(np.arange(len(c) - 1))
+    if not segments:
+        return np.zeros((0, 6))
+    seg, owner, order = np.concatenate(segments), np.concatenate(owner), np.concatenate(order)
+    plan = shapely.linestrings(seg[:, :, :2])
+    a, b = shapely.STRtree(plan).query(plan, predicate="dwithin", distance=near)
+    keep = (a < b) & ~((owner[a] == owner[b]) & (np.abs(order[a] - order[b]) == 1))
+    a, b = a[keep], b[keep]
+    if not len(a):
+        return np.zeros((0, 6))
+    # the two segments' nearest points lie where they cross or at an end of one of them; over
+    # a stretch where they run within ``near``, the heights part most at such an end too
+    found = [_where_crossing(seg[a], seg[b])]
+    for one, other, swap in ((seg[a], seg[b], False), (seg[b], seg[a], True)):
+        for end in (0, 1):
+            at, on = one[:, end], _nearest_on(one[:, end], other)
+            found.append((on, at) if swap else (at, on))
+    first = np.stack([f[0] for f in found])   # (5, pairs, 3): the point on a's segment
+    second = np.stack([f[1] for f in found])  # ... and on b's
+    apart = np.hypot(*(first[..., :2] - second[..., :2]).transpose(2, 0, 1))
+    difference = np.where(apart <= near, np.abs(first[..., 2] - second[..., 2]), -np.inf)
+    pick = np.argmax(difference, axis=0)
+    pairs = np.arange(len(a))
+    worst = difference[pick, pairs]
+    clash = np.flatnonzero(worst > rise)
+    clash = clash[np.argsort(-worst[clash], kind="stable")]
+    p, q = first[pick[clash], clash], second[pick[clash], clash]
+    return np.column_stack([(p[:, :2] + q[:, :2]) / 2, p[:, 2], q[:, 2], owner[a[clash]],
+                            owner[b[clash]]])
+
+
+def _nearest_on(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """The point (k, 3) of each segment ((k, 2, 3), m) nearest in plan to each of ``points``
+    (k, 2+), its z along the segment."""
+    start, step = segments[:, 0], segments[:, 1] - segments[:, 0]
+    length2 = (step[:, :2] ** 2).sum(axis=1)
+    t = ((points[:, :2] - start[:, :2]) * step[:, :2]).sum(axis=1) / np.where(length2 > 0,
+                                                                               length2, 1.0)
+    return start + np.clip(t, 0.0, 1.0)[:, None] * step
+
+
+def _where_crossing(one: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each segment of ``one`` ((k, 2, 3), m) crosses the one of ``other`` in plan: the
+    point on each (k, 3), z along it; NaN where they do not cross (parallel ones included)."""
+    d1, d2 = one[:, 1] - one[:, 0], other[:, 1] - other[:, 0]
+    gap = other[:, 0] - one[:, 0]
+    denominator = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (gap[:, 0] * d2[:, 1] - gap[:, 1] * d2[:, 0]) / denominator
+        u = (gap[:, 0] * d1[:, 1] - gap[:, 1] * d1[:, 0]) / denominator
+    crossing = (denominator != 0) & (t >= 0) & (t <= 1) & (u >= 0) & (u <= 1)
+    t, u = np.where(crossing, t, np.nan), np.where(crossing, u, np.nan)
+    return one[:, 0] + t[:, None] * d1, other[:, 0] + u[:, None] * d2

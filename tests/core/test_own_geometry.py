@@ -89,7 +89,8 @@ def test_own_lines_far_off_the_ground_are_named(demo_points_file, tmp_path):
     x0, y0 = xyz[:, 0].min(), xyz[:, 1].min()
     along = np.linspace(0, 1, 6)[:, None]
     zero = np.column_stack([x0 + 40 + 200 * along, y0 + 30 + 120 * along, 0 * along])
-    raised = np.column_stack([x0 + 60 + 200 * along, y0 + 170 - 60 * along])
+    # apart from the first: crossing it 20 m higher would be refused
+    raised = np.column_stack([x0 + 60 + 200 * along, y0 + 200 - 20 * along])
     raised = np.column_stack([raised, demo.ground_elevation(raised[:, 0] - demo.DEMO_ORIGIN[0],
                                                             raised[:, 1] - demo.DEMO_ORIGIN[1],
                                                             demo.DEMO) + 0.4])
@@ -156,3 +157,90 @@ def test_boundary_layer_named_as_qgis_names_it(tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     nodes, _ = io.read_mesh_2dm(tmp_path / "mesh.2dm")
     assert np.ptp(nodes[:, 0]) > 40 and nodes[:, 0].min() - ORIGIN[0] < 6
+
+
+def _bridge(x0, y0, dem_z, rise):
+    """A road's line on the ground and a bridge deck's line ``rise`` m above it, crossing at
+    (x0 + 150, y0 + 100); ``dem_z(x, y)`` the ground's z."""
+    import numpy as np
+
+    along = np.linspace(0, 1, 5)[:, None]
+    road = np.column_stack([x0 + 100 + 100 * along, np.full_like(along, y0 + 100)])
+    deck = np.column_stack([np.full_like(along, x0 + 150), y0 + 40 + 130 * along])
+    road = np.column_stack([road, dem_z(road[:, 0], road[:, 1])])
+    deck = np.column_stack([deck, np.full(len(deck), dem_z(x0 + 150, y0 + 100) + rise)])
+    return road, deck
+
+
+def _lines_3d(path, lines):
+    schema = {"geometry": "3D LineString", "properties": {"name": "str"}}
+    with fiona.open(path, "w", driver="GPKG", schema=schema,
+                    crs_wkt=CRS.from_epsg(25832).to_wkt()) as dst:
+        for k, coords in enumerate(lines):
+            dst.write({"geometry": {"type": "LineString", "coordinates": coords.tolist()},
+                       "properties": {"name": str(k)}})
+
+
+def test_own_3d_lines_crossing_at_two_heights_are_refused(demo_points_file, tmp_path):
+    """From the user's side: a road's line on the ground and a bridge deck's 7 m above it, one
+    layer with Z, crossing (vertices 40 m apart: neither has a vertex at the crossing). The run
+    meshed them without a word, the crossing's node at the ground and the deck's line running
+    down to it: a 7 m spike. It stops, naming the crossing, both heights and the fixes, and
+    writes nothing."""
+    from floodmesh.core import io
+    from floodmesh.core.frontends import demo
+
+    xyz = io.read_points(demo_points_file).xyz
+    x0, y0 = xyz[:, 0].min(), xyz[:, 1].min()
+
+    def ground(x, y):
+        return demo.ground_elevation(x - demo.DEMO_ORIGIN[0], y - demo.DEMO_ORIGIN[1], demo.DEMO)
+
+    road, deck = _bridge(x0, y0, ground, 7.0)
+    _lines_3d(tmp_path / "own.gpkg", [road, deck])
+    run = _run(demo_points_file, tmp_path / "out", "--lines", str(tmp_path / "own.gpkg"))
+    assert run.returncode == 2, run.stderr[-3000:]
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in run.stderr, lines
+    assert (f"own.gpkg: features 1 and 2 cross at ({x0 + 150:.2f}, {y0 + 100:.2f}) at heights "
+            f"{road[2, 2]:.2f} and {deck[0, 2]:.2f} m, 7.00 m apart") in lines[0], lines
+    assert "Cut one line short of the crossing" in lines[0] and "without Z" in lines[0]
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
+
+
+def test_own_3d_lines_meeting_at_one_height_are_meshed(tmp_path):
+    """From the user's side: 3-D lines of one layer meeting at one height, as a modeller's
+    lines do: a road crossing another (5 cm apart there, as two surveys agree), a lane ending
+    on the road (a T-junction) and the road's continuation end to end. The mesh step takes
+    them, with a node at each meeting point."""
+    import numpy as np
+
+    from floodmesh.core import io
+
+    from ..bad_inputs import ORIGIN, slope_dem, write_tif
+
+    dem = write_tif(tmp_path / "dem.tif", slope_dem())
+    x0, y0 = ORIGIN
+
+    def ground(x, y):
+        return 10.0 + 0.05 * (np.asarray(x) - x0)  # the bank DEM west of its step
+
+    def line(*xy, lift=0.0):
+        xy = np.asarray(xy, float) + ORIGIN
+        return np.column_stack([xy, ground(xy[:, 0], xy[:, 1]) + lift])
+
+    lines = [line((5, 30), (25, 30)), line((25, 30), (28, 45)),  # the road, end to end
+             line((15, 10), (15, 50), lift=0.05),                # a road crossing it
+             line((10, 50), (10, 30))]                            # a lane ending on it
+    _lines_3d(tmp_path / "own.gpkg", lines)
+    run = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "mesh", str(dem),
+                          "--lines", str(tmp_path / "own.gpkg"), "--out",
+                          str(tmp_path / "mesh.2dm")], capture_output=True, text=True,
+                         timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    nodes, _ = io.read_mesh_2dm(tmp_path / "mesh.2dm")
+    for x, y in ((15, 30), (10, 30), (25, 30)):
+        near = np.hypot(nodes[:, 0] - x0 - x, nodes[:, 1] - y0 - y)
+        assert near.min() < 0.01, (x, y)
+        assert abs(nodes[near.argmin(), 2] - ground(x0 + x, 0)) < 0.2
+
