@@ -494,6 +494,10 @@ CASES = [
                                    [(20, 20), (30, 20), (30, 30), (20, 30)])),
     _boundary_case("boundary-in-another-crs", "reproject it to the DEM's CRS",
                    _box(5, 5, 50, 50), crs="EPSG:32633"),
+    _boundary_case("boundary-smaller-than-four-cells",
+                   "is too small to mesh: it covers 2.25 m² of the DEM's data (2.25 m² in all), "
+                   "and a part needs more than 4 cells, 4 m² at the cell size of 1 m",
+                   _box(20, 20, 21.5, 21.5)),
     _own_lines_case("own-lines-crossing-at-two-heights",
                     "features 1 and 2 cross at (412020.00, 5652030.00) at heights 11.00 and "
                     "18.00 m, 7.00 m apart", [_ROAD, _DECK]),

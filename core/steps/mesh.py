@@ -124,13 +124,20 @@ def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon",
     boundary = shapely.union_all(polygons)
     data = domain_from_dem(dem, tolerance=tolerance)
     domain = shapely.intersection(boundary, data)
+    least = 4 * dem.cell_size ** 2  # domain_from_dem's least part: 4 cells
     polygons = [p for p in getattr(domain, "geoms", [domain])
-                if p.geom_type == "Polygon" and p.area > 4 * dem.cell_size ** 2]
+                if p.geom_type == "Polygon" and p.area > least]
+    if not polygons and domain.area > 0:
+        raise FloodMeshError(
+            f"{name} is too small to mesh: it covers {domain.area:.3g} m² of the DEM's data "
+            f"({boundary.area:.3g} m² in all), and a part needs more than 4 cells, "
+            f"{least:.3g} m² at the cell size of {dem.cell_size:g} m; draw a larger domain, "
+            "or grid with smaller cells")
     if not polygons:
         raise FloodMeshError(f"{name} does not overlap the DEM's data (the data cover "
                              f"{data.bounds}); check that both are in the same CRS")
     clipped = boundary.area - sum(p.area for p in polygons)
-    if note and clipped > max(0.01 * boundary.area, 4 * dem.cell_size ** 2):
+    if note and clipped > max(0.01 * boundary.area, least):
         note(f"{clipped:,.0f} m² ({100 * clipped / boundary.area:.0f} %) of the model domain "
              f"{name} has no data (outside the survey, or in its gaps) and is left out of the "
              "mesh: extend the survey there, or draw the domain within the data")
