@@ -143,7 +143,37 @@ def user_domain(polygons, dem: Grid, *, name: str = "the boundary polygon",
              "mesh: extend the survey there, or draw the domain within the data")
     domain = shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
     _refuse_touching_parts(domain, name)
+    if note:
+        _note_narrow_parts(domain, dem.cell_size, name, note)
     return domain
+
+
+# A stretch of the domain narrower than a cell is named where it covers this many cells' area
+# or more: a corner sharper than 14 degrees does (its tip narrower than a cell), a square
+# corner or the rounding of a cell's staircase does not
+NARROW_CELLS = 2.0
+
+
+def _note_narrow_parts(domain, cell_size: float, name: str, note) -> None:
+    """Tell ``note`` where the ``domain`` is narrower than ``cell_size`` m (what an opening by
+    half a cell takes away, in pieces of ``NARROW_CELLS`` cells' area or more): meshed as
+    drawn, but the DEM holds one height a cell across it, and its triangles, smaller than a
+    cell, would set a flood model's time step."""
+    half = cell_size / 2
+    opened = domain.buffer(-half, join_style="mitre").buffer(half, join_style="mitre")
+    pieces = shapely.get_parts(shapely.difference(domain, opened))
+    pieces = pieces[shapely.area(pieces) >= NARROW_CELLS * cell_size ** 2]
+    if not len(pieces):
+        return
+    largest = pieces[np.argmax(shapely.area(pieces))]
+    x, y = shapely.get_coordinates(shapely.point_on_surface(largest))[0]
+    length = float(shapely.length(pieces).sum()) / 2  # a strip's outline runs along it twice
+    more = f" and {len(pieces) - 1} other place(s)" if len(pieces) > 1 else ""
+    note(f"{name}: the model domain is narrower than a cell ({cell_size:g} m) along some "
+         f"{length:,.0f} m, around ({x:.2f}, {y:.2f}){more}; meshed as drawn, but the mesh "
+         "there cannot follow the terrain across it (the DEM has one height a cell), and its "
+         "triangles, smaller than a cell, would set a flood model's time step: widen the "
+         "domain there, or grid with smaller cells")
 
 
 def build_pslg(lines: list[np.ndarray], domain, *, snap: float,

@@ -1,8 +1,9 @@
 """The modeller's own lines and domain, checked on entry: a zero-length line or repeated
 vertices are left out with a note naming the feature (a zero-length line beside a good one ended
-a run with a GEOS traceback after the mesh was built); a coordinate that is no number is refused
-(tests/bad_inputs.py); a domain reaching beyond the data is clipped with a note giving the area
-left out."""
+a run with a GEOS traceback after the mesh was built); a coordinate that is no number, or 3-D
+lines crossing at two heights, are refused; a domain reaching beyond the data is clipped with a
+note giving the area left out, and one narrower than a cell in places is meshed with a note
+saying where."""
 import json
 import subprocess
 import sys
@@ -244,3 +245,34 @@ def test_own_3d_lines_meeting_at_one_height_are_meshed(tmp_path):
         assert near.min() < 0.01, (x, y)
         assert abs(nodes[near.argmin(), 2] - ground(x0 + x, 0)) < 0.2
 
+
+def test_a_domain_narrower_than_a_cell_is_named(tmp_path):
+    """From the user's side: a model domain of a 20 m square and, drawn on with it, a strip
+    0.5 m wide and 30 m long on a DEM of 1 m cells (a slip of the mouse, or a ditch drawn as
+    the domain). It was meshed without a word: triangles of a fraction of a cell there, on
+    terrain the DEM holds one height a cell across. It is meshed, and a note names the strip:
+    where, how long, and the fixes; the square alone gets no such note."""
+    import shapely.affinity
+
+    from ..bad_inputs import ORIGIN, slope_dem, write_tif
+
+    dem = write_tif(tmp_path / "dem.tif", slope_dem())
+    square = shapely.geometry.box(5, 5, 25, 25)
+    strip = shapely.geometry.box(25, 15, 55, 15.5)
+    notes = {}
+    for name, domain in (("strip", shapely.union_all([square, strip])), ("square", square)):
+        write_regions(tmp_path / f"{name}.gpkg", [(shapely.affinity.translate(domain, *ORIGIN),
+                                                   1)])
+        run = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "mesh",
+                              str(dem), "--boundary", str(tmp_path / f"{name}.gpkg"), "--out",
+                              str(tmp_path / f"{name}.2dm")], capture_output=True, text=True,
+                             timeout=600)
+        assert run.returncode == 0, run.stderr[-3000:]
+        assert (tmp_path / f"{name}.2dm").is_file()
+        notes[name] = [line for line in run.stderr.splitlines() if "narrower" in line]
+    assert not notes["square"], notes
+    assert len(notes["strip"]) == 1, notes
+    x, y = ORIGIN[0] + 40, ORIGIN[1] + 15.25
+    assert (f"strip.gpkg: the model domain is narrower than a cell (1 m) along some 30 m, "
+            f"around ({x:.2f}, {y:.2f})") in notes["strip"][0]
+    assert "widen the domain there, or grid with smaller cells" in notes["strip"][0]
