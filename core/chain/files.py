@@ -168,7 +168,7 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
 
 
 def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
-    """(DEM, break lines and the user's own, domain) of a meshing step."""
+    """(DEM, break lines, the user's own lines, domain) of a meshing step."""
     # lazy: numba, PROJ and GEOS load only when this runs
     from .pipeline import mesh_constraints
 
@@ -176,7 +176,7 @@ def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
     check_dem_size(terrain.values, terrain.cell_size, f"raster {Path(dem).name}")
     lines = io.read_lines_gpkg(breaklines) if breaklines else []
     domain, own = mesh_constraints(terrain, boundary, user_lines, note=note)
-    return terrain, lines + own, domain
+    return terrain, lines, own, domain
 
 
 def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_field=None,
@@ -199,15 +199,16 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     check_max_area(max_area)
     check_max_triangles(max_triangles)
     check_flow_area(flow_area)
-    terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
+    terrain, lines, own, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
     size = size_from(size_field, terrain, max_area=max_area, min_area=min_area)
     flow_area = flow_area_for(flow_area, terrain.cell_size)
     # smaller triangles where water flows and the terrain needs them (see drainage)
     flow = None if flow_area is None else flow_size(terrain, flow_area=flow_area)
     result_mesh, _, _ = flow_refined(lambda size, _, told: build_mesh(
-        terrain, lines, min_angle=min_angle, max_area=max_area, conforming=conforming,
-        domain=domain, size_field=size, max_triangles=max_triangles, note=told),
-        size, flow, None, terrain, lines=lines, note=note)
+        terrain, lines, own_lines=own, min_angle=min_angle, max_area=max_area,
+        conforming=conforming, domain=domain, size_field=size, max_triangles=max_triangles,
+        note=told),
+        size, flow, None, terrain, lines=lines + own, note=note)
     io.write_mesh_2dm(output, result_mesh.nodes, result_mesh.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "crs": terrain.crs.to_wkt()}
     if triangles:
@@ -251,7 +252,7 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
     check_max_area(max_area)
     check_refinement(lower, upper, target_rmse=target_rmse, target_max=target_max, noise=noise,
                      max_rounds=max_rounds, max_nodes=max_nodes)
-    terrain, lines, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
+    terrain, lines, own, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
     measured = measured_points(points, crs, terrain.crs, note)[0]
     check_xyz = measured_points(check, crs, terrain.crs, note)[0] if check else None
     if check_xyz is not None:
@@ -260,7 +261,8 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
                                   min_angle=min_angle, max_area=max_area, lower=lower,
                                   upper=upper, target_rmse=target_rmse, target_max=target_max,
                                   max_nodes=max_nodes, max_rounds=max_rounds, noise=noise,
-                                  progress=progress, cancelled=cancelled, note=note)
+                                  mesh_options=dict(own_lines=own), progress=progress,
+                                  cancelled=cancelled, note=note)
     io.write_mesh_2dm(output, refined.nodes, refined.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "NODES": len(refined.nodes), "RMSE": rounds[-1].rmse_m,
               "crs": terrain.crs.to_wkt()}

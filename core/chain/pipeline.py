@@ -199,7 +199,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
         thinned to the flow ``spacing`` (a Grid, or None), its repairs said to ``told``."""
         kept["lines"], kept["stats"] = (plain if spacing is None else _lines_for_flood(
             front, options, lines, domain, spacing, low_ground))
-        return build_mesh(front.dem, kept["lines"] + front.own_lines,
+        return build_mesh(front.dem, kept["lines"], own_lines=front.own_lines,
                           min_angle=options.min_angle, max_area=max_area,
                           conforming=options.conforming, domain=domain, size_field=size,
                           max_triangles=options.max_triangles,
@@ -208,8 +208,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
     mesh, size, flow_zone = steps.run("mesh", flow_refined, build, size, flow, spacing,
                                       front.dem, lines=plain[0] + front.own_lines, note=note)
     detected, line_stats = kept["lines"], kept["stats"]
-    mesh_lines = detected + front.own_lines
-    mesh, rounds = _terrain_z(mesh, front, options, steps, fits, mesh_lines, domain, size,
+    mesh, rounds = _terrain_z(mesh, front, options, steps, fits, detected, domain, size,
                               max_area, cancelled, low_ground, note)
     # the terrain fits are done: their points and index go before the assessment and writing
     size = fits.index = front.measured = None
@@ -408,10 +407,11 @@ def _refining(options: RunOptions) -> bool:
 
 
 def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _TerrainFits,
-               mesh_lines, domain, size, max_area, cancelled, low_ground=None, note=None):
+               detected, domain, size, max_area, cancelled, low_ground=None, note=None):
     """(mesh, refinement rounds): refined on the points gridded until the bounds hold (``note``
     hears what they left), or its node z fitted on them (``node_elevation="plane"``); the
-    held-out points stay independent."""
+    held-out points stay independent. ``detected``: the mesh's detected lines, meshed with the
+    modeller's own."""
     delta = front.dem.cell_size / 2
 
     def elevations(mesh):
@@ -419,9 +419,9 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
         if options.node_elevation != "plane":
             return mesh
         points, fit_index = fits.measured()
-        z, counts = fit_node_elevations(mesh.nodes, points, mesh_lines, fits.window.node_radius,
-                                        on_line=delta / 10, index=fit_index,
-                                        noise=fits.window.noise)
+        z, counts = fit_node_elevations(mesh.nodes, points, detected + front.own_lines,
+                                        fits.window.node_radius, on_line=delta / 10,
+                                        index=fit_index, noise=fits.window.noise)
         fits.node_counts.update(counts)
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 
@@ -432,10 +432,11 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
                   elevations=elevations, max_nodes=options.max_triangles,
                   noise=fits.window.noise if fits.window else None, cancelled=cancelled,
                   note=note,
-                  mesh_options=dict(max_triangles=options.max_triangles,
+                  mesh_options=dict(own_lines=front.own_lines,
+                                    max_triangles=options.max_triangles,
                                     corner_gap=options.min_spacing or None))
     if options.refine:
-        return steps.run("refine", refine_mesh, front.dem, mesh_lines, fits.measured()[0],
+        return steps.run("refine", refine_mesh, front.dem, detected, fits.measured()[0],
                          lower=options.refine_lower, upper=options.refine_upper, **common)
     # folds no line describes (crossings, junctions, rounded ends), split without new points;
     # one point in k, some MISFIT_DENSITY a m² (a split triangle holds 8 cells² or more), chosen
@@ -444,9 +445,9 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
     points = every_nth_by_place(fits.measured()[0], every)
     floor = MISFIT_FLOOR_CELLS * front.dem.cell_size ** 2
     low_floor = None if low_ground is None else _low_ground_floor(
-        low_ground, mesh_lines, floor, MISFIT_CROSSING_CELLS * front.dem.cell_size)
+        low_ground, detected + front.own_lines, floor, MISFIT_CROSSING_CELLS * front.dem.cell_size)
     clearance = 2 * _line_spacing(front, options)  # the band the lines keep clear of
-    return steps.run("refine", refine_mesh, front.dem, mesh_lines, points,
+    return steps.run("refine", refine_mesh, front.dem, detected, points,
                      lower=MISFIT_EXCESS, upper=None, max_rounds=options.misfit_passes + 1,
                      most=MISFIT_SHARE, measure_last=False,
                      floor_at=_off_edge(low_floor, floor, domain, clearance),

@@ -101,7 +101,7 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
                 simplified[key], _ = lines_for_hydraulics(
                     simplified[key], domains[key], spacing=spacing, own_lines=own_lines)
         told = said[setting.label] = []
-        mesh = build_mesh(dem, simplified[key] + list(own_lines), min_angle=min_angle,
+        mesh = build_mesh(dem, simplified[key], own_lines=own_lines, min_angle=min_angle,
                           max_area=setting.max_area, domain=domains[key], note=told.append)
         res = residuals(mesh, check_xyz)
         outside = outside_mesh_note(check_xyz, res, dem, domain is not None)

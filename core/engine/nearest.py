@@ -54,6 +54,32 @@ def nearest_line(xy: np.ndarray, lines: list) -> tuple[np.ndarray, np.ndarray]:
                                 np.ascontiguousarray(vertices[first + 1]), owner)
 
 
+def z_along_lines(xy: np.ndarray, lines: list, *, within: float):
+    """(horizontal distance in m from each point of ``xy`` (n, 2+) to the nearest of ``lines``
+    ((k, 3) arrays; fewer than 2 vertices: left out), indices of the points within ``within`` m
+    of it, their z along it): a line's z interpolated linearly along its segment there, where
+    it has one (a modeller's 2-D line, read with NaN z, gives none). Where two lines are
+    equally near (a crossing, a shared vertex), the one listed first. The one rule for a node on
+    a line, in the mesh and in the terrain fits."""
+    # lazy: GEOS loads only when this runs
+    import shapely
+
+    usable = [np.asarray(c, float) for c in lines if len(c) >= 2]
+    if not usable or not len(xy):
+        return np.full(len(xy), np.inf), np.zeros(0, np.int64), np.zeros(0)
+    nearest, distance = nearest_line(xy, usable)
+    pick = np.flatnonzero(distance <= within)
+    geoms = np.array([shapely.LineString(c[:, :3] if c.shape[1] >= 3 else c[:, :2])
+                      for c in usable], dtype=object)
+    at = geoms[nearest[pick]]
+    on = np.asarray(xy, float)[pick, :2]
+    # NaN where the line has no z there: a 2-D line's get_z, or a vertex read without z
+    z = shapely.get_z(shapely.line_interpolate_point(at, shapely.line_locate_point(
+        at, shapely.points(on))))
+    known = np.isfinite(z)
+    return distance, pick[known], z[known]
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def _nearest_segment(p, a, b, owner):
     """(owner of the nearest segment a–b, its distance) per point of ``p``, the lowest owner

@@ -28,7 +28,7 @@ import shapely
 from numba import njit, prange
 
 from ..engine.arrays import distance_along, true_runs
-from ..engine.nearest import nearest_line, point_index, threads_for
+from ..engine.nearest import nearest_line, point_index, threads_for, z_along_lines
 from ..errors import FloodMeshError
 from .breaklines import BreakLine
 from .joining import bridges, chains_through, join_pieces, snap_t_junctions
@@ -582,27 +582,17 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
                         radius: float, *, on_line: float, index=None,
                         noise: float | None = None) -> tuple[np.ndarray, dict]:
     """Node elevations (n,) with the noise taken out: nodes within ``on_line`` m of a break line
-    (k, 3 arrays) take z along it (keep theirs where the line has no z there: a modeller's
+    (k, 3 arrays) take z along it (``z_along_lines``, as ``build_mesh`` gives those on the
+    modeller's own lines; keep theirs where the line has no z there: a modeller's
     2-D line, read with NaN z); the others z of a least-squares plane of ``points`` within
     ``radius`` m (at most 0.9 of their distance to the nearest line, at least ``on_line``·10),
     or keep theirs where fewer than 6 points are there (a node equally near two lines takes
     the one listed first). Returns z and counts."""
     z = np.asarray(nodes[:, 2], float).copy()
     xy = np.asarray(nodes[:, :2], float)
-    usable = [np.asarray(c, float) for c in lines if len(c) >= 2]
-    distance = np.full(len(xy), np.inf)
-    on = np.zeros(len(xy), bool)
-    if usable:
-        geoms = np.array([shapely.LineString(c[:, :3] if c.shape[1] >= 3 else c[:, :2])
-                          for c in usable], dtype=object)
-        nearest, distance = nearest_line(xy, usable)
-        on = distance <= on_line
-        pick = np.nonzero(on)[0]
-        along = shapely.line_locate_point(geoms[nearest[pick]], shapely.points(xy[pick]))
-        # NaN where the line has no z there: a 2-D line's get_z, or a vertex read without z
-        on_z = shapely.get_z(shapely.line_interpolate_point(geoms[nearest[pick]], along))
-        known = np.isfinite(on_z)
-        z[pick[known]] = on_z[known]
+    distance, at, on_z = z_along_lines(xy, lines, within=on_line)
+    z[at] = on_z
+    on = distance <= on_line
     off = ~on
     r = np.clip(0.9 * distance[off], min(radius, 10 * on_line), radius)
     index = index if index is not None else point_index(points)

@@ -706,16 +706,19 @@ def containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarra
     return locate(xy, triangles, points)[0]
 
 
-def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
+def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float = 25.0,
                max_area: float = 100.0, conforming: bool = False, snap: float | None = None,
                domain=None, points: np.ndarray | None = None,
                local_areas: np.ndarray | None = None, size_field: Grid | None = None,
                max_triangles: int = DEFAULT_MAX_TRIANGLES, corner_gap: float | None = None,
                note=None) -> Mesh:
-    """Mesh the DEM's valid area honouring the break lines (``BreakLine``s or (n, 2|3) arrays);
-    node z from the lines where a node is a break-line vertex, from ``points`` (k, 3:
-    measurements put into the TIN) at theirs, else bilinear from the DEM. ``local_areas`` (x, y,
-    m²) refine locally; ``size_field`` is a grid of local maximum areas (m², NaN: no limit; see
+    """Mesh the DEM's valid area honouring the break lines (``BreakLine``s or (n, 2|3) arrays)
+    and the modeller's ``own_lines`` ((k, 3) arrays, NaN z where 2-D); node z along an own line
+    where it has z there (linear along its segment, ``z_along_lines``: the surveyed crest
+    between its vertices too, and at a crossing with a break line), else from the lines where a
+    node is a break-line vertex, from ``points`` (k, 3: measurements put into the TIN) at
+    theirs, else bilinear from the DEM. ``local_areas`` (x, y, m²) refine locally;
+    ``size_field`` is a grid of local maximum areas (m², NaN: no limit; see
     ``size_from_slope``). A mesh estimated above ``max_triangles`` triangles is refused before
     any work; ``note`` receives the repairs made to the lines. Lines meeting at a sharp corner
     stop ``corner_gap`` m (default: 4 ``snap``, the cell size at the default snap: the spacing
@@ -723,7 +726,8 @@ def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
     min_angle = check_min_angle(min_angle)
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
-    lines = [getattr(line, "coords", line) for line in lines]  # BreakLines as the tracer gives
+    # BreakLines as the tracer gives
+    lines = [getattr(line, "coords", line) for line in lines] + list(own_lines)
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
     check_triangles(domain.area, max_area, max_triangles)
@@ -741,6 +745,11 @@ def build_mesh(dem: Grid, lines: list, *, min_angle: float = 25.0,
     if points is not None and len(points):
         z[len(pslg.vertices):len(pslg.vertices) + len(points)] = points[:, 2]
     at, value = _line_vertex_z(lines, vertices, precision=snap / 5)
+    z[at] = value
+    # lazy: numba loads only when this runs
+    from ..engine.nearest import z_along_lines
+
+    _, at, value = z_along_lines(vertices, own_lines, within=snap / 5)
     z[at] = value
     if not np.isfinite(z).all():
         raise FloodMeshError(f"{int((~np.isfinite(z)).sum())} mesh nodes fall where the DEM has no "

@@ -3,7 +3,7 @@ vertices are left out with a note naming the feature (a zero-length line beside 
 a run with a GEOS traceback after the mesh was built); a coordinate that is no number, or 3-D
 lines crossing at two heights, are refused; a domain reaching beyond the data is clipped with a
 note giving the area left out, and one narrower than a cell in places is meshed with a note
-saying where."""
+saying where. Every node on an own 3-D line takes the z along it, in every step."""
 import json
 import subprocess
 import sys
@@ -276,3 +276,53 @@ def test_a_domain_narrower_than_a_cell_is_named(tmp_path):
     assert (f"strip.gpkg: the model domain is narrower than a cell (1 m) along some 30 m, "
             f"around ({x:.2f}, {y:.2f})") in notes["strip"][0]
     assert "widen the domain there, or grid with smaller cells" in notes["strip"][0]
+
+
+def test_nodes_on_an_own_3d_line_take_its_height_in_every_step(tmp_path):
+    """From the user's side: a bridge deck's 3-D line, 8 m above the bank DEM and rising 2 m
+    over its 50 m (a vertex at each end), meshed in small triangles (max area 2 m²), which
+    split it into some 30 segments, with a break line (``--breaklines``) crossing it between
+    both lines' vertices. The mesh step, refine and ``run --node-elevation dem`` gave the
+    deck's nodes between its vertices the DEM's z (10.98 m under a deck at 18.60 m), a dip of
+    8 m in the deck. Every node on the deck has the z along it (within 1 mm), the crossing's
+    too, in every step, as run's terrain fits (its default) gave them before."""
+    import numpy as np
+
+    from floodmesh.core import io
+
+    from ..bad_inputs import ORIGIN, slope_dem, write_tif, write_xyz
+
+    values = slope_dem()
+    dem = write_tif(tmp_path / "dem.tif", values)
+    x0, y0 = ORIGIN
+    deck = np.array([[x0 + 20, y0 + 5, 18.0], [x0 + 20, y0 + 55, 20.0]])
+    _lines_3d(tmp_path / "own.gpkg", [deck])
+    crossing = np.array([[x0 + 5, y0 + 30, 10.25], [x0 + 12, y0 + 30, 10.6],
+                         [x0 + 28, y0 + 30, 11.4]])  # on the ground: 10 + 0.05 (x - x0)
+    _lines_3d(tmp_path / "detected.gpkg", [crossing])
+    rows, cols = np.mgrid[0:values.shape[0], 0:values.shape[1]]
+    write_xyz(tmp_path / "cells.xyz", np.column_stack([x0 + cols.ravel() + 0.5,
+                                                       y0 + values.shape[0] - rows.ravel() - 0.5,
+                                                       values.ravel()]))
+    common = ["--lines", str(tmp_path / "own.gpkg"), "--max-area", "2"]
+    commands = {
+        "mesh": ["mesh", dem, "--breaklines", tmp_path / "detected.gpkg", *common,
+                 "--out", tmp_path / "mesh.2dm"],
+        "refine": ["refine", dem, "--points", tmp_path / "cells.xyz", "--crs", "EPSG:25832",
+                   *common, "--out", tmp_path / "refine.2dm"],
+        "run": ["run", dem, *common, "--out", tmp_path / "run"],
+        "run-dem": ["run", dem, *common, "--node-elevation", "dem", "--out", tmp_path / "dem"]}
+    meshes = {"mesh": "mesh.2dm", "refine": "refine.2dm", "run": "run/mesh.2dm",
+              "run-dem": "dem/mesh.2dm"}
+    for name, args in commands.items():
+        done = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli",
+                               *map(str, args)], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, (name, done.stderr[-3000:])
+        nodes, _ = io.read_mesh_2dm(tmp_path / meshes[name])
+        on = nodes[shapely.distance(shapely.geometry.LineString(deck[:, :2]),
+                                    shapely.points(nodes[:, :2])) < 1e-3]
+        assert len(on) >= 20, name
+        along = 18.0 + 2.0 * (on[:, 1] - y0 - 5) / 50
+        assert np.abs(on[:, 2] - along).max() < 1e-3, (name, on[np.abs(on[:, 2] - along) > 1e-3])
+        if name == "mesh":
+            assert np.hypot(on[:, 0] - x0 - 20, on[:, 1] - y0 - 30).min() < 1e-3  # the crossing
