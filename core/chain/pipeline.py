@@ -421,7 +421,8 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
         points, fit_index = fits.measured()
         z, counts = fit_node_elevations(mesh.nodes, points, detected + front.own_lines,
                                         fits.window.node_radius, on_line=delta / 10,
-                                        index=fit_index, noise=fits.window.noise)
+                                        own_lines=front.own_lines, index=fit_index,
+                                        noise=fits.window.noise)
         fits.node_counts.update(counts)
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 

@@ -326,3 +326,38 @@ def test_nodes_on_an_own_3d_line_take_its_height_in_every_step(tmp_path):
         assert np.abs(on[:, 2] - along).max() < 1e-3, (name, on[np.abs(on[:, 2] - along) > 1e-3])
         if name == "mesh":
             assert np.hypot(on[:, 0] - x0 - 20, on[:, 1] - y0 - 30).min() < 1e-3  # the crossing
+
+
+def test_an_own_3d_line_crossing_detected_lines_keeps_its_height_in_run(tmp_path):
+    """From the user's side: a deck's 3-D line 7 m above the bank DEM, across the bank's
+    detected crest and toe lines, in a run that keeps every detected line (``--min-spacing
+    0``). The crossing's node, snapped to a 5 cm grid and so nearer the toe's line than the
+    deck's, took the toe's z in the run's terrain fits (11.46 m under a deck at 19.02 m),
+    while ``--node-elevation dem`` and the mesh step gave it the deck's. Every node within
+    5 cm of the deck has the deck's z there, both ways."""
+    import numpy as np
+
+    from floodmesh.core import io
+
+    from ..bad_inputs import ORIGIN, slope_dem, write_tif
+
+    dem = write_tif(tmp_path / "dem.tif", slope_dem())
+    x0, y0 = ORIGIN
+    deck = np.array([[x0 + 5, y0 + 20.44, 18.0], [x0 + 55, y0 + 20.54, 20.0]])
+    _lines_3d(tmp_path / "own.gpkg", [deck])
+    line = shapely.geometry.LineString(deck)
+    for name, extra in (("plane", []), ("dem", ["--node-elevation", "dem"])):
+        done = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "run",
+                               str(dem), "--lines", str(tmp_path / "own.gpkg"), "--min-spacing",
+                               "0", "--out", str(tmp_path / name), *extra],
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, (name, done.stderr[-3000:])
+        detected = io.read_lines_gpkg(tmp_path / name / "breaklines.gpkg")
+        assert sum(line.crosses(shapely.geometry.LineString(c[:, :2])) for c in detected) >= 2
+        nodes, _ = io.read_mesh_2dm(tmp_path / name / "mesh.2dm")
+        points = shapely.points(nodes[:, :2])
+        on = shapely.distance(line, points) < 0.05
+        assert on.sum() >= 10, name
+        along = shapely.get_z(shapely.line_interpolate_point(
+            line, shapely.line_locate_point(line, points[on])))
+        assert np.abs(nodes[on, 2] - along).max() < 1e-3, (name, nodes[on][:, 2] - along)
