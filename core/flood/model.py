@@ -436,11 +436,18 @@ def _worker_env() -> dict:
 
 # ---------------------------------------------------------------------------------------------
 # geometry before the run
-def tag_boundary(nodes, triangles, boundaries) -> tuple[np.ndarray, list, dict]:
-    """(edges (k, 3) rows triangle, edge, tag index; tag names; tag → kind spec) for every
-    boundary edge. Edges no boundary names are walls."""
+def tag_boundary(nodes, triangles, boundaries, left_out=None) -> tuple[np.ndarray, list,
+                                                                     dict, list]:
+    """(edges (k, 3) rows triangle, edge, tag index; tag names; tag → kind spec; notes) for
+    every boundary edge. ``sides`` pick edges of the mesh's outer rings only, never a hole's
+    rim; the rims of ``left_out`` (xy, triangles: buildings left out as holes) stay walls
+    whatever names them. Edges no boundary names are walls; tags that end up with no edge
+    are dropped (ANUGA refuses a tag no edge has)."""
     # lazy: GEOS loads only when this runs
     import shapely
+
+    # lazy: PROJ and GEOS load only when this runs
+    from ..steps.mesh import containing_triangle
 
     edges = boundary_edges(triangles)
     pairs = edge_nodes(triangles, edges)
@@ -451,6 +458,12 @@ def tag_boundary(nodes, triangles, boundaries) -> tuple[np.ndarray, list, dict]:
     side_of = np.where(np.abs(normal[:, 0]) >= np.abs(normal[:, 1]),
                        np.where(normal[:, 0] > 0, 0, 1), np.where(normal[:, 1] > 0, 2, 3))
     side_names = ("east", "west", "north", "south")
+    outer = _outer_ring_edges(nodes, triangles, pairs)
+    rim = np.zeros(len(edges), bool)
+    if left_out is not None and len(left_out[1]):
+        step = 1e-3 * normal  # a thousandth of the edge off its middle, to either side
+        for sign in (1, -1):
+            rim |= containing_triangle(left_out[0], left_out[1], mid + sign * step) >= 0
     tags, kinds = ["wall"], {"wall": {"kind": "wall"}}
     tag = np.zeros(len(edges), np.int64)
     for k, boundary in enumerate(boundaries):
@@ -459,21 +472,47 @@ def tag_boundary(nodes, triangles, boundaries) -> tuple[np.ndarray, list, dict]:
             pick = np.zeros(len(edges), bool)
             for side in boundary.sides:
                 pick |= True if side == "all" else side_of == side_names.index(side)
+            pick &= outer
         else:
             line = shapely.LineString(np.asarray(boundary.line)[:, :2])
             pick = shapely.distance(shapely.points(mid), line) <= boundary.snap_m
-        if not pick.any():
+        if not (pick & ~rim).any():
             where = (f"sides {', '.join(boundary.sides)}" if boundary.sides
                      else f"within {boundary.snap_m} m of its line")
+            walls = (", only the walls of buildings left out as holes, which stay walls"
+                     if pick.any() else "")
             raise FloodMeshError(f"the {boundary.kind} boundary {k + 1} meets no boundary edge "
-                                 f"of the mesh ({where}): check its coordinates and CRS, or "
-                                 "give a larger snap_m")
+                                 f"of the mesh ({where}{walls}): check its coordinates and CRS, "
+                                 "or give a larger snap_m")
         tags.append(name)
         kinds[name] = {"kind": boundary.kind, "level_m": boundary.level_m,
                        "levels": [list(p) for p in boundary.levels]}
-        tag[pick] = len(tags) - 1
-    edges[:, 2] = tag
-    return edges, tags, kinds
+        tag[pick & ~rim] = len(tags) - 1
+    used = np.isin(np.arange(len(tags)), tag)
+    notes = [f"the {kinds[name]['kind']} boundary {k} is overridden on all its edges by later "
+             "boundaries: it has no effect" for k, name in enumerate(tags) if not used[k] and k]
+    edges[:, 2] = np.cumsum(used)[tag] - 1
+    tags = [name for name, u in zip(tags, used) if u]
+    return edges, tags, {name: kinds[name] for name in tags}, notes
+
+
+def _outer_ring_edges(nodes, triangles, pairs) -> np.ndarray:
+    """Which boundary edges (node pairs) lie on a ring around the mesh (counter-clockwise), not
+    around a hole in it."""
+    # lazy: GEOS loads only when this runs
+    import shapely
+
+    # lazy: PROJ and GEOS load only when this runs
+    from ..steps.mesh import boundary_loops
+
+    n = len(nodes)
+    outer = []
+    for loop in boundary_loops(nodes, triangles):
+        if shapely.LinearRing(nodes[loop, :2]).is_ccw:
+            outer.append(np.column_stack([loop, np.roll(loop, -1)]))
+    ring = np.sort(np.concatenate(outer), axis=1) if outer else np.empty((0, 2), np.int64)
+    key = np.sort(pairs, axis=1)
+    return np.isin(key[:, 0] * n + key[:, 1], ring[:, 0] * n + ring[:, 1])
 
 
 def _inside(polygons, xy: np.ndarray, buffer: float = 0.0) -> np.ndarray:
@@ -549,9 +588,11 @@ def prepare(nodes, triangles, scenario: Scenario) -> dict:
     triangles = np.asarray(triangles, np.int64)
     notes = scenario_notes(scenario)
     houses = scenario.buildings.polygons
+    left_out = None  # the buildings' triangles, whose rims stay walls
     if houses and scenario.buildings.mode == "holes":
         centroids = nodes[triangles][:, :, :2].mean(axis=1)
         keep = _inside(houses, centroids) < 0
+        left_out = (nodes[:, :2].copy(), triangles[~keep])
         nodes, triangles = _drop_unused(nodes, triangles[keep])
         notes.append(f"{len(houses)} buildings left out as holes with walls "
                      f"({int((~keep).sum())} triangles removed)")
@@ -567,7 +608,9 @@ def prepare(nodes, triangles, scenario: Scenario) -> dict:
                      "boundary segments (ANUGA's gradient there is singular and gives NaN)")
     order, triangles = spatial_order(nodes, triangles)
     nodes = nodes[order]
-    edges, tags, kinds = tag_boundary(nodes, triangles, scenario.boundaries)
+    edges, tags, kinds, tag_notes = tag_boundary(nodes, triangles, scenario.boundaries,
+                                                 left_out)
+    notes += tag_notes
     centroids = nodes[triangles][:, :, :2].mean(axis=1)
     manning = np.full(len(triangles), scenario.manning)
     if scenario.roughness:
