@@ -29,16 +29,10 @@ UNSTABLE_EXIT = 3
 CHECK_INTERVAL_S = 10.0  # flood time between checks at most: an output interval is split
 
 
-def _series(times, values, hold=False):
-    """f(t) by linear interpolation; outside the series 0 (a hydrograph) or, with ``hold``,
-    the first and last values (a level)."""
+def _series(times, values):
+    """f(t) by linear interpolation, held at the first and last values outside the series."""
     times, values = np.asarray(times, float), np.asarray(values, float)
-
-    def f(t):
-        if not hold and (t < times[0] or t > times[-1]):
-            return 0.0
-        return float(np.interp(t, times, values))
-    return f
+    return lambda t: float(np.interp(t, times, values))
 
 
 def _outflow(anuga, domain):
@@ -77,7 +71,7 @@ def _boundary_objects(anuga, domain, kinds: dict):
         elif kind == "level":
             if spec.get("levels"):
                 times, levels = zip(*spec["levels"])
-                stage = _series(times, levels, hold=True)
+                stage = _series(times, levels)
             else:
                 stage = (lambda t, level=float(spec["level_m"]): level)
             # water at rest outside at that level: the Riemann flux lets water in while the

@@ -629,9 +629,15 @@ def prepare(nodes, triangles, scenario: Scenario) -> dict:
         arrays[f"inflow_{k}"] = region
         if inflow.hydrograph:
             series = np.asarray(inflow.hydrograph, float)
+            notes += series_notes(f"inflow {k + 1}'s hydrograph", series, "m³/s",
+                                  scenario.duration_s, zero_is_off=True)
             inflows.append({"times_s": series[:, 0].tolist(), "rates_m3s": series[:, 1].tolist()})
         else:
             inflows.append({"discharge_m3s": float(inflow.discharge_m3s)})
+    for k, boundary in enumerate(scenario.boundaries):
+        if boundary.levels:
+            notes += series_notes(f"the level boundary {k + 1}'s levels",
+                                  np.asarray(boundary.levels, float), "m", scenario.duration_s)
     obs = np.full(len(scenario.observation_points), -1)
     if scenario.observation_points:
         # lazy: PROJ and GEOS load only when this runs
@@ -646,6 +652,26 @@ def prepare(nodes, triangles, scenario: Scenario) -> dict:
            "flow_algorithm": "DE0"}
     counts = {name: int((edges[:, 2] == k).sum()) for k, name in enumerate(tags)}
     return {"arrays": arrays, "job": job, "notes": notes, "boundary_edges": counts}
+
+
+def series_notes(what: str, series: np.ndarray, unit: str, duration: float,
+                 zero_is_off: bool = False) -> list[str]:
+    """Notes on a (time s, value) series that starts after the run does or ends before it
+    (the worker holds its first and last values there; no note for a held 0 where
+    ``zero_is_off``: an inflow that is off); a FloodMeshError if its times do not increase."""
+    t = series[:, 0]
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if len(back):
+        raise FloodMeshError(f"{what} goes back in time at row {back[0] + 2} ({t[back[0] + 1]:g} s "
+                             f"after {t[back[0]]:g} s): its times must increase, row by row")
+    notes = []
+    if t[0] > 0 and not (zero_is_off and series[0, 1] == 0):
+        notes.append(f"{what} starts at {t[0]:g} s: held at its first value, "
+                     f"{series[0, 1]:g} {unit}, before")
+    if t[-1] < duration and not (zero_is_off and series[-1, 1] == 0):
+        notes.append(f"{what} ends at {t[-1]:g} s, before the run's {duration:g} s: held at its "
+                     f"last value, {series[-1, 1]:g} {unit}, to the end")
+    return notes
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """A flood's scenario at the edges of what it says: boundaries by side on a mesh with holes
-(buildings left out, the domain's own), a boundary that covers every edge. Run as a modeller
-runs them: scenario files through the CLI, short real ANUGA runs."""
+(buildings left out, the domain's own), a boundary that covers every edge, hydrographs that end
+before the run. Run as a modeller runs them: scenario files through the CLI, short real ANUGA
+runs."""
 import json
 import subprocess
 import sys
@@ -118,3 +119,33 @@ def test_a_wall_on_all_sides_runs_as_a_closed_basin(tmp_path):
     assert report["max_speed_ms"] < 1e-3
     assert report["mass_balance"]["outflow_volume_m3"] == pytest.approx(0, abs=1e-9)
     assert "the outflow boundary 1 is overridden on all its edges" in err
+
+
+@needs_anuga
+def test_an_inflow_hydrograph_that_ends_before_the_run_is_held_at_its_last_value(tmp_path):
+    """A hydrograph of 1 then 2 m³/s over the first 10 s of a 20 s run, into a walled basin:
+    held at 2 m³/s, as a level hydrograph is held, it brings 15 + 20 = 35 m³ (it dropped to 0
+    and brought 15), and a note says it was held; so does one for a level series."""
+    mesh = tmp_path / "m.2dm"
+    rectangle_mesh(mesh, 40, 20, lambda x, y: 0.005 * x, max_area=2.0)
+    rc, err, report = flood(tmp_path, mesh, {
+        "duration_s": 20, "output_interval_s": 10,
+        "inflows": [{"circle": {"centre": [X0 + 10, Y0 + 10], "radius": 3},
+                     "hydrograph": [[0, 1], [10, 2]]}],
+        "boundaries": [{"kind": "level", "levels": [[0, -1], [5, -0.5]], "sides": ["west"]}]})
+    assert rc == 0, err
+    assert report["mass_balance"]["inflow_volume_m3"] == pytest.approx(35, rel=0.03)
+    assert ("inflow 1's hydrograph ends at 10 s, before the run's 20 s: held at its last value, "
+            "2 m³/s, to the end") in err
+    assert "the level boundary 1's levels ends at 5 s" in err
+
+
+def test_a_hydrograph_that_goes_back_in_time_is_refused(tmp_path):
+    mesh = tmp_path / "m.2dm"
+    rectangle_mesh(mesh, 20, 10, lambda x, y: 0 * x, max_area=2.0)
+    rc, err, report = flood(tmp_path, mesh, {
+        "duration_s": 20, "inflows": [{"circle": {"centre": [X0 + 10, Y0 + 5], "radius": 3},
+                                       "hydrograph": [[0, 1], [10, 2], [5, 3]]}]})
+    assert rc == 2 and err.count("\n") == 1
+    assert "inflow 1's hydrograph goes back in time at row 3 (5 s after 10 s)" in err
+    assert not (tmp_path / "out").exists()
