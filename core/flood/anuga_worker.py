@@ -6,10 +6,10 @@ elevations, per-triangle Manning's n, tagged boundary edges, inflows, observatio
 and ``JOB_DIR/job.json`` (duration, output interval, boundary kinds), runs ANUGA (flow algorithm
 DE0), and writes ``JOB_DIR/result.npz``: per triangle the maximum depth, water level and speed
 and the arrival time, and per output time the water volume, the inflow applied, the boundary
-flux integral and the stage at each observation triangle, and per triangle how often it set
-the time step (at the checks below: the triangle of least inradius over its fastest wave in the
-step before, and the steps since the last check). On stdout it prints
-``progress T`` after each output time T (s) for the parent's progress bar.
+flux integral and the stage and depth at each observation triangle (and its bed once), and per
+triangle how often it set the time step (at the checks below: the triangle of least inradius
+over its fastest wave in the step before, and the steps since the last check). On stdout it
+prints ``progress T`` after each output time T (s) for the parent's progress bar.
 
 At each output time, and at least every ``CHECK_INTERVAL_S`` of flood time, it checks that
 the solution is still a flood: where the water turns non-finite, or water deeper than the wet
@@ -142,7 +142,7 @@ def run(job_dir: str) -> None:
     max_stage = np.full(n_tri, -np.inf)
     max_speed = np.zeros(n_tri)
     arrival = np.full(n_tri, np.nan)
-    times, volume, applied, flux, obs_stage, steps = [], [], [], [], [], []
+    times, volume, applied, flux, obs_stage, obs_depth, steps = [], [], [], [], [], [], []
     done = [0]  # time steps so far: ANUGA counts them per output interval
     # the triangle whose inradius over its fastest wave (ANUGA's own: its flux time step is
     # the least of radii / max_speed) set the last step before each check, and the steps of
@@ -185,6 +185,7 @@ def run(job_dir: str) -> None:
         applied.append(float(sum(i.get_total_applied_volume() for i in inlets)))
         flux.append(float(domain.get_boundary_flux_integral()))
         obs_stage.append(np.where(obs >= 0, stage[np.maximum(obs, 0)], np.nan))
+        obs_depth.append(np.where(obs >= 0, depth[np.maximum(obs, 0)], np.nan))
         steps.append(done[0])
         return None
 
@@ -209,6 +210,8 @@ def run(job_dir: str) -> None:
              volume_m3=np.array(volume), inflow_applied_m3=np.array(applied),
              boundary_flux_m3=np.array(flux),
              observation_stage_m=np.array(obs_stage).reshape(len(times), len(obs)),
+             observation_depth_m=np.array(obs_depth).reshape(len(times), len(obs)),
+             observation_bed_m=domain.quantities["elevation"].centroid_values[obs],
              steps=np.array(steps), cpu_s=np.array(cpu),
              step_setter_checks=step_setter_checks, step_setter_steps=step_setter_steps,
              anuga_version=np.array(anuga.__version__))

@@ -47,6 +47,7 @@ SETTER_FIELDS = ("inradius_m", "share_of_steps", "checks", "max_depth_m", "max_s
 # (m): a thinner film is below any depth a flood reports (wet_depth_m, the worker's 1 cm
 # for speeds), so the share of its volume measures round-off, not the flood
 FILM_M = 0.001
+DRY_BELOW_M = 1e-3  # ANUGA's minimum_storable_height: thinner water (round-off) it stores as dry
 
 
 # ---------------------------------------------------------------------------------------------
@@ -638,13 +639,8 @@ def prepare(nodes, triangles, scenario: Scenario) -> dict:
         if boundary.levels:
             notes += series_notes(f"the level boundary {k + 1}'s levels",
                                   np.asarray(boundary.levels, float), "m", scenario.duration_s)
-    obs = np.full(len(scenario.observation_points), -1)
-    if scenario.observation_points:
-        # lazy: PROJ and GEOS load only when this runs
-        from ..steps.mesh import containing_triangle
-        xy = np.array([[x, y] for _, x, y in scenario.observation_points])
-        obs = containing_triangle(nodes[:, :2], triangles, xy)
-    arrays["observation_triangles"] = np.asarray(obs, np.int64)
+    arrays["observation_triangles"] = observation_triangles(nodes, triangles, scenario,
+                                                            left_out)
     job = {"duration_s": scenario.duration_s, "output_interval_s": scenario.output_interval_s,
            "wet_depth_m": scenario.wet_depth_m, "initial_stage_m": scenario.initial_stage_m,
            "unstable_speed_m_s": scenario.unstable_speed_m_s,
@@ -672,6 +668,32 @@ def series_notes(what: str, series: np.ndarray, unit: str, duration: float,
         notes.append(f"{what} ends at {t[-1]:g} s, before the run's {duration:g} s: held at its "
                      f"last value, {series[-1, 1]:g} {unit}, to the end")
     return notes
+
+
+def observation_triangles(nodes, triangles, scenario: Scenario, left_out=None) -> np.ndarray:
+    """The triangle holding each observation point; a FloodMeshError naming a point that no
+    triangle holds (outside the mesh, in a hole of it, or in a building ``left_out``)."""
+    points = scenario.observation_points
+    if not points:
+        return np.empty(0, np.int64)
+    # lazy: PROJ and GEOS load only when this runs
+    from ..steps.mesh import containing_triangle
+
+    xy = np.array([[x, y] for _, x, y in points])
+    found = containing_triangle(nodes[:, :2], triangles, xy)
+    if (found >= 0).all():
+        return np.asarray(found, np.int64)
+    k = int(np.flatnonzero(found < 0)[0])
+    name, x, y = points[k]
+    lo, hi = nodes[:, :2].min(axis=0), nodes[:, :2].max(axis=0)
+    where = (f"outside the mesh (x {lo[0]:.0f} to {hi[0]:.0f}, y {lo[1]:.0f} to {hi[1]:.0f})"
+             ": check its coordinates and CRS")
+    if left_out is not None and containing_triangle(left_out[0], left_out[1], xy[k:k + 1])[0] >= 0:
+        where = ("in a building left out of the mesh as a hole: move it off the building, or "
+                 "give the buildings mode raised")
+    elif (lo <= xy[k]).all() and (xy[k] <= hi).all():
+        where = "in a hole of the mesh, where no triangle is: move it onto the mesh"
+    raise FloodMeshError(f"observation point {name} ({x}, {y}) lies {where}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -804,7 +826,8 @@ def outflow_hydrograph(result: dict) -> np.ndarray:
 
 def result_grids(nodes, triangles, result: dict, crs, cell_size: float) -> dict:
     """The per-triangle maxima as Grids (cell centres take the value of their triangle; NaN
-    outside the mesh; dry cells 0 depth and speed, NaN level and arrival)."""
+    outside the mesh; dry cells 0 depth and speed, NaN arrival, and NaN level where the
+    water never got ``DRY_BELOW_M`` deep)."""
     # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import containing_triangle
 
@@ -812,7 +835,7 @@ def result_grids(nodes, triangles, result: dict, crs, cell_size: float) -> dict:
                                                nodes[:, :2].max(axis=0), cell_size)
     tri = containing_triangle(nodes[:, :2], triangles, xy).reshape(rows, cols)
     inside = tri >= 0
-    wet = np.asarray(result["max_depth"]) > 0
+    wet = np.asarray(result["max_depth"]) >= DRY_BELOW_M
     grids = {}
     for name in RESULT_RASTERS:
         values = np.asarray(result[name], float).copy()
@@ -877,9 +900,10 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
     for name, filename in RESULT_RASTERS.items():
         io.write_raster(out / filename, grids[name])
     write_table(out / "hydrograph.csv", ("time_s", "outflow_m3s"), outflow_hydrograph(result))
+    observations = observation_series(scenario, result)
     names = [name for name, _, _ in scenario.observation_points]
-    write_table(out / "observations.csv", ["time_s"] + [f"stage_{n}" for n in names],
-                np.column_stack([result["times_s"], result["observation_stage_m"]]))
+    write_table(out / "observations.csv", ["time_s"] + [f"stage_{n}" for n in names]
+                + [f"depth_{n}" for n in names], observations["table"])
     depth = np.asarray(result["max_depth"])
     area = np.abs(triangle_areas(arrays["nodes"], arrays["triangles"]))
     balance = mass_balance(result, float(area.sum()))
@@ -899,12 +923,9 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
         "flooded_area_m2": float(area[depth > scenario.wet_depth_m].sum()),
         "max_depth_m": float(depth.max()),
         "max_speed_ms": float(np.max(result["max_speed"])),
-        "observations": [{"name": n, "x": x, "y": y,
-                          "peak_stage_m": float(np.nanmax(result["observation_stage_m"][:, k]))
-                          if np.isfinite(result["observation_stage_m"][:, k]).any() else None}
-                         for k, (n, x, y) in enumerate(scenario.observation_points)],
+        "observations": observations["peaks"],
         "raster_cell_size_m": cell,
-        "notes": prepared["notes"],
+        "notes": prepared["notes"] + observations["notes"],
         "files": sorted(FLOOD_FILES),
     }
     setters = report["time_step_set_by"]
@@ -917,6 +938,28 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
              **{k: result[k] for k in ("max_depth", "max_stage", "max_speed", "arrival_s")})
     io.write_json(out / "report.json", report)
     return report
+
+
+def observation_series(scenario: Scenario, result: dict) -> dict:
+    """The observation points' series and peaks: ``table`` rows of time (s), the water level
+    at each point (m; NaN while dry, under ``DRY_BELOW_M`` deep) and the depth at each (m);
+    ``peaks`` per point its ground (m), peak depth (m), peak stage (m; None if never wet) and
+    ``dry``; ``notes`` on the points that stay dry."""
+    depth = np.asarray(result["observation_depth_m"], float)
+    depth[depth < DRY_BELOW_M] = 0.0
+    stage = np.where(depth > 0, result["observation_stage_m"], np.nan)
+    peaks, notes = [], []
+    for k, (name, x, y) in enumerate(scenario.observation_points):
+        dry = not (depth[:, k] > 0).any()
+        ground = float(result["observation_bed_m"][k])
+        peaks.append({"name": name, "x": x, "y": y, "ground_m": ground,
+                      "peak_depth_m": float(depth[:, k].max()), "dry": dry,
+                      "peak_stage_m": None if dry else float(np.nanmax(stage[:, k]))})
+        if dry:
+            notes.append(f"observation point {name} stays dry (ground {ground:.2f} m): no peak "
+                         "stage")
+    return {"table": np.column_stack([result["times_s"], stage, depth]), "peaks": peaks,
+            "notes": notes}
 
 
 def _jsonable_scenario(scenario: Scenario) -> dict:

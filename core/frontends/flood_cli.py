@@ -80,10 +80,15 @@ def _comparison(c: dict) -> str:
              f"(bias {c['max_depth_bias_m']:+.3f} m), CPU {c['mesh_cpu_s']:.1f} s against "
              f"{c['reference_cpu_s']:.1f} s ({c['cpu_ratio']:.2f}x)"]
     for o in c["observations"]:
-        if o["difference_m"] is not None:
-            lines.append(f"  {o['name']}: peak stage {o['mesh_peak_stage_m']:.2f} m, "
-                         f"reference {o['reference_peak_stage_m']:.2f} m")
+        mesh, reference = (o[f"{run}_peak_stage_m"] for run in ("mesh", "reference"))
+        if mesh is not None or reference is not None:
+            lines.append(f"  {o['name']}: peak stage {_stage(mesh)}, reference "
+                         f"{_stage(reference)}")
     return "\n".join(lines)
+
+
+def _stage(stage) -> str:
+    return "dry" if stage is None else f"{stage:.2f} m"
 
 
 def cmd_compare(args):

@@ -1,15 +1,17 @@
 """A flood's scenario at the edges of what it says: boundaries by side on a mesh with holes
 (buildings left out, the domain's own), a boundary that covers every edge, hydrographs that end
-before the run. Run as a modeller runs them: scenario files through the CLI, short real ANUGA
-runs."""
+before the run, observation points off the mesh or never wet. Run as a modeller runs them:
+scenario files through the CLI, short real ANUGA runs."""
 import json
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+import rasterio
 
 from floodmesh.core.flood.model import prepare, scenario_from_dict
+from floodmesh.core.options import RESULT_RASTERS
 from floodmesh.core.steps.mesh import PSLG, triangulate_pslg
 
 from .test_flood import CRS, X0, Y0, local, needs_anuga, rectangle_mesh
@@ -149,3 +151,53 @@ def test_a_hydrograph_that_goes_back_in_time_is_refused(tmp_path):
     assert rc == 2 and err.count("\n") == 1
     assert "inflow 1's hydrograph goes back in time at row 3 (5 s after 10 s)" in err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("where, says", [
+    ((151.75, -32.94), "observation point X (151.75, -32.94) lies outside the mesh (x 382000 "
+                       "to 382030, y 6354000 to 6354010): check its coordinates and CRS"),
+    ((X0 + 15, Y0 + 5), f"observation point X ({X0 + 15}, {Y0 + 5}) lies in a building "
+                        "left out of the mesh as a hole")])
+def test_an_observation_point_off_the_mesh_is_refused_naming_it(tmp_path, where, says):
+    """A point outside the mesh (here in degrees, not the mesh's UTM) gave an empty column and
+    a null peak with exit 0; one in a building left out as a hole the same."""
+    mesh = tmp_path / "m.2dm"
+    rectangle_mesh(mesh, 30, 10, lambda x, y: 0 * x, max_area=2.0)
+    rc, err, report = flood(tmp_path, mesh, {
+        "duration_s": 10, "observation_points": [{"name": "X", "x": where[0], "y": where[1]}],
+        "buildings": {"polygons": [local([[12, 3], [18, 3], [18, 7], [12, 7]])],
+                      "mode": "holes"}})
+    assert rc == 2 and err.count("\n") == 1
+    assert says in err
+    assert not (tmp_path / "out").exists()
+
+
+@needs_anuga
+def test_a_point_the_water_never_reaches_is_dry_not_its_ground_as_peak_stage(tmp_path):
+    """An inflow at the low end of a sloping basin (ground at a real town's 23 to 27 m) and a
+    point up the slope it never reaches: its peak stage was its ground level, read as a water
+    level; now it is dry (no stage, peak depth 0, its ground given), blank in
+    observations.csv, and a note says so. Where ANUGA leaves round-off (1e-15 m) over dry
+    ground, the max water level map has no level either (it had one: the ground)."""
+    mesh = tmp_path / "m.2dm"
+    rectangle_mesh(mesh, 40, 10, lambda x, y: 23.4792 + 0.1 * x + 0.01 * y, max_area=2.0)
+    rc, err, report = flood(tmp_path, mesh, {
+        "duration_s": 20, "output_interval_s": 10,
+        "inflows": [{"circle": {"centre": [X0 + 3, Y0 + 5], "radius": 2.5}, "discharge_m3s": 0.5}],
+        "observation_points": [{"name": "low", "x": X0 + 2, "y": Y0 + 5},
+                               {"name": "high", "x": X0 + 35, "y": Y0 + 5}]})
+    assert rc == 0, err
+    low, high = report["observations"]
+    assert not low["dry"] and low["peak_depth_m"] > 0.05
+    assert low["peak_stage_m"] == pytest.approx(low["ground_m"] + low["peak_depth_m"], abs=0.05)
+    assert high["dry"] and high["peak_stage_m"] is None and high["peak_depth_m"] == 0
+    assert high["ground_m"] == pytest.approx(27.0, abs=0.2)
+    assert "observation point high stays dry (ground 27.0" in err
+    rows = (tmp_path / "out" / "observations.csv").read_text().splitlines()
+    assert rows[0] == "time_s,stage_low,stage_high,depth_low,depth_high"
+    assert all(row.split(",")[2] == "" and float(row.split(",")[4]) == 0 for row in rows[1:])
+    with rasterio.open(tmp_path / "out" / RESULT_RASTERS["max_stage"]) as src:
+        level = src.read(1, masked=True)
+    with rasterio.open(tmp_path / "out" / RESULT_RASTERS["max_depth"]) as src:
+        depth = src.read(1, masked=True)
+    assert level.count() > 0 and (depth[~level.mask] >= 1e-3).all()
