@@ -570,26 +570,46 @@ def _edge(result):
 
 
 def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes,
-               held_below: int | None, seed: int) -> np.ndarray:
-    """Round two: the cells of one block, from the tiles under it (``full``: paths, re-read) and
-    its neighbours' edge bands (``edges``: arrays, or ``.npy`` files read in place), without the
-    check points (hash at most ``held_below``, ``_held``)."""
+               held_below: int | None, seed: int, survey: list) -> np.ndarray:
+    """Round two: the cells of one block, from the points within its ``box`` (its halo around
+    it): of the tiles under it (``full``: paths, re-read) and its neighbours' edge bands
+    (``edges``: arrays, or ``.npy`` files read in place), without the check points (hash at
+    most ``held_below``, ``_held``). Where a triangle that gives a cell has a circle reaching
+    past the box (a thin one by a void), the points beyond, which may make it none of the
+    whole TIN's, are read from the tiles of the ``survey`` (path, bounds) that the circle
+    reaches, and the block gridded again with them: the cells of one TIN of all the points."""
     # lazy: numba loads only when this runs
     from ..steps.grid import grid_window
 
-    box = window["box"]
+    known = window["box"]
     parts = []
     for edge in edges:
         xyz = np.load(edge, mmap_mode="r") if isinstance(edge, str) else edge
-        xyz = np.array(xyz[_within(xyz, box)])
+        xyz = np.array(xyz[_within(xyz, known)])
         parts.append(xyz[~_held(xyz, held_below, seed)])
         del xyz
     for path in full:
         xyz = _tile_points(path, crs_wkt, classes, held_below, seed)[0]
-        parts.append(xyz[_within(xyz, box)])
-    xyz = np.concatenate(parts) if parts else np.empty((0, 3))
-    return grid_window(xyz, window["cell_size"], window["max_gap"], window["x0"], window["y1"],
-                       window["rows"], window["cols"], workers=1)
+        parts.append(xyz[_within(xyz, known)])
+    extent = (min(b[0] for _, b in survey), min(b[1] for _, b in survey),
+              max(b[2] for _, b in survey), max(b[3] for _, b in survey))
+    while True:
+        xyz = np.concatenate(parts) if parts else np.empty((0, 3))
+        values, needed = grid_window(xyz, window["cell_size"], window["max_gap"], window["x0"],
+                                     window["y1"], window["rows"], window["cols"], workers=1,
+                                     known=known, extent=extent)
+        if needed == tuple(known):  # no circle reaches past it
+            return values
+        # a side that grows grows by a cell more, past the circles' rounding
+        pad = window["cell_size"]
+        known = (*[n - pad if n < k else k for n, k in zip(needed[:2], known[:2])],
+                 *[n + pad if n > k else k for n, k in zip(needed[2:], known[2:])])
+        parts, xyz = [], None
+        for path, bounds in survey:
+            if (bounds[0] <= known[2] and bounds[2] >= known[0] and bounds[1] <= known[3]
+                    and bounds[3] >= known[1]):
+                points = _tile_points(path, crs_wkt, classes, held_below, seed)[0]
+                parts.append(points[_within(points, known)])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -868,10 +888,13 @@ def _submit_blocks(client, layout: _Layout, meta: list, tiles: list, edges: list
                    cell_size: float, halo: float, band: float, crs_wkt: str,
                    seed: int) -> tuple[list, list]:
     """Round two submitted: a ``grid_block`` task (key ``grid-ROW-COL``) for each block of the
-    layout, on the points within ``halo`` m of it (``_block_sources``); (the tasks, the (row,
-    col) of each block's first cell)."""
+    layout, on the points within ``halo`` m of it (``_block_sources``), and the tiles to read
+    where a triangle's circle reaches farther (sent to the cluster once); (the tasks, the
+    (row, col) of each block's first cell)."""
     plan, block = layout.plan, layout.block
     rows, cols, x0, y1 = plan["rows"], plan["cols"], plan["x0"], plan["y1"]
+    survey = client.scatter([[(tiles[i].path, meta[i]["bounds"]) for i in layout.gridded]],
+                            hash=False)[0]
     tasks, windows = [], []
     for r0 in range(0, rows, block):
         for c0 in range(0, cols, block):
@@ -884,7 +907,7 @@ def _submit_blocks(client, layout: _Layout, meta: list, tiles: list, edges: list
                       "cell_size": cell_size, "max_gap": plan["max_gap"]}
             windows.append((r0, c0))
             tasks.append(client.submit(_task, grid_block, window, full, near, crs_wkt,
-                                       layout.classes, layout.held_below, seed,
+                                       layout.classes, layout.held_below, seed, survey,
                                        key=f"grid-{r0}-{c0}"))
     return tasks, windows
 

@@ -73,10 +73,20 @@ def halo_width(cell_size: float, max_gap: float) -> float:
 
 def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1: float,
                 rows: int, cols: int, *, progress=None, cancelled=None,
-                workers: int | None = None) -> np.ndarray:
+                workers: int | None = None, known: tuple | None = None,
+                extent: tuple | None = None):
     """Cell values (rows, cols; NaN where no triangle covers) of the window whose upper-left
     corner is (x0, y1), by linear interpolation on the TIN of ``xyz``. Points up to
-    ``halo_width`` beyond the window are used; points farther out are ignored.
+    ``halo_width`` beyond the window are triangulated; points farther out only check that a
+    triangle is the whole TIN's (its circle empty of them).
+
+    ``known`` (xmin, ymin, xmax, ymax, m): ``xyz`` are the survey's points within this box
+    only (a block of tiles), not all of them, and all lie within ``extent`` (the same order).
+    A triangle is then the whole TIN's only if its circle is empty of the points beyond the
+    box too, which were not given: returns (the values, the box the given points must fill for
+    every cell to be decided): ``known`` itself, or a larger box where the circle of a
+    triangle that gave a cell reaches past it within ``extent`` (grid again with the points
+    within it).
 
     Each tile is triangulated with the points of a halo around it, and a triangle whose
     circumcircle stays inside the halo's box is one of the TIN of all the points (its circle is
@@ -89,7 +99,15 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
     past the box lies in the circle (else the whole TIN has a long one there: NaN)."""
     values = np.full((rows, cols), np.nan)
     if len(xyz) < 3:
-        return values
+        return values if known is None else (values, tuple(known))
+    # the box of the given points in local coordinates (x - x0, y1 - y: x0, x1, y0, y1), and
+    # the box of the circles of the triangles that gave cells and reach past it
+    inf, clipped = np.inf, known is not None
+
+    def local(box):
+        return (np.array([-inf, inf, -inf, inf]) if box is None else
+                np.array([box[0] - x0, box[2] - x0, y1 - box[3], y1 - box[1]], float))
+    limits, within = local(known), local(extent)
     workers = workers or os.cpu_count() or 1
     halo = halo_width(cell_size, max_gap)
     near = NEAR_HALO_SPACINGS * math.sqrt(rows * cols * cell_size ** 2 / max(len(xyz), 1))
@@ -109,10 +127,11 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
     n_brows = math.ceil(rows / side) * per_tile
     n_bcols = math.ceil(cols / side) * per_tile
 
-    def triangulated(r0, c0, reach, checked):
+    def triangulated(r0, c0, reach, checked, past):
         """Rasterise the tile at (r0, c0) from the TIN of its points and those within ``reach``
         metres around it; with ``checked``, returns how many of its cells are not proven to be
-        the whole TIN's (``_rasterise_tin``)."""
+        the whole TIN's (``_rasterise_tin``; ``past``: the box of its circles past the given
+        points', updated)."""
         x_lo, x_hi = c0 * cell_size - reach, (c0 + side) * cell_size + reach
         y_lo, y_hi = r0 * cell_size - reach, (r0 + side) * cell_size + reach
         r1, c1 = min(rows, r0 + side), min(cols, c0 + side)
@@ -121,14 +140,18 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
         if len(local) < 3:
             return (r1 - r0) * (c1 - c0) if checked else 0
         swept, ids, triangles = delaunay_in_sweep_order(local)
-        # a side of the box beyond every point needs no check: no point lies past it
-        box = ((x_lo if x_lo > data[0] else -np.inf), (x_hi if x_hi < data[1] else np.inf),
-               (y_lo if y_lo > data[2] else -np.inf), (y_hi if y_hi < data[3] else np.inf))
+        # a side of the box beyond every point needs no check: no point lies past it (where
+        # all the points were given)
+        box = ((x_lo if x_lo > data[0] or clipped else -np.inf),
+               (x_hi if x_hi < data[1] or clipped else np.inf),
+               (y_lo if y_lo > data[2] or clipped else -np.inf),
+               (y_hi if y_hi < data[3] or clipped else np.inf))
         # points at one place (overlapping flight lines, tiles merged twice): their mean z, in
         # the copy that indexing by ``ids`` makes
         return _rasterise_tin(swept, average_repeats(swept, local_z[ids]), triangles, values,
                               r0, r1, c0, c1, float(cell_size), float(max_gap), checked,
-                              np.array(box), hull, xy, bounds, n_bcols, bucket_size)
+                              np.array(box), hull, xy, bounds, n_bcols, bucket_size, limits,
+                              within, past)
 
     def bucket_span(x_lo, x_hi, y_lo, y_hi):
         """Rows and columns (first, last) of the buckets that hold a box's points (the
@@ -137,6 +160,7 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
                 cell_of(x_lo, 0.0, bucket_size, n_bcols), cell_of(x_hi, 0.0, bucket_size, n_bcols))
 
     def grid_tile(tile):
+        """Grid the tile at (r0, c0); the box of its circles past the given points'."""
         r0, c0 = tile
         if cancelled is not None and cancelled():
             raise Cancelled()
@@ -144,11 +168,14 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
             brow0, brow1, bcol0, bcol1 = bucket_span(
                 c0 * cell_size - near, (c0 + side) * cell_size + near,
                 r0 * cell_size - near, (r0 + side) * cell_size + near)
+            past = limits.copy()
             if (density[brow0:brow1 + 1, bcol0:bcol1 + 1].min() >= full_density
-                    and not triangulated(r0, c0, near, True)):
-                return
+                    and not triangulated(r0, c0, near, True, past)):
+                return past
             values[r0:r0 + side, c0:c0 + side] = np.nan
-        triangulated(r0, c0, halo, False)
+        past = limits.copy()
+        triangulated(r0, c0, halo, False, past)
+        return past
 
     with ThreadPoolExecutor(max_workers=workers) as pool, without_huge_pages():
         xy, z, bounds = _bucket_sort(xyz, float(x0), float(y1), bucket_size, n_brows, n_bcols,
@@ -162,10 +189,19 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
         full_density = FULL_SHARE * np.median(finite) if len(finite) else np.inf
         hull = _local_hull(xyz, x0, y1)
         data = (hull[:, 0].min(), hull[:, 0].max(), hull[:, 1].min(), hull[:, 1].max())
-        for done, _ in enumerate(pool.map(grid_tile, tiles), start=1):
+        needed = limits.copy()
+        for done, past in enumerate(pool.map(grid_tile, tiles), start=1):
+            needed[::2], needed[1::2] = (np.minimum(needed[::2], past[::2]),
+                                         np.maximum(needed[1::2], past[1::2]))
             if progress:
                 progress(done / len(tiles))
-    return values
+    if not clipped:
+        return values
+    # in world coordinates, the sides that do not grow as given
+    return values, (x0 + needed[0] if needed[0] < limits[0] else known[0],
+                    y1 - needed[3] if needed[3] > limits[3] else known[1],
+                    x0 + needed[1] if needed[1] > limits[1] else known[2],
+                    y1 - needed[2] if needed[2] < limits[2] else known[3])
 
 
 def near_tile_side(rows: int, cols: int, cell_size: float, n_points: int, workers: int) -> int:
@@ -313,7 +349,7 @@ def _tile_points(xy, z, bounds, n_cols, row0, row1, col0, col1, x_lo, x_hi, y_lo
 
 @numba.njit(cache=True, nogil=True)
 def _rasterise_tin(xy, z, simplices, out, row0, row1, col0, col1, d, max_gap, near, box, hull,
-                   points, bounds, n_bcols, bucket_size):
+                   points, bounds, n_bcols, bucket_size, limits, extent, past):
     """Linear interpolation of each triangle of the tile's TIN onto the cell centres it covers
     within rows row0..row1-1 and columns col0..col1-1 of ``out`` (local coordinates, y down),
     made from all the ``points`` (bucketed: ``bounds``, ``n_bcols``, ``bucket_size``) inside
@@ -326,7 +362,13 @@ def _rasterise_tin(xy, z, simplices, out, row0, row1, col0, col1, d, max_gap, ne
     the whole TIN whose edges are at most ``max_gap`` and which covers a tile cell is among
     the tile's; a short triangle of the tile whose circle reaches past the box is then the
     whole TIN's only if no point past the box lies in the circle, else its cells are under a
-    longer triangle of the whole TIN, and stay NaN; returns 0."""
+    longer triangle of the whole TIN, and stay NaN; returns 0.
+
+    ``points`` are those within ``limits`` (x0, x1, y0, y1; infinite where all are given) of
+    all within ``extent``: the box ``past`` (the same order, starting as ``limits``) grows to
+    hold the circles (within ``extent``) of the triangles that give cells (with ``near``,
+    those proven) and reach past ``limits``, which the points beyond may make no triangles of
+    the whole TIN."""
     max_gap2 = max_gap * max_gap
     eps = 1e-9
     covered = np.zeros((row1 - row0, col1 - col0) if near else (0, 0), np.bool_)
@@ -365,6 +407,7 @@ def _rasterise_tin(xy, z, simplices, out, row0, row1, col0, col1, d, max_gap, ne
         if short and not (near or inside) and not _empty_past(points, bounds, n_bcols,
                                                               bucket_size, ux, uy, r, box):
             continue
+        gave = False
         for i in range(i0, i1 + 1):
             y = (i + 0.5) * d
             for j in range(j0, j1 + 1):
@@ -375,9 +418,18 @@ def _rasterise_tin(xy, z, simplices, out, row0, row1, col0, col1, d, max_gap, ne
                 if l1 >= -eps and l2 >= -eps and l3 >= -eps:
                     if short:
                         out[i, j] = l1 * z[a] + l2 * z[b] + l3 * z[c]
+                        gave = True
                     if near and not covered[i - row0, j - col0]:
                         covered[i - row0, j - col0] = True
                         unproven += not inside
+        # a circle past the given points' box: the cells it gave are decided only by the
+        # points beyond, which the caller is to give
+        if gave and (inside or not near) and (ux - r < limits[0] or ux + r > limits[1]
+                                              or uy - r < limits[2] or uy + r > limits[3]):
+            cx0, cx1, cy0, cy1 = _circle_within(ux, uy, r, extent)
+            if cx0 <= cx1 and cy0 <= cy1:
+                past[0], past[1] = min(past[0], cx0), max(past[1], cx1)
+                past[2], past[3] = min(past[2], cy0), max(past[3], cy1)
     if near:
         for i in range(row1 - row0):
             for j in range(col1 - col0):
@@ -385,6 +437,20 @@ def _rasterise_tin(xy, z, simplices, out, row0, row1, col0, col1, d, max_gap, ne
                                                     (row0 + i + 0.5) * d):
                     unproven += 1
     return unproven
+
+
+@numba.njit(cache=True, nogil=True)
+def _circle_within(ux, uy, r, box):
+    """The bounds (x0, x1, y0, y1) of the part of the circle (ux, uy, r) within ``box`` (the
+    same order); x0 > x1 where none is."""
+    y = min(max(uy, box[2]), box[3])  # the box's nearest to the centre, each way
+    x = min(max(ux, box[0]), box[1])
+    half_width = math.sqrt(max(r * r - (y - uy) ** 2, 0.0))
+    half_height = math.sqrt(max(r * r - (x - ux) ** 2, 0.0))
+    if (x - ux) ** 2 + (y - uy) ** 2 > r * r:
+        return 1.0, 0.0, 1.0, 0.0
+    return (max(ux - half_width, box[0]), min(ux + half_width, box[1]),
+            max(uy - half_height, box[2]), min(uy + half_height, box[3]))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

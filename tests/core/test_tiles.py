@@ -75,6 +75,37 @@ def _rows(xyz):
     return {tuple(row) for row in np.asarray(xyz).tolist()}
 
 
+def test_a_void_by_a_block_edge_on_a_cluster_stays_nodata_as_in_one_file(scheduler, tmp_path):
+    """A pond 12 m wide (more than the 10 m max gap) ending at the edge between two blocks of
+    round two (256 cells from the west): the thin triangles along its east shore have circles
+    reaching past the east block's halo to points of the west shore, so one TIN of all the
+    points bridges the pond there with long triangles (nodata). On a cluster the east block
+    once gridded only the points within its halo and gave those cells the thin triangles'
+    heights (one to sixteen cells a seed: the tester's 804.99 m in a gap of Topography.laz)."""
+    rng = np.random.default_rng(0)
+    gx, gy = np.meshgrid(np.arange(0.5, 280, 1.0), np.arange(0.5, 30, 1.0))
+    xy = np.column_stack([gx.ravel(), gy.ravel()]) + rng.uniform(-0.45, 0.45, (gx.size, 2))
+    xy = xy[(xy[:, 0] < 244) | (xy[:, 0] > 256.2)]  # the pond
+    xyz = np.round(np.column_stack([xy[:, 0] + X0, xy[:, 1] + Y0,
+                                    100 + 0.01 * xy[:, 0] + 0.3 * np.sin(xy[:, 1] / 5)]), 2)
+    crs = CRS.from_epsg(25832)
+    (tmp_path / "tiles").mkdir()
+    for west in (0, 95, 190):  # tiles narrower than a block
+        inside = (xyz[:, 0] >= X0 + west) & (xyz[:, 0] < X0 + west + 95)
+        io.write_points_las(tmp_path / "tiles" / f"strip_{west}.laz",
+                            PointCloud(xyz[inside], crs))
+    io.write_points_las(tmp_path / "one.laz", PointCloud(xyz, crs))
+    whole = grid_points_linear(io.read_points(tmp_path / "one.laz"), 1.0)
+    tiled = grid_point_tiles(tmp_path / "tiles", 1.0, scheduler=scheduler,
+                             out_path=tmp_path / "dem.tif")
+    assert tiled.dem.transform == whole.transform and tiled.dem.shape == whole.shape
+    assert whole.shape[1] > 256 and np.isnan(whole.values[:, 244:257]).any()
+    assert np.array_equal(np.isnan(tiled.dem.values), np.isnan(whole.values))
+    np.testing.assert_allclose(tiled.dem.values, whole.values, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(io.read_raster(tmp_path / "dem.tif").values,
+                                  whole.values.astype(np.float32))
+
+
 def test_a_local_cluster_keeps_the_edge_bands_in_scratch_files(survey, scheduler, tmp_path,
                                                                monkeypatch):
     """On its own local cluster round one writes each tile's edge band to a scratch file instead
