@@ -1010,6 +1010,12 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
             for read in reads:
                 read.cancel()
     counted = _tiles_counted(meta, classes, skip_unreadable, notes)
+    # the points overlapping tiles share counted once before the check points are drawn, as
+    # from one file of the tiles' points
+    repeats = _repeated_rows([points[i] for i in counted], [meta[i] for i in counted], notes)
+    for i, rows in zip(counted, repeats):
+        if len(rows):
+            points[i] = _without_rows(points[i], meta[i], rows)
     _check_points([meta[i] for i in counted], holdout, notes)
     gridding = []
     for i in counted:  # each tile's points let go as its points to grid are made
@@ -1017,7 +1023,6 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
         gridding.append(np.delete(points[i], rows, axis=0) if len(rows) else points[i])
         points[i] = None
     held = [meta[i]["holdout"] for i in counted]
-    _count_repeats_once(gridding, held, [Path(meta[i]["path"]).name for i in counted], notes)
     n_gridding = sum(len(p) for p in gridding)
     n_points = n_gridding + sum(len(h) for h in held)
     _check_enough(n_gridding, len(meta), classes)
@@ -1025,48 +1030,56 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
                       notes, tile_crs)
 
 
-def _count_repeats_once(gridding: list, held: list, names: list, notes: list) -> None:
-    """Points that overlapping tiles both hold (a buffered delivery, a tile cut again with a
-    margin) counted once: each point identical to 0.1 mm in x, y and z to one of an earlier
-    tile is dropped from the later tile's points to grid (``gridding``) or held out (``held``),
-    in place, with a note naming both tiles. Only points within another tile's bounds are
-    compared, so tiles that meet without overlapping cost nothing. A point is held out in both
-    tiles or in neither (its hash is the same in each): the check stays independent of the
-    grid."""
-    parts = [np.concatenate([g, h]) for g, h in zip(gridding, held)]
-    boxes = [(p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()) if len(p) else None
-             for p in parts]
-    keys, owners, rows = [], [], []
-    for i, (xyz, box) in enumerate(zip(parts, boxes)):
-        near = np.zeros(len(xyz), bool)
-        for j, other in enumerate(boxes):
-            if j != i and box is not None and other is not None and (
-                    other[0] <= box[2] and box[0] <= other[2] and other[1] <= box[3]
-                    and box[1] <= other[3]):
-                near |= _within(xyz, other)
-        index = np.flatnonzero(near)
-        keys.append(np.rint(xyz[index] * 1e4).astype(np.int64))
-        owners.append(np.full(len(index), i))
-        rows.append(index)
-    if not sum(len(r) for r in rows):
-        return
-    keys, owners, rows = np.concatenate(keys), np.concatenate(owners), np.concatenate(rows)
-    order = np.lexsort((owners, keys[:, 2], keys[:, 1], keys[:, 0]))
-    keys, owners, rows = keys[order], owners[order], rows[order]
-    starts = np.ones(len(keys), bool)
-    starts[1:] = (keys[1:] != keys[:-1]).any(axis=1)
-    first = owners[np.maximum.accumulate(np.where(starts, np.arange(len(keys)), 0))]
-    repeat = owners != first  # a later tile's copy of an earlier tile's point
-    for i in np.unique(owners[repeat]):
-        mine = repeat & (owners == i)
-        for j, n in zip(*np.unique(first[mine], return_counts=True)):
-            n = int(n)
-            notes.append(f"tile {names[i]} repeats {n:,} point{'s' * (n > 1)} of tile "
-                         f"{names[j]} where the two overlap: they are counted once")
-        drop = rows[mine]
-        n_grid = len(gridding[i])
-        gridding[i] = np.delete(gridding[i], drop[drop < n_grid], axis=0)
-        held[i] = np.delete(held[i], drop[drop >= n_grid] - n_grid, axis=0)
+def _repeated_rows(points: list, meta: list, notes: list) -> list[np.ndarray]:
+    """The rows of each tile's ``points`` that repeat a point of an earlier tile where the two
+    overlap (a buffered delivery, a tile cut again with a margin), with a note naming both
+    tiles: the same x, y and z to 0.1 mm. Only the points within another tile's bounds are
+    compared, so tiles that meet without overlapping cost nothing."""
+    # lazy: scipy loads only where tiles overlap
+    from scipy.spatial import cKDTree
+
+    boxes = [np.array([p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()])
+             if len(p) else None for p in points]
+    names = [Path(m["path"]).name for m in meta]
+    repeats = []
+    for i, (xyz, box) in enumerate(zip(points, boxes)):
+        repeat = np.zeros(len(xyz), bool)
+        for j, other in enumerate(boxes[:i]):
+            if box is None or other is None:
+                continue
+            step = np.full(3, 0.999e-4)  # two points a step of 0.1 mm apart are two
+            pad = np.array([-step[0], -step[1], step[0], step[1]])
+            reach = other + pad
+            if not (reach[0] <= box[2] and box[0] <= reach[2] and reach[1] <= box[3]
+                    and box[1] <= reach[3]):
+                continue
+            mine = np.flatnonzero(_within(xyz, reach) & ~repeat)
+            theirs = points[j][_within(points[j], box + pad)]
+            if not len(mine) or not len(theirs):
+                continue
+            origin = np.array([box[0], box[1], 0.0])
+            gap, _ = cKDTree((theirs - origin) / step).query((xyz[mine] - origin) / step,
+                                                              p=np.inf, distance_upper_bound=1)
+            found = mine[gap <= 1]
+            if len(found):
+                repeat[found] = True
+                n = len(found)
+                notes.append(f"tile {names[i]} repeats {n:,} point{'s' * (n > 1)} of tile "
+                             f"{names[j]} where the two overlap: they are counted once")
+        repeats.append(np.flatnonzero(repeat))
+    return repeats
+
+
+def _without_rows(xyz: np.ndarray, figures: dict, rows: np.ndarray) -> np.ndarray:
+    """A tile's points (round one's) without ``rows`` (sorted), its ``figures``' count and
+    candidate check points made to match them (in place)."""
+    candidates = figures["candidates"]
+    keep = ~np.isin(candidates["rows"], rows)
+    kept_rows = candidates["rows"][keep]
+    candidates.update(rows=kept_rows - np.searchsorted(rows, kept_rows),
+                      hashes=candidates["hashes"][keep], xyz=candidates["xyz"][keep])
+    figures["n_points"] -= len(rows)
+    return np.delete(xyz, rows, axis=0)
 
 
 def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,

@@ -378,6 +378,55 @@ def test_overlapping_tiles_count_their_shared_points_once(survey, tmp_path):
     assert any("counted once" in n for n in report["notes"])
 
 
+def _buffered(xyz, crs, folder, buffer, scales=None):
+    """The points as 2 x 2 tiles of the survey's cut, each ``buffer`` m wider on every side (its
+    neighbours' points there too), written at the LAS ``scales`` given by tile (default
+    0.001 m)."""
+    # lazy: laspy loads only in the tests that write other scales
+    import laspy
+
+    folder.mkdir()
+    for k, (xs, ys) in enumerate(((0, 0), (0, 120), (150, 0), (150, 120))):
+        inside = ((xyz[:, 0] >= X0 + xs - buffer) & (xyz[:, 0] < X0 + xs + 150 + buffer)
+                  & (xyz[:, 1] >= Y0 + ys - buffer) & (xyz[:, 1] < Y0 + ys + 120 + buffer))
+        header = laspy.LasHeader(point_format=3, version="1.4")
+        header.offsets = np.floor(xyz.min(axis=0))
+        header.scales = np.full(3, 0.001 if scales is None else scales[k])
+        header.add_crs(crs)
+        las = laspy.LasData(header)
+        las.x, las.y, las.z = xyz[inside, 0], xyz[inside, 1], xyz[inside, 2]
+        las.classification = np.full(inside.sum(), 2, np.uint8)
+        las.write(str(folder / f"tile_{xs}_{ys}.laz"))
+
+
+def _check_points_gpkg(path):
+    with fiona.open(path) as layer:  # read by GDAL, as QGIS reads them
+        return sorted(tuple(f.geometry.coordinates) for f in layer)
+
+
+def test_buffered_tiles_hold_out_and_grid_what_one_file_of_their_points_does(survey, tmp_path):
+    """Buffered tiles (5 m of each neighbour's points) through `grid` as a user runs it: the
+    shared points are counted once before the check points are drawn, so the tiles hold out
+    the check points one file of their points holds out, as many, and grid its DEM. The draw
+    once came first: the copies of a shared point took two of the least hashes (one point),
+    the count was of the copies, and the check points and the DEM were others."""
+    whole = io.read_points(survey / "single.laz")
+    _buffered(whole.xyz, whole.crs, tmp_path / "buffered", 5.0)
+    said = []
+    for source, out in ((tmp_path / "buffered", "tiles"), (survey / "single.laz", "one")):
+        (tmp_path / out).mkdir()
+        result = subprocess.run([FLOODMESH, "grid", str(source), "--cell-size", "1",
+                                 "--holdout", "0.01", "--out", str(tmp_path / out / "dem.tif")],
+                                capture_output=True, text=True, timeout=600)
+        assert result.returncode == 0, result.stderr
+        said.append(result.stdout + result.stderr)
+    assert "from 4 tiles (288,000 points)" in said[0] and "counted once" in said[0]
+    tiles, one = (_check_points_gpkg(tmp_path / out / "holdout.gpkg") for out in ("tiles", "one"))
+    assert len(tiles) == len(one) == 2880 and tiles == one
+    np.testing.assert_array_equal(io.read_raster(tmp_path / "tiles" / "dem.tif").values,
+                                  io.read_raster(tmp_path / "one" / "dem.tif").values)
+
+
 def test_overlapping_tiles_on_a_cluster_are_named_in_a_note(survey, scheduler, tmp_path):
     """On a cluster the shared points of overlapping tiles cannot be told apart: the note names
     the tiles and the way to count them once; tiles that only meet get no such note."""
