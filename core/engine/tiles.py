@@ -405,6 +405,28 @@ def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     return las_xyz(las, cls), cls
 
 
+def _resolution(path: str, xyz: np.ndarray) -> np.ndarray:
+    """The step (m; x, y, z) to which a tile stores its coordinates: a LAS/LAZ header's scales;
+    for text, the coarsest of 1 m to 0.1 mm of which its numbers (the first 10,000) are whole
+    multiples."""
+    file = path.split(_WINDOW)[0]
+    if Path(file).suffix.lower() in LAS_EXTENSIONS:
+        # lazy: laspy loads only when this runs
+        import laspy
+
+        with laspy.open(file) as reader:
+            return np.asarray(reader.header.scales, float)
+    sample = np.asarray(xyz[:10_000], float)
+    steps = np.full(3, 1e-4)
+    for axis in range(3):
+        for decimals in range(5):
+            scaled = sample[:, axis] * 10.0 ** decimals
+            if np.all(np.abs(scaled - np.rint(scaled)) < 1e-3):
+                steps[axis] = 10.0 ** -decimals
+                break
+    return steps
+
+
 def _which(classes) -> str:
     return "ground points (class 2)" if classes is None else f"points of classes {sorted(classes)}"
 
@@ -459,10 +481,11 @@ def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int,
     """Round one's read of a tile: the points kept (``_kept``, ``_usable``: ``points``), the
     candidates for the survey's check points among them (``holdout_candidates`` of a
     ``holdout`` fraction, hashed by ``seed``: ``candidates``, their row indices, hashes and
-    bound), the digest of all its points and whether it is sparse."""
+    bound), the digest of all its points, whether it is sparse and the step of its
+    coordinates (``_resolution``)."""
     name = Path(path).name
     xyz, cls = _read_raw(Path(path))
-    digest = _digest(xyz)
+    digest, resolution = _digest(xyz), _resolution(path, xyz)
     kept, kind = _kept(xyz, cls, classes, name, notes)
     del xyz, cls
     kept, sparse = _usable(kept, crs_wkt, name, notes)
@@ -470,7 +493,7 @@ def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int,
     hashes = place_hashes(kept, seed) if holdout > 0 else np.empty(0, np.uint64)
     rows, bound = holdout_candidates(hashes, holdout)
     return {"points": kept, "candidates": {"rows": rows, "hashes": hashes[rows], "bound": bound},
-            "kind": kind, "digest": digest, "sparse": sparse}
+            "kind": kind, "digest": digest, "sparse": sparse, "resolution": resolution}
 
 
 def _tile_points(path: str, crs_wkt: str, classes, held_below: int | None, seed: int):
@@ -1032,8 +1055,10 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
 
 def _repeated_rows(points: list, meta: list, notes: list) -> list[np.ndarray]:
     """The rows of each tile's ``points`` that repeat a point of an earlier tile where the two
-    overlap (a buffered delivery, a tile cut again with a margin), with a note naming both
-    tiles: the same x, y and z to 0.1 mm. Only the points within another tile's bounds are
+    overlap (a buffered delivery, a tile cut again with a margin, or stored at another LAS
+    scale), with a note naming both tiles: the same x, y and z to within half the sum of the
+    two tiles' coordinate steps (``meta``'s ``resolution``), the most that two copies of one
+    point stored at those steps differ by. Only the points within another tile's bounds are
     compared, so tiles that meet without overlapping cost nothing."""
     # lazy: scipy loads only where tiles overlap
     from scipy.spatial import cKDTree
@@ -1047,7 +1072,9 @@ def _repeated_rows(points: list, meta: list, notes: list) -> list[np.ndarray]:
         for j, other in enumerate(boxes[:i]):
             if box is None or other is None:
                 continue
-            step = np.full(3, 0.999e-4)  # two points a step of 0.1 mm apart are two
+            # a little less than the half sum: two points of tiles of one step lie a whole
+            # step apart at the least
+            step = 0.999 * (meta[i]["resolution"] + meta[j]["resolution"]) / 2
             pad = np.array([-step[0], -step[1], step[0], step[1]])
             reach = other + pad
             if not (reach[0] <= box[2] and box[0] <= reach[2] and reach[1] <= box[3]
@@ -1063,11 +1090,22 @@ def _repeated_rows(points: list, meta: list, notes: list) -> list[np.ndarray]:
             found = mine[gap <= 1]
             if len(found):
                 repeat[found] = True
-                n = len(found)
-                notes.append(f"tile {names[i]} repeats {n:,} point{'s' * (n > 1)} of tile "
-                             f"{names[j]} where the two overlap: they are counted once")
+                notes.append(_repeats_note(names[i], names[j], len(found),
+                                           meta[i]["resolution"], meta[j]["resolution"]))
         repeats.append(np.flatnonzero(repeat))
     return repeats
+
+
+def _repeats_note(name: str, first: str, n: int, mine: np.ndarray, theirs: np.ndarray) -> str:
+    """The note on the ``n`` points of tile ``name`` that repeat points of tile ``first``, of
+    coordinate steps ``mine`` and ``theirs`` (m; how near the copies were found where they
+    differ)."""
+    said = (f"tile {name} repeats {n:,} point{'s' * (n > 1)} of tile {first} where the two "
+            "overlap: they are counted once")
+    if np.array_equal(mine, theirs):
+        return said
+    return (f"{said} (found within {(mine + theirs).max() / 2 * 1000:.3g} mm: the tiles store "
+            f"coordinates to {mine.max() * 1000:g} and {theirs.max() * 1000:g} mm)")
 
 
 def _without_rows(xyz: np.ndarray, figures: dict, rows: np.ndarray) -> np.ndarray:

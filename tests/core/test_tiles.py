@@ -427,6 +427,42 @@ def test_buffered_tiles_hold_out_and_grid_what_one_file_of_their_points_does(sur
                                   io.read_raster(tmp_path / "one" / "dem.tif").values)
 
 
+def test_buffered_tiles_at_other_las_scales_count_their_shared_points_once(survey, tmp_path):
+    """Buffered tiles, two written at 1 cm, two at 1 mm: a shared point's copies differ by up
+    to 5.5 mm, and are found as one point (within half the two scales' sum), with a note
+    saying so; every point counts once, and no check point has a copy among the points
+    gridded (they were matched to 0.1 mm only: most copies were counted twice, and a check
+    point's copy gridded)."""
+    whole = io.read_points(survey / "single.laz")
+    _buffered(whole.xyz, whole.crs, tmp_path / "buffered", 10.0, (0.01, 0.001, 0.01, 0.001))
+    result = subprocess.run([FLOODMESH, "grid", str(tmp_path / "buffered"), "--cell-size", "1",
+                             "--holdout", "0.01", "--out", str(tmp_path / "dem.tif")],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert "from 4 tiles (288,000 points)" in result.stdout, result.stdout
+    assert "found within 5.5 mm: the tiles store coordinates to 1 and 10 mm" in result.stderr
+    read = read_point_tiles(tmp_path / "buffered", 1.0, holdout=0.01, seed=0)
+    assert len(read.gridding) + len(read.holdout) == read.n_points == len(whole.xyz)
+    assert len(read.holdout) == 2880
+    from scipy.spatial import cKDTree
+
+    gap, _ = cKDTree(read.gridding).query(read.holdout, p=np.inf)
+    assert gap.min() > 0.0055
+
+
+def test_buffered_xyz_tiles_of_other_decimals_count_their_shared_points_once(survey, tmp_path):
+    """XYZ text tiles have no scale: their step is read from their numbers (2 and 3 decimals),
+    and the copies of a shared point are found as in LAS tiles."""
+    xyz = io.read_points(survey / "single.laz").xyz
+    xyz = xyz[(xyz[:, 0] < X0 + 60) & (xyz[:, 1] < Y0 + 40)]
+    for name, west, decimals in (("a.xyz", 0, 2), ("b.xyz", 25, 3)):
+        inside = (xyz[:, 0] >= X0 + west) & (xyz[:, 0] < X0 + west + 35)
+        np.savetxt(tmp_path / name, xyz[inside], fmt=f"%.{decimals}f")
+    read = read_point_tiles(str(tmp_path / "*.xyz"), 1.0, crs="EPSG:25832")
+    assert read.n_points == len(read.gridding) == len(xyz)
+    assert any("tile b.xyz repeats" in n and "to 1 and 10 mm" in n for n in read.notes)
+
+
 def test_overlapping_tiles_on_a_cluster_are_named_in_a_note(survey, scheduler, tmp_path):
     """On a cluster the shared points of overlapping tiles cannot be told apart: the note names
     the tiles and the way to count them once; tiles that only meet get no such note."""
