@@ -654,12 +654,8 @@ def series_notes(what: str, series: np.ndarray, unit: str, duration: float,
                  zero_is_off: bool = False) -> list[str]:
     """Notes on a (time s, value) series that starts after the run does or ends before it
     (the worker holds its first and last values there; no note for a held 0 where
-    ``zero_is_off``: an inflow that is off); a FloodMeshError if its times do not increase."""
+    ``zero_is_off``: an inflow that is off); its times increase (``_series``)."""
     t = series[:, 0]
-    back = np.flatnonzero(np.diff(t) <= 0)
-    if len(back):
-        raise FloodMeshError(f"{what} goes back in time at row {back[0] + 2} ({t[back[0] + 1]:g} s "
-                             f"after {t[back[0]]:g} s): its times must increase, row by row")
     notes = []
     if t[0] > 0 and not (zero_is_off and series[0, 1] == 0):
         notes.append(f"{what} starts at {t[0]:g} s: held at its first value, "

@@ -142,17 +142,6 @@ def test_an_inflow_hydrograph_that_ends_before_the_run_is_held_at_its_last_value
     assert "the level boundary 1's levels ends at 5 s" in err
 
 
-def test_a_hydrograph_that_goes_back_in_time_is_refused(tmp_path):
-    mesh = tmp_path / "m.2dm"
-    rectangle_mesh(mesh, 20, 10, lambda x, y: 0 * x, max_area=2.0)
-    rc, err, report = flood(tmp_path, mesh, {
-        "duration_s": 20, "inflows": [{"circle": {"centre": [X0 + 10, Y0 + 5], "radius": 3},
-                                       "hydrograph": [[0, 1], [10, 2], [5, 3]]}]})
-    assert rc == 2 and err.count("\n") == 1
-    assert "inflow 1's hydrograph goes back in time at row 3 (5 s after 10 s)" in err
-    assert not (tmp_path / "out").exists()
-
-
 @pytest.mark.parametrize("where, says", [
     ((151.75, -32.94), "observation point X (151.75, -32.94) lies outside the mesh (x 382000 "
                        "to 382030, y 6354000 to 6354010): check its coordinates and CRS"),
