@@ -251,8 +251,8 @@ def real_sources(work: Path) -> dict:
     """The real samples of ../shared/data/real as the chain's inputs, each with the options it
     needs: the Québec LiDAR (0.1 ground points/m², lakes), the Autzen LiDAR (Oregon, 0.4 ground
     points/m², a river bank; its feet scaled to metres: EPSG:2994 and EPSG:2993 are the same
-    Lambert projection in feet and in metres) and the Merewether DEM (1 m, urban, held-out DEM
-    cells: not independent of the DEM)."""
+    Lambert projection in feet and in metres) and the Merewether DEM (1 m, urban; its held-out
+    cells are taken out of the DEM and filled from their neighbours)."""
     import laspy
 
     from floodmesh.core.points import PointCloud

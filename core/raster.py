@@ -343,3 +343,49 @@ def bilinear(grid: Grid, x, y) -> np.ndarray:
         out = total / weight
     # A point exactly on a NaN-free side can get zero total weight only if every neighbour is NaN.
     return np.where(weight > 1e-12, out, np.nan)
+
+
+_AROUND = tuple((dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc)
+
+
+def inner_cells(values: np.ndarray) -> np.ndarray:
+    """Flat indices of the valid cells whose eight neighbours are valid too: cells that can be
+    taken out of the data and filled from around without moving its edge."""
+    valid = np.isfinite(values)
+    rows, cols = valid.shape
+    inner = np.zeros_like(valid)
+    if rows > 2 and cols > 2:
+        middle = valid[1:-1, 1:-1].copy()
+        for dr, dc in _AROUND:
+            middle &= valid[1 + dr:rows - 1 + dr, 1 + dc:cols - 1 + dc]
+        inner[1:-1, 1:-1] = middle
+    return np.flatnonzero(inner)
+
+
+def fill_from_around(values: np.ndarray, cells: np.ndarray) -> None:
+    """Replace the flat ``cells`` of ``values`` (``inner_cells``) in place by linear
+    interpolation from the neighbours not among them, as a TIN of the other data would: the
+    midpoint of the opposite pair (across, up and down, or a diagonal) that differ least, the
+    one along a wall or bank rather than across it (a mean of all would put a ramp's height at
+    a wall's foot), else the mean of the neighbours known; cells beside others are filled
+    pass by pass, those with the most pairs known first."""
+    values.flat[cells] = np.nan
+    pending = np.asarray(cells)
+    while pending.size:
+        r, c = np.divmod(pending, values.shape[1])
+        pairs = np.stack([(values[r + dr, c + dc], values[r - dr, c - dc])
+                          for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1))])  # (4, 2, n)
+        step = np.abs(pairs[:, 0] - pairs[:, 1])
+        steady = np.argmin(np.where(np.isfinite(step), step, np.inf), axis=0)
+        estimate = pairs[steady, :, np.arange(len(r))].mean(axis=1)
+        around = np.stack([values[r + dr, c + dc] for dr, dc in _AROUND])
+        known = np.isfinite(around)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(known, around, 0.0).sum(axis=0) / known.sum(axis=0)
+        estimate = np.where(np.isfinite(estimate), estimate, mean)
+        known_pairs = np.isfinite(step).sum(axis=0)
+        filled = np.isfinite(estimate) & (known_pairs == known_pairs.max())
+        if not filled.any():  # every pending cell walled in by pending ones: no inner cells
+            raise FloodMeshError("cells to fill have no data around them")
+        values[r[filled], c[filled]] = estimate[filled]
+        pending = pending[~filled]

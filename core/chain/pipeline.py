@@ -33,7 +33,8 @@ from ..options import (BRIDGE_GAP_CELLS, DEFAULT_CELL_SIZE, EXPORT_EXTENSIONS, E
                        check_sigma_fits)
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
-from ..raster import Grid, bilinear, check_dem_size, nearest_value, parse_crs, same_place
+from ..raster import (Grid, bilinear, check_dem_size, fill_from_around, inner_cells,
+                      nearest_value, parse_crs, same_place)
 from ..steps.accuracy import accuracy_statistics, outside_mesh_note, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
@@ -623,6 +624,7 @@ class Front:
 
 
 HELD_OUT = "LiDAR points withheld from gridding"  # tiles or one file: the same points
+DEM_HELD_OUT = "DEM cells taken out of the DEM and filled from their neighbours"
 
 
 @dataclass
@@ -745,8 +747,13 @@ def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
     triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
     check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
                  advice="resample the DEM to larger cells or split it into tiles")
-    return _Terrain(dem, _dem_check_points(dem, options.holdout, options.seed),
-                    "DEM cell centres (not independent of the DEM)", 0)
+    check = _hold_dem_cells_out(dem, options.holdout, options.seed)
+    if note and len(check):
+        note(f"{len(check):,} check cells of the DEM (holdout {options.holdout:g}) were taken "
+             "out of it and filled from their neighbours before anything was built from it, as "
+             "held-out points are left out of gridding, so that the accuracy is measured where "
+             "the mesh never saw the data; dem.tif has them filled")
+    return _Terrain(dem, check, DEM_HELD_OUT, 0)
 
 
 def _read_point_tiles(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
@@ -927,10 +934,20 @@ def _note_own_z_off_the_ground(lines, dem: Grid, name: str, note) -> None:
              "heights has z 0: save such lines without Z to give them the DEM's")
 
 
-def _dem_check_points(dem: Grid, fraction: float, seed: int) -> PointCloud:
-    """A seeded random ``fraction`` of the DEM's valid cells as points (cell centre, z), in the
-    draw's order (``_cell_points``)."""
-    return PointCloud(_cell_points(dem, _dem_cells(dem, fraction, seed)), dem.crs)
+def _hold_dem_cells_out(dem: Grid, fraction: float, seed: int) -> PointCloud:
+    """The check points of a DEM: a seeded random ``fraction`` of its valid cells (at least 30;
+    none for 0), drawn among those inside the data (``inner_cells``, so that its edge stays), as
+    points (cell centre, z) in the draw's order; the cells are then taken out of ``dem`` and
+    filled from their neighbours (``fill_from_around``), so that nothing built from it saw
+    them."""
+    if fraction == 0:
+        return PointCloud(np.empty((0, 3)), dem.crs)
+    inner = inner_cells(dem.values)
+    n = min(inner.size, max(int(round(fraction * np.isfinite(dem.values).sum())), 30))
+    cells = inner[np.random.default_rng(seed).choice(inner.size, size=n, replace=False)]
+    check = PointCloud(_cell_points(dem, cells), dem.crs)
+    fill_from_around(dem.values, cells)
+    return check
 
 
 def _dem_measured(dem: Grid, seed: int) -> tuple[np.ndarray, CellIndex]:

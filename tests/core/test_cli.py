@@ -265,3 +265,50 @@ def test_the_parameters_page_lists_every_option_of_every_command():
                if option.startswith("--") and option != "--help"
                and not re.search(rf"`{re.escape(option)}[` ]", _documented(command, page))]
     assert not missing, f"not in docs/parameters.md: {', '.join(missing)}"
+
+
+def test_a_dem_run_holds_its_check_cells_out_of_the_dem(tmp_path):
+    """A DEM has no points to hold back: its check cells are taken out of the DEM the run
+    builds from (dem.tif has them filled from their neighbours), so the RMSE is measured where
+    the mesh never saw the data; with --holdout 0 nothing is assessed (no cells drawn)."""
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.raster import Grid
+
+    rows, cols = 80, 100
+    x = np.arange(cols)[None, :]
+    # a noisy plane: no cell's z follows from its neighbours'
+    z = 10 + 0.02 * x + np.random.default_rng(0).normal(0, 0.05, (rows, cols))
+    io.write_raster(tmp_path / "in.tif", Grid(z, Affine(1, 0, 500_000, 0, -1, 6_000_100),
+                                              CRS.from_epsg(32632)))
+    given = io.read_raster(tmp_path / "in.tif").values
+    said = floodmesh("run", tmp_path / "in.tif", "--out", tmp_path / "r", "--holdout", 0.01,
+                     "--max-area", 20)
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert report["n_holdout"] == 80 and f"on {report['n_assessed']} points" in said.stdout
+    check = io.read_points_vector(tmp_path / "r" / "residuals.gpkg")
+    r = np.floor(6_000_100 - check[:, 1]).astype(int)
+    c = np.floor(check[:, 0] - 500_000).astype(int)
+    np.testing.assert_allclose(check[:, 2], given[r, c])  # the DEM's own z is the check
+    built = io.read_raster(tmp_path / "r" / "dem.tif").values
+    assert (np.abs(built[r, c] - given[r, c]) > 1e-4).all()  # ... which the run never used
+    # filled as the midpoint of the opposite neighbours that differ least (along a bank)
+    pairs = np.array([(given[r + dr, c + dc], given[r - dr, c - dc])
+                      for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1))])
+    steady = np.argmin(np.abs(pairs[:, 0] - pairs[:, 1]), axis=0)
+    midpoint = pairs[steady, :, np.arange(len(r))].mean(axis=1)
+    alone = [not any(abs(r[i] - r[j]) <= 1 and abs(c[i] - c[j]) <= 1
+                     for j in range(len(r)) if j != i) for i in range(len(r))]
+    np.testing.assert_allclose(built[r, c][alone], midpoint[alone], atol=1e-5)
+    untouched = np.ones(given.shape, bool)
+    untouched[r, c] = False
+    np.testing.assert_allclose(built[untouched], given[untouched], atol=1e-5)
+
+    said = floodmesh("run", tmp_path / "in.tif", "--out", tmp_path / "r0", "--holdout", 0,
+                     "--max-area", 20)
+    report = json.loads((tmp_path / "r0" / "report.json").read_text())
+    assert report["n_holdout"] == 0 and report["rmse_m"] is None
+    assert "not assessed: no check points were held out" in said.stdout
+    np.testing.assert_allclose(io.read_raster(tmp_path / "r0" / "dem.tif").values, given,
+                               atol=1e-5)
