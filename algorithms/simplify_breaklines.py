@@ -22,7 +22,9 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
             "vertically; or a cubic smoothing spline within the same bound. The result stays a "
             "valid mesh input: segments that would cross another line get their vertices back, "
             "parts of a line closer than the minimum distance (m) to a longer line merge into "
-            "it, and vertices closer than it to the previous one are dropped.")
+            "it, and vertices closer than it to the previous one are dropped. The minimum "
+            "distance is 0 (off) by default, as in floodmesh simplify; LiDAR to mesh takes half "
+            "the cell size, d/2: give that for its lines.")
     INPUT, METHOD, KEEP_EVERY, TOLERANCE, MIN_DISTANCE, OUTPUT = (
         "INPUT", "METHOD", "KEEP_EVERY", "TOLERANCE", "MIN_DISTANCE", "OUTPUT")
 
@@ -36,8 +38,8 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
             INTEGER, 4, minValue=1))
         self.addParameter(distance(self, self.TOLERANCE, "Tolerance for Douglas–Peucker or "
                                    "spline", 0.9))
-        self.addParameter(distance(self, self.MIN_DISTANCE, "Minimum distance between lines",
-                                   0.5))
+        self.addParameter(distance(self, self.MIN_DISTANCE, "Minimum distance between lines "
+                                   "(0: off; d/2 as LiDAR to mesh)", 0.0))
         self.addParameter(QgsProcessingParameterVectorDestination(
             self.OUTPUT, self.tr("Simplified break lines"), VECTOR_LINE))
 

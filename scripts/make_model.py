@@ -72,7 +72,9 @@ steps = [
      {"BREAKPOINTS": child_output("breakpoints", "OUTPUT"), "SLOPE": child_output("slope", "OUTPUT"),
       "DEM": child_output("grid", "OUTPUT"), "CRITICAL_SLOPE": param("s_crit")}, {}),
     ("simplify", "floodmesh:simplifybreaklines",
-     {"INPUT": child_output("trace", "OUTPUT"), "METHOD": static(0), "KEEP_EVERY": static(4)},
+     # the minimum distance d/2, as LiDAR to mesh takes it (the step alone knows no cell size)
+     {"INPUT": child_output("trace", "OUTPUT"), "METHOD": static(0), "KEEP_EVERY": static(4),
+      "MIN_DISTANCE": [QgsProcessingModelChildParameterSource.fromExpression("@cell_size / 2")]},
      {"breaklines": ("Break lines", "OUTPUT")}),
     ("mesh", "floodmesh:buildmesh",
      {"DEM": child_output("grid", "OUTPUT"), "BREAKLINES": child_output("simplify", "OUTPUT"),

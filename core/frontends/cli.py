@@ -508,7 +508,8 @@ def _add_step_commands(sub) -> None:
     group.add_argument("--spline", type=float, metavar="TOLERANCE",
                        help="cubic smoothing spline within this many metres")
     p.add_argument("--min-distance", type=float, default=0.0,
-                   help="merge lines and vertices closer than this, m (default 0: off)")
+                   help="merge lines and vertices closer than this, m (default 0: off; run "
+                        "takes half the cell size)")
     p.add_argument("--out", required=True)
     p.add_argument("--crs")
     p.set_defaults(func=cmd_simplify)

@@ -17,14 +17,17 @@ def test_model_is_in_the_toolbox_with_its_outputs(processing):
 
 
 def test_model_runs_through_processing_run(processing, demo_points_file, tmp_path):
+    """At 2 m cells; the simplification merges lines closer than d/2, 1 m, as LiDAR to mesh
+    does (not a fixed 0.5 m, nor the step's own default, off)."""
     result = processing.run(MODEL_ID, {
-        "points": str(demo_points_file), "cell_size": 1.0, "s_crit": 10.0, "min_angle": 25.0,
+        "points": str(demo_points_file), "cell_size": 2.0, "s_crit": 10.0, "min_angle": 25.0,
         "max_area": 100.0, "mesh:mesh": str(tmp_path / "mesh.2dm"),
         "simplify:breaklines": str(tmp_path / "lines.gpkg"),
         "assess:residuals": str(tmp_path / "residuals.gpkg")})
     mesh = QgsMeshLayer(result["mesh:mesh"], "mesh", "mdal")
     assert mesh.isValid() and mesh.dataProvider().faceCount() > 1000
     assert QgsVectorLayer(result["simplify:breaklines"], "l", "ogr").featureCount() >= 10
+    assert result["CHILD_INPUTS"]["simplify"]["MIN_DISTANCE"] == 1.0
     assert QgsVectorLayer(result["assess:residuals"], "r", "ogr").featureCount() == round(
         0.01 * 2 * 300 * 240)
 

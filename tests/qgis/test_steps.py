@@ -188,6 +188,32 @@ def test_trace_and_simplify_load_in_one_readable_style(processing, demo_rasters,
     QgsProject.instance().clear()
 
 
+def test_simplify_by_default_gives_the_command_line_s_lines(processing, demo_rasters,
+                                                            tmp_path):
+    """Simplify break lines and floodmesh simplify take one default (minimum distance 0: off),
+    so the documented step chain gives the same lines in QGIS and on the command line; here a
+    minimum distance changes the lines, so a default of 0.5 m would show."""
+    import sys
+    from pathlib import Path
+
+    lines = processing.run("floodmesh:tracebreaklines", {
+        "BREAKPOINTS": demo_rasters["bp"], "SLOPE": demo_rasters["slope"],
+        "DEM": demo_rasters["dem"], "OUTPUT": str(tmp_path / "lines.gpkg")})["OUTPUT"]
+    qgis = processing.run("floodmesh:simplifybreaklines", {
+        "INPUT": lines, "OUTPUT": str(tmp_path / "qgis.gpkg")})["OUTPUT"]
+    cli = subprocess.run([str(Path(sys.executable).parent / "floodmesh"), "simplify", lines,
+                          "--out", str(tmp_path / "cli.gpkg")], capture_output=True, text=True,
+                         timeout=300)
+    assert cli.returncode == 0, cli.stderr
+    by_qgis, by_cli = io.read_lines_gpkg(qgis), io.read_lines_gpkg(tmp_path / "cli.gpkg")
+    assert len(by_qgis) == len(by_cli) > 10
+    for a, b in zip(by_qgis, by_cli):
+        np.testing.assert_array_equal(a, b)
+    merged = processing.run("floodmesh:simplifybreaklines", {
+        "INPUT": lines, "MIN_DISTANCE": 0.5, "OUTPUT": str(tmp_path / "merged.gpkg")})["OUTPUT"]
+    assert sum(map(len, io.read_lines_gpkg(merged))) < sum(map(len, by_cli))
+
+
 def test_refine_mesh_algorithm(processing, demo_rasters, tmp_path):
     """Refine mesh from the toolbox: measured points and check points as layers; the refined
     mesh has more nodes than the unrefined one, meets the RMSE target on its points, loads as a
