@@ -21,6 +21,10 @@ ALGORITHMS = (GridPointsAlgorithm, SlopeAlgorithm, ClassifyBreakpointsAlgorithm,
               RefineMeshAlgorithm, AssessAccuracyAlgorithm, ExportMeshAlgorithm,
               LidarToMeshAlgorithm, FloodOnMeshAlgorithm)
 
+# the only formats the steps write (core.chain.files: GEOTIFF, GEOPACKAGE; not imported: it
+# loads the numerical core), so that a raster or layer output offers no other
+RASTER_EXTENSIONS, VECTOR_EXTENSIONS = ["tif", "tiff"], ["gpkg"]
+
 ROOT = Path(__file__).resolve().parent.parent
 ICON = ROOT / "icons" / "floodmesh.svg"
 MODELS = ROOT / "models"
@@ -53,6 +57,21 @@ class FloodMeshProvider(QgsProcessingProvider):
     def supportsNonFileBasedOutput(self):  # noqa: N802
         # core writes files; temporary outputs (as in models) must become files, not memory layers
         return False
+
+    def supportedOutputRasterLayerExtensions(self):  # noqa: N802
+        return list(RASTER_EXTENSIONS)
+
+    def supportedOutputVectorLayerExtensions(self):  # noqa: N802
+        return list(VECTOR_EXTENSIONS)
+
+    def supportedOutputTableExtensions(self):  # noqa: N802
+        return list(VECTOR_EXTENSIONS)
+
+    def defaultRasterFileExtension(self):  # noqa: N802
+        return RASTER_EXTENSIONS[0]
+
+    def defaultVectorFileExtension(self, hasGeometry=True):  # noqa: N802, N803
+        return VECTOR_EXTENSIONS[0]
 
     def loadAlgorithms(self):  # noqa: N802
         for algorithm in ALGORITHMS:

@@ -56,3 +56,35 @@ def test_the_parameters_page_lists_every_parameter_of_every_algorithm(processing
         missing += [f"{algorithm.id()} {p.name()}" for p in algorithm.parameterDefinitions()
                     if f"| `{p.name()}` |" not in table]
     assert not missing, f"not in docs/parameters.md: {', '.join(missing)}"
+
+
+def test_outputs_offer_only_the_formats_the_steps_write(processing):
+    """Every raster output (the models' too) offers GeoTIFF alone and every layer output
+    GeoPackage alone, in its extensions and its save dialog's filter: QGIS's default list (img,
+    shp, geojson, …) offered names the steps then refuse."""
+    import re
+
+    from qgis.core import (QgsProcessingParameterRasterDestination,
+                           QgsProcessingParameterVectorDestination)
+
+    from floodmesh.core.chain.files import GEOPACKAGE, GEOTIFF
+
+    provider = QgsApplication.processingRegistry().providerById("floodmesh")
+    assert provider.supportedOutputRasterLayerExtensions() == ["tif", "tiff"]
+    assert provider.supportedOutputVectorLayerExtensions() == ["gpkg"]
+    seen = set()
+    for algorithm in provider.algorithms():
+        for parameter in algorithm.destinationParameterDefinitions():
+            if isinstance(parameter, QgsProcessingParameterRasterDestination):
+                offered, written = parameter.supportedOutputRasterLayerExtensions(), GEOTIFF
+            elif isinstance(parameter, QgsProcessingParameterVectorDestination):
+                offered, written = parameter.supportedOutputVectorLayerExtensions(), GEOPACKAGE
+            else:
+                continue
+            seen.add(type(parameter))
+            where = f"{algorithm.id()} {parameter.name()}"
+            assert offered and {f".{e}" for e in offered} <= set(written[0]), (where, offered)
+            assert parameter.defaultFileExtension() in offered, where
+            in_filter = {e.lower() for e in re.findall(r"\*\.(\w+)", parameter.createFileFilter())}
+            assert in_filter == set(offered), (where, parameter.createFileFilter())
+    assert len(seen) == 2
