@@ -52,6 +52,12 @@ def managed_venv() -> Path:
     return Path(QgsApplication.qgisSettingsDirPath()) / "floodmesh" / "venv"
 
 
+def flood_env() -> Path:
+    """Where ANUGA's environment goes beside the profile (a ZIP install has no ``make setup``):
+    core's ``flood_python`` looks there too, and says how to make it."""
+    return managed_venv().parent / "venv-flood"
+
+
 def find_python() -> str | None:
     """The Python that runs the worker, or None when there is none yet."""
     given = os.environ.get(ENV_VARIABLE)

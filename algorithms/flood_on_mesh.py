@@ -10,6 +10,7 @@ from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
 from ..core.flood.summary import time_step_summary
 from ..core.options import RESULT_RASTERS
 from .base import FloodMeshAlgorithm, crs_or_none, layer_file
+from .child import flood_env
 from .styles import load_results, run_group_name
 
 RASTERS = (("MAX_DEPTH", "Maximum depth (m)", "max_depth"),
@@ -33,8 +34,10 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
             "mesh's CRS, the triangles that set the solver's time step (points, with their share "
             "of the steps: where a sliver or a fast jet makes the flood dear), the outflow "
             "hydrograph, the stage at observation points and report.json (mass balance, "
-            "hydraulic checks of the mesh, cost). ANUGA needs its own "
-            "environment (make setup builds .venv-flood).")
+            "hydraulic checks of the mesh, cost). ANUGA needs an environment of its own: "
+            "make setup builds it for a checkout; after an install from the ZIP, make it once "
+            "in <QGIS profile>/floodmesh/venv-flood (the first run says the command; see "
+            "docs/qgis.md, Flood on mesh and ANUGA).")
     MESH, SCENARIO, CRS, OUTPUT = "MESH", "SCENARIO", "CRS", "OUTPUT_FOLDER"
     HYDROGRAPH, REPORT, TIME_STEP = "HYDROGRAPH", "REPORT", "TIME_STEP"
 
@@ -62,7 +65,7 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
         out = Path(self.parameterAsString(parameters, self.OUTPUT, context))
         report = self.run_step("flood", {
             "mesh": mesh_path, "scenario": self.parameterAsFile(parameters, self.SCENARIO, context),
-            "output": str(out), "crs": crs}, feedback, out)
+            "output": str(out), "crs": crs, "own_env": str(flood_env())}, feedback, out)
         mb = report["mass_balance"]
         feedback.pushInfo(f"ANUGA: {report['cpu_s']:.1f} s CPU, {report['time_steps']} steps; "
                           f"flooded {report['flooded_area_m2']:.0f} m², mass balance error "

@@ -16,6 +16,7 @@ import glob
 import json
 import os
 import queue
+import shlex
 import shutil
 import subprocess
 import sys
@@ -397,12 +398,18 @@ def load_scenario(path) -> Scenario:
 
 # ---------------------------------------------------------------------------------------------
 # the flood environment
-def flood_python() -> str | None:
+ANUGA = "anuga==4.2.0"  # what make setup installs (scripts/setup.sh)
+
+
+def flood_python(own_env=None) -> str | None:
     """The Python that runs ANUGA: ``FLOODMESH_FLOOD_PYTHON`` when set, else the project's
-    ``.venv-flood`` or this Python, whichever imports anuga; None if none does."""
+    ``.venv-flood``, the front end's ``own_env`` (a venv folder: the QGIS plugin's, beside its
+    profile) or this Python, whichever imports anuga; None if none does."""
     named = os.environ.get("FLOODMESH_FLOOD_PYTHON")
     candidates = [named] if named else [
         str(Path(__file__).resolve().parents[2] / ".venv-flood" / "bin" / "python")]
+    if not named and own_env:
+        candidates.append(str(Path(own_env) / "bin" / "python"))
     if not named and Path(sys.executable).name.startswith("python"):  # not qgis.bin
         candidates.append(sys.executable)
     for python in candidates:
@@ -414,19 +421,31 @@ def flood_python() -> str | None:
     return None
 
 
-def require_flood_python() -> str:
-    """``flood_python()``, or a FloodMeshError saying how to install ANUGA."""
-    python = flood_python()
-    if python is None:
-        named = os.environ.get("FLOODMESH_FLOOD_PYTHON")
-        where = (f"FLOODMESH_FLOOD_PYTHON ({named}) does not import it" if named
-                 else "it is not installed")
+def require_flood_python(own_env=None) -> str:
+    """``flood_python(own_env)``, or a FloodMeshError saying how to install ANUGA: into
+    ``own_env`` where the front end has one (QGIS: a ZIP install has no Makefile)."""
+    python = flood_python(own_env)
+    if python is not None:
+        return python
+    named = os.environ.get("FLOODMESH_FLOOD_PYTHON")
+    where = (f"FLOODMESH_FLOOD_PYTHON ({named}) does not import it" if named
+             else "it is not installed")
+    if own_env:  # QGIS: a ZIP install has no Makefile; the environment beside its profile
+        env = shlex.quote(str(own_env))
+        make = (f"(a few minutes and some 600 MB, with the internet): `/usr/bin/python3 -m venv "
+                f"{env} && {env}/bin/pip install {ANUGA}`")
         raise FloodMeshError(
-            f"running a flood needs the ANUGA solver, but {where}: run `make setup` (it builds "
-            ".venv-flood with numpy 2 and anuga 4.2), or `python3 -m venv .venv-flood && "
-            ".venv-flood/bin/pip install anuga`, or point FLOODMESH_FLOOD_PYTHON at a Python "
-            "that imports anuga")
-    return python
+            f"running a flood needs the ANUGA solver, but {where}: point it at a Python that "
+            f"imports anuga, or unset it and make FloodMesh's own ANUGA environment once {make}"
+            if named else
+            f"running a flood needs the ANUGA solver, in an environment of its own, but {where}"
+            f": make it once {make}, where FloodMesh finds it; or point FLOODMESH_FLOOD_PYTHON "
+            "at a Python that imports anuga")
+    raise FloodMeshError(
+        f"running a flood needs the ANUGA solver, but {where}: run `make setup` (it builds "
+        ".venv-flood with numpy 2 and anuga 4.2), or `python3 -m venv .venv-flood && "
+        ".venv-flood/bin/pip install anuga`, or point FLOODMESH_FLOOD_PYTHON at a Python "
+        "that imports anuga")
 
 
 def _worker_env() -> dict:
@@ -867,7 +886,7 @@ def default_cell_size(nodes, triangles) -> float:
     return max(0.25, round(side / 2 * 4) / 4)
 
 
-def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
+def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
               progress: Callable[[float], None] | None = None,
               cancelled: Callable[[], bool] | None = None,
               log: Callable[[str], None] | None = None) -> dict:
@@ -875,12 +894,13 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None,
     into ``out_dir``: max depth, max water level, max speed and arrival time as GeoTIFFs in
     the mesh's CRS (``crs``, else that of a ``mesh.gpkg`` or ``dem.tif`` beside the mesh), the
     outflow hydrograph, the stage at the observation points and ``report.json`` (hydraulic
-    checks of the mesh, mass balance, cost). Returns the report."""
+    checks of the mesh, mass balance, cost); ANUGA's Python as ``flood_python(own_env)``.
+    Returns the report."""
     # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import triangle_areas
 
     crs = require_metric_crs(crs or mesh_crs(mesh_path), f"the mesh {Path(mesh_path).name}")
-    python = require_flood_python()
+    python = require_flood_python(own_env)
     mesh = io.read_2dm(mesh_path)
     prepared = prepare(mesh.nodes, mesh.triangles, scenario)
     arrays = prepared["arrays"]

@@ -101,9 +101,9 @@ def step_run(ch, *, input, output_folder, options, skip_unreadable=False):
             "rmse_m": report["rmse_m"], "crs": CRS.from_user_input(report["crs"]).to_wkt()}
 
 
-def step_flood(ch, *, mesh, scenario, output, crs=None):
-    report = run_flood(mesh, load_scenario(scenario), output, crs=crs, progress=ch.progress,
-                       log=ch.info)
+def step_flood(ch, *, mesh, scenario, output, crs=None, own_env=None):
+    report = run_flood(mesh, load_scenario(scenario), output, crs=crs, own_env=own_env,
+                       progress=ch.progress, log=ch.info)
     for message in report["notes"]:
         ch.note(message)
     return {key: report[key] for key in ("cpu_s", "time_steps", "flooded_area_m2",
