@@ -164,9 +164,10 @@ SCALE_TOLERANCE = 0.02
 
 
 def check_scale(crs: CRS, x, y, what: str, kind: str | None = None) -> None:
-    """Refuse a projected CRS whose scale at map points ``x``, ``y`` (m; e.g. the data's
-    corners and centre) differs from true by more than ``SCALE_TOLERANCE``: slopes, areas and
-    cell sizes would be off by as much. Points off the projection's domain are not judged."""
+    """Refuse data at map points ``x``, ``y`` (m; e.g. the data's corners and centre) far
+    outside the area ``crs`` is used in (``check_area_of_use``), and a projected CRS whose
+    scale there differs from true by more than ``SCALE_TOLERANCE``: slopes, areas and cell
+    sizes would be off by as much. Points off the projection's domain are not judged."""
     # lazy: PROJ loads only when this runs
     from pyproj import Proj
     from pyproj.exceptions import CRSError, ProjError
@@ -174,6 +175,7 @@ def check_scale(crs: CRS, x, y, what: str, kind: str | None = None) -> None:
     horizontal = horizontal_crs(crs)
     if not horizontal.is_projected:  # a local engineering CRS has no place on the earth
         return
+    check_area_of_use(crs, x, y, what)
     try:
         projection = Proj(horizontal)
     except (CRSError, ProjError):  # a projection PROJ cannot run backwards: not judged
@@ -196,6 +198,89 @@ def check_scale(crs: CRS, x, y, what: str, kind: str | None = None) -> None:
         f"data (scale {worst:.3f}): slopes, areas and cell sizes would be off by as much. "
         f"Reproject it to the UTM zone first, e.g. EPSG:{code} (WGS 84 / UTM zone {zone}"
         f"{'N' if lat0 >= 0 else 'S'}): {_reproject_hint(kind, code)}")
+
+
+# How far data may lie beyond its CRS's area of use before it is refused: twice the area's
+# larger side each way, at least 1,000 km; so a UTM zone's reaches past the equator and 10,000 km
+# east and west, and eastings with the zone number before them (from zone 11 on: 11,000 km
+# east) lie beyond it
+AREA_MARGIN_SIDES, AREA_MARGIN_M = 2.0, 1_000_000.0
+UTM_ZONE_PREFIX_M = 1_000_000.0  # a zone number written before the easting: zone 32 adds 32e6 m
+
+
+def check_area_of_use(crs: CRS, x, y, what: str) -> None:
+    """Refuse data at map points ``x``, ``y`` (m) far outside the area where the projected
+    ``crs`` is used (its area of use, as EPSG gives it, widened by ``AREA_MARGIN_SIDES`` its
+    larger side, at least ``AREA_MARGIN_M``, each way): coordinates in another CRS, or eastings
+    with the UTM zone number before them. A CRS without an area of use (a custom or local one)
+    is not judged."""
+    horizontal = horizontal_crs(crs)
+    area = _area_of_use(horizontal) if horizontal.is_projected else None
+    if area is None:
+        return
+    name, (xmin, ymin, xmax, ymax) = area
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    margin = max(AREA_MARGIN_M, AREA_MARGIN_SIDES * max(xmax - xmin, ymax - ymin))
+    widened = (xmin - margin, ymin - margin, xmax + margin, ymax + margin)
+    if _within(x, y, widened):
+        return
+    raise FloodMeshError(
+        f"{what} lies at x {x.min():,.0f} to {x.max():,.0f}, y {y.min():,.0f} to {y.max():,.0f} "
+        f"m, far outside the area where {crs.name} is used ({name}: x {xmin:,.0f} to "
+        f"{xmax:,.0f}, y {ymin:,.0f} to {ymax:,.0f} m): {_place_fix(horizontal, x, y, widened)}")
+
+
+def _within(x: np.ndarray, y: np.ndarray, box) -> bool:
+    """Whether all the points ``x``, ``y`` lie in ``box`` (xmin, ymin, xmax, ymax)."""
+    return bool(box[0] <= x.min() and x.max() <= box[2] and box[1] <= y.min()
+                and y.max() <= box[3])
+
+
+def _area_of_use(horizontal: CRS) -> tuple[str, tuple[float, ...]] | None:
+    """(the name, the (xmin, ymin, xmax, ymax) m) of a projected CRS's area of use, from EPSG
+    where its WKT names none (a GeoTIFF's WKT1); None where neither gives one."""
+    # lazy: PROJ loads only when this runs
+    from pyproj import CRS, Transformer
+    from pyproj.exceptions import CRSError, ProjError
+
+    area = horizontal.area_of_use
+    try:
+        if area is None:
+            authority = horizontal.to_authority(min_confidence=90)
+            area = CRS.from_authority(*authority).area_of_use if authority else None
+        if area is None:
+            return None
+        to_map = Transformer.from_crs(horizontal.geodetic_crs, horizontal, always_xy=True)
+        box = to_map.transform_bounds(*area.bounds, densify_pts=21)
+    except (CRSError, ProjError):
+        return None
+    if not np.all(np.isfinite(box)) or box[0] >= box[2] or box[1] >= box[3]:
+        return None
+    return area.name.split(":")[0].rstrip(". "), tuple(float(v) for v in box)
+
+
+def _place_fix(horizontal: CRS, x: np.ndarray, y: np.ndarray, box) -> str:
+    """The fix for data at ``x``, ``y`` outside a UTM zone's ``box`` (m): where the data fall
+    in it once a zone number before the eastings (32 in 32,412,000) is taken off, the zone-
+    prefixed CRS where EPSG has one; else the CRS the data are in."""
+    # lazy: PROJ loads only when this runs
+    from pyproj.database import query_crs_info
+    from pyproj.enums import PJType
+
+    zone = int(np.floor(np.median(x) / UTM_ZONE_PREFIX_M))
+    if ("UTM zone" not in horizontal.name or not 1 <= zone <= 60
+            or not _within(x - zone * UTM_ZONE_PREFIX_M, y, box)):
+        return ("check its CRS and give the one its x, y are in (--crs EPSG:XXXX, or the CRS "
+                "parameter in QGIS)")
+    prefixed = re.sub(r"UTM zone \d+", f"UTM zone {zone}", horizontal.name) + " (zE-N)"
+    codes = [f"EPSG:{c.code}" for c in query_crs_info(auth_name="EPSG",
+                                                       pj_types=PJType.PROJECTED_CRS)
+             if c.name == prefixed and not c.deprecated]
+    give = (f"give the zone-prefixed CRS, --crs {codes[0]} ({prefixed}; or the CRS parameter in "
+            "QGIS), or " if codes else "")
+    return (f"its eastings look like they carry the UTM zone number before them ({zone} "
+            f"before {np.median(x) - zone * UTM_ZONE_PREFIX_M:,.0f} m): {give}take "
+            f"{zone * UTM_ZONE_PREFIX_M:,.0f} m off x first")
 
 
 def corners_and_centre(xmin: float, ymin: float, xmax: float, ymax: float):

@@ -192,6 +192,15 @@ def _tif(name, values_fn=slope_dem, **kwargs):
 WEB_MERCATOR_50N = Affine(1.0, 0.0, 1_001_875.0, 0.0, -1.0, 6_446_475.0)
 
 
+# eastings with the UTM zone number before them (32 and 412,000 m), a German habit, under the
+# zone's CRS, EPSG:25832: 32,000 km east of the zone
+ZONE_PREFIXED = Affine(1.0, 0.0, 32_000_000.0 + ORIGIN[0], 0.0, -1.0, ORIGIN[1] + 60)
+
+
+def _zone_prefixed_las(folder):
+    return write_las(folder / "prefixed.laz", plane_xyz() + [32_000_000.0, 0.0, 0.0])
+
+
 def _autzen(folder):
     return REAL_DATA / "autzen_trim.laz"
 
@@ -577,6 +586,12 @@ CASES = [
              _lidar(_tif("webmerc.tif", transform=WEB_MERCATOR_50N, crs="EPSG:3857"))),
     BadInput("web-mercator-points", "Reproject it to the UTM zone first",
              _maker(_xyz, crs="EPSG:3857"), _lidar(_xyz, crs="EPSG:3857")),
+    BadInput("zone-prefixed-las", "carry the UTM zone number before them (32 before 412,025 m)"
+             ": give the zone-prefixed CRS, --crs EPSG:4647",
+             _maker(_zone_prefixed_las), _lidar(_zone_prefixed_las)),
+    BadInput("zone-prefixed-raster", "far outside the area where ETRS89 / UTM zone 32N is "
+             "used", _maker(_tif("prefixed.tif", transform=ZONE_PREFIXED)),
+             _lidar(_tif("prefixed.tif", transform=ZONE_PREFIXED))),
     BadInput("no-crs-text", "no coordinate reference system", _maker(_xyz), _lidar(_xyz)),
     BadInput("no-crs-las", "no coordinate reference system", _maker(_las_without_crs),
              _lidar(_las_without_crs)),

@@ -376,11 +376,20 @@ def _replaced_note(replaced: list) -> list:
 
 def _check_tiles_scale(crs: CRS, bounds: list, what: str, kind: str) -> None:
     """``check_scale`` over the extent of all the tiles' ``bounds`` (xmin, ymin, xmax, ymax;
-    None where unknown: text tiles, not read yet, are not checked)."""
+    None where unknown: text tiles, not read yet, are checked once read, ``_check_text_tiles``)."""
     known = np.array([b for b in bounds if b is not None], float).reshape(-1, 4)
     if len(known):
         low, high = known[:, :2].min(axis=0), known[:, 2:].max(axis=0)
         check_scale(crs, *corners_and_centre(*low, *high), what, kind)
+
+
+def _check_text_tiles(meta: list, crs: CRS) -> None:
+    """``_check_tiles_scale`` over the points round one read (``meta``) of the XYZ text tiles,
+    which no header placed before."""
+    text = [m for m in meta if m.get("kind") == "text"]
+    if text:
+        _check_tiles_scale(crs, [m["bounds"] for m in text],
+                           f"tile {Path(text[0]['path']).name}", "points")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1032,6 +1041,7 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
         finally:
             for read in reads:
                 read.cancel()
+    _check_text_tiles(meta, tile_crs)
     counted = _tiles_counted(meta, classes, skip_unreadable, notes)
     # the points overlapping tiles share counted once before the check points are drawn, as
     # from one file of the tiles' points
@@ -1156,6 +1166,7 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
                      "points: give fewer --workers or cut the survey into smaller tiles")
         meta, edges = _round_one(client, tiles, crs_wkt, classes, holdout, seed, band, bands,
                                  progress=progress, cancelled=cancelled)
+        _check_text_tiles(meta, tile_crs)
         layout = _tile_layout(meta, classes, holdout, cell_size, max_gap, band, largest=largest,
                               parallel=parallel, keep=keep,
                               skip_unreadable=skip_unreadable, notes=notes)

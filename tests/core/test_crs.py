@@ -4,6 +4,7 @@ what the messages for feet and for a projection far from true scale tell the use
 import fiona
 import numpy as np
 import pytest
+import rasterio
 import shapely
 from affine import Affine
 from pyproj import CRS
@@ -150,3 +151,60 @@ def test_point_tiles_far_from_true_scale_are_refused_from_their_headers(tmp_path
                            "--cell-size", 1, "--out", tmp_path / "dem.tif"], capsys)
     assert code == 2 and "whose metre is 0.64 m on the ground at the data" in err[-1], err
     assert not (tmp_path / "dem.tif").exists()
+
+
+def _zone_prefixed(tmp_path, kind):
+    """Points or a DEM whose eastings carry the UTM zone number before them (32 412 000 m) in
+    EPSG:25832, as LAS, XYZ text, a GeoTIFF, LAS tiles or XYZ tiles; the command's arguments."""
+    xyz = plane_xyz() + [32_000_000.0, 0.0, 0.0]
+    west = xyz[:, 0] < xyz[:, 0].mean()
+    if kind == "las":
+        return [write_las(tmp_path / "prefixed.laz", xyz)]
+    if kind == "xyz":
+        np.savetxt(tmp_path / "prefixed.xyz", xyz, fmt="%.3f")
+        return [tmp_path / "prefixed.xyz", "--crs", "EPSG:25832"]
+    if kind == "dem":
+        return [write_tif(tmp_path / "prefixed.tif", slope_dem(), transform=Affine(
+            1.0, 0.0, 32_412_000.0, 0.0, -1.0, 5_652_060.0))]
+    if kind == "las-tiles":
+        return [write_las(tmp_path / "west.laz", xyz[west]),
+                write_las(tmp_path / "east.laz", xyz[~west])]
+    np.savetxt(tmp_path / "west.xyz", xyz[west], fmt="%.3f")
+    np.savetxt(tmp_path / "east.xyz", xyz[~west], fmt="%.3f")
+    return [tmp_path / "west.xyz", tmp_path / "east.xyz", "--crs", "EPSG:25832"]
+
+
+@pytest.mark.parametrize("kind", ["las", "xyz", "dem", "las-tiles", "xyz-tiles"])
+def test_zone_prefixed_eastings_are_refused_naming_the_zone_prefixed_crs(tmp_path, capsys,
+                                                                        kind):
+    """Eastings of 32,412,000 m in ETRS89 / UTM zone 32N (the zone number before them, a German
+    habit) gave a mesh 32,000 km east of the survey; every reader refuses them, naming the
+    zone-prefixed CRS, under which the same file is gridded where it lies."""
+    args = _zone_prefixed(tmp_path, kind)
+    step = ["slope"] if kind == "dem" else ["grid", "--cell-size", 1]
+    code, err = floodmesh([*step, *args, "--out", tmp_path / "out.tif"], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert ("far outside the area where ETRS89 / UTM zone 32N is used (Europe between 6°E and "
+            "12°E" in err[0]), err
+    assert ("its eastings look like they carry the UTM zone number before them (32 before "
+            "412,0") in err[0] and "--crs EPSG:4647" in err[0], err
+    assert not (tmp_path / "out.tif").exists()
+    args = [a for a in args if a not in ("--crs", "EPSG:25832")]
+    code, err = floodmesh([*step, *args, "--crs", "EPSG:4647", "--out", tmp_path / "out.tif"],
+                          capsys)
+    assert code == 0, err
+    with rasterio.open(tmp_path / "out.tif") as src:
+        assert src.bounds.left > 32_411_000 and CRS(src.crs.to_wkt()).to_epsg() == 4647
+
+
+def test_data_far_outside_a_national_grid_are_refused_naming_its_area(tmp_path, capsys):
+    """A survey in UTM coordinates declared as RD New (EPSG:28992) lies 5,000 km north of the
+    Netherlands: refused, naming the CRS, its area and the data's extent."""
+    path = tmp_path / "points.xyz"
+    np.savetxt(path, plane_xyz(), fmt="%.3f")  # y 5,652,000 m
+    code, err = floodmesh(["grid", path, "--crs", "EPSG:28992", "--cell-size", 1, "--out",
+                           tmp_path / "dem.tif"], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert ("point file points.xyz lies at x 412,0" in err[0] and "far outside the area "
+            "where Amersfoort / RD New is used (Netherlands - onshore" in err[0]), err
+    assert "check its CRS and give the one its x, y are in (--crs EPSG:XXXX" in err[0], err

@@ -23,6 +23,7 @@ from floodmesh.core.steps.slope import slope
 from floodmesh.core.engine.tiles import (_tile_points, grid_point_tiles, read_back, read_dem_tiles,
                                          read_point_tiles, slope_file64)
 
+from ..bad_inputs import plane_xyz
 from ..conftest import survey_tiles
 
 FLOODMESH = str(Path(sys.executable).parent / "floodmesh")
@@ -316,6 +317,21 @@ def test_xyz_tiles_with_a_given_crs(survey, scheduler, tmp_path):
                                 scheduler=scheduler)
     assert from_xyz.dem.transform == from_laz.dem.transform
     np.testing.assert_allclose(from_xyz.dem.values, from_laz.dem.values, atol=1e-6)
+
+
+def test_xyz_tiles_with_zone_prefixed_eastings_are_refused_once_read(scheduler, tmp_path):
+    """XYZ tiles have no header to place them before they are read: their points, once read on
+    the cluster, are checked as a LAS tile's header is (eastings with the UTM zone before them,
+    32 412 000 m, placed the DEM 32,000 km off)."""
+    xyz = plane_xyz() + [32_000_000.0, 0.0, 0.0]
+    west = xyz[:, 0] < xyz[:, 0].mean()
+    np.savetxt(tmp_path / "west.xyz", xyz[west], fmt="%.3f")
+    np.savetxt(tmp_path / "east.xyz", xyz[~west], fmt="%.3f")
+    with pytest.raises(FloodMeshError, match=r"tile east.xyz lies at x 32,41.* far outside the "
+                       r"area where ETRS89 / UTM zone 32N is used .* --crs EPSG:4647"):
+        grid_point_tiles(str(tmp_path / "*.xyz"), 1.0, crs="EPSG:25832", scheduler=scheduler,
+                         out_path=tmp_path / "dem.tif")
+    assert not (tmp_path / "dem.tif").exists()
 
 
 def test_refine_on_tiles_fits_the_points_and_checks_on_the_tiles_holdout(survey, scheduler,
