@@ -16,6 +16,7 @@ import rasterio
 from affine import Affine
 from pyproj import CRS
 
+from floodmesh.core.chain.files import slope
 from floodmesh.core.options import BREAKPOINT_METHODS
 
 REAL_DATA = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "real"
@@ -417,6 +418,18 @@ def _qgis_refine(**parameters):
 _TRACED = {"BREAKPOINTS": _tif("bp.tif"), "SLOPE": _tif("slope.tif"), "DEM": _tif("dem.tif")}
 
 
+def _slope_step(name, **options):
+    """The bank DEM through FloodMesh's own slope step: a slope (degrees) or, with
+    ``method="log"``, a LoG response (m), each tagged with what it holds."""
+    def make(folder):
+        slope(_tif("dem.tif")(folder), folder / name, **options)
+        return folder / name
+    return make
+
+
+_SLOPE, _LOG = _slope_step("slope-step.tif"), _slope_step("log-step.tif", method="log")
+
+
 def _trace(folder, *extra):
     return ["breaklines", _TRACED["BREAKPOINTS"](folder), "--slope", _TRACED["SLOPE"](folder),
             "--dem", _TRACED["DEM"](folder), *extra]
@@ -680,6 +693,21 @@ CASES = [
                         "{out}/bp.tif"],
              _qgis("classifybreakpoints", INPUT=_tif("log.tif"), LOG_SENSITIVITY=0.0,
                    OUTPUT="{out}/bp.tif")),
+    BadInput("breakpoints-of-a-log-response-without-sensitivity",
+             "holds a Laplacian-of-Gaussian response in metres, as FloodMesh's slope step wrote "
+             "it, not a slope in degrees: give its LoG sensitivity",
+             lambda f: ["breakpoints", _LOG(f), "--out", "{out}/bp.tif"],
+             _qgis("classifybreakpoints", INPUT=_LOG, OUTPUT="{out}/bp.tif")),
+    BadInput("breakpoints-of-a-slope-with-sensitivity",
+             "holds a slope in degrees, as FloodMesh's slope step wrote it, not a "
+             "Laplacian-of-Gaussian response in metres: leave out the LoG sensitivity",
+             lambda f: ["breakpoints", _SLOPE(f), "--sensitivity", 0.02, "--out", "{out}/bp.tif"],
+             _qgis("classifybreakpoints", INPUT=_SLOPE, LOG_SENSITIVITY=0.02,
+                   OUTPUT="{out}/bp.tif")),
+    BadInput("breaklines-following-a-log-response", "the tracer follows the slope",
+             lambda f: ["breaklines", _TRACED["BREAKPOINTS"](f), "--slope", _LOG(f), "--dem",
+                        _TRACED["DEM"](f), "--out", "{out}/lines.gpkg"],
+             _qgis("tracebreaklines", **{**_TRACED, "SLOPE": _LOG}, OUTPUT="{out}/lines.gpkg")),
     BadInput("refine-negative-noise", "noise of the points must be zero or a positive number",
              lambda f: _refine(f, "--noise", -1), _qgis_refine(NOISE=-1.0)),
     BadInput("refine-negative-target", "target RMSE must be a positive number",

@@ -20,8 +20,8 @@ import numpy as np
 
 from .._kernels.aot import kernel
 from ..errors import Cancelled, FloodMeshError
-from ..io import (atomic_output, dem_file, implausible_note, no_valid_cells, nodata_range,
-                  raster_crs_wkt, raster_profile, read_band, require_file)
+from ..io import (atomic_output, dem_file, describe_band, implausible_note, no_valid_cells,
+                  nodata_range, raster_crs_wkt, raster_profile, read_band, require_file)
 from ..raster import HIGHEST_GROUND_M, LOWEST_GROUND_M
 
 DEFAULT_BLOCK_ROWS = 2048
@@ -132,10 +132,11 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
                dtype="float32", nodata=None, windows: Iterable[Window] | None = None,
                block_rows: int = STREAM_BLOCK_ROWS, input_dtype=np.float32, crs=None,
                elevations: bool = False, note: Callable[[str], None] | None = None,
-               progress: Callable[[float], None] | None = None,
+               quantity: str | None = None, progress: Callable[[float], None] | None = None,
                cancelled: Callable[[], bool] | None = None) -> None:
     """Stream ``func`` (a kernel as for ``map_overlap``) from band 1 of ``src_path`` to a tiled
-    GeoTIFF ``dst_path`` (``io.raster_profile``) on the same grid, window by window.
+    GeoTIFF ``dst_path`` (``io.raster_profile``) on the same grid, window by window; ``quantity``
+    says what it holds (``io.describe_band``).
 
     The kernel receives ``input_dtype`` (float32) blocks with NaN for nodata, ±inf and beyond the
     raster (with ``elevations``, a DEM's, also for cells no ground has, which ``note`` is told
@@ -185,6 +186,8 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
         profile = raster_profile(shape, src.transform, crs, dtype, nodata)
         with atomic_output(dst_path) as tmp:
             with rasterio.open(tmp, "w", **profile) as dst:
+                describe_band(dst, quantity)
+
                 def write(window, result):
                     r0, c0, h, w = window
                     dst.write(result, 1, window=Window(c0, r0, w, h))

@@ -1233,7 +1233,8 @@ def slope_file64(dem_path, slope_path, method: str, *, crs=None, cancelled=None)
     ``input_dtype=np.float64`` then gives ``classify_breakpoints``' breakpoints."""
     d = cell_size(dem_path)
     map_raster(dem_path, slope_path, lambda padded: slope_block(padded, d, method), halo=1,
-               dtype="float64", input_dtype=np.float64, crs=crs, cancelled=cancelled)
+               dtype="float64", input_dtype=np.float64, crs=crs, quantity="slope",
+               cancelled=cancelled)
     return Path(slope_path)
 
 
@@ -1257,7 +1258,7 @@ def write_front_rasters(files: dict, out) -> None:
     breakpoints.tif of a run into ``out``, block by block from ``files`` (``slope``,
     ``breakpoints``: the float64 slope and the breakpoints files)."""
     map_raster(files["slope"], Path(out) / "slope.tif", lambda padded: padded, halo=0,
-               input_dtype=np.float64)
+               input_dtype=np.float64, quantity="slope")
     shutil.copyfile(files["breakpoints"], Path(out) / "breakpoints.tif")
 
 

@@ -218,9 +218,50 @@ def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
     return profile
 
 
-def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
+# What a raster of the slope step holds, as a GeoTIFF metadata item that the steps taking it
+# read back (``check_quantity``), with the band's description and unit, which QGIS and gdalinfo
+# show: (description, unit, what it is in words). A raster without it, another program's (gdaldem
+# slope), is taken as the step is told
+QUANTITY_TAG = "FLOODMESH_QUANTITY"
+QUANTITIES = {"slope": ("slope", "degree", "a slope in degrees"),
+              "log": ("Laplacian-of-Gaussian response", "m",
+                      "a Laplacian-of-Gaussian response in metres")}
+
+
+def describe_band(dst, quantity: str | None) -> None:
+    """Tag the open rasterio dataset ``dst`` as holding ``quantity`` (a key of ``QUANTITIES``;
+    None: nothing is said)."""
+    if quantity is None:
+        return
+    description, unit, _ = QUANTITIES[quantity]
+    dst.update_tags(**{QUANTITY_TAG: quantity})
+    dst.set_band_description(1, description)
+    dst.set_band_unit(1, unit)
+
+
+def check_quantity(path, wanted: str, fix: str) -> None:
+    """Refuse a raster that the slope step tagged (``describe_band``) as holding another
+    quantity than ``wanted``, naming what it holds and ``fix``; a raster without the tag, or
+    one GDAL cannot open (the step reading it says so), is not judged."""
+    # lazy: GDAL loads only when this runs
+    import rasterio
+
+    try:
+        with rasterio.open(require_file(path, "raster")) as src:
+            held = src.tags().get(QUANTITY_TAG)
+    except rasterio.errors.RasterioIOError:
+        return
+    if held in QUANTITIES and held != wanted:
+        raise FloodMeshError(
+            f"raster {Path(path).name} holds {QUANTITIES[held][2]}, as FloodMesh's slope step "
+            f"wrote it, not {QUANTITIES[wanted][2]}: {fix}")
+
+
+def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None,
+                 quantity: str | None = None) -> None:
     """Write a Grid as a tiled, compressed GeoTIFF (``raster_profile``); float NaN (or
-    cells outside ``valid``) become nodata."""
+    cells outside ``valid``) become nodata; ``quantity`` says what it holds
+    (``describe_band``)."""
     # lazy: GDAL loads only when this runs
     import rasterio
 
@@ -240,6 +281,7 @@ def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None) -> None:
     with atomic_output(path) as tmp:
         with rasterio.open(tmp, "w", **profile) as dst:
             dst.write(values, 1)
+            describe_band(dst, quantity)
 
 
 def read_input(path, *, crs=None, classes=None, note=None):

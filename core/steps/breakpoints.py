@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine.blocks import BYTE_NODATA, map_overlap, map_raster
+from ..io import check_quantity
 from ..options import check_s_crit, check_sensitivity
 from ..raster import Grid
 
@@ -41,7 +42,17 @@ def breakpoints_file(src_path, out_path, *, s_crit: float | None = None,
     """Breakpoints of a slope raster (``s_crit``) or of a LoG response (``sensitivity``) into a
     uint8 GeoTIFF (1 breakpoint, 0 not, 255 where the input is nodata), streamed block by block
     (``blocks.map_raster``; ``windows`` and ``input_dtype``, what the rules compare, as there).
-    Returns the number of breakpoints."""
+    Returns the number of breakpoints. A raster the slope step tagged as holding the other
+    quantity (``io.check_quantity``) is refused."""
+    if sensitivity is None:
+        check_quantity(src_path, "slope", "give its LoG sensitivity to take its breakpoints "
+                       "(--sensitivity, e.g. 0.02, or LoG sensitivity in QGIS), or the slope of "
+                       "the DEM (floodmesh slope DEM, without --method log)")
+    if sensitivity is not None or zero_crossings:
+        check_quantity(src_path, "log", "leave out the LoG sensitivity and zero crossings "
+                       "(--sensitivity, --zero-crossings, or those parameters in QGIS) to take "
+                       "breakpoints where the slope reaches S_crit, or give the DEM's LoG "
+                       "response (floodmesh slope DEM --method log)")
     if sensitivity is None:
         block, halo = _threshold_block(check_s_crit(s_crit), True)
     else:

@@ -107,7 +107,8 @@ def slope_file(dem_path, out_path, method: str = "one-over-distance", *,
 
     with ThreadPoolExecutor(max(helpers, 1), thread_name_prefix="floodmesh-slope") as pool:
         map_raster(dem_path, out_path, block, halo=1, crs=crs, windows=windows,
-                   elevations=True, note=note, progress=progress, cancelled=cancelled)
+                   elevations=True, note=note, quantity="slope", progress=progress,
+                   cancelled=cancelled)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -144,7 +145,8 @@ def laplacian_of_gaussian_file(dem_path, out_path, sigma: float, *, kernel: str 
         d, shape = float(src.transform.a), (src.height, src.width)
     block, halo = _log_block(sigma, d, kernel, shape)
     map_raster(dem_path, out_path, block, halo=halo, crs=crs, windows=windows,
-               elevations=True, note=note, progress=progress, cancelled=cancelled)
+               elevations=True, note=note, quantity="log", progress=progress,
+               cancelled=cancelled)
 
 
 def _log_block(sigma: float, d: float, kernel: str, shape):

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rasterio
 
 from floodmesh.core import io
 from floodmesh.core.chain.pipeline import OUTPUT_FILES
@@ -123,6 +124,8 @@ def test_log_breakpoints_through_the_commands_and_the_chain(demo_points_file, tm
     report = json.loads((t / "run" / "report.json").read_text())
     assert report["options"]["slope_method"] == "log" and report["n_breaklines"] > 10
     assert report["n_below_min_angle"] == 0 and report["max_area_m2"] <= 100
+    with rasterio.open(t / "run" / "slope.tif") as src:  # the slope the tracer followed
+        assert src.tags()["FLOODMESH_QUANTITY"] == "slope" and src.units == ("degree",)
 
 
 def test_tracing_and_simplification_options(demo_points_file, tmp_path):

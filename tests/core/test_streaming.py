@@ -252,3 +252,31 @@ def test_streamed_slope_refuses_a_crs_not_in_metres_as_reading_does(tmp_path, cr
         slope_file(dem, tmp_path / "s.tif", "sharpnack-akin")
     assert str(streamed.value) == str(read.value)
     assert not (tmp_path / "s.tif").exists()
+
+
+def test_slope_files_say_what_they_hold_and_breakpoints_take_them_so(dem_file, tmp_path):
+    """The slope step tags its GeoTIFF as a slope (degrees) or a LoG response (m), which QGIS
+    and gdalinfo show and the breakpoints step reads: a LoG response read as degrees gave 0
+    breakpoints without a word. A slope without the tag (gdaldem slope's) is taken as degrees."""
+    slope_file(dem_file, tmp_path / "s.tif")
+    laplacian_of_gaussian_file(dem_file, tmp_path / "log.tif", 1.0)
+    for name, tag, description, unit in (("s.tif", "slope", "slope", "degree"),
+                                         ("log.tif", "log", "Laplacian-of-Gaussian response",
+                                          "m")):
+        with rasterio.open(tmp_path / name) as src:
+            assert src.tags()["FLOODMESH_QUANTITY"] == tag
+            assert src.descriptions == (description,) and src.units == (unit,)
+    bp = tmp_path / "bp.tif"
+    with pytest.raises(FloodMeshError, match=r"raster log.tif holds a Laplacian-of-Gaussian "
+                       r"response in metres, .* not a slope in degrees: give its LoG sensitivity"):
+        breakpoints_file(tmp_path / "log.tif", bp, s_crit=10.0)
+    for log_options in ({"sensitivity": 0.02}, {"s_crit": 10.0, "zero_crossings": True}):
+        with pytest.raises(FloodMeshError, match=r"raster s.tif holds a slope in degrees, .* not "
+                           r"a Laplacian-of-Gaussian response in metres: leave out"):
+            breakpoints_file(tmp_path / "s.tif", bp, **log_options)
+    assert not bp.exists()
+    assert breakpoints_file(tmp_path / "log.tif", bp, sensitivity=0.02) > 20
+    slope_values = io.read_raster(tmp_path / "s.tif", elevations=False)
+    io.write_raster(tmp_path / "gdaldem.tif", slope_values)  # no tag
+    assert (breakpoints_file(tmp_path / "gdaldem.tif", tmp_path / "bp2.tif", s_crit=10.0)
+            == breakpoints_file(tmp_path / "s.tif", bp, s_crit=10.0) > 20)
