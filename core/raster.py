@@ -327,11 +327,21 @@ def check_dem_size(values: np.ndarray, cell_size: float, what: str) -> None:
             f"{what} has cells of {cell_size:g} m, far smaller than a LiDAR DEM's (centimetres "
             f"to metres), so its data covers only {width:.3g} x {height:.3g} m: check its CRS "
             "and units (coordinates in degrees under a CRS in metres give such cells)")
-    if min(across) < MIN_DEM_CELLS_ACROSS:
+    check_cells_across(across, (width, height), cell_size, f"the data of {what}",
+                       "check that it is the right file")
+
+
+def check_cells_across(cells: tuple[int, int], extent: tuple[float, float], cell_size: float,
+                       what: str, fix: str) -> None:
+    """Refuse ``what`` (a DEM's data, points to grid) spanning ``cells`` (columns, rows) of
+    ``cell_size`` m over ``extent`` (width, height; m), fewer than ``MIN_DEM_CELLS_ACROSS``
+    either way: too little to mesh; ``fix`` says what to do."""
+    if min(cells) < MIN_DEM_CELLS_ACROSS:
+        width, height = (round(float(e), 2) for e in extent)
         raise FloodMeshError(
-            f"the data of {what} covers only {width:g} x {height:g} m, fewer than "
-            f"{MIN_DEM_CELLS_ACROSS} cells of {cell_size:g} m each way: too little to mesh; "
-            "check that it is the right file")
+            f"{what} covers only {width:g} x {height:g} m, fewer than {MIN_DEM_CELLS_ACROSS} "
+            f"cells of {cell_size:g} m each way ({cells[0]} x {cells[1]}): too little to mesh; "
+            f"{fix}")
 
 
 @dataclass(frozen=True)

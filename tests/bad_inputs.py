@@ -617,7 +617,11 @@ CASES = [
     BadInput("south-up-raster", "not north-up",
              _maker(_tif("southup.tif", transform=Affine(1.0, 0, ORIGIN[0], 0, 1.0, ORIGIN[1]))),
              _lidar(_tif("southup.tif", transform=Affine(1.0, 0, ORIGIN[0], 0, 1.0, ORIGIN[1])))),
-    _options_case("cell-size-larger-than-data", "fewer than 3 cells", CELL_SIZE=30.0),
+    _options_case("cell-size-larger-than-data", "fewer than 4 cells", CELL_SIZE=30.0),
+    # 50 m of points at 20 m cells: a grid of 3 x 3 cells, which a DEM of its own would not mesh
+    _options_case("cell-size-of-3-cells-across", "the data covers only 50 x 50 m, fewer "
+                  "than 4 cells of 20 m each way (3 x 3): too little to mesh; choose a smaller "
+                  "cell size", CELL_SIZE=20.0),
     _options_case("cell-size-below-point-spacing", "would leave most grid cells empty",
                   CELL_SIZE=0.02),
     _options_case("cell-size-zero", "cell size must be a positive", CELL_SIZE=0.0),

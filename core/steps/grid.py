@@ -28,7 +28,7 @@ from ..engine.nearest import cell_of
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_cell_size, check_max_gap
 from ..points import PointCloud
-from ..raster import Grid
+from ..raster import Grid, check_cells_across
 
 FULL_TILE = 256  # the least tile side (cells) with full halos; larger where there are tiles
 # enough for the threads
@@ -235,9 +235,10 @@ def _inside_share(n_buckets: int, size: float, length: float) -> np.ndarray:
 
 def check_grid(points: PointCloud, cell_size: float, max_gap: float | None = None, *,
                memory: int | None = None) -> dict:
-    """Check, before any cell is allocated, that a grid of ``cell_size`` suits the points: at
-    least 3 cells each way, a max gap (default 10 cells) that bridges the point spacing, and
-    memory for the points and the cells. Returns the grid's layout
+    """Check, before any cell is allocated, that a grid of ``cell_size`` suits the points: as
+    many cells each way as a DEM needs to be meshed (``raster.check_cells_across``), a max gap
+    (default 10 cells) that bridges the point spacing, and memory for the points and the cells.
+    Returns the grid's layout
     (``rows``, ``cols``, ``x0``, ``y1``, ``max_gap``) and the points' ``area`` (m²) and
     ``spacing`` (m)."""
     xyz = points.xyz
@@ -264,11 +265,8 @@ def check_layout(bounds, n_points: int, area: float, cell_size: float,
     cols = max(1, math.ceil((xmax - x0) / cell_size))
     rows = max(1, math.ceil((y1 - ymin) / cell_size))
     spacing = math.sqrt(area / n_points)
-    if rows < 3 or cols < 3:
-        raise FloodMeshError(
-            f"the data covers only {xmax - xmin:.2f} x {ymax - ymin:.2f} m, fewer than 3 cells of "
-            f"{cell_size:g} m each way; choose a smaller cell size (the points are about "
-            f"{spacing:.2g} m apart)")
+    check_cells_across((cols, rows), (xmax - xmin, ymax - ymin), cell_size, "the data",
+                       f"choose a smaller cell size (the points are about {spacing:.2g} m apart)")
     if max_gap < MIN_GAP_IN_SPACINGS * spacing:
         fix = (f"give a cell size of at least {MIN_GAP_IN_SPACINGS * spacing / 10:.2g} m (the "
                f"point spacing, {spacing:.2g} m, is a good choice) or a larger max gap"

@@ -178,8 +178,9 @@ def test_non_positive_cell_size_is_refused(plane_xyz, cell_size):
 
 @pytest.mark.parametrize("cell_size", [20.0, 100.0])
 def test_cell_size_larger_than_the_data_is_refused(plane_xyz, cell_size):
-    """40 m of data at 20 m or 100 m cells is fewer than 3 cells each way."""
-    with pytest.raises(FloodMeshError, match="fewer than 3 cells"):
+    """40 m of data at 20 m or 100 m cells is fewer than 4 cells each way, as a DEM needs to be
+    meshed."""
+    with pytest.raises(FloodMeshError, match="fewer than 4 cells"):
         grid_points_linear(cloud(plane_xyz), cell_size)
 
 
