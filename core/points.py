@@ -40,21 +40,7 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
     ``repeated_positions_note``)."""
     crs = require_metric_crs(crs, source, kind)
     xyz = np.asarray(xyz, dtype=np.float64)
-    usable = usable_rows(xyz)
-    if usable is not None:
-        if note:
-            left = xyz[~usable]
-            empty = int((~np.isfinite(left).all(axis=1)).sum())
-            if empty:
-                note(f"{source}: {empty:,} points without a finite x, y and z (empty or NaN "
-                     "values) were left out")
-            if len(left) > empty:
-                z = left[np.isfinite(left).all(axis=1), 2]
-                note(f"{source}: {len(z):,} points with a z no ground has ({z.min():g}"
-                     f"{'' if z.min() == z.max() else f' to {z.max():g}'} m; below "
-                     f"{LOWEST_GROUND_M:g} m or above {HIGHEST_GROUND_M:g} m: no-data values) "
-                     "were left out")
-        xyz = xyz[usable]
+    xyz = drop_unusable(xyz, source, note)
     if len(xyz) < 3:
         raise FloodMeshError(f"{source} has {len(xyz)} usable points (finite x, y, z); at least 3 "
                              "are needed to make a terrain model. Check the file and its classes")
@@ -77,6 +63,42 @@ def usable_rows(xyz: np.ndarray) -> np.ndarray | None:
 
     return rows(np.ascontiguousarray(xyz, np.float64), LOWEST_GROUND_M, HIGHEST_GROUND_M,
                 numba.get_num_threads())
+
+
+def drop_unusable(xyz: np.ndarray, source: str, note=None) -> np.ndarray:
+    """The points (n, 3) that ``usable_rows`` keeps (``xyz`` itself where all are); ``note``
+    is told how many were left out and why (no finite x, y and z; a z no ground has)."""
+    usable = usable_rows(xyz)
+    if usable is None:
+        return xyz
+    if note:
+        left = xyz[~usable]
+        empty = int((~np.isfinite(left).all(axis=1)).sum())
+        if empty:
+            note(f"{source}: {empty:,} points without a finite x, y and z (empty or NaN "
+                 "values) were left out")
+        if len(left) > empty:
+            z = left[np.isfinite(left).all(axis=1), 2]
+            note(f"{source}: {len(z):,} points with a z no ground has ({z.min():g}"
+                 f"{'' if z.min() == z.max() else f' to {z.max():g}'} m; below "
+                 f"{LOWEST_GROUND_M:g} m or above {HIGHEST_GROUND_M:g} m: no-data values) "
+                 "were left out")
+    return xyz[usable]
+
+
+def step_points(xyz, what: str, note=None, *, least: int = 0) -> np.ndarray:
+    """Points (n, 3) as a step takes them from its caller: an (n, 3) float array whose rows
+    without a finite x, y, z or with a z no ground has are left out (``drop_unusable``,
+    ``note`` told), the rule the readers apply; at least ``least`` of them must be left."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise FloodMeshError(f"{what} must be an (N, 3) array of x, y, z, got shape {xyz.shape}")
+    xyz = drop_unusable(xyz, what, note)
+    if len(xyz) < least:
+        raise FloodMeshError(f"{what}: {len(xyz)} usable (finite x, y and z, z "
+                             f"between {LOWEST_GROUND_M:g} and {HIGHEST_GROUND_M:g} m); at least "
+                             f"{least} are needed: check their values")
+    return xyz
 
 
 def usable_points(xyz: np.ndarray) -> np.ndarray:

@@ -27,7 +27,7 @@ from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
 from ..engine.nearest import cell_of
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_cell_size, check_max_gap
-from ..points import PointCloud
+from ..points import PointCloud, step_points
 from ..raster import Grid, check_cells_across
 
 FULL_TILE = 256  # the least tile side (cells) with full halos; larger where there are tiles
@@ -41,16 +41,20 @@ FULL_SHARE = 0.75  # a tile by a bucket of fewer points than this share of the m
 
 def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float | None = None,
                        progress=None, cancelled=None, workers: int | None = None,
-                       plan: dict | None = None) -> Grid:
+                       plan: dict | None = None, note=None) -> Grid:
     """DEM of cell size ``cell_size`` (m) by linear interpolation on the points' Delaunay TIN.
 
     ``max_gap`` (m, default 10 cell sizes) is the longest triangle edge bridged; wider gaps become
     nodata. Duplicate points are harmless (the triangulation skips them). Progress and
     cancellation are polled per tile. ``plan``: what ``check_grid`` returned for these points
     and arguments, where the caller checked them already (the points' footprint is a pass over
-    all of them).
+    all of them). Points without a finite x, y, z or with a z no ground has are left out, as
+    the readers leave them out (``points.step_points``; ``note`` is told).
     """
     cell_size = check_cell_size(cell_size)
+    xyz = step_points(points.xyz, "the points", note, least=3)
+    if xyz is not points.xyz:  # some left out: the caller's plan was made for them all
+        points, plan = PointCloud(xyz, points.crs), None
     plan = plan if plan is not None else check_grid(points, cell_size, max_gap)
     max_gap, rows, cols, x0, y1 = (plan[k] for k in ("max_gap", "rows", "cols", "x0", "y1"))
     values = grid_window(points.xyz, cell_size, max_gap, x0, y1, rows, cols, progress=progress,
