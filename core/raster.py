@@ -484,3 +484,50 @@ def fill_from_around(values: np.ndarray, cells: np.ndarray) -> None:
             raise FloodMeshError("cells to fill have no data around them")
         values[r[filled], c[filled]] = estimate[filled]
         pending = pending[~filled]
+
+
+def usable_dem(dem: Grid, what: str = "the DEM", note=None) -> Grid:
+    """``dem`` itself where every cell is NaN (nodata) or an elevation some ground has; else a
+    copy whose other cells (-9999, inf and the like) are NaN, as a DEM file's are when read
+    (``drop_implausible``, ``note`` told): the rule where a ``Grid`` enters a step."""
+    values = np.asarray(dem.values)
+    if not np.issubdtype(values.dtype, np.floating) or not _implausible(values).any():
+        return dem
+    values = values.copy()
+    drop_implausible(values, what, None, note)
+    if not np.isfinite(values).any():
+        raise FloodMeshError(f"{what} has no cell with an elevation some ground has (between "
+                             f"{LOWEST_GROUND_M:g} and {HIGHEST_GROUND_M:g} m): check its values")
+    return dem.with_values(values)
+
+
+def _implausible(values: np.ndarray) -> np.ndarray:
+    """Which cells hold an elevation no ground has (inf included); NaN cells do not."""
+    return (values < LOWEST_GROUND_M) | (values > HIGHEST_GROUND_M)
+
+
+def drop_implausible(values: np.ndarray, what: str, file: str | None, note=None) -> None:
+    """Set to NaN, in place, the cells of a DEM's ``values`` (m) below ``LOWEST_GROUND_M`` or
+    above ``HIGHEST_GROUND_M``: no ground lies there, they hold a no-data value that no tag
+    names. ``note`` is told (``implausible_note``: ``what``, ``file``)."""
+    outside = _implausible(values)
+    count = int(np.count_nonzero(outside))
+    if count:
+        held = values[outside]
+        if note:
+            note(implausible_note(what, file, count, float(held.min()), float(held.max())))
+        values[outside] = np.nan
+
+
+def implausible_note(what: str, file: str | None, count: int, least: float,
+                     greatest: float) -> str:
+    """The note on ``count`` cells of ``what`` (``dem_file``, or the DEM tiles) holding
+    ``least`` to ``greatest``, beyond any ground, taken as nodata; ``file`` the name to tag
+    (None: an in-memory ``Grid``)."""
+    value = f"{least:g}" if least == greatest else "VALUE"
+    held = f"{value}, an elevation" if least == greatest else \
+        f"{least:g} to {greatest:g}, elevations"
+    fix = ("set them to NaN in the Grid's values to say so" if file is None else
+           f"tag that value in the file to say so (gdal_edit.py -a_nodata {value} {file})")
+    return (f"{what}: {count:,} cells hold {held} no ground has (below {LOWEST_GROUND_M:g} m "
+            f"or above {HIGHEST_GROUND_M:g} m): they are taken as nodata; {fix}")

@@ -12,8 +12,8 @@ import numpy as np
 from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import is_point_source
-from ..raster import (HIGHEST_GROUND_M, LOWEST_GROUND_M, METRE_NAMES, SCALE_TOLERANCE, Grid,
-                      check_scale, check_transform, chosen_crs, corners_and_centre,
+from ..raster import (METRE_NAMES, SCALE_TOLERANCE, Grid, check_scale, check_transform,
+                      chosen_crs, corners_and_centre, drop_implausible, implausible_note,
                       require_metric_crs)
 from .outputs import atomic_output, require_file
 from .points import read_points
@@ -162,33 +162,9 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
     return Grid(values, transform, crs)
 
 
-def drop_implausible(values: np.ndarray, what: str, file: str, note=None) -> None:
-    """Set to NaN, in place, the cells of a DEM's ``values`` (m) below ``LOWEST_GROUND_M`` or
-    above ``HIGHEST_GROUND_M``: no ground lies there, they hold a no-data value that no tag
-    names. ``note`` is told (``implausible_note``: ``what``, ``file``)."""
-    outside = (values < LOWEST_GROUND_M) | (values > HIGHEST_GROUND_M)
-    count = int(np.count_nonzero(outside))
-    if count:
-        held = values[outside]
-        if note:
-            note(implausible_note(what, file, count, float(held.min()), float(held.max())))
-        values[outside] = np.nan
-
-
 def dem_file(name: str, nodata) -> str:
     """``implausible_note``'s words for DEM file ``name`` with the nodata tag ``nodata``."""
     return f"raster {name} ({'no nodata tag' if nodata is None else f'nodata tag {nodata:g}'})"
-
-
-def implausible_note(what: str, file: str, count: int, least: float, greatest: float) -> str:
-    """The note on ``count`` cells of ``what`` (``dem_file``, or the DEM tiles) holding
-    ``least`` to ``greatest``, beyond any ground, taken as nodata; ``file`` the name to tag."""
-    value = f"{least:g}" if least == greatest else "VALUE"
-    held = f"{value}, an elevation" if least == greatest else \
-        f"{least:g} to {greatest:g}, elevations"
-    return (f"{what}: {count:,} cells hold {held} no ground has (below {LOWEST_GROUND_M:g} m "
-            f"or above {HIGHEST_GROUND_M:g} m): they are taken as nodata; tag that value in "
-            f"the file to say so (gdal_edit.py -a_nodata {value} {file})")
 
 
 TILE = 256  # GeoTIFF tile size (cells)

@@ -35,7 +35,7 @@ import numpy as np
 from ..errors import FloodMeshError
 from ..options import (TRACING_MODES, check_choice, check_min_length, check_min_points,
                        check_s_crit, check_seed)
-from ..raster import Grid
+from ..raster import Grid, usable_dem
 
 MODES = TRACING_MODES
 # neighbour order: E, NE, N, NW, W, SW, S, SE as (row, col) offsets
@@ -68,7 +68,8 @@ class BreakLine:
 
 def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *,
                      mode: str = "auto", min_points: int = 3, min_length: float = 0.0,
-                     join: bool = True, seed: int = 0, crests: bool = True) -> list[BreakLine]:
+                     join: bool = True, seed: int = 0, crests: bool = True,
+                     note=None) -> list[BreakLine]:
     """Join thinned breakpoints into break lines (see the module docstring for the rules), and
     with ``crests`` add the crest lines of ridges and the bed lines of troughs too narrow for
     their sides to be traced apart (``narrow_crest_cells``), traced by the same rules.
@@ -77,7 +78,8 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     S_crit). Lines with fewer than ``min_points`` points or shorter than ``min_length`` metres
     are dropped. ``join`` joins pieces end to end across the corners that thinning leaves on
     bands oblique to the grid (see ``_join_fragments``); without it every line obeys the slope
-    continuity rule strictly. ``seed`` settles ties that the 7x7 kernel leaves.
+    continuity rule strictly. ``seed`` settles ties that the 7x7 kernel leaves. DEM cells no
+    ground has (-9999, inf) are nodata (``raster.usable_dem``, ``note`` told).
     """
     check_choice(mode, MODES, "tracing mode")
     s_crit = check_s_crit(s_crit)
@@ -87,6 +89,7 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     if breakpoints.shape != slope.shape or slope.shape != dem.shape:
         raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
                              f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")
+    dem = usable_dem(dem, "the DEM", note)
     if mode == "auto":
         valid = slope.values[np.isfinite(slope.values)]  # a copy: the median may sort it
         mode = "steep" if valid.size and np.median(valid, overwrite_input=True) >= s_crit \

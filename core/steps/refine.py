@@ -21,8 +21,8 @@ import numpy as np
 
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_refinement
-from ..points import at_places_of
-from ..raster import Grid
+from ..points import at_places_of, step_points
+from ..raster import Grid, usable_dem
 from .accuracy import residuals
 from .localise import beyond_noise, estimate_noise
 from .mesh import Mesh, build_mesh, triangle_areas
@@ -76,6 +76,12 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     points = np.asarray(points, float)
     if points.ndim != 2 or points.shape[1] != 3 or not len(points):
         raise FloodMeshError("refinement needs measured points (x, y, z); none were given")
+    # the readers' rule on what the caller gives: rows without a finite x, y, z or with a z
+    # no ground has left out, DEM cells no ground has nodata (``note`` told)
+    points = step_points(points, "the refinement's points", note, least=1)
+    if check is not None and len(check):
+        check = step_points(check, "the check points", note)
+    dem = usable_dem(dem, "the DEM", note)
     check_refinement(lower, upper, target_rmse=target_rmse, target_max=target_max, noise=noise,
                      max_rounds=max_rounds, max_nodes=max_nodes)
     # no refinement below the DEM's own resolution

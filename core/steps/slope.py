@@ -27,7 +27,7 @@ from ..engine.blocks import cell_size, map_overlap, map_raster
 from ..errors import FloodMeshError
 from ..io import require_file
 from ..options import LOG_KERNELS, SLOPE_METHOD_NAMES, check_choice, check_sigma_fits
-from ..raster import Grid
+from ..raster import Grid, usable_dem
 
 SQRT2 = math.sqrt(2.0)
 
@@ -71,9 +71,12 @@ def slope_block(padded: np.ndarray, d: float, method: str = "one-over-distance",
 
 
 def slope(dem: Grid, method: str = "one-over-distance", *, diagonal_distance: bool = True,
-          cancelled=None) -> Grid:
-    """Slope of a DEM in degrees by one of ``SLOPE_METHODS``, computed block by block."""
+          cancelled=None, note=None) -> Grid:
+    """Slope of a DEM in degrees by one of ``SLOPE_METHODS``, computed block by block. Cells
+    no ground has (-9999, inf) are nodata, as in a DEM file (``raster.usable_dem``, ``note``
+    told)."""
     _method_code(method)
+    dem = usable_dem(dem, "the DEM", note)
     d = dem.cell_size
     values = map_overlap(
         dem.values,

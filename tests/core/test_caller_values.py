@@ -36,3 +36,45 @@ def test_grid_points_refuses_a_cloud_with_no_usable_point():
     for xyz in (np.empty((0, 3)), np.full((10, 3), np.nan)):
         with pytest.raises(core.FloodMeshError, match="usable"):
             core.grid_points(core.PointCloud(xyz, CRS), 1.0)
+
+
+def _dem(strip_value=None):
+    y, x = np.mgrid[0:60, 0:80]
+    z = 10 + 0.01 * y + np.clip((x - 40) / 2, 0, 1) * 2.0
+    if strip_value is not None:
+        z[:5, :] = strip_value
+    return core.Grid(z, Affine(1, 0, 500000, 0, -1, 5700060), CRS)
+
+
+@pytest.mark.parametrize("value", [-9999.0, np.inf, -np.inf, 1e38])
+def test_dem_cells_no_ground_has_are_nodata_in_every_step(value):
+    bad, nodata = _dem(value), _dem(np.nan)
+    given = bad.values.copy()
+    notes = []
+    mesh = core.build_mesh(bad, [], max_area=50, note=notes.append)
+    assert mesh.nodes[:, 2].min() > 9 and mesh.nodes[:, 2].max() < 13
+    assert np.array_equal(mesh.nodes, core.build_mesh(nodata, [], max_area=50).nodes)
+    slope = core.terrain_slope(bad, "one-over-distance", note=notes.append)
+    expected = core.terrain_slope(nodata, "one-over-distance")
+    assert np.array_equal(slope.values, expected.values, equal_nan=True)
+    breakpoints = core.classify_breakpoints(expected, 10.0)
+    lines = core.trace_breaklines(breakpoints, expected, bad, 10.0, note=notes.append)
+    alike = core.trace_breaklines(breakpoints, expected, nodata, 10.0)
+    assert [line.coords.tolist() for line in lines] == [line.coords.tolist() for line in alike]
+    assert np.array_equal(bad.values, given)  # the caller's Grid untouched
+    assert len(notes) == 3 and all("400 cells" in n and "nodata" in n for n in notes)
+
+
+def test_refine_mesh_leaves_out_what_no_ground_has():
+    rng = np.random.default_rng(1)
+    pts = np.column_stack([rng.uniform(2, 78, 400) + 500000, rng.uniform(8, 58, 400) + 5700000,
+                           np.full(400, 10.3)])
+    bad_pts = pts.copy()
+    bad_pts[:3, 2] = [np.nan, -9999.0, np.inf]
+    notes = []
+    mesh, _ = core.refine_mesh(_dem(-9999.0), [], bad_pts, check=bad_pts[:40], max_rounds=1,
+                               note=notes.append)
+    assert mesh.nodes[:, 2].min() > 9
+    assert np.isnan(bad_pts[0, 2]) and bad_pts[1, 2] == -9999.0  # the caller's points untouched
+    assert sum("left out" in n for n in notes) == 4 and any("nodata" in n for n in notes)
+
