@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from ..options import MIN_CHECK_POINTS
+from ..points import step_points, usable_rows
 from ..raster import Grid, nearest_value
 from .mesh import Mesh
 
@@ -35,11 +36,21 @@ def residuals(mesh: Mesh, points_xyz: np.ndarray) -> np.ndarray:
 
 
 def assess(mesh: Mesh, points_xyz: np.ndarray, *, alpha: float | None = None,
-           delta: float | None = None) -> tuple[np.ndarray, dict]:
+           delta: float | None = None, note=None) -> tuple[np.ndarray, dict]:
     """Step 8: the residuals of held-out points against the mesh's TIN (m, NaN outside it) and
-    their statistics (``accuracy_statistics``: RMSE, NSSDA test, classes, E = RMSE + α·Δ)."""
-    res = residuals(mesh, points_xyz)
-    return res, accuracy_statistics(res, alpha=alpha, delta=delta)
+    their statistics (``accuracy_statistics``: RMSE, NSSDA test, classes, E = RMSE + α·Δ).
+    Points without a finite x, y, z or with a z no ground has (-9999) are left out, as the
+    readers leave them out (``points.step_points``, ``note`` told): their residual is NaN and
+    no figure counts them, not even ``n_outside_mesh``."""
+    given = np.asarray(points_xyz, dtype=np.float64)
+    usable = step_points(given, "the check points", note) if len(given) else given
+    if usable is given:
+        res = residuals(mesh, given)
+        return res, accuracy_statistics(res, alpha=alpha, delta=delta, note=note)
+    kept = usable_rows(given)
+    res = np.full(len(given), np.nan)
+    res[kept] = residuals(mesh, usable)
+    return res, accuracy_statistics(res[kept], alpha=alpha, delta=delta, note=note)
 
 
 OUTSIDE_NOTE_SHARE = 0.02  # of the check points outside the mesh, beyond which a note says so

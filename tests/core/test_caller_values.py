@@ -78,3 +78,22 @@ def test_refine_mesh_leaves_out_what_no_ground_has():
     assert np.isnan(bad_pts[0, 2]) and bad_pts[1, 2] == -9999.0  # the caller's points untouched
     assert sum("left out" in n for n in notes) == 4 and any("nodata" in n for n in notes)
 
+
+def test_assess_leaves_out_check_points_no_ground_has_and_says_so():
+    y, x = np.mgrid[0:60, 0:80]
+    dem = core.Grid(10 + 0.01 * y, Affine(1, 0, 500000, 0, -1, 5700060), CRS)
+    mesh = core.build_mesh(dem, [], max_area=50)
+    rng = np.random.default_rng(0)
+    pts = np.column_stack([rng.uniform(10, 70, 30) + 500000, rng.uniform(10, 50, 30) + 5700000,
+                           np.full(30, 10.3)])
+    clean_res, clean = core.assess(mesh, pts[2:])
+    bad = pts.copy()
+    bad[0, 2], bad[1, 2] = np.nan, -9999.0
+    given = bad.copy()
+    notes = []
+    res, stats = core.assess(mesh, bad, note=notes.append)
+    assert np.array_equal(bad, given, equal_nan=True)
+    assert stats["n_outside_mesh"] == 0 and stats["n_assessed"] == 28
+    assert stats["rmse_m"] == pytest.approx(clean["rmse_m"])
+    assert len(res) == 30 and np.isnan(res[:2]).all() and np.array_equal(res[2:], clean_res)
+    assert sum("1 points" in n and "left out" in n for n in notes) == 2
