@@ -16,6 +16,7 @@ from ..engine.limits import check_triangles
 from ..errors import FloodMeshError
 from ..options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles, check_min_angle,
                        check_tolerance)
+from ..points import step_points
 from ..raster import Grid, bilinear, nearest_value, usable_dem
 from .outline import smooth_outline
 
@@ -727,6 +728,8 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
     dem = usable_dem(dem, "the DEM", note)  # -9999, inf: nodata, as in a DEM file
+    if points is not None and len(points):  # as the readers leave them out
+        points = step_points(points, "the mesh's points", note)
     # BreakLines as the tracer gives
     lines = [getattr(line, "coords", line) for line in lines] + list(own_lines)
     snap = dem.cell_size / 4 if snap is None else snap

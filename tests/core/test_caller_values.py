@@ -97,3 +97,15 @@ def test_assess_leaves_out_check_points_no_ground_has_and_says_so():
     assert stats["rmse_m"] == pytest.approx(clean["rmse_m"])
     assert len(res) == 30 and np.isnan(res[:2]).all() and np.array_equal(res[2:], clean_res)
     assert sum("1 points" in n and "left out" in n for n in notes) == 2
+
+
+def test_build_mesh_leaves_out_measured_points_no_ground_has():
+    rng = np.random.default_rng(2)
+    pts = np.column_stack([rng.uniform(5, 75, 50) + 500000, rng.uniform(10, 55, 50) + 5700000,
+                           np.full(50, 10.4)])
+    bad = np.vstack([pts, [[500040.3, 5700030.3, -9999.0], [500041.3, 5700031.3, np.nan]]])
+    notes = []
+    mesh = core.build_mesh(_dem(), [], max_area=50, points=bad, note=notes.append)
+    assert np.isfinite(mesh.nodes).all() and mesh.nodes[:, 2].min() > 9
+    assert np.array_equal(mesh.nodes, core.build_mesh(_dem(), [], max_area=50, points=pts).nodes)
+    assert sum("left out" in n for n in notes) == 2
