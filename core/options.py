@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 from .errors import FloodMeshError
@@ -232,7 +232,11 @@ def check_classes(classes) -> tuple[int, ...] | None:
     """LAS classes to grid: whole numbers 0-255 (a LAS file has no others), or None."""
     if classes is None:
         return None
-    classes = tuple(classes)
+    try:
+        classes = tuple(classes)
+    except TypeError:
+        raise FloodMeshError(f"LAS classes must be a list of class numbers 0-255, got "
+                             f"{classes!r}: {_CLASSES_EXAMPLE}") from None
     bad = [c for c in classes if isinstance(c, bool) or not isinstance(c, numbers.Integral)
            or not 0 <= c <= 255]
     if bad or not classes:
@@ -324,6 +328,39 @@ def check_choice(value, choices, what: str) -> str:
     return value
 
 
+def _field_value(name: str, kind: str, value):
+    """One RunOptions field's value in the type the chain uses: True or False for a switch (a
+    string such as "False" is truthy, so it is refused); a number given as text ("1.0", as a
+    config file or argv gives it) converted, as the step functions' checks convert it; formats
+    and classes as ``"2dm,slf"`` and ``"2,9"`` (or one class number) as the command line takes
+    them. Anything else is left for ``validate`` to check."""
+    if kind == "bool":
+        if isinstance(value, bool):
+            return value
+        if type(value).__name__ == "bool_":  # numpy's
+            return bool(value)
+        raise FloodMeshError(f"{name} must be True or False, got {value!r}: give {name}=True "
+                             f"or {name}=False (a string such as 'False' would count as True)")
+    if value is None:
+        return value
+    if kind.startswith(("float", "int")):
+        if isinstance(value, bool) or not isinstance(value, (str, numbers.Real)):
+            raise FloodMeshError(f"{name} must be a number, got {value!r}")
+        if not isinstance(value, str):
+            return value
+        number = _number(value, name)
+        return int(number) if kind.startswith("int") and number.is_integer() else number
+    if name == "formats" and isinstance(value, str):
+        return parse_formats(value)
+    if name == "classes":
+        if isinstance(value, str):
+            return parse_classes(value)
+        if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+            return (int(value),)
+        return check_classes(value)
+    return value
+
+
 # --scheduler's value for a local Dask cluster even where the tiles fit in memory
 LOCAL_CLUSTER = "local"
 
@@ -382,6 +419,10 @@ class RunOptions:
     processes: bool = True          # point tiles: local workers are processes (False: threads)
 
     def __post_init__(self):
+        for field in fields(self):
+            value = _field_value(field.name, field.type, getattr(self, field.name))
+            if value is not getattr(self, field.name):
+                object.__setattr__(self, field.name, value)
         self.validate()
 
     def validate(self) -> None:
