@@ -212,13 +212,18 @@ def build_pslg(lines: list[np.ndarray], domain, *, snap: float,
     return PSLG(vertices.astype(float), segments.astype(np.int32), _hole_points(domain, snap / 5))
 
 
+def _usable(line: np.ndarray) -> bool:
+    """A line the mesh can carry: (k, 2|3), at least 2 points, finite x and y."""
+    return (line.ndim == 2 and line.shape[1] >= 2 and len(line) >= 2
+            and bool(np.isfinite(line[:, :2]).all()))
+
+
 def _clipped_lines(lines, inner, snap: float, note) -> list:
     """The break lines (x, y[, z] arrays) as LineStrings clipped to ``inner`` (the domain shrunk
     by ``snap`` m); those with fewer than 2 points or non-finite coordinates, and those wholly
     outside, are left out, each kind said to ``note``."""
     arrays = [np.asarray(c, float) for c in lines]
-    usable = [c[:, :2] for c in arrays
-              if c.ndim == 2 and len(c) >= 2 and np.isfinite(c[:, :2]).all()]
+    usable = [c[:, :2] for c in arrays if _usable(c)]
     if len(usable) < len(arrays):
         note(f"{len(arrays) - len(usable)} break lines with fewer than 2 points or non-finite "
              "coordinates were left out")
@@ -727,6 +732,11 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     min_angle = check_min_angle(min_angle)
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
+    for given, what in ((lines, "lines"), (own_lines, "own_lines")):
+        if hasattr(given, "coords") or (isinstance(given, np.ndarray) and given.ndim <= 2):
+            raise FloodMeshError(f"{what} must be a list of lines, got one "
+                                 f"{type(given).__name__} of shape {np.shape(given)}: give "
+                                 f"[line] for a single (k, 3) line")
     dem = usable_dem(dem, "the DEM", note)  # -9999, inf: nodata, as in a DEM file
     if points is not None and len(points):  # as the readers leave them out
         points = step_points(points, "the mesh's points", note)
@@ -820,7 +830,9 @@ def _line_vertex_z(lines, vertices: np.ndarray, precision: float):
     """(indices of ``vertices``, their z): the mesh vertices that are a vertex of one of
     ``lines`` ((k, 3) arrays; (k, 2) ones carry no z) on the ``precision`` grid (m), with that
     vertex's z where finite; where lines share a vertex, the last line's."""
-    with_z = [np.asarray(c, float) for c in lines if np.asarray(c).shape[1] >= 3]
+    # the lines the PSLG kept (_clipped_lines said which it left out)
+    arrays = [np.asarray(c, float) for c in lines]
+    with_z = [c for c in arrays if _usable(c) and c.shape[1] >= 3]
     if not with_z or not len(vertices):
         return np.zeros(0, np.int64), np.zeros(0)
     line_xyz = np.concatenate(with_z)

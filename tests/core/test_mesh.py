@@ -422,3 +422,29 @@ def test_lines_meeting_at_a_sharp_corner_stop_a_cell_apart():
     assert inradii(default.nodes, default.triangles).min() > 0.4
     assert inradii(half.nodes, half.triangles).min() < 0.25
     assert mesh_quality(default, min_angle=25, max_area=100)["n_below_min_angle"] == 0
+
+
+def test_one_line_array_instead_of_a_list_of_lines_is_refused_naming_the_fix():
+    from floodmesh import core  # as docs/library.md calls it
+
+    # a (k, 3) array iterated as lines of one point each used to end in an IndexError
+    with pytest.raises(FloodMeshError, match=r"lines must be a list of lines.*give \[line\]"):
+        core.build_mesh(_plane_dem(), DIAGONAL, max_area=50)
+    with pytest.raises(FloodMeshError, match=r"own_lines must be a list of lines"):
+        core.build_mesh(_plane_dem(), [], own_lines=L_SHAPE, max_area=50)
+
+
+@pytest.mark.parametrize("bad", [np.empty((0, 3)), np.empty((0, 2)), DIAGONAL[0],
+                                 DIAGONAL[:1]])
+@pytest.mark.parametrize("others", [[], [DIAGONAL]], ids=["alone", "with a line"])
+def test_an_empty_or_one_point_line_is_left_out_with_a_note(bad, others):
+    from floodmesh import core
+
+    # alone, an empty line used to end in an IndexError, a 1-D one in either case
+    notes = []
+    mesh = core.build_mesh(_plane_dem(), [*others, bad], max_area=50, note=notes.append)
+    without = core.build_mesh(_plane_dem(), others, max_area=50)
+    assert notes == ["1 break lines with fewer than 2 points or non-finite coordinates were "
+                     "left out"]
+    np.testing.assert_array_equal(mesh.nodes, without.nodes)
+    np.testing.assert_array_equal(mesh.segments, without.segments)
