@@ -344,11 +344,11 @@ def _field_value(name: str, kind: str, value):
     if value is None:
         return value
     if kind.startswith(("float", "int")):
-        if isinstance(value, bool) or not isinstance(value, (str, numbers.Real)):
+        if isinstance(value, bool):
             raise FloodMeshError(f"{name} must be a number, got {value!r}")
+        number = _number(value, name)
         if not isinstance(value, str):
             return value
-        number = _number(value, name)
         return int(number) if kind.startswith("int") and number.is_integer() else number
     if name == "formats" and isinstance(value, str):
         return parse_formats(value)
