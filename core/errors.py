@@ -14,6 +14,9 @@ class FloodMeshError(ValueError):
 class Cancelled(Exception):
     """The user cancelled the run (QGIS Cancel, Ctrl-C); nothing half-written is left behind."""
 
+    def __init__(self, message: str = "cancelled by the user"):
+        super().__init__(message)
+
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM or SIGHUP (a scheduler's time limit, a closed terminal, QGIS ending a stuck

@@ -53,6 +53,25 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
     return PointCloud(xyz, crs)
 
 
+def xyz_array(values, what: str) -> np.ndarray:
+    """``values`` as an (N, 3) float array of x, y, z in metres (an empty one as (0, 3)), else a
+    FloodMeshError naming ``what`` and the fix."""
+    if isinstance(values, PointCloud):
+        raise FloodMeshError(f"{what} must be an (N, 3) array of x, y, z, got a PointCloud: "
+                             "give its .xyz")
+    try:
+        array = np.asarray(values, float)
+    except (TypeError, ValueError):
+        raise FloodMeshError(f"{what} must be an (N, 3) array of x, y, z, got "
+                             f"{type(values).__name__}: give numbers") from None
+    if not array.size:
+        return array.reshape(0, 3)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise FloodMeshError(f"{what} must be an (N, 3) array of x, y, z, got shape "
+                             f"{array.shape}: give each row's elevation as its third column")
+    return array
+
+
 def usable_rows(xyz: np.ndarray) -> np.ndarray | None:
     """Which points (n, 3) have a finite x, y, z and a z some ground has (``LOWEST_GROUND_M``
     to ``HIGHEST_GROUND_M``: -9999 and the like are no-data values); None where all do."""
@@ -90,10 +109,7 @@ def step_points(xyz, what: str, note=None, *, least: int = 0) -> np.ndarray:
     """Points (n, 3) as a step takes them from its caller: an (n, 3) float array whose rows
     without a finite x, y, z or with a z no ground has are left out (``drop_unusable``,
     ``note`` told), the rule the readers apply; at least ``least`` of them must be left."""
-    xyz = np.asarray(xyz, dtype=np.float64)
-    if xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise FloodMeshError(f"{what} must be an (N, 3) array of x, y, z, got shape {xyz.shape}")
-    xyz = drop_unusable(xyz, what, note)
+    xyz = drop_unusable(xyz_array(xyz, what), what, note)
     if len(xyz) < least:
         raise FloodMeshError(f"{what}: {len(xyz)} usable (finite x, y and z, z "
                              f"between {LOWEST_GROUND_M:g} and {HIGHEST_GROUND_M:g} m); at least "

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from ..options import MIN_CHECK_POINTS
-from ..points import step_points, usable_rows
+from ..points import step_points, usable_rows, xyz_array
 from ..raster import Grid, nearest_value
 from .mesh import Mesh
 
@@ -42,7 +42,7 @@ def assess(mesh: Mesh, points_xyz: np.ndarray, *, alpha: float | None = None,
     Points without a finite x, y, z or with a z no ground has (-9999) are left out, as the
     readers leave them out (``points.step_points``, ``note`` told): their residual is NaN and
     no figure counts them, not even ``n_outside_mesh``."""
-    given = np.asarray(points_xyz, dtype=np.float64)
+    given = xyz_array(points_xyz, "the check points")
     usable = step_points(given, "the check points", note) if len(given) else given
     if usable is given:
         res = residuals(mesh, given)

@@ -26,6 +26,7 @@ from .. import io
 from ..engine.arrays import unique_rows
 from ..errors import FloodMeshError
 from ..options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
+from ..points import xyz_array
 from ..raster import parse_crs, require_metric_crs, same_place
 from .accuracy import tin_elevation
 from .mesh import boundary_loops
@@ -103,7 +104,7 @@ def prepare(nodes, triangles, *, crs=None, open_lines=(), snap: float = 1.0, reg
     ``open_lines``: (k, 2+) coordinate arrays; ``regions``: (polygon, material id) pairs, later
     ones over earlier ones, by triangle centroid; ``materials``: ids to start from (default 1).
     """
-    nodes = np.array(nodes, dtype=float).reshape(-1, 3)
+    nodes = xyz_array(nodes, "the mesh's nodes")
     triangles = np.array(triangles, dtype=np.int64).reshape(-1, 3)
     if len(triangles) == 0:
         raise FloodMeshError("the mesh has no triangles: nothing to export")

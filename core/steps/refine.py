@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_refinement
-from ..points import at_places_of, step_points
+from ..points import at_places_of, step_points, xyz_array
 from ..raster import Grid, usable_dem
 from .accuracy import residuals
 from .localise import beyond_noise, estimate_noise
@@ -73,8 +73,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     beyond ``lower``, and how many picked points were too close to a node, a line or an edge to
     be inserted. A round whose picks would pass ``max_nodes`` takes the worst of them that fit
     (``_within_budget``) and is the last. Returns the last mesh and every round."""
-    points = np.asarray(points, float)
-    if points.ndim != 2 or points.shape[1] != 3 or not len(points):
+    points = xyz_array(points, "the refinement's points")
+    if not len(points):
         raise FloodMeshError("refinement needs measured points (x, y, z); none were given")
     # the readers' rule on what the caller gives: rows without a finite x, y, z or with a z
     # no ground has left out, DEM cells no ground has nodata (``note`` told)
