@@ -738,8 +738,8 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
                                  f"{type(given).__name__} of shape {np.shape(given)}: give "
                                  f"[line] for a single (k, 3) line")
     dem = usable_dem(dem, "the DEM", note)  # -9999, inf: nodata, as in a DEM file
-    if points is not None and len(points):  # as the readers leave them out
-        points = step_points(points, "the mesh's points", note)
+    if points is not None:  # (N, 3); as the readers leave them out
+        points = step_points(points, "the points put into the mesh", note)
     # BreakLines as the tracer gives
     lines = [getattr(line, "coords", line) for line in lines] + list(own_lines)
     snap = dem.cell_size / 4 if snap is None else snap
@@ -747,8 +747,7 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     check_triangles(domain.area, max_area, max_triangles)
     pslg = build_pslg(lines, domain, snap=snap, corner_gap=corner_gap, note=note)
     if points is not None and len(points):
-        points = _points_apart(np.asarray(points, float), pslg.vertices, domain, snap,
-                               segments=pslg.segments)
+        points = _points_apart(points, pslg.vertices, domain, snap, segments=pslg.segments)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
                                            conforming=conforming, points=points,
                                            local_areas=local_areas,

@@ -55,6 +55,14 @@ def test_export_mesh_refuses_nodes_without_z(case, shape, tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("shape", SHAPES)
+def test_build_mesh_refuses_points_without_z(case, shape):
+    dem, xyz, _ = case
+    with pytest.raises(core.FloodMeshError,
+                       match=f"points put into the mesh must be .*{_fix(shape)}"):
+        core.build_mesh(dem, [], max_area=50, points=_given(shape, xyz[:20]))
+
+
 def test_x_y_nodes_whose_count_fits_three_columns_are_not_read_as_x_y_z(case, tmp_path):
     # 6 nodes' x, y are 12 numbers: reshaped to (4, 3) they made a mesh of the wrong nodes
     nodes = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [2, 0], [2, 1]], float) + 5e5
