@@ -13,6 +13,7 @@ from ..core.errors import FloodMeshError
 from ..core.options import is_point_source
 from .compat import METRES, VECTOR_LINE, VECTOR_POLYGON
 from .child import run_step
+from .styles import reload_rewritten
 
 
 # what toolbox searches find every FloodMesh algorithm by (each adds its own, ``TAGS``)
@@ -177,6 +178,11 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
             return self.process(parameters, context, feedback)
         except FloodMeshError as exc:
             raise QgsProcessingException(str(exc)) from None
+
+    def postProcessAlgorithm(self, context, feedback):  # noqa: N802
+        # in QGIS's main thread, after the run, before QGIS loads its results
+        reload_rewritten(context)
+        return {}
 
     def run_step(self, step, args, feedback, *outputs):
         """Core's ``step`` on ``args`` in the worker process (see ``child.run_step``); the

@@ -198,6 +198,44 @@ def load_results(context, crs_wkt, layers, group: str | None = None) -> None:
         context.addLayerToLoadOnCompletion(layer.id(), details)
 
 
+def _file_of(source: str) -> tuple:
+    """A layer source's file, resolved, and its layer name within it (a GeoPackage's), if any."""
+    import os
+
+    path, _, options = (source or "").partition("|")
+    layer = [o.split("=", 1)[1] for o in options.split("|") if o.startswith("layername=")]
+    return os.path.realpath(path) if path else "", layer[0] if layer else None
+
+
+def _same_file(one: str, other: str) -> bool:
+    (path, layer), (other_path, other_layer) = _file_of(one), _file_of(other)
+    return bool(path) and path == other_path and (layer == other_layer
+                                                  or None in (layer, other_layer))
+
+
+def reload_rewritten(context) -> None:
+    """A run that rewrote a file already in the project shows the new file once: each layer on
+    it is reloaded where it is (its place, group and style kept) and the run does not load that
+    output again (QGIS 3.22 would hand back the loaded layer, stale, or add a second one)."""
+    project = context.project()
+    if project is None:
+        return
+    loaded = list(project.mapLayers().values())
+    keep = {}
+    for key, details in context.layersToLoadOnCompletion().items():
+        layer = context.temporaryLayerStore().mapLayer(key)
+        source = layer.source() if layer is not None else key
+        stale = [old for old in loaded if _same_file(old.source(), source)]
+        if not stale:
+            keep[key] = details
+        for old in stale:
+            old.reload()
+            if old.dataProvider() is not None:
+                old.setExtent(old.dataProvider().extent())
+            old.triggerRepaint()
+    context.setLayersToLoadOnCompletion(keep)
+
+
 def run_group_name(folder, source=None) -> str:
     """A run's layer group: its output folder's name, or where QGIS chose a temporary folder
     (named after the parameter, OUTPUT_FOLDER), the input's."""

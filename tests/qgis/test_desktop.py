@@ -315,3 +315,51 @@ def test_a_flood_shows_where_its_time_step_was_set(tmp_path):
     assert layers[0]["layer"] == "Where the time step was set", layers
     assert layers[0]["valid"] and layers[0]["crs"] == "EPSG:32756", layers
     assert len(layers) == 5, layers
+
+
+RERUN_SCRIPT = HELPERS + r"""
+try:
+    import processing
+    from qgis.core import QgsMeshLayer, QgsRasterLayer
+    project = QgsProject.instance()
+    dem, mesh = os.environ["FM_OUTPUT"] + ".tif", os.environ["FM_OUTPUT"] + ".2dm"
+    for cell in (2.0, 4.0):  # the same GeoTIFF, loaded, rewritten at another cell size
+        processing.runAndLoadResults("floodmesh:gridpoints", {
+            "INPUT": os.environ["FM_INPUT"], "CELL_SIZE": cell, "OUTPUT": dem})
+        settle()
+    for area in (100, 400):  # the same mesh, loaded, rewritten with larger triangles
+        processing.runAndLoadResults("floodmesh:buildmesh", {
+            "DEM": os.environ["FM_DEM"], "MAX_AREA": area, "OUTPUT": mesh})
+        settle()
+    for area in (100, 200):  # LiDAR to mesh twice into one folder
+        processing.runAndLoadResults("floodmesh:lidartomesh", {
+            "INPUT": os.environ["FM_INPUT"], "CELL_SIZE": 2.0, "MAX_AREA": area,
+            "OUTPUT_FOLDER": os.environ["FM_OUTPUT"]})
+        settle()
+    out["groups"] = [row["group"] for row in tree(project.layerTreeRoot()) if "group" in row]
+    on = {path: [l for l in project.mapLayers().values() if l.source() == path]
+          for path in (dem, mesh)}
+    out["dem"] = [[l.width(), l.height()] for l in on[dem]]
+    on_disk = QgsRasterLayer(dem, "file"), QgsMeshLayer(mesh, "file", "mdal")
+    out["dem_file"] = [on_disk[0].width(), on_disk[0].height()]
+    out["mesh"] = [l.dataProvider().faceCount() for l in on[mesh]]
+    out["mesh_file"] = on_disk[1].dataProvider().faceCount()
+except Exception:
+    out["error"] = traceback.format_exc()
+open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
+os._exit(0)
+"""
+
+
+def test_a_rerun_into_a_loaded_file_shows_the_new_file_once(tmp_path):
+    """Grid LiDAR points run twice into one GeoTIFF, Build mesh twice into one 2DM, LiDAR to
+    mesh twice into one folder: once Qt's events have run, each file is in the project once,
+    showing what is on disk now, and the folder's run has one group."""
+    real = REPO.parent / "shared" / "data" / "real"
+    if not shutil.which("xvfb-run") or not (real / "Topography.laz").exists():
+        pytest.skip("xvfb-run or ../shared/data/real is missing")
+    seen = run_desktop(RERUN_SCRIPT, tmp_path, FM_INPUT=real / "Topography.laz",
+                       FM_DEM=real / "merewether_topography1.asc", FM_OUTPUT=tmp_path / "out")
+    assert seen["dem"] == [seen["dem_file"]], seen
+    assert seen["mesh"] == [seen["mesh_file"]], seen
+    assert seen["groups"] == ["out"], seen
