@@ -60,6 +60,8 @@ def open_source(given, *, skip_unreadable: bool = False) -> Source:
         tiles = expand_tiles(given, skip_unreadable=skip_unreadable)
         kind = POINT_TILES if tile_kind(tiles[0]) == "points" else DEM_TILES
         return Source(kind, tiles, given)
+    if not isinstance(given, (str, os.PathLike)):  # one file, given as a list of tiles
+        (given,) = given
     path = Path(given)
     if path.suffix.lower() in RASTER_EXTENSIONS:
         return Source(DEM, (path,), given)

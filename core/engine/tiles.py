@@ -198,10 +198,14 @@ def _mixed_kinds(tiles: list[Path], inputs) -> str:
     suffixes = [p.suffix for p in kept]
     pattern = Path(folder) / f"*{max(set(suffixes), key=suffixes.count)}"
     s = "s" if len(stray) > 1 else ""
-    return (f"the tiles mix point files and DEM rasters: {len(stray)} {what}{s} "
-            f"({first_names([p.name for p in stray])}) beside {len(kept)} {others}: move "
-            f"{'them' if s else 'it'} out of {folder}, or give the {others} as a quoted "
-            f"pattern, e.g. '{pattern}'")
+    mixed = (f"the tiles mix point files and DEM rasters: {len(stray)} {what}{s} "
+             f"({first_names([p.name for p in stray])}) beside {len(kept)} {others}: ")
+    if not any(Path(i).is_dir() or any(ch in i for ch in GLOB_CHARACTERS) for i in items):
+        # files listed one by one: no folder to move them out of
+        return (f"{mixed}take {'them' if s else 'it'} out of the list of tiles (keep "
+                f"{first_names([p.name for p in kept])})")
+    return (f"{mixed}move {'them' if s else 'it'} out of {folder}, or give the {others} as a "
+            f"quoted pattern, e.g. '{pattern}'")
 
 
 def tile_kind(path: Path) -> str:

@@ -363,3 +363,44 @@ def test_a_rerun_into_a_loaded_file_shows_the_new_file_once(tmp_path):
     assert seen["dem"] == [seen["dem_file"]], seen
     assert seen["mesh"] == [seen["mesh_file"]], seen
     assert seen["groups"] == ["out"], seen
+
+
+ONE_TILE_SCRIPT = HELPERS + r"""
+import processing
+
+
+def outcome(algorithm, parameters):
+    try:
+        return sorted(processing.run(algorithm, parameters))
+    except Exception as exc:
+        return str(exc)
+
+
+try:
+    laz, dem, folder = os.environ["FM_INPUT"], os.environ["FM_DEM"], os.environ["FM_OUTPUT"]
+    out["one_laz"] = outcome("floodmesh:gridpoints", {
+        "TILES": [laz], "CELL_SIZE": 2.0, "OUTPUT": folder + ".tif"})
+    out["one_dem"] = outcome("floodmesh:lidartomesh", {
+        "TILES": [dem], "MAX_AREA": 400, "OUTPUT_FOLDER": folder})
+    out["mixed"] = outcome("floodmesh:gridpoints", {
+        "TILES": [laz, dem], "CELL_SIZE": 2.0, "OUTPUT": folder + " mixed.tif"})
+except Exception:
+    out["error"] = traceback.format_exc()
+open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
+os._exit(0)
+"""
+
+
+def test_one_tile_runs_as_its_file_and_a_mixed_list_is_named(tmp_path):
+    """Tiles given as a list of one LAZ (Grid LiDAR points) or one DEM (LiDAR to mesh) run as
+    that file would; a list mixing a LAZ and a DEM is refused naming the files, not a folder."""
+    real = REPO.parent / "shared" / "data" / "real"
+    if not shutil.which("xvfb-run") or not (real / "Topography.laz").exists():
+        pytest.skip("xvfb-run or ../shared/data/real is missing")
+    seen = run_desktop(ONE_TILE_SCRIPT, tmp_path, FM_INPUT=real / "Topography.laz",
+                       FM_DEM=real / "merewether_topography1.asc", FM_OUTPUT=tmp_path / "out")
+    assert seen["one_laz"] == ["OUTPUT"], seen
+    assert "MESH" in seen["one_dem"], seen
+    assert seen["mixed"].endswith("1 DEM raster (merewether_topography1.asc) beside 1 point "
+                                  "tiles: take it out of the list of tiles (keep "
+                                  "Topography.laz)"), seen
