@@ -77,6 +77,7 @@ class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):
             self.style(layer)
         if self.run is not None and self.run.get("name"):
             _into_group(context.project(), layer, self.run)
+            _after_group(context.project(), self.run["group"])
         else:
             _among_results(context.project(), layer)
         if self.run is not None:
@@ -143,6 +144,25 @@ def _into_group(project, layer, run: dict) -> None:
     position = sum(1 for child in group.children()
                    if child.layer() is not None and _rank(child.layer()) <= rank)
     _move(node, group, position)
+
+
+def _after_group(project, group) -> None:
+    """In the desktop QGIS, have the next layers added go where they would without the run: in
+    the group's parent, above it, not into the group (QGIS puts them beside the current node,
+    which the run left on its last layer)."""
+    try:
+        from qgis.utils import iface
+    except ImportError:
+        return
+    if iface is None or iface.layerTreeView() is None or group.parent() is None:
+        return
+    from qgis.core import QgsLayerTreeRegistryBridge
+    from qgis.PyQt.QtCore import QModelIndex
+
+    iface.layerTreeView().setCurrentIndex(QModelIndex())
+    parent = group.parent()
+    project.layerTreeRegistryBridge().setLayerInsertionPoint(
+        QgsLayerTreeRegistryBridge.InsertionPoint(parent, parent.children().index(group)))
 
 
 def _zoom_to(layer, project) -> None:

@@ -404,3 +404,34 @@ def test_one_tile_runs_as_its_file_and_a_mixed_list_is_named(tmp_path):
     assert seen["mixed"].endswith("1 DEM raster (merewether_topography1.asc) beside 1 point "
                                   "tiles: take it out of the list of tiles (keep "
                                   "Topography.laz)"), seen
+
+
+AFTER_RUN_SCRIPT = HELPERS + r"""
+try:
+    import processing
+    processing.runAndLoadResults("floodmesh:lidartomesh", {
+        "INPUT": os.environ["FM_INPUT"], "CELL_SIZE": 2.0,
+        "OUTPUT_FOLDER": os.environ["FM_OUTPUT"]})
+    settle()
+    processing.runAndLoadResults("floodmesh:slope", {
+        "INPUT": os.environ["FM_DEM"], "OUTPUT": os.environ["FM_OUTPUT"] + " slope.tif"})
+    settle()
+    out["tree"] = tree(QgsProject.instance().layerTreeRoot())
+except Exception:
+    out["error"] = traceback.format_exc()
+open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
+os._exit(0)
+"""
+
+
+def test_a_later_result_loads_outside_the_run_group(tmp_path):
+    """After LiDAR to mesh, the next algorithm's result loads beside the run's group, above
+    it, as it would without the run, not into the group."""
+    real = REPO.parent / "shared" / "data" / "real"
+    if not shutil.which("xvfb-run") or not (real / "Topography.laz").exists():
+        pytest.skip("xvfb-run or ../shared/data/real is missing")
+    seen = run_desktop(AFTER_RUN_SCRIPT, tmp_path, FM_INPUT=real / "Topography.laz",
+                       FM_DEM=real / "merewether_topography1.asc", FM_OUTPUT=tmp_path / "run")
+    assert [row.get("layer", row.get("group")) for row in seen["tree"]] == [
+        "Slope (degrees) or LoG response (m)", "run"], seen
+    assert len(seen["tree"][1]["children"]) == 3, seen
