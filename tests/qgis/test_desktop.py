@@ -55,6 +55,16 @@ def tree(node):
                          "crs": layer.crs().authid() if layer else None})
     return rows
 """
+def desktop_script(body: str) -> str:
+    """A script for ``run_desktop``: ``body`` (indented one level) run after HELPERS, what it
+    puts in ``out`` written to FM_RESULT as JSON, or the traceback of what it raised."""
+    return HELPERS + "\ntry:\n" + body + """except Exception:
+    out["error"] = traceback.format_exc()
+open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
+os._exit(0)
+"""
+
+
 SCRIPT = f"SEARCHES = {SEARCHES!r}\n" + HELPERS + r"""
 
 try:
@@ -182,6 +192,16 @@ def run_desktop(script: str, tmp_path, **variables) -> dict:
     return seen
 
 
+def run_on_real_data(script: str, tmp_path) -> dict:
+    """``run_desktop`` with FM_INPUT Topography.laz, FM_DEM Merewether's DEM and FM_OUTPUT a
+    path in ``tmp_path``; skipped where xvfb-run or ../shared/data/real is missing."""
+    real = REPO.parent / "shared" / "data" / "real"
+    if not shutil.which("xvfb-run") or not (real / "Topography.laz").exists():
+        pytest.skip("xvfb-run or ../shared/data/real is missing")
+    return run_desktop(script, tmp_path, FM_INPUT=real / "Topography.laz",
+                       FM_DEM=real / "merewether_topography1.asc", FM_OUTPUT=tmp_path / "run")
+
+
 @pytest.fixture(scope="module")
 def desktop(tmp_path_factory):
     if not shutil.which("xvfb-run"):
@@ -269,20 +289,14 @@ def test_no_numerical_package_in_the_qgis_process(desktop):
     assert imported == {} and shapely.startswith("/usr/lib/python3/dist-packages/")
 
 
-FLOOD_SCRIPT = HELPERS + r"""
-
-try:
+FLOOD_SCRIPT = desktop_script(r"""
     import processing
     processing.runAndLoadResults("floodmesh:floodonmesh", {
         "MESH": os.environ["FM_MESH"], "SCENARIO": os.environ["FM_SCENARIO"],
         "CRS": "EPSG:32756", "OUTPUT_FOLDER": os.environ["FM_OUTPUT"]})
     settle()
     out["tree"] = tree(QgsProject.instance().layerTreeRoot())
-except Exception:
-    out["error"] = traceback.format_exc()
-open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
-os._exit(0)
-"""
+""")
 
 
 def test_a_flood_shows_where_its_time_step_was_set(tmp_path):
@@ -317,8 +331,7 @@ def test_a_flood_shows_where_its_time_step_was_set(tmp_path):
     assert len(layers) == 5, layers
 
 
-RERUN_SCRIPT = HELPERS + r"""
-try:
+RERUN_SCRIPT = desktop_script(r"""
     import processing
     from qgis.core import QgsMeshLayer, QgsRasterLayer
     project = QgsProject.instance()
@@ -344,39 +357,29 @@ try:
     out["dem_file"] = [on_disk[0].width(), on_disk[0].height()]
     out["mesh"] = [l.dataProvider().faceCount() for l in on[mesh]]
     out["mesh_file"] = on_disk[1].dataProvider().faceCount()
-except Exception:
-    out["error"] = traceback.format_exc()
-open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
-os._exit(0)
-"""
+""")
 
 
 def test_a_rerun_into_a_loaded_file_shows_the_new_file_once(tmp_path):
     """Grid LiDAR points run twice into one GeoTIFF, Build mesh twice into one 2DM, LiDAR to
     mesh twice into one folder: once Qt's events have run, each file is in the project once,
     showing what is on disk now, and the folder's run has one group."""
-    real = REPO.parent / "shared" / "data" / "real"
-    if not shutil.which("xvfb-run") or not (real / "Topography.laz").exists():
-        pytest.skip("xvfb-run or ../shared/data/real is missing")
-    seen = run_desktop(RERUN_SCRIPT, tmp_path, FM_INPUT=real / "Topography.laz",
-                       FM_DEM=real / "merewether_topography1.asc", FM_OUTPUT=tmp_path / "out")
+    seen = run_on_real_data(RERUN_SCRIPT, tmp_path)
     assert seen["dem"] == [seen["dem_file"]], seen
     assert seen["mesh"] == [seen["mesh_file"]], seen
-    assert seen["groups"] == ["out"], seen
+    assert seen["groups"] == ["run"], seen
 
 
-ONE_TILE_SCRIPT = HELPERS + r"""
-import processing
+ONE_TILE_SCRIPT = desktop_script(r"""
+    import processing
 
 
-def outcome(algorithm, parameters):
-    try:
-        return sorted(processing.run(algorithm, parameters))
-    except Exception as exc:
-        return str(exc)
+    def outcome(algorithm, parameters):
+        try:
+            return sorted(processing.run(algorithm, parameters))
+        except Exception as exc:
+            return str(exc)
 
-
-try:
     laz, dem, folder = os.environ["FM_INPUT"], os.environ["FM_DEM"], os.environ["FM_OUTPUT"]
     out["one_laz"] = outcome("floodmesh:gridpoints", {
         "TILES": [laz], "CELL_SIZE": 2.0, "OUTPUT": folder + ".tif"})
@@ -384,21 +387,13 @@ try:
         "TILES": [dem], "MAX_AREA": 400, "OUTPUT_FOLDER": folder})
     out["mixed"] = outcome("floodmesh:gridpoints", {
         "TILES": [laz, dem], "CELL_SIZE": 2.0, "OUTPUT": folder + " mixed.tif"})
-except Exception:
-    out["error"] = traceback.format_exc()
-open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
-os._exit(0)
-"""
+""")
 
 
 def test_one_tile_runs_as_its_file_and_a_mixed_list_is_named(tmp_path):
     """Tiles given as a list of one LAZ (Grid LiDAR points) or one DEM (LiDAR to mesh) run as
     that file would; a list mixing a LAZ and a DEM is refused naming the files, not a folder."""
-    real = REPO.parent / "shared" / "data" / "real"
-    if not shutil.which("xvfb-run") or not (real / "Topography.laz").exists():
-        pytest.skip("xvfb-run or ../shared/data/real is missing")
-    seen = run_desktop(ONE_TILE_SCRIPT, tmp_path, FM_INPUT=real / "Topography.laz",
-                       FM_DEM=real / "merewether_topography1.asc", FM_OUTPUT=tmp_path / "out")
+    seen = run_on_real_data(ONE_TILE_SCRIPT, tmp_path)
     assert seen["one_laz"] == ["OUTPUT"], seen
     assert "MESH" in seen["one_dem"], seen
     assert seen["mixed"].endswith("1 DEM raster (merewether_topography1.asc) beside 1 point "
@@ -406,8 +401,7 @@ def test_one_tile_runs_as_its_file_and_a_mixed_list_is_named(tmp_path):
                                   "Topography.laz)"), seen
 
 
-AFTER_RUN_SCRIPT = HELPERS + r"""
-try:
+AFTER_RUN_SCRIPT = desktop_script(r"""
     import processing
     processing.runAndLoadResults("floodmesh:lidartomesh", {
         "INPUT": os.environ["FM_INPUT"], "CELL_SIZE": 2.0,
@@ -417,21 +411,13 @@ try:
         "INPUT": os.environ["FM_DEM"], "OUTPUT": os.environ["FM_OUTPUT"] + " slope.tif"})
     settle()
     out["tree"] = tree(QgsProject.instance().layerTreeRoot())
-except Exception:
-    out["error"] = traceback.format_exc()
-open(os.environ["FM_RESULT"], "w").write(json.dumps(out))
-os._exit(0)
-"""
+""")
 
 
 def test_a_later_result_loads_outside_the_run_group(tmp_path):
     """After LiDAR to mesh, the next algorithm's result loads beside the run's group, above
     it, as it would without the run, not into the group."""
-    real = REPO.parent / "shared" / "data" / "real"
-    if not shutil.which("xvfb-run") or not (real / "Topography.laz").exists():
-        pytest.skip("xvfb-run or ../shared/data/real is missing")
-    seen = run_desktop(AFTER_RUN_SCRIPT, tmp_path, FM_INPUT=real / "Topography.laz",
-                       FM_DEM=real / "merewether_topography1.asc", FM_OUTPUT=tmp_path / "run")
+    seen = run_on_real_data(AFTER_RUN_SCRIPT, tmp_path)
     assert [row.get("layer", row.get("group")) for row in seen["tree"]] == [
         "Slope (degrees) or LoG response (m)", "run"], seen
     assert len(seen["tree"][1]["children"]) == 3, seen
