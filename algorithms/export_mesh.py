@@ -11,6 +11,9 @@ from .compat import DOUBLE, VECTOR_LINE, VECTOR_POLYGON
 from ..core.options import EXPORT_EXTENSIONS as EXTENSIONS
 from ..core.options import EXPORT_FORMAT_LABELS, EXPORT_FORMATS
 from .base import FloodMeshAlgorithm, crs_or_none, distance, layer_file
+from .styles import load_results, style_breaklines, style_mesh
+
+GPKG_LAYERS = ("breaklines", "boundary", "nodes", "triangles")  # what write_gpkg writes
 FILE_FILTER = ";;".join(f"{label} (*{EXTENSIONS[f]})"
                         for f, label in zip(EXPORT_FORMATS, EXPORT_FORMAT_LABELS))
 
@@ -90,4 +93,23 @@ class ExportMeshAlgorithm(FloodMeshAlgorithm):
             "datum_offset": self.parameterAsDouble(parameters, self.DATUM_OFFSET, context),
             "element_elevations": self.parameterAsBool(parameters, self.ELEMENT_ELEVATIONS,
                                                        context)}, feedback, out)
+        self.load_export(context, out, fmt, crs)
         return {k: v for k, v in result.items() if k in (self.OUTPUT, self.CLI)}
+
+    def load_export(self, context, out: Path, fmt: str, crs) -> None:
+        """Load what QGIS opens of the export, as Build mesh loads its mesh: a 2DM or UGRID
+        netCDF as a mesh layer shaded by elevation; a GeoPackage's layers in one group named
+        after the file; the solvers' own formats (Selafin, fort.14, gr3) are left unloaded."""
+        from qgis.core import QgsMeshLayer, QgsVectorLayer
+
+        if fmt in ("2dm", "nc"):
+            layers = [(QgsMeshLayer(str(out), "Exported mesh", "mdal"), style_mesh)]
+        elif fmt == "gpkg":
+            layers = [(QgsVectorLayer(f"{out}|layername={name}", name, "ogr"),
+                       style_breaklines if name == "breaklines" else lambda _: None)
+                      for name in GPKG_LAYERS]
+        else:
+            return
+        load_results(context, crs, [(layer, style, self.OUTPUT) for layer, style in layers
+                                    if layer.isValid()],
+                     group=out.name if fmt == "gpkg" else None)

@@ -421,3 +421,34 @@ def test_a_later_result_loads_outside_the_run_group(tmp_path):
     assert [row.get("layer", row.get("group")) for row in seen["tree"]] == [
         "Slope (degrees) or LoG response (m)", "run"], seen
     assert len(seen["tree"][1]["children"]) == 3, seen
+
+
+EXPORT_SCRIPT = desktop_script(r"""
+    import processing
+    from qgis.core import QgsMeshLayer
+    mesh = os.environ["FM_OUTPUT"] + ".2dm"
+    processing.run("floodmesh:buildmesh", {"DEM": os.environ["FM_DEM"], "MAX_AREA": 400,
+                                           "OUTPUT": mesh})
+    for fmt, ext in ((0, ".2dm"), (4, ".nc"), (5, ".gpkg")):
+        processing.runAndLoadResults("floodmesh:exportmesh", {
+            "INPUT": mesh, "CRS": "EPSG:32756", "FORMAT": fmt,
+            "OUTPUT": os.environ["FM_OUTPUT"] + " export" + ext})
+        settle()
+    out["tree"] = tree(QgsProject.instance().layerTreeRoot())
+    out["faces"] = sorted(l.dataProvider().faceCount() for l in
+                          QgsProject.instance().mapLayers().values()
+                          if isinstance(l, QgsMeshLayer))
+""")
+
+
+def test_export_mesh_loads_what_qgis_opens(tmp_path):
+    """Export mesh as 2DM, UGRID netCDF and GeoPackage: the two meshes load as mesh layers
+    in the mesh's CRS, the GeoPackage's layers in one group named after it."""
+    seen = run_on_real_data(EXPORT_SCRIPT, tmp_path)
+    tree = seen["tree"]
+    assert [row.get("layer", row.get("group")) for row in tree] == [
+        "run export.gpkg", "Exported mesh", "Exported mesh"], seen
+    assert all(row["valid"] and row["crs"] == "EPSG:32756" for row in tree[1:]), seen
+    assert len(set(seen["faces"])) == 1, seen
+    assert sorted(row["layer"] for row in tree[0]["children"]) == [
+        "boundary", "nodes", "triangles"], seen
