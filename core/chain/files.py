@@ -142,7 +142,7 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
                       "without --method log)")
     points = io.read_raster(breakpoints, crs=crs, elevations=False)
     points = points.with_values((points.values == 1).astype("uint8"))
-    terrain = io.read_raster(dem, crs=crs, note=note)
+    terrain = io.read_dem(dem, crs=crs, note=note)
     slope_grid = io.read_raster(slope, crs=crs, elevations=False)
     lines = trace_breaklines(points, slope_grid, terrain, s_crit, mode=mode,
                              min_points=min_points, min_length=min_length, join=join, seed=seed)
@@ -175,7 +175,7 @@ def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
     # lazy: numba, PROJ and GEOS load only when this runs
     from .pipeline import mesh_constraints
 
-    terrain = io.read_raster(dem, crs=crs, note=note)
+    terrain = io.read_dem(dem, crs=crs, note=note)
     check_dem_size(terrain.values, terrain.cell_size, f"raster {Path(dem).name}")
     lines = io.read_lines_gpkg(breaklines) if breaklines else []
     domain, own = mesh_constraints(terrain, boundary, user_lines, note=note)

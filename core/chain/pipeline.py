@@ -735,7 +735,7 @@ def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
     if source.tiled:
         dem = steps.run("read", read_dem_tiles, source.paths, crs=options.crs, note=note)
     else:
-        dem = steps.run("read", io.read_raster, source.path, crs=options.crs, note=note)
+        dem = steps.run("read", io.read_dem, source.path, crs=options.crs, note=note)
     check_dem_size(dem.values, dem.cell_size,
                    "the DEM tiles" if source.tiled else f"raster {source.path.name}")
     given = options.cell_size

@@ -21,7 +21,8 @@ import numpy as np
 from .._kernels.aot import kernel
 from ..errors import Cancelled, FloodMeshError
 from ..io import (atomic_output, dem_file, describe_band, implausible_note, no_valid_cells,
-                  nodata_range, raster_crs_wkt, raster_profile, read_band, require_file)
+                  nodata_range, raster_crs_wkt, raster_profile, read_band, refuse_non_elevations,
+                  require_file)
 from ..raster import HIGHEST_GROUND_M, LOWEST_GROUND_M
 
 DEFAULT_BLOCK_ROWS = 2048
@@ -161,6 +162,8 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
     # GDAL sizes its block cache when first used: the environment comes before the first open
     with rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB), \
             _open(src_path) as src:
+        if elevations:
+            refuse_non_elevations(src, f"raster {src_path.name}")
         crs = raster_crs_wkt(src, src_path, crs)
         shape = (src.height, src.width)
         windows = row_windows(shape, block_rows) if windows is None else list(windows)

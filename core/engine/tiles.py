@@ -46,7 +46,8 @@ from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
 from ..io import (GROUND_CLASS, atomic_output, classes_kept, drop_implausible, file_format,
-                  las_classes, las_crs, las_fields_read, las_xyz, read_band, read_las, read_xyz)
+                  las_classes, las_crs, las_fields_read, las_xyz, read_band, read_las, read_xyz,
+                  refuse_non_elevations)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_points
@@ -1290,6 +1291,7 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
                 raise FloodMeshError(f"tile {name} is not a readable raster ({exc}): replace it "
                                      "or leave it out") from None
             check_transform(src.transform, f"tile {name}")
+            refuse_non_elevations(src, f"tile {name}", "take it out of the DEM tiles")
             own = src.crs.to_wkt() if src.crs else None
             tile_crs = require_metric_crs(chosen_crs(crs, own, f"tile {name}", replaced.append),
                                           f"tile {name}", kind="raster")

@@ -19,7 +19,7 @@ from .points import (GROUND_CLASS, classes_kept, file_format, las_classes, las_c
 from .rasters import (INTEGER_COMPRESSION, RASTER_EXTENSIONS, TILE, check_quantity, dem_file,
                       describe_band, drop_implausible, implausible_note, no_valid_cells,
                       nodata_range, raster_crs, raster_crs_wkt, raster_profile, read_band,
-                      read_input, read_raster, write_raster)
+                      read_dem, read_input, read_raster, refuse_non_elevations, write_raster)
 from .vectors import (read_boundary, read_breaklines, read_lines_gpkg, read_own_lines,
                       read_points_vector, read_regions, vector_crs, vector_path,
                       write_breaklines, write_gpkg, write_lines_gpkg, write_points_gpkg,
@@ -34,7 +34,7 @@ __all__ = [
     "INTEGER_COMPRESSION", "RASTER_EXTENSIONS", "TILE", "check_quantity", "dem_file",
     "describe_band", "drop_implausible", "implausible_note", "no_valid_cells", "nodata_range",
     "raster_crs", "raster_crs_wkt", "raster_profile", "read_band", "read_input", "read_raster",
-    "write_raster",
+    "read_dem", "refuse_non_elevations", "write_raster",
     # vectors
     "read_boundary", "read_breaklines", "read_lines_gpkg", "read_own_lines",
     "read_points_vector", "read_regions",

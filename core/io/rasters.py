@@ -162,6 +162,20 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
     return Grid(values, transform, crs)
 
 
+def read_dem(path, *, crs=None, note=None) -> Grid:
+    """The DEM a step takes (``read_raster``), refusing a slope or LoG response the slope step
+    wrote (``refuse_non_elevations``)."""
+    # lazy: GDAL loads only when this runs
+    import rasterio
+
+    try:
+        with rasterio.open(require_file(path, "raster")) as src:
+            refuse_non_elevations(src, f"raster {Path(path).name}")
+    except rasterio.errors.RasterioIOError:
+        pass  # read_raster says what is wrong with it
+    return read_raster(path, crs=crs, note=note)
+
+
 def dem_file(name: str, nodata) -> str:
     """``implausible_note``'s words for DEM file ``name`` with the nodata tag ``nodata``."""
     return f"raster {name} ({'no nodata tag' if nodata is None else f'nodata tag {nodata:g}'})"
@@ -215,6 +229,16 @@ def describe_band(dst, quantity: str | None) -> None:
     dst.set_band_unit(1, unit)
 
 
+def refuse_non_elevations(src, name: str, fix: str = "give the DEM (a run's dem.tif)") -> None:
+    """Refuse the open raster ``src`` (``name``) where elevations are wanted if the slope step
+    tagged it (``describe_band``) as a slope or a LoG response: a slope gridded, sloped or
+    meshed as ground gives a mesh of degrees without a word."""
+    held = src.tags().get(QUANTITY_TAG)
+    if held in QUANTITIES:
+        raise FloodMeshError(f"{name} holds {QUANTITIES[held][2]}, as FloodMesh's slope step "
+                             f"wrote it, not elevations: {fix}")
+
+
 def check_quantity(path, wanted: str, fix: str) -> None:
     """Refuse a raster that the slope step tagged (``describe_band``) as holding another
     quantity than ``wanted``, naming what it holds and ``fix``; a raster without the tag, or
@@ -264,7 +288,7 @@ def read_input(path, *, crs=None, classes=None, note=None):
     """A point file (→ PointCloud) or a raster DEM (→ Grid), by extension."""
     ext = Path(path).suffix.lower()
     if ext in RASTER_EXTENSIONS:
-        return read_raster(path, crs=crs, note=note)
+        return read_dem(path, crs=crs, note=note)
     if is_point_source(path):
         return read_points(path, crs=crs, classes=classes, note=note)
     require_file(path, "input")

@@ -280,3 +280,27 @@ def test_slope_files_say_what_they_hold_and_breakpoints_take_them_so(dem_file, t
     io.write_raster(tmp_path / "gdaldem.tif", slope_values)  # no tag
     assert (breakpoints_file(tmp_path / "gdaldem.tif", tmp_path / "bp2.tif", s_crit=10.0)
             == breakpoints_file(tmp_path / "s.tif", bp, s_crit=10.0) > 20)
+
+
+def test_a_slope_raster_is_refused_where_a_dem_belongs(dem_file, tmp_path, capsys):
+    """A slope the slope step wrote, given where a DEM belongs (mesh, slope, run, or left among
+    DEM tiles by an earlier run), was taken as ground: a mesh of degrees, exit 0."""
+    import shutil
+
+    from floodmesh.core.frontends.cli import main
+
+    slope = tmp_path / "slope.tif"
+    slope_file(dem_file, slope)
+    tiles = tmp_path / "tiles"
+    tiles.mkdir()
+    shutil.copy(dem_file, tiles / "dem.tif")
+    shutil.copy(slope, tiles / "slope.tif")
+    out = tmp_path / "out"
+    for args, name in ((["mesh", slope, "--out", out / "m.2dm"], "raster slope.tif"),
+                       (["slope", slope, "--out", out / "s.tif"], "raster slope.tif"),
+                       (["run", slope, "--out", out], "raster slope.tif"),
+                       (["run", tiles, "--out", out], "tile slope.tif")):
+        assert main([str(a) for a in args]) == 2, args
+        assert (f"{name} holds a slope in degrees, as FloodMesh's slope step wrote it, not "
+                "elevations") in capsys.readouterr().err
+        assert not out.exists()
