@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 import time
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import closing
+from contextlib import closing, contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -119,6 +119,27 @@ class _Steps:
         return result
 
 
+@contextmanager
+def _background_thread():
+    """An executor of one thread for the work run ahead (``_Steps.ahead``: computations in
+    memory, no files), joined at the end, but not after an interrupt: one that arrives while the
+    main thread takes an import's module lock can leave that lock taken (as numba's:
+    ``errors.compiler_locks_freed``), and the background thread, importing the same module,
+    then waits forever, and so did the run joining it (Python 3.13: SIGHUP at random moments
+    hung 1 run in 60, in ``ThreadPoolExecutor.shutdown``). The command ends the process without
+    joining it (``frontends.process.end_process``)."""
+    pool = ThreadPoolExecutor(max_workers=1)
+    try:
+        yield pool
+    except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP (errors.Terminated)
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    except BaseException:
+        pool.shutdown(wait=True)
+        raise
+    pool.shutdown(wait=True)
+
+
 def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
                  progress: Callable[[float], None] | None = None,
                  cancelled: Callable[[], bool] | None = None,
@@ -139,7 +160,7 @@ def run_pipeline(input_path, out_dir, options: RunOptions = RunOptions(), *,
     check_output_folder(out, inputs, run_outputs(options.formats))
     check_outputs_apart(source, [out / name for name in run_outputs(options.formats)])
     # every step makes its large arrays afresh: see without_huge_pages
-    with (ThreadPoolExecutor(max_workers=1) as background, PicturesApart() as pictures,
+    with (_background_thread() as background, PicturesApart() as pictures,
           without_huge_pages()):
         steps = _Steps(_step_weights(options), progress, cancelled, log, background)
         with interrupts_unwrapped():  # between steps too: the background thread is joined next
