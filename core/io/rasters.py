@@ -127,13 +127,15 @@ def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
     return values
 
 
-def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_crs=None) -> Grid:
+def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_crs=None,
+                dem: bool = False) -> Grid:
     """Read band 1 of a raster as a float64 Grid with NaN for nodata, in ``crs``, else its own
     CRS, else ``default_crs`` (``raster_crs``).
 
     With ``elevations`` (a DEM), cells no ground has are nodata too (``drop_implausible``).
     ``note`` (given for DEMs) receives what was assumed: such cells, further bands left unused,
-    elevations stored as whole numbers.
+    elevations stored as whole numbers. ``dem`` (a step's DEM): a slope or LoG response the
+    slope step wrote is refused (``refuse_non_elevations``).
     """
     # lazy: GDAL loads only when this runs
     import rasterio
@@ -141,6 +143,8 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
     path = require_file(path, "raster")
     try:
         with rasterio.open(path) as src:
+            if dem:
+                refuse_non_elevations(src, f"raster {path.name}")
             transform, crs = src.transform, raster_crs(src, path, crs, note, default_crs)
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
@@ -165,15 +169,7 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
 def read_dem(path, *, crs=None, note=None) -> Grid:
     """The DEM a step takes (``read_raster``), refusing a slope or LoG response the slope step
     wrote (``refuse_non_elevations``)."""
-    # lazy: GDAL loads only when this runs
-    import rasterio
-
-    try:
-        with rasterio.open(require_file(path, "raster")) as src:
-            refuse_non_elevations(src, f"raster {Path(path).name}")
-    except rasterio.errors.RasterioIOError:
-        pass  # read_raster says what is wrong with it
-    return read_raster(path, crs=crs, note=note)
+    return read_raster(path, crs=crs, note=note, dem=True)
 
 
 def dem_file(name: str, nodata) -> str:
