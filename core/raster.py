@@ -236,9 +236,28 @@ def _within(x: np.ndarray, y: np.ndarray, box) -> bool:
                 and y.max() <= box[3])
 
 
+# _area_of_use by the horizontal CRS's WKT: a PROJ transform each, and the same CRS is checked
+# tile by tile
+_AREAS: dict = {}
+_AREAS_KEPT = 64
+
+
 def _area_of_use(horizontal: CRS) -> tuple[str, tuple[float, ...]] | None:
     """(the name, the (xmin, ymin, xmax, ymax) m) of a projected CRS's area of use, from EPSG
-    where its WKT names none (a GeoTIFF's WKT1); None where neither gives one."""
+    where its WKT names none (a GeoTIFF's WKT1); None where neither gives one. Found once per
+    CRS (``_AREAS``)."""
+    key = horizontal.to_wkt()
+    if key is None:  # a CRS PROJ cannot write as WKT
+        return _find_area_of_use(horizontal)
+    if key not in _AREAS:
+        if len(_AREAS) >= _AREAS_KEPT:
+            _AREAS.clear()
+        _AREAS[key] = _find_area_of_use(horizontal)
+    return _AREAS[key]
+
+
+def _find_area_of_use(horizontal: CRS) -> tuple[str, tuple[float, ...]] | None:
+    """``_area_of_use`` found anew."""
     # lazy: PROJ loads only when this runs
     from pyproj import CRS, Transformer
     from pyproj.exceptions import CRSError, ProjError
@@ -491,7 +510,12 @@ def usable_dem(dem: Grid, what: str = "the DEM", note=None) -> Grid:
     copy whose other cells (-9999, inf and the like) are NaN, as a DEM file's are when read
     (``drop_implausible``, ``note`` told): the rule where a ``Grid`` enters a step."""
     values = np.asarray(dem.values)
-    if not np.issubdtype(values.dtype, np.floating) or not _implausible(values).any():
+    if not np.issubdtype(values.dtype, np.floating) or not values.size:
+        return dem
+    # the least and greatest cell past NaN, in two passes without a full-size temporary: a
+    # cleaned DEM (the pipeline's, each refine round's) costs one read of its cells
+    least, greatest = np.fmin.reduce(values, axis=None), np.fmax.reduce(values, axis=None)
+    if not (least < LOWEST_GROUND_M or greatest > HIGHEST_GROUND_M):
         return dem
     values = values.copy()
     drop_implausible(values, what, None, note)
