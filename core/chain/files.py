@@ -19,7 +19,7 @@ from ..io.outputs import check_output_folder, check_outputs, require_suffix
 from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, check_flow_area,
                        check_holdout, check_max_area, check_max_gap, check_max_triangles,
                        check_min_angle, check_refinement, check_seed, is_point_source)
-from ..points import PointCloud, at_places_of, split_holdout
+from ..points import PointCloud, at_places_of, split_holdout, step_points
 from ..raster import check_dem_size, chosen_crs, require_metric_crs
 from ..steps.breakpoints import breakpoints_file
 from ..steps.slope import slope_raster_file
@@ -227,13 +227,17 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
 def measured_points(path, crs=None, fallback=None, note=None):
     """(xyz, CRS) of measured points: a LiDAR point file (LAS/LAZ ground, XYZ/CSV; ``crs``
     overrides its own) or a point layer (GeoPackage, Shapefile, GeoJSON; ``crs``, which
-    ``note`` hears replace its own, else its own, else ``fallback``, the mesh's or DEM's)."""
+    ``note`` hears replace its own, else its own, else ``fallback``, the mesh's or DEM's).
+    Either way ``note`` hears of the points left out (``points.drop_unusable``)."""
     if is_point_source(path):
-        cloud = io.read_points(path, crs=crs)
+        cloud = io.read_points(path, crs=crs, note=note)
         return cloud.xyz, cloud.crs
     name = Path(path).name
-    return io.read_points_vector(path), require_metric_crs(
-        chosen_crs(crs, io.vector_crs(path), name, note) or fallback, name)
+    # the point readers' rule: points without a finite x, y, z or with a z no ground has
+    # (-9999) are left out, ``note`` told
+    xyz = step_points(io.read_points_vector(path), f"point layer {name}", note)
+    return xyz, require_metric_crs(chosen_crs(crs, io.vector_crs(path), name, note) or fallback,
+                                   name)
 
 
 def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=None, check=None,

@@ -109,3 +109,37 @@ def test_build_mesh_leaves_out_measured_points_no_ground_has():
     assert np.isfinite(mesh.nodes).all() and mesh.nodes[:, 2].min() > 9
     assert np.array_equal(mesh.nodes, core.build_mesh(_dem(), [], max_area=50, points=pts).nodes)
     assert sum("left out" in n for n in notes) == 2
+
+
+def test_assess_command_leaves_out_check_points_no_ground_has_as_the_library_does(tmp_path):
+    """``floodmesh assess`` (and QGIS's Assess, the same step) on a point layer holding a check
+    point at -9999 m (a survey's no-data z): left out with a note, as ``core.assess`` leaves it
+    out, not a residual of 10 km that makes the RMSE 1.8 km."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from pyproj import CRS as ProjCRS
+
+    from floodmesh.core import io
+
+    dem = core.Grid(10 + 0.01 * np.mgrid[0:60, 0:80][0], Affine(1, 0, 500000, 0, -1, 5700060),
+                    CRS)
+    mesh = core.build_mesh(dem, [], max_area=50)
+    io.write_mesh_2dm(tmp_path / "mesh.2dm", mesh.nodes, mesh.triangles, crs=CRS)
+    rng = np.random.default_rng(0)
+    pts = np.column_stack([rng.uniform(10, 70, 30) + 500000, rng.uniform(10, 50, 30) + 5700000,
+                           np.full(30, 10.3)])
+    bad = np.vstack([pts, [[500040.5, 5700030.5, -9999.0]]])
+    io.write_points_gpkg(tmp_path / "check.gpkg", bad, ProjCRS(CRS))
+    _, expected = core.assess(mesh, bad)
+    said = subprocess.run([str(Path(sys.executable).parent / "floodmesh"), "assess",
+                           tmp_path / "mesh.2dm", "--points", tmp_path / "check.gpkg", "--out",
+                           tmp_path / "res.gpkg", "--report", tmp_path / "stats.json"],
+                          capture_output=True, text=True, timeout=600)
+    assert said.returncode == 0, said.stderr
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["n_holdout"] == expected["n_holdout"] == 30
+    assert stats["rmse_m"] == pytest.approx(expected["rmse_m"], rel=1e-3)  # 2DM: to 1 mm
+    assert "1 points with a z no ground has (-9999 m" in said.stderr
