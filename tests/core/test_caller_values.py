@@ -111,10 +111,9 @@ def test_build_mesh_leaves_out_measured_points_no_ground_has():
     assert sum("left out" in n for n in notes) == 2
 
 
-def test_assess_command_leaves_out_check_points_no_ground_has_as_the_library_does(tmp_path):
-    """``floodmesh assess`` (and QGIS's Assess, the same step) on a point layer holding a check
-    point at -9999 m (a survey's no-data z): left out with a note, as ``core.assess`` leaves it
-    out, not a residual of 10 km that makes the RMSE 1.8 km."""
+def _assess_command(tmp_path, check: np.ndarray):
+    """``floodmesh assess`` (as QGIS's Assess: the same step) of a mesh of ``_dem``'s plane on
+    the ``check`` points as a GeoPackage: (the mesh, its stats.json, what it said)."""
     import json
     import subprocess
     import sys
@@ -128,18 +127,37 @@ def test_assess_command_leaves_out_check_points_no_ground_has_as_the_library_doe
                     CRS)
     mesh = core.build_mesh(dem, [], max_area=50)
     io.write_mesh_2dm(tmp_path / "mesh.2dm", mesh.nodes, mesh.triangles, crs=CRS)
-    rng = np.random.default_rng(0)
-    pts = np.column_stack([rng.uniform(10, 70, 30) + 500000, rng.uniform(10, 50, 30) + 5700000,
-                           np.full(30, 10.3)])
-    bad = np.vstack([pts, [[500040.5, 5700030.5, -9999.0]]])
-    io.write_points_gpkg(tmp_path / "check.gpkg", bad, ProjCRS(CRS))
-    _, expected = core.assess(mesh, bad)
+    io.write_points_gpkg(tmp_path / "check.gpkg", check, ProjCRS(CRS))
     said = subprocess.run([str(Path(sys.executable).parent / "floodmesh"), "assess",
                            tmp_path / "mesh.2dm", "--points", tmp_path / "check.gpkg", "--out",
                            tmp_path / "res.gpkg", "--report", tmp_path / "stats.json"],
                           capture_output=True, text=True, timeout=600)
     assert said.returncode == 0, said.stderr
-    stats = json.loads((tmp_path / "stats.json").read_text())
+    return mesh, json.loads((tmp_path / "stats.json").read_text()), said
+
+
+def _check_points(n: int) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    return np.column_stack([rng.uniform(10, 70, n) + 500000, rng.uniform(10, 50, n) + 5700000,
+                            np.full(n, 10.3)])
+
+
+def test_assess_command_leaves_out_check_points_no_ground_has_as_the_library_does(tmp_path):
+    """A check point at -9999 m (a survey's no-data z) in the point layer: left out with a
+    note, as ``core.assess`` leaves it out, not a residual of 10 km that makes the RMSE 1.8 km."""
+    bad = np.vstack([_check_points(30), [[500040.5, 5700030.5, -9999.0]]])
+    mesh, stats, said = _assess_command(tmp_path, bad)
+    _, expected = core.assess(mesh, bad)
     assert stats["n_holdout"] == expected["n_holdout"] == 30
     assert stats["rmse_m"] == pytest.approx(expected["rmse_m"], rel=1e-3)  # 2DM: to 1 mm
     assert "1 points with a z no ground has (-9999 m" in said.stderr
+
+
+def test_assess_command_says_why_the_nssda_test_is_null_as_the_library_does(tmp_path):
+    """Five check points: the NSSDA test needs 20, so nssda_pass is null, and the command says
+    why, as ``core.assess`` and ``floodmesh run`` do."""
+    mesh, stats, said = _assess_command(tmp_path, _check_points(5))
+    notes = []
+    core.assess(mesh, _check_points(5), note=notes.append)
+    assert stats["nssda_pass"] is None and len(notes) == 1
+    assert notes[0] in said.stderr
