@@ -119,7 +119,7 @@ def slope_file(dem_path, out_path, method: str = "one-over-distance", *,
 
 
 def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
-                          cancelled=None) -> Grid:
+                          cancelled=None, note=None) -> Grid:
     """Laplacian-of-Gaussian response in metres, positive on crests and negative in troughs.
 
     The DEM is smoothed by a Gaussian of ``sigma`` metres (0: no smoothing), then the Laplacian
@@ -127,11 +127,13 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
     centre stands above the mean of its eight neighbours. ``kernel="analytic"`` convolves with
     the sampled analytic ∇²G_σ instead, scaled to the same units (−3d²/8 · ∇²z). Both are exact on
     quadratic surfaces. Cells whose kernel reaches nodata or beyond the raster (4σ plus one cell)
-    are nodata: a one-sided window would bias the response there.
+    are nodata: a one-sided window would bias the response there. Cells no ground has (-9999,
+    inf) are nodata, as in a DEM file (``raster.usable_dem``, ``note`` told).
 
     Reference: Pratt, Digital Image Processing (2007), ch. 15; Marr & Hildreth (1980)
     doi:10.1098/rspb.1980.0020.
     """
+    dem = usable_dem(dem, "the DEM", note)
     block, halo = _log_block(sigma, dem.cell_size, kernel, dem.shape)
     return dem.with_values(map_overlap(dem.values, block, halo=halo, cancelled=cancelled))
 

@@ -161,3 +161,14 @@ def test_assess_command_says_why_the_nssda_test_is_null_as_the_library_does(tmp_
     core.assess(mesh, _check_points(5), note=notes.append)
     assert stats["nssda_pass"] is None and len(notes) == 1
     assert notes[0] in said.stderr
+
+
+@pytest.mark.parametrize("value", [-9999.0, np.inf])
+def test_laplacian_of_gaussian_takes_dem_cells_no_ground_has_as_nodata(value):
+    """``core.laplacian_of_gaussian`` as ``core.terrain_slope`` and the LoG of a DEM file: the
+    -9999 cells are nodata (said to ``note``), not ground 10 km deep whose rim is all crests."""
+    notes = []
+    response = core.laplacian_of_gaussian(_dem(value), 1.0, note=notes.append)
+    expected = core.laplacian_of_gaussian(_dem(np.nan), 1.0)
+    assert np.array_equal(response.values, expected.values, equal_nan=True)
+    assert len(notes) == 1 and "400 cells" in notes[0] and "nodata" in notes[0]
