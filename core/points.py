@@ -44,7 +44,7 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
     if len(xyz) < 3:
         raise FloodMeshError(f"{source} has {len(xyz)} usable points (finite x, y, z); at least 3 "
                              "are needed to make a terrain model. Check the file and its classes")
-    _check_area(xyz[:, :2], source)
+    check_spread(xyz[:, :2], source)
     if scale:
         check_scale(crs, *corners_and_centre(*_sampled_bounds(xyz)), source, kind)
     message = repeated_positions_note(xyz, source) if note and repeats else None
@@ -130,7 +130,7 @@ def _sampled_bounds(xyz: np.ndarray, sample: int = 65_536) -> tuple[float, ...]:
     return (*xy.min(axis=0), *xy.max(axis=0))
 
 
-def _check_area(xy: np.ndarray, source: str) -> None:
+def check_spread(xy: np.ndarray, source: str) -> None:
     """Refuse points that all lie at one place or on one straight line (in any direction)."""
     # lazy: numba loads only where points are read
     import numba

@@ -27,7 +27,7 @@ from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
 from ..engine.nearest import cell_of
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_cell_size, check_max_gap
-from ..points import PointCloud, step_points
+from ..points import PointCloud, check_spread, step_points
 from ..raster import Grid, check_cells_across
 
 FULL_TILE = 256  # the least tile side (cells) with full halos; larger where there are tiles
@@ -55,7 +55,10 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
     xyz = step_points(points.xyz, "the points", note, least=3)
     if xyz is not points.xyz:  # some left out: the caller's plan was made for them all
         points, plan = PointCloud(xyz, points.crs), None
-    plan = plan if plan is not None else check_grid(points, cell_size, max_gap)
+    if plan is None:  # the readers' check (points.clean_points) first: points spread over an
+        # area, not on one line, which no cell size or gap would grid
+        check_spread(xyz[:, :2], "the points")
+        plan = check_grid(points, cell_size, max_gap)
     max_gap, rows, cols, x0, y1 = (plan[k] for k in ("max_gap", "rows", "cols", "x0", "y1"))
     values = grid_window(points.xyz, cell_size, max_gap, x0, y1, rows, cols, progress=progress,
                          cancelled=cancelled, workers=workers)

@@ -172,3 +172,19 @@ def test_laplacian_of_gaussian_takes_dem_cells_no_ground_has_as_nodata(value):
     expected = core.laplacian_of_gaussian(_dem(np.nan), 1.0)
     assert np.array_equal(response.values, expected.values, equal_nan=True)
     assert len(notes) == 1 and "400 cells" in notes[0] and "nodata" in notes[0]
+
+
+@pytest.mark.parametrize("case", ["line", "diagonal", "one place"])
+def test_grid_points_says_points_on_a_line_cover_no_area_as_the_readers_do(case):
+    """Points along one straight line (an x or y column read twice) or at one place: the library
+    says so, as reading them from a file does, and does not send the caller after ever smaller
+    cells or a larger gap (which would never cover a line 0 m wide)."""
+    along = np.linspace(0, 100, 500)
+    x = {"line": along, "diagonal": along, "one place": np.zeros(500)}[case]
+    y = along if case == "diagonal" else np.zeros(500)
+    xyz = np.column_stack([500000 + x, 5700000 + y, 10 + 0.01 * along])
+    with pytest.raises(core.FloodMeshError, match="one place" if case == "one place"
+                       else "one straight line") as refused:
+        core.grid_points(core.PointCloud(xyz, CRS), 1.0)
+    assert "smaller cell size" not in str(refused.value)
+    assert "max gap" not in str(refused.value)

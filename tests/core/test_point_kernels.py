@@ -6,7 +6,7 @@ from floodmesh.core._kernels.points import spread
 
 
 def _numpy_spread(xy):
-    """The definition (points._check_area before it was compiled)."""
+    """The definition (points.check_spread before it was compiled)."""
     centred = xy - xy.mean(axis=0)
     _, axes = np.linalg.eigh(centred.T @ centred)
     across, along = np.ptp(centred @ axes, axis=0)
