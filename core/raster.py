@@ -507,17 +507,18 @@ def fill_from_around(values: np.ndarray, cells: np.ndarray) -> None:
 
 def usable_dem(dem: Grid, what: str = "the DEM", note=None) -> Grid:
     """``dem`` itself where every cell is NaN (nodata) or an elevation some ground has; else a
-    copy whose other cells (-9999, inf and the like) are NaN, as a DEM file's are when read
-    (``drop_implausible``, ``note`` told): the rule where a ``Grid`` enters a step."""
+    float copy (an integer band's too) whose other cells (-9999, inf and the like) are NaN, as
+    a DEM file's are when read (``drop_implausible``, ``note`` told): the rule where a ``Grid``
+    enters a step."""
     values = np.asarray(dem.values)
-    if not np.issubdtype(values.dtype, np.floating) or not values.size:
+    if values.dtype.kind not in "fiu" or not values.size:
         return dem
     # the least and greatest cell past NaN, in two passes without a full-size temporary: a
     # cleaned DEM (the pipeline's, each refine round's) costs one read of its cells
     least, greatest = np.fmin.reduce(values, axis=None), np.fmax.reduce(values, axis=None)
     if not (least < LOWEST_GROUND_M or greatest > HIGHEST_GROUND_M):
         return dem
-    values = values.copy()
+    values = values.astype(np.result_type(values.dtype, np.float32))  # a copy that holds NaN
     drop_implausible(values, what, None, note)
     if not np.isfinite(values).any():
         raise FloodMeshError(f"{what} has no cell with an elevation some ground has (between "

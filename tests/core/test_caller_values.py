@@ -188,3 +188,24 @@ def test_grid_points_says_points_on_a_line_cover_no_area_as_the_readers_do(case)
         core.grid_points(core.PointCloud(xyz, CRS), 1.0)
     assert "smaller cell size" not in str(refused.value)
     assert "max gap" not in str(refused.value)
+
+
+@pytest.mark.parametrize("dtype, value", [(np.int16, -9999), (np.int16, -32768),
+                                          (np.uint16, 65535)])
+def test_an_integer_dem_grid_takes_cells_no_ground_has_as_nodata(dtype, value):
+    """A Grid of whole metres as an integer band holds it (-32768 in an SRTM tile, 65535 in an
+    unsigned one): its no-data value is nodata in every step, as a DEM file's is when read, not
+    ground 10 km deep that makes every slope around it 90°."""
+    heights = np.rint(_dem().values * 4)  # whole metres, with slopes to find
+    bad = heights.astype(dtype)
+    bad[:5, :] = value
+    nan = heights.copy()
+    nan[:5, :] = np.nan
+    as_int, as_nan = (core.Grid(v, _dem().transform, CRS) for v in (bad, nan))
+    notes = []
+    slope = core.terrain_slope(as_int, note=notes.append)
+    assert np.array_equal(slope.values, core.terrain_slope(as_nan).values, equal_nan=True)
+    mesh = core.build_mesh(as_int, [], max_area=50, note=notes.append)
+    assert np.array_equal(mesh.nodes, core.build_mesh(as_nan, [], max_area=50).nodes)
+    assert len(notes) == 2 and all("400 cells" in n and "nodata" in n for n in notes)
+    assert (as_int.values[:5] == value).all()  # the caller's Grid untouched
