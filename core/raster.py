@@ -249,11 +249,14 @@ def _area_of_use(horizontal: CRS) -> tuple[str, tuple[float, ...]] | None:
     key = horizontal.to_wkt()
     if key is None:  # a CRS PROJ cannot write as WKT
         return _find_area_of_use(horizontal)
-    if key not in _AREAS:
-        if len(_AREAS) >= _AREAS_KEPT:
-            _AREAS.clear()
-        _AREAS[key] = _find_area_of_use(horizontal)
-    return _AREAS[key]
+    area = _AREAS.get(key, _AREAS)  # (the dict itself: not found; None is an answer)
+    if area is not _AREAS:
+        return area
+    area = _find_area_of_use(horizontal)
+    if len(_AREAS) >= _AREAS_KEPT:
+        _AREAS.clear()
+    _AREAS[key] = area
+    return area
 
 
 def _find_area_of_use(horizontal: CRS) -> tuple[str, tuple[float, ...]] | None:
