@@ -25,7 +25,7 @@ from ..points import at_places_of, step_points, xyz_array
 from ..raster import Grid, usable_dem
 from .accuracy import residuals
 from .localise import beyond_noise, estimate_noise
-from .mesh import Mesh, build_mesh, triangle_areas
+from .mesh import Mesh, build_mesh, domain_from_dem, triangle_areas
 
 
 @dataclass(frozen=True)
@@ -101,6 +101,9 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
 
     def build(picked: _Picks) -> Mesh:
         """The mesh with the points and triangles of earlier rounds and ``picked``."""
+        nonlocal domain
+        if domain is None:  # the DEM's outline once, where build_mesh would trace it each round
+            domain = domain_from_dem(dem)
         mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area,
                           points=np.vstack([inserted, picked.points]),
                           local_areas=np.vstack([local, picked.triangles]), domain=domain,
