@@ -234,8 +234,8 @@ def measured_points(path, crs=None, fallback=None, note=None):
         return cloud.xyz, cloud.crs
     name = Path(path).name
     # the point readers' rule: points without a finite x, y, z or with a z no ground has
-    # (-9999) are left out, ``note`` told
-    xyz = step_points(io.read_points_vector(path), f"point layer {name}", note)
+    # (-9999) are left out, ``note`` told; none left is refused
+    xyz = step_points(io.read_points_vector(path), f"point layer {name}", note, least=1)
     return xyz, require_metric_crs(chosen_crs(crs, io.vector_crs(path), name, note) or fallback,
                                    name)
 

@@ -111,9 +111,10 @@ def test_build_mesh_leaves_out_measured_points_no_ground_has():
     assert sum("left out" in n for n in notes) == 2
 
 
-def _assess_command(tmp_path, check: np.ndarray):
+def _assess_command(tmp_path, check: np.ndarray, *, code: int = 0):
     """``floodmesh assess`` (as QGIS's Assess: the same step) of a mesh of ``_dem``'s plane on
-    the ``check`` points as a GeoPackage: (the mesh, its stats.json, what it said)."""
+    the ``check`` points as a GeoPackage: (the mesh, its stats.json (None where it exits with
+    ``code`` other than 0), what it said)."""
     import json
     import subprocess
     import sys
@@ -132,7 +133,9 @@ def _assess_command(tmp_path, check: np.ndarray):
                            tmp_path / "mesh.2dm", "--points", tmp_path / "check.gpkg", "--out",
                            tmp_path / "res.gpkg", "--report", tmp_path / "stats.json"],
                           capture_output=True, text=True, timeout=600)
-    assert said.returncode == 0, said.stderr
+    assert said.returncode == code, said.stderr
+    if code:
+        return mesh, None, said
     return mesh, json.loads((tmp_path / "stats.json").read_text()), said
 
 
@@ -209,3 +212,13 @@ def test_an_integer_dem_grid_takes_cells_no_ground_has_as_nodata(dtype, value):
     assert np.array_equal(mesh.nodes, core.build_mesh(as_nan, [], max_area=50).nodes)
     assert len(notes) == 2 and all("400 cells" in n and "nodata" in n for n in notes)
     assert (as_int.values[:5] == value).all()  # the caller's Grid untouched
+
+
+def test_assess_command_refuses_a_layer_without_a_usable_check_point(tmp_path):
+    """Every check point at -9999 m: one line naming the layer and the fix, and no residuals or
+    report of nothing (as a point file of no usable point is refused)."""
+    bad = np.array([[500040.5, 5700030.5, -9999.0], [500041.5, 5700030.5, -9999.0]])
+    _, _, said = _assess_command(tmp_path, bad, code=2)
+    error = said.stderr.strip().splitlines()[-1]  # after the note of the points left out
+    assert "point layer check.gpkg: 0 usable" in error and "check their values" in error
+    assert not (tmp_path / "stats.json").exists() and not (tmp_path / "res.gpkg").exists()
