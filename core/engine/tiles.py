@@ -390,8 +390,8 @@ def _check_tiles_scale(crs: CRS, bounds: list, what: str, kind: str) -> None:
 
 def _check_text_tiles(meta: list, crs: CRS) -> None:
     """``_check_tiles_scale`` over the points round one read (``meta``) of the XYZ text tiles,
-    which no header placed before."""
-    text = [m for m in meta if m.get("kind") == "text"]
+    which no header placed before (those with a class column too)."""
+    text = [m for m in meta if m.get("bounds") and not _is_las(m["path"])]  # read, with points
     if text:
         _check_tiles_scale(crs, [m["bounds"] for m in text],
                            f"tile {Path(text[0]['path']).name}", "points")
@@ -423,12 +423,11 @@ def _resolution(path: str, xyz: np.ndarray) -> np.ndarray:
     """The step (m; x, y, z) to which a tile stores its coordinates: a LAS/LAZ header's scales;
     for text, the coarsest of 1 m to 0.1 mm of which its numbers (the first 10,000) are whole
     multiples."""
-    file = path.split(_WINDOW)[0]
-    if Path(file).suffix.lower() in LAS_EXTENSIONS:
+    if _is_las(path):
         # lazy: laspy loads only when this runs
         import laspy
 
-        with laspy.open(file) as reader:
+        with laspy.open(path.split(_WINDOW)[0]) as reader:
             return np.asarray(reader.header.scales, float)
     sample = np.asarray(xyz[:10_000], float)
     steps = np.full(3, 1e-4)
@@ -439,6 +438,11 @@ def _resolution(path: str, xyz: np.ndarray) -> np.ndarray:
                 steps[axis] = 10.0 ** -decimals
                 break
     return steps
+
+
+def _is_las(path: str) -> bool:
+    """Whether a tile (a file, or a COPC window of one) is LAS/LAZ, not XYZ text."""
+    return Path(path.split(_WINDOW)[0]).suffix.lower() in LAS_EXTENSIONS
 
 
 def _which(classes) -> str:

@@ -169,12 +169,19 @@ def _zone_prefixed(tmp_path, kind):
     if kind == "las-tiles":
         return [write_las(tmp_path / "west.laz", xyz[west]),
                 write_las(tmp_path / "east.laz", xyz[~west])]
+    if kind == "classified-xyz-tiles":  # text with a class column, as some exports write it
+        for name, part in (("west", xyz[west]), ("east", xyz[~west])):
+            np.savetxt(tmp_path / f"{name}.xyz", np.column_stack([part, np.full(len(part), 2)]),
+                       fmt=["%.3f", "%.3f", "%.3f", "%d"], header="x y z classification",
+                       comments="")
+        return [tmp_path / "west.xyz", tmp_path / "east.xyz", "--crs", "EPSG:25832"]
     np.savetxt(tmp_path / "west.xyz", xyz[west], fmt="%.3f")
     np.savetxt(tmp_path / "east.xyz", xyz[~west], fmt="%.3f")
     return [tmp_path / "west.xyz", tmp_path / "east.xyz", "--crs", "EPSG:25832"]
 
 
-@pytest.mark.parametrize("kind", ["las", "xyz", "dem", "las-tiles", "xyz-tiles"])
+@pytest.mark.parametrize("kind", ["las", "xyz", "dem", "las-tiles", "xyz-tiles",
+                                  "classified-xyz-tiles"])
 def test_zone_prefixed_eastings_are_refused_naming_the_zone_prefixed_crs(tmp_path, capsys,
                                                                         kind):
     """Eastings of 32,412,000 m in ETRS89 / UTM zone 32N (the zone number before them, a German
