@@ -9,7 +9,7 @@ import numpy as np
 from .errors import FloodMeshError
 from .options import check_seed, holdout_count
 from .raster import (HIGHEST_GROUND_M, LOWEST_GROUND_M, check_scale, corners_and_centre,
-                     require_metric_crs)
+                     metric_crs_at, require_metric_crs, require_numbers)
 
 if TYPE_CHECKING:  # pyproj is imported where a CRS is checked: it costs 0.1 s of start-up
     from pyproj import CRS
@@ -23,6 +23,7 @@ class PointCloud:
     crs: CRS
 
     def __post_init__(self):
+        require_numbers(self.xyz, "a PointCloud's xyz", "x, y, z in metres")
         if self.xyz.ndim != 2 or self.xyz.shape[1] != 3:
             raise FloodMeshError(f"points must be an (N, 3) array of x, y, z, got {self.xyz.shape}")
 
@@ -72,6 +73,16 @@ def xyz_array(values, what: str) -> np.ndarray:
     return array
 
 
+def line_list(given, what: str) -> list:
+    """``given`` (lines: BreakLines or arrays) as a list, refusing one line given for the list
+    (a BreakLine, or an array of at most 2 dimensions), named ``what``."""
+    if hasattr(given, "coords") or (isinstance(given, np.ndarray) and given.ndim <= 2):
+        raise FloodMeshError(f"{what} must be a list of lines, got one "
+                             f"{type(given).__name__} of shape {np.shape(given)}: give "
+                             f"[line] for a single (k, 3) line")
+    return list(given)
+
+
 def usable_rows(xyz: np.ndarray) -> np.ndarray | None:
     """Which points (n, 3) have a finite x, y, z and a z some ground has (``LOWEST_GROUND_M``
     to ``HIGHEST_GROUND_M``: -9999 and the like are no-data values); None where all do."""
@@ -114,6 +125,21 @@ def step_points(xyz, what: str, note=None, *, least: int = 0) -> np.ndarray:
         raise FloodMeshError(f"{what}: {len(xyz)} usable (finite x, y and z, z "
                              f"between {LOWEST_GROUND_M:g} and {HIGHEST_GROUND_M:g} m); at least "
                              f"{least} are needed: check their values")
+    return xyz
+
+
+def step_cloud(points, what: str, note=None, *, least: int = 0) -> np.ndarray:
+    """The usable points (n, 3) of the ``PointCloud`` a step takes (``step_points``), refused
+    as the readers refuse a file where its CRS is not in metres or far from true scale or its
+    area of use at them (``require_metric_crs``, ``check_scale``)."""
+    if not isinstance(points, PointCloud):
+        raise FloodMeshError(f"{what} must be a PointCloud, got {type(points).__name__}: give "
+                             "PointCloud(xyz, crs), as read_points returns")
+    xyz = step_points(points.xyz, what, note, least=least)
+    if len(xyz):
+        metric_crs_at(points.crs, _sampled_bounds(xyz), what, "points")
+    else:
+        require_metric_crs(points.crs, what, "points")
     return xyz
 
 

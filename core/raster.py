@@ -225,9 +225,14 @@ def check_area_of_use(crs: CRS, x, y, what: str) -> None:
     if _within(x, y, widened):
         return
     raise FloodMeshError(
-        f"{what} lies at x {x.min():,.0f} to {x.max():,.0f}, y {y.min():,.0f} to {y.max():,.0f} "
-        f"m, far outside the area where {crs.name} is used ({name}: x {xmin:,.0f} to "
-        f"{xmax:,.0f}, y {ymin:,.0f} to {ymax:,.0f} m): {_place_fix(horizontal, x, y, widened)}")
+        f"{what} lies at {extent_words(x.min(), y.min(), x.max(), y.max())}, far outside the "
+        f"area where {crs.name} is used ({name}: {extent_words(xmin, ymin, xmax, ymax)}): "
+        f"{_place_fix(horizontal, x, y, widened)}")
+
+
+def extent_words(xmin: float, ymin: float, xmax: float, ymax: float) -> str:
+    """A box (m) in words: 'x 500,000 to 500,080, y 5,700,000 to 5,700,060 m'."""
+    return f"x {xmin:,.0f} to {xmax:,.0f}, y {ymin:,.0f} to {ymax:,.0f} m"
 
 
 def _within(x: np.ndarray, y: np.ndarray, box) -> bool:
@@ -305,6 +310,15 @@ def _place_fix(horizontal: CRS, x: np.ndarray, y: np.ndarray, box) -> str:
             f"{zone * UTM_ZONE_PREFIX_M:,.0f} m off x first")
 
 
+def metric_crs_at(crs, bounds, what: str, kind: str | None = None) -> CRS:
+    """``crs`` as a pyproj CRS where data of ``bounds`` (xmin, ymin, xmax, ymax; m) may be
+    taken in it: in metres (``require_metric_crs``), true to scale there and not far outside
+    its area of use (``check_scale``, at the box's corners and centre)."""
+    crs = require_metric_crs(crs, what, kind)
+    check_scale(crs, *corners_and_centre(*bounds), what, kind)
+    return crs
+
+
 def corners_and_centre(xmin: float, ymin: float, xmax: float, ymax: float):
     """(x, y) of a box's corners and centre, where ``check_scale`` looks."""
     x = np.array([xmin, xmax, xmin, xmax, (xmin + xmax) / 2])
@@ -366,6 +380,24 @@ def check_cells_across(cells: tuple[int, int], extent: tuple[float, float], cell
             f"{fix}")
 
 
+def require_numbers(values, what: str, holding: str) -> None:
+    """Refuse ``values`` (a ``Grid``'s, a ``PointCloud``'s) that are not a numpy array of numbers
+    (a list, an object or text array), naming ``what`` and the fix."""
+    dtype = getattr(values, "dtype", None)
+    if not isinstance(values, np.ndarray) or dtype.kind not in "biuf":
+        of = f" of {dtype}" if dtype is not None else ""
+        raise FloodMeshError(f"{what} must be a numpy array of numbers ({holding}), got "
+                             f"{type(values).__name__}{of}: give np.asarray(values, float)")
+
+
+# What a grid of the slope step holds (``Grid.quantity``; in a file, the FLOODMESH_QUANTITY tag
+# that ``io.write_raster`` writes): (description, unit, what it is in words). A grid without it
+# holds elevations, or what the step given it is told
+QUANTITIES = {"slope": ("slope", "degree", "a slope in degrees"),
+              "log": ("Laplacian-of-Gaussian response", "m",
+                      "a Laplacian-of-Gaussian response in metres")}
+
+
 @dataclass(frozen=True)
 class Grid:
     """A north-up raster with square cells: ``values`` (rows, cols), NaN where there is no data.
@@ -378,11 +410,20 @@ class Grid:
     values: np.ndarray
     transform: Affine
     crs: CRS
+    quantity: str | None = None  # a key of QUANTITIES (the slope step's); None: elevations
 
     def __post_init__(self):
+        require_numbers(self.values, "a Grid's values", "NaN for nodata")
         if self.values.ndim != 2:
             raise FloodMeshError(f"a grid must be 2-D, got {self.values.ndim}-D")
+        if not isinstance(self.transform, Affine):
+            raise FloodMeshError(
+                f"a Grid's transform must be an affine.Affine, got {self.transform!r}: give "
+                "Affine(d, 0, x_left, 0, -d, y_top), or Affine.from_gdal(*geotransform)")
         check_transform(self.transform)
+        if self.quantity is not None and self.quantity not in QUANTITIES:
+            raise FloodMeshError(f"a Grid's quantity is one of {', '.join(QUANTITIES)} or None "
+                                 f"(elevations), got {self.quantity!r}")
 
     @property
     def cell_size(self) -> float:
@@ -393,11 +434,11 @@ class Grid:
     def shape(self) -> tuple[int, int]:
         return self.values.shape
 
-    def with_values(self, values: np.ndarray) -> "Grid":
-        """The same georeference with other values of the same shape."""
+    def with_values(self, values: np.ndarray, quantity: str | None = None) -> "Grid":
+        """The same georeference with other values of the same shape, holding ``quantity``."""
         if values.shape != self.values.shape:
             raise ValueError(f"shape {values.shape} differs from the grid's {self.values.shape}")
-        return Grid(values, self.transform, self.crs)
+        return Grid(values, self.transform, self.crs, quantity)
 
     def cell_centres(self, rows, cols) -> tuple[np.ndarray, np.ndarray]:
         """Map coordinates (x, y) of the centres of cells (rows, cols)."""
@@ -508,11 +549,65 @@ def fill_from_around(values: np.ndarray, cells: np.ndarray) -> None:
         pending = pending[~filled]
 
 
+def step_grid(grid, what: str, holds: str | None = None,
+              fix: str = "give the DEM (what grid_points returns), not its slope") -> None:
+    """Refuse ``grid`` where a step takes it as ``what``, holding ``holds`` (a key of
+    ``QUANTITIES``, else in words; None: elevations), as the readers refuse a file: not a
+    ``Grid``, without cells, in a CRS not in metres or far from true scale or its area of use
+    there (``require_metric_crs``, ``check_scale``), or holding another quantity (``fix``
+    said)."""
+    if not isinstance(grid, Grid):
+        raise FloodMeshError(f"{what} must be a Grid, got {type(grid).__name__}: give "
+                             "Grid(values, transform, crs), as grid_points returns")
+    if not grid.values.size:
+        raise FloodMeshError(f"{what} has no cells (shape {grid.shape}): give a grid with data")
+    held = grid.quantity
+    if held != holds and held is not None:
+        wanted = QUANTITIES[holds][2] if holds in QUANTITIES else holds or "elevations"
+        raise FloodMeshError(f"{what} holds {QUANTITIES[held][2]}, as FloodMesh's slope step "
+                             f"made it, not {wanted}: {fix}")
+    metric_crs_at(grid.crs, grid.bounds, what, "raster")
+
+
+def lines_near(lines, bounds, what: str, where: str) -> None:
+    """Refuse any of ``lines`` ((k, 2|3) arrays, named ``what``) lying wholly beyond ``bounds``
+    (xmin, ymin, xmax, ymax; m; of ``where``, e.g. "the DEM") widened by their larger side
+    each way: a line of another place or CRS, not one drawn a little past the data (which the
+    step leaves out with a note). Lines without finite x, y are left to the step."""
+    xmin, ymin, xmax, ymax = bounds
+    margin = max(xmax - xmin, ymax - ymin)
+    for k, line in enumerate(lines):
+        xy = np.asarray(line, float)
+        xy = xy[:, :2] if xy.ndim == 2 and xy.shape[1] >= 2 else np.empty((0, 2))
+        xy = xy[np.isfinite(xy).all(axis=1)]  # own lines' z is NaN where they are 2-D
+        if len(xy) and (xy[:, 0].max() < xmin - margin or xy[:, 0].min() > xmax + margin
+                        or xy[:, 1].max() < ymin - margin or xy[:, 1].min() > ymax + margin):
+            low, high = xy.min(axis=0), xy.max(axis=0)
+            raise FloodMeshError(
+                f"{what} {k + 1} lies at {extent_words(*low, *high)}, far from {where} at "
+                f"{extent_words(*bounds)}: give lines in {where}'s CRS, of its place")
+
+
+def one_place(grid: Grid, other: Grid, what: str, other_what: str, fix: str) -> None:
+    """Refuse grids ``grid`` and ``other`` (named ``what``, ``other_what``) that a step combines
+    cell by cell but that do not lie on the same cells in one CRS: a shape alike is not a place
+    alike."""
+    crs, other_crs = parse_crs(grid.crs, what), parse_crs(other.crs, other_what)
+    alike = same_place(crs, other_crs)
+    if alike and grid.shape == other.shape and grid.transform.almost_equals(other.transform):
+        return
+    raise FloodMeshError(
+        f"{what} lies at {extent_words(*grid.bounds)}{'' if alike else f' in {crs.name}'}, "
+        f"{other_what} at {extent_words(*other.bounds)}"
+        f"{'' if alike else f' in {other_crs.name}'}, not on the same cells: {fix}")
+
+
 def usable_dem(dem: Grid, what: str = "the DEM", note=None) -> Grid:
     """``dem`` itself where every cell is NaN (nodata) or an elevation some ground has; else a
     float copy (an integer band's too) whose other cells (-9999, inf and the like) are NaN, as
     a DEM file's are when read (``drop_implausible``, ``note`` told): the rule where a ``Grid``
-    enters a step."""
+    enters a step, after ``step_grid``'s checks."""
+    step_grid(dem, what)
     values = np.asarray(dem.values)
     if values.dtype.kind not in "fiu" or not values.size:
         return dem

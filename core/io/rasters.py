@@ -12,9 +12,8 @@ import numpy as np
 from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import is_point_source
-from ..raster import (METRE_NAMES, SCALE_TOLERANCE, Grid, check_scale, check_transform,
-                      chosen_crs, corners_and_centre, drop_implausible, implausible_note,
-                      require_metric_crs)
+from ..raster import (METRE_NAMES, QUANTITIES, SCALE_TOLERANCE, Grid, check_transform,
+                      chosen_crs, drop_implausible, implausible_note, metric_crs_at)
 from .outputs import atomic_output, require_file
 from .points import read_points
 
@@ -34,10 +33,8 @@ def raster_crs(src, path: Path, crs=None, note=None, default_crs=None):
     check_transform(transform, f"raster {path.name}")
     what = f"raster {path.name}"
     own = file_crs.to_wkt() if file_crs else None
-    checked = require_metric_crs(chosen_crs(crs, own, what, note) or default_crs, what,
-                                 kind="raster")
-    check_scale(checked, *corners_and_centre(*src.bounds), what, kind="raster")
-    return checked
+    return metric_crs_at(chosen_crs(crs, own, what, note) or default_crs, src.bounds, what,
+                         "raster")
 
 
 # A Transverse Mercator's scale at d m from its central meridian is k0 (1 + d² / 2R²) to 0.01 %
@@ -150,6 +147,7 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
                          advice="resample it to larger cells or split it into tiles")
             values = read_band(src)
             nodata, count, dtype = src.nodata, src.count, src.dtypes[0]
+            held = src.tags().get(QUANTITY_TAG)
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
     if elevations:
@@ -163,7 +161,7 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
              "DEM with floating-point elevations (float32) where there is one")
     if not np.isfinite(values).any():
         raise no_valid_cells(path)
-    return Grid(values, transform, crs)
+    return Grid(values, transform, crs, held if held in QUANTITIES else None)
 
 
 def read_dem(path, *, crs=None, note=None) -> Grid:
@@ -204,14 +202,11 @@ def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
     return profile
 
 
-# What a raster of the slope step holds, as a GeoTIFF metadata item that the steps taking it
-# read back (``check_quantity``), with the band's description and unit, which QGIS and gdalinfo
-# show: (description, unit, what it is in words). A raster without it, another program's (gdaldem
-# slope), is taken as the step is told
+# What a raster of the slope step holds (``raster.QUANTITIES``), as a GeoTIFF metadata item that
+# the steps taking it read back (``check_quantity``), with the band's description and unit, which
+# QGIS and gdalinfo show. A raster without it, another program's (gdaldem slope), is taken as the
+# step is told
 QUANTITY_TAG = "FLOODMESH_QUANTITY"
-QUANTITIES = {"slope": ("slope", "degree", "a slope in degrees"),
-              "log": ("Laplacian-of-Gaussian response", "m",
-                      "a Laplacian-of-Gaussian response in metres")}
 
 
 def describe_band(dst, quantity: str | None) -> None:
@@ -256,8 +251,8 @@ def check_quantity(path, wanted: str, fix: str) -> None:
 def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None,
                  quantity: str | None = None) -> None:
     """Write a Grid as a tiled, compressed GeoTIFF (``raster_profile``); float NaN (or
-    cells outside ``valid``) become nodata; ``quantity`` says what it holds
-    (``describe_band``)."""
+    cells outside ``valid``) become nodata; ``quantity`` (default the grid's) says what it
+    holds (``describe_band``)."""
     # lazy: GDAL loads only when this runs
     import rasterio
 
@@ -277,7 +272,7 @@ def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None,
     with atomic_output(path) as tmp:
         with rasterio.open(tmp, "w", **profile) as dst:
             dst.write(values, 1)
-            describe_band(dst, quantity)
+            describe_band(dst, quantity or grid.quantity)
 
 
 def read_input(path, *, crs=None, classes=None, note=None):

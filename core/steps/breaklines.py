@@ -35,7 +35,8 @@ import numpy as np
 from ..errors import FloodMeshError
 from ..options import (TRACING_MODES, check_choice, check_min_length, check_min_points,
                        check_s_crit, check_seed)
-from ..raster import Grid, usable_dem
+from ..points import line_list, xyz_array
+from ..raster import Grid, one_place, step_grid, usable_dem
 
 MODES = TRACING_MODES
 # neighbour order: E, NE, N, NW, W, SW, S, SE as (row, col) offsets
@@ -66,6 +67,21 @@ class BreakLine:
         return float(np.hypot(*np.diff(self.coords[:, :2], axis=0).T).sum())
 
 
+def as_breaklines(lines, what: str) -> list[BreakLine]:
+    """The caller's ``lines``, BreakLines or (k, 3) arrays of x, y, z (m; taken as lines of no
+    known slope), as BreakLines; other arrays are refused, naming ``what`` and the line."""
+    return [line if isinstance(line, BreakLine) else
+            _no_slopes(xyz_array(getattr(line, "coords", line), f"{what} {k + 1}"))
+            for k, line in enumerate(line_list(lines, f"the {what}s"))]
+
+
+def _no_slopes(coords: np.ndarray) -> BreakLine:
+    return BreakLine(coords, np.full(len(coords), np.nan))
+
+
+BREAKPOINTS_FIX = "give classify_breakpoints(slope, s_crit), 1 where a cell is a breakpoint"
+
+
 def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *,
                      mode: str = "auto", min_points: int = 3, min_length: float = 0.0,
                      join: bool = True, seed: int = 0, crests: bool = True,
@@ -90,6 +106,14 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
         raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
                              f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")
     dem = usable_dem(dem, "the DEM", note)
+    step_grid(slope, "the slope", "slope", "give terrain_slope(dem)")
+    step_grid(breakpoints, "the breakpoints grid", "breakpoints", BREAKPOINTS_FIX)
+    marks = breakpoints.values
+    if not ((marks == 0) | (marks == 1)).all():
+        raise FloodMeshError(f"the breakpoints grid holds {np.nanmin(marks):g} to "
+                             f"{np.nanmax(marks):g}, not 0 and 1: {BREAKPOINTS_FIX}")
+    for grid, what in ((slope, "the slope"), (breakpoints, "the breakpoints grid")):
+        one_place(grid, dem, what, "the DEM", "give the DEM's own slope and breakpoints")
     if mode == "auto":
         valid = slope.values[np.isfinite(slope.values)]  # a copy: the median may sort it
         mode = "steep" if valid.size and np.median(valid, overwrite_input=True) >= s_crit \

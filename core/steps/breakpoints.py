@@ -12,11 +12,13 @@ import numpy as np
 from ..engine.blocks import BYTE_NODATA, map_overlap, map_raster
 from ..io import check_quantity
 from ..options import check_s_crit, check_sensitivity
-from ..raster import Grid
+from ..raster import Grid, step_grid
 
 
 def classify_breakpoints(slope: Grid, s_crit: float, *, thin: bool = True) -> Grid:
     """Binary (uint8) breakpoint grid: slope ≥ ``s_crit`` degrees, then thinned."""
+    step_grid(slope, "the slope", "slope", "give terrain_slope(dem), or for a LoG response "
+              "log_breakpoints")
     block, halo = _threshold_block(check_s_crit(s_crit), thin)
     return slope.with_values(map_overlap(slope.values, block, halo=halo).astype(np.uint8))
 
@@ -30,6 +32,8 @@ def log_breakpoints(response: Grid, sensitivity: float, *, zero_crossings: bool 
     least ``sensitivity``; the cell of the pair nearer to zero is marked (Marr & Hildreth 1980,
     doi:10.1098/rspb.1980.0020): the mid-slope edges.
     """
+    step_grid(response, "the LoG response", "log", "give laplacian_of_gaussian(dem), or for a "
+              "slope classify_breakpoints")
     block, halo = _log_block(check_sensitivity(sensitivity), zero_crossings)
     return response.with_values(map_overlap(response.values, block, halo=halo)
                                 .astype(np.uint8))

@@ -27,7 +27,7 @@ from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
 from ..engine.nearest import cell_of
 from ..errors import Cancelled, FloodMeshError
 from ..options import check_cell_size, check_max_gap
-from ..points import PointCloud, check_spread, step_points
+from ..points import PointCloud, check_spread, step_cloud
 from ..raster import Grid, check_cells_across
 
 FULL_TILE = 256  # the least tile side (cells) with full halos; larger where there are tiles
@@ -49,10 +49,11 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
     cancellation are polled per tile. ``plan``: what ``check_grid`` returned for these points
     and arguments, where the caller checked them already (the points' footprint is a pass over
     all of them). Points without a finite x, y, z or with a z no ground has are left out, as
-    the readers leave them out (``points.step_points``; ``note`` is told).
+    the readers leave them out (``points.step_cloud``; ``note`` is told), and a CRS
+    the readers refuse is refused.
     """
     cell_size = check_cell_size(cell_size)
-    xyz = step_points(points.xyz, "the points", note, least=3)
+    xyz = step_cloud(points, "the point cloud", note, least=3)
     if xyz is not points.xyz:  # some left out: the caller's plan was made for them all
         points, plan = PointCloud(xyz, points.crs), None
     if plan is None:  # the readers' check (points.clean_points) first: points spread over an

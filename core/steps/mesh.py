@@ -16,8 +16,8 @@ from ..engine.limits import check_triangles
 from ..errors import FloodMeshError
 from ..options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles, check_min_angle,
                        check_tolerance)
-from ..points import step_points
-from ..raster import Grid, bilinear, nearest_value, usable_dem
+from ..points import line_list, step_points
+from ..raster import Grid, bilinear, lines_near, nearest_value, usable_dem
 from .outline import smooth_outline
 
 # Triangle leaves skinny triangles in the concentric shells it builds around input corners
@@ -732,16 +732,15 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     min_angle = check_min_angle(min_angle)
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
-    for given, what in ((lines, "lines"), (own_lines, "own_lines")):
-        if hasattr(given, "coords") or (isinstance(given, np.ndarray) and given.ndim <= 2):
-            raise FloodMeshError(f"{what} must be a list of lines, got one "
-                                 f"{type(given).__name__} of shape {np.shape(given)}: give "
-                                 f"[line] for a single (k, 3) line")
+    lines, own_lines = line_list(lines, "lines"), line_list(own_lines, "own_lines")
     dem = usable_dem(dem, "the DEM", note)  # -9999, inf: nodata, as in a DEM file
     if points is not None:  # (N, 3); as the readers leave them out
         points = step_points(points, "the points put into the mesh", note)
     # BreakLines as the tracer gives
-    lines = [getattr(line, "coords", line) for line in lines] + list(own_lines)
+    lines = [getattr(line, "coords", line) for line in lines]
+    lines_near(lines, dem.bounds, "break line", "the DEM")
+    lines_near(own_lines, dem.bounds, "own line", "the DEM")
+    lines += own_lines
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain
     check_triangles(domain.area, max_area, max_triangles)

@@ -18,14 +18,14 @@ from ..engine.arrays import distance_along
 from ..engine.nearest import nearest_line
 from ..options import (SIMPLIFY_METHODS, check_choice, check_min_distance, check_positive_int,
                        check_tolerance)
-from .breaklines import BreakLine
+from .breaklines import BreakLine, as_breaklines
 
 
 def simplify_keep_every(lines: list[BreakLine], n: int) -> list[BreakLine]:
     """Keep every ``n``-th point of each line, and always both ends."""
     n = check_positive_int(n, "keep-every")
     out = []
-    for line in lines:
+    for line in as_breaklines(lines, "line"):
         keep = _keep_every_mask(len(line.coords), int(n))
         out.append(BreakLine(line.coords[keep], line.slopes[keep], line.component))
     return out
@@ -36,7 +36,7 @@ def simplify_douglas_peucker(lines: list[BreakLine], tolerance: float) -> list[B
     line, horizontally or vertically."""
     tolerance = check_tolerance(tolerance)
     out = []
-    for line in lines:
+    for line in as_breaklines(lines, "line"):
         keep = douglas_peucker_mask(line.coords, tolerance)
         out.append(BreakLine(line.coords[keep], line.slopes[keep], line.component))
     return out
@@ -90,12 +90,14 @@ def max_deviation(original: list[BreakLine], simplified: list[BreakLine]) -> flo
 
 def simplify_breaklines(lines: list[BreakLine], method: str, amount: float, *,
                         min_distance: float = 0.0) -> list[BreakLine]:
-    """Simplify ``lines`` by ``method`` ("keep-every": every ``amount``-th point;
+    """Simplify ``lines`` (BreakLines, or (k, 3) arrays: ``as_breaklines``) by ``method``
+    ("keep-every": every ``amount``-th point;
     "douglas-peucker" or "spline": within ``amount`` metres), then repair crossings and merge
     slivers and near-duplicate vertices closer than ``min_distance`` metres (see the module
     docstring)."""
     check_choice(method, SIMPLIFY_METHODS, "simplification")
     min_distance = check_min_distance(min_distance)
+    lines = as_breaklines(lines, "line")
     if method == "keep-every":
         amount = check_positive_int(amount, "keep-every")
         plans = [(line.coords, _keep_every_mask(len(line.coords), amount)) for line in lines]

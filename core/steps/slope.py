@@ -82,7 +82,7 @@ def slope(dem: Grid, method: str = "one-over-distance", *, diagonal_distance: bo
         dem.values,
         lambda padded: slope_block(padded, d, method, diagonal_distance=diagonal_distance),
         halo=1, cancelled=cancelled)
-    return dem.with_values(values)
+    return dem.with_values(values, "slope")
 
 
 def slope_file(dem_path, out_path, method: str = "one-over-distance", *,
@@ -135,7 +135,7 @@ def laplacian_of_gaussian(dem: Grid, sigma: float, *, kernel: str = "pratt",
     """
     dem = usable_dem(dem, "the DEM", note)
     block, halo = _log_block(sigma, dem.cell_size, kernel, dem.shape)
-    return dem.with_values(map_overlap(dem.values, block, halo=halo, cancelled=cancelled))
+    return dem.with_values(map_overlap(dem.values, block, halo=halo, cancelled=cancelled), "log")
 
 
 def laplacian_of_gaussian_file(dem_path, out_path, sigma: float, *, kernel: str = "pratt",

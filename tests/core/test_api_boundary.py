@@ -78,3 +78,124 @@ def test_no_check_points_is_still_no_accuracy_test(case):
 def test_a_cancelled_step_says_so(case):
     with pytest.raises(core.Cancelled, match="cancelled"):
         core.grid_points(core.PointCloud(case[1], CRS), 1.0, cancelled=lambda: True)
+
+
+# Grids and point clouds built in memory meet the readers' rule on CRS, place and quantity
+def _on(dem, crs=CRS, transform=None):
+    return core.Grid(dem.values, dem.transform if transform is None else transform, crs)
+
+
+REFUSED_CRS = [(None, "has no coordinate reference system"),
+               ("EPSG:4326", "is in a geographic CRS"), ("EPSG:2227", "units of 'US survey foot'")]
+
+
+@pytest.mark.parametrize("crs, said", REFUSED_CRS)
+def test_the_steps_refuse_a_crs_the_readers_refuse(case, crs, said):
+    dem, xyz, mesh = case
+    grid, slope = _on(dem, crs), core.terrain_slope(dem)
+    runs = {"grid_points": lambda: core.grid_points(core.PointCloud(xyz, crs), 1.0),
+            "terrain_slope": lambda: core.terrain_slope(grid),
+            "laplacian_of_gaussian": lambda: core.laplacian_of_gaussian(grid, 1.0),
+            "classify_breakpoints": lambda: core.classify_breakpoints(
+                core.Grid(slope.values, slope.transform, crs), 10.0),
+            "trace_breaklines": lambda: core.trace_breaklines(
+                core.classify_breakpoints(slope, 10.0), slope, grid, 10.0),
+            "build_mesh": lambda: core.build_mesh(grid, [], max_area=50),
+            "refine_mesh": lambda: core.refine_mesh(grid, [], xyz, max_area=50, max_rounds=1),
+            "assess": lambda: core.assess(core.Mesh(mesh.nodes, mesh.triangles, crs), xyz)}
+    for step, run in runs.items():
+        with pytest.raises(core.FloodMeshError, match=said):
+            run()
+
+
+def test_a_grid_far_outside_its_crs_area_is_refused_naming_the_zone(case):
+    dem = case[0]
+    prefixed = _on(dem, transform=Affine(1, 0, 32_500_000, 0, -1, 5_700_030))
+    with pytest.raises(core.FloodMeshError, match="far outside the area.*UTM zone number"):
+        core.terrain_slope(prefixed)
+
+
+def test_a_slope_grid_is_refused_where_a_dem_belongs(case):
+    dem = case[0]
+    slope = core.terrain_slope(dem)
+    assert slope.quantity == "slope"
+    for run in (lambda: core.terrain_slope(slope), lambda: core.build_mesh(slope, [], max_area=50),
+                lambda: core.trace_breaklines(core.classify_breakpoints(slope, 10.0), slope,
+                                              slope, 10.0)):
+        with pytest.raises(core.FloodMeshError, match="the DEM holds a slope in degrees.*not "
+                                                      "elevations: give the DEM"):
+            run()
+    with pytest.raises(core.FloodMeshError, match="breakpoints grid holds a slope in degrees"):
+        core.trace_breaklines(slope, slope, dem, 10.0)
+    log = core.laplacian_of_gaussian(dem, 1.0)
+    with pytest.raises(core.FloodMeshError, match="slope holds a Laplacian-of-Gaussian"):
+        core.classify_breakpoints(log, 10.0)
+
+
+def test_the_quantity_travels_with_the_file(case, tmp_path):
+    slope = core.terrain_slope(case[0])
+    core.write_raster(tmp_path / "slope.tif", slope)
+    assert core.read_raster(tmp_path / "slope.tif", elevations=False).quantity == "slope"
+
+
+def test_breakpoints_must_be_zeros_and_ones(case):
+    dem = case[0]
+    slope = core.terrain_slope(dem)
+    untagged = core.Grid(slope.values, slope.transform, slope.crs)
+    with pytest.raises(core.FloodMeshError, match="breakpoints grid holds 0 to .*not 0 and 1"):
+        core.trace_breaklines(untagged, slope, dem, 10.0)
+
+
+def test_grids_of_another_place_are_not_combined_by_their_shape(case):
+    dem = case[0]
+    slope = core.terrain_slope(dem)
+    breakpoints = core.classify_breakpoints(slope, 10.0)
+    elsewhere = Affine(1, 0, 600_000, 0, -1, 5_800_030)
+    with pytest.raises(core.FloodMeshError,
+                       match=r"breakpoints grid lies at x 600,000 to 600,040, y 5,800,000 to "
+                             r"5,800,030 m, the DEM at x 500,000 to 500,040, y 5,700,000 to "
+                             r"5,700,030 m, not on the same cells"):
+        core.trace_breaklines(_on(breakpoints, transform=elsewhere), slope, dem, 10.0)
+    with pytest.raises(core.FloodMeshError, match="slope lies at .* in ETRS89 / UTM zone 33N"):
+        core.trace_breaklines(breakpoints, _on(slope, "EPSG:25833"), dem, 10.0)
+
+
+def test_lines_far_from_the_dem_are_refused_naming_both_places(case):
+    dem = case[0]
+    far = np.array([[10.0, 20.0, 11.0], [30.0, 20.0, 11.0]])  # x, y without the easting
+    with pytest.raises(core.FloodMeshError, match=r"break line 1 lies at x 10 to 30, y 20 to 20 m,"
+                                                  r" far from the DEM at x 500,000 to 500,040"):
+        core.build_mesh(dem, [far], max_area=50)
+    with pytest.raises(core.FloodMeshError, match="own line 1 lies at"):
+        core.build_mesh(dem, [], own_lines=[far * [1, 1, np.nan]], max_area=50)
+    near = far + [500_045, 5_700_000, 0]  # just past the DEM's edge: left out with a note
+    notes = []
+    core.build_mesh(dem, [near], max_area=50, note=notes.append)
+    assert any("wholly outside" in n for n in notes)
+
+
+@pytest.mark.parametrize("make, said", [
+    (lambda dem, xyz: core.PointCloud(xyz.astype(object), CRS), "xyz must be a numpy array of "
+                                                                "numbers.*got ndarray of object"),
+    (lambda dem, xyz: core.PointCloud(xyz.tolist(), CRS), "xyz must be a numpy array.*got list"),
+    (lambda dem, xyz: core.Grid(dem.values, dem.transform.to_gdal(), CRS),
+     r"transform must be an affine.Affine.*Affine.from_gdal"),
+    (lambda dem, xyz: core.terrain_slope(core.Grid(np.zeros((0, 0)), dem.transform, CRS)),
+     r"the DEM has no cells \(shape \(0, 0\)\)"),
+    (lambda dem, xyz: core.grid_points(xyz, 1.0), "the point cloud must be a PointCloud"),
+])
+def test_types_built_wrong_are_named(case, make, said):
+    with pytest.raises(core.FloodMeshError, match=said):
+        make(case[0], case[1])
+
+
+def test_simplify_takes_plain_arrays_as_build_mesh_does():
+    line = np.column_stack([np.linspace(0, 10, 11) + 5e5, np.full(11, 5.7e6), np.full(11, 10.0)])
+    for simplified in (core.simplify_breaklines([line], "keep-every", 4),
+                       core.simplify_breaklines([line], "douglas-peucker", 0.1)):
+        assert [s.coords[[0, -1]].tolist() for s in simplified] == [line[[0, -1]].tolist()]
+    with pytest.raises(core.FloodMeshError, match=r"line 1 must be an \(N, 3\).*third column"):
+        core.simplify_breaklines([line[:, :2]], "keep-every", 4)
+    with pytest.raises(core.FloodMeshError, match="must be a list of lines"):
+        core.simplify_breaklines(line, "keep-every", 4)
+
