@@ -16,6 +16,8 @@ from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, staged_folder
 from ..io.report import new_figure, save_png
 from ..options import RunOptions, check_max_area
+from ..points import step_points
+from ..raster import usable_dem
 from ..steps.accuracy import (accuracy_statistics, nssda_threshold_m, outside_mesh_note,
                               residuals)
 from ..steps.hydraulic_lines import lines_for_hydraulics
@@ -82,7 +84,10 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
     that say it where not every mesh does (``series_notes``).
 
     Returns one row per setting (``COLUMNS``: errors in metres, ``share_over_25cm`` a fraction)
-    and the meshes, in the order of ``settings``."""
+    and the meshes, in the order of ``settings``. DEM cells and check points no ground has
+    (-9999, inf) are nodata and left out, as in every step (``note`` told)."""
+    dem = usable_dem(dem, "the DEM", note)
+    check_xyz = step_points(check_xyz, "the check points", note)
     min_distance = dem.cell_size / 2 if min_distance is None else min_distance
     spacing = dem.cell_size if min_spacing is None else min_spacing
     simplified, domains = {}, {}

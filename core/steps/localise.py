@@ -30,7 +30,8 @@ from numba import njit, prange
 from ..engine.arrays import distance_along, true_runs
 from ..engine.nearest import nearest_line, point_index, threads_for, z_along_lines
 from ..errors import FloodMeshError
-from .breaklines import BreakLine
+from ..points import step_points, xyz_array
+from .breaklines import BreakLine, as_breaklines
 from .joining import bridges, chains_through, join_pieces, snap_t_junctions
 from .simplify import douglas_peucker_mask
 
@@ -580,7 +581,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
 
 def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.ndarray],
                         radius: float, *, on_line: float, own_lines: list = (), index=None,
-                        noise: float | None = None) -> tuple[np.ndarray, dict]:
+                        noise: float | None = None, note=None) -> tuple[np.ndarray, dict]:
     """Node elevations (n,) with the noise taken out: nodes within ``on_line`` m of a break line
     (k, 3 arrays) take z along it (``z_along_lines``; keep theirs where the line has no z there:
     a modeller's 2-D line, read with NaN z; a node equally near two lines takes the one listed
@@ -588,9 +589,13 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     where it has one, though another line be nearer (a crossing's node, snapped to a grid), as
     ``build_mesh`` gives them; the others z of a least-squares plane of ``points`` within
     ``radius`` m (at most 0.9 of their distance to the nearest line, at least ``on_line``·10),
-    or keep theirs where fewer than 6 points are there. Returns z and counts."""
-    z = np.asarray(nodes[:, 2], float).copy()
-    xy = np.asarray(nodes[:, :2], float)
+    or keep theirs where fewer than 6 points are there. Returns z and counts. Points without a
+    finite x, y, z or with a z no ground has (-9999) are left out (``points.step_points``,
+    ``note`` told; ``index`` then built anew)."""
+    nodes = xyz_array(nodes, "the mesh's nodes")
+    points, index = _measured(points, index, note)
+    z = nodes[:, 2].copy()
+    xy = nodes[:, :2]
     distance, at, on_z = z_along_lines(xy, lines, within=on_line)
     z[at] = on_z
     _, at, on_z = z_along_lines(xy, own_lines, within=on_line)
@@ -615,6 +620,13 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     z[idx] = plane[fitted]
     return z, {"on_lines": int(on.sum()), "plane_fitted": int(fitted.sum()),
                "kept": int((~fitted).sum())}
+
+
+def _measured(points, index, note) -> tuple[np.ndarray, object]:
+    """The caller's measured ``points`` (n, 3) as a step takes them (``points.step_points``,
+    ``note`` told of those left out) and their ``index``, None where some were left out."""
+    usable = step_points(points, "the measured points", note)
+    return usable, index if usable is points else None
 
 
 def _failed_fits_left_out(coords, moved, max_gap, lateral, kink):
@@ -1004,7 +1016,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
                     max_gap: float = 12.0, join_gap: float | None = None,
                     join_lateral: float = 1.0, bridge_gap: float | None = None,
-                    cell_size: float = 1.0, index=None) -> tuple[list, list[float], dict]:
+                    cell_size: float = 1.0, index=None,
+                    note=None) -> tuple[list, list[float], dict]:
     """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
     move are dropped where that leaves no gap over ``max_gap`` m and, between crests, moves the
     line by no more than ``UNMOVED_LATERAL`` cells (``cell_size`` m) in plan
@@ -1025,7 +1038,10 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     ``s_crit``), are snapped onto it
     (``joining.snap_t_junctions``). Returns the BreakLines, each line's confidence (the
     median fit RMS residual of its vertices, m; NaN where none moved) and counts. ``index``:
-    ``nearest.point_index(points)`` if built."""
+    ``nearest.point_index(points)`` if built. ``lines`` may be (k, 3) arrays
+    (``as_breaklines``); points as for ``fit_node_elevations``."""
+    lines = as_breaklines(lines, "line")
+    points, index = _measured(points, index, note)
     index = index if index is not None else point_index(points)  # one for both uses below
     lateral = UNMOVED_LATERAL * cell_size  # the grid's cell (m)
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,

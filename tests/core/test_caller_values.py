@@ -222,3 +222,66 @@ def test_assess_command_refuses_a_layer_without_a_usable_check_point(tmp_path):
     error = said.stderr.strip().splitlines()[-1]  # after the note of the points left out
     assert "point layer check.gpkg: 0 usable" in error and "check their values" in error
     assert not (tmp_path / "stats.json").exists() and not (tmp_path / "res.gpkg").exists()
+
+
+def _plane_points(n=20000, seed=3):
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 60, (n, 2))
+    return np.column_stack([xy + [500000, 5700000], 10 + 0.01 * xy[:, 0]
+                            + rng.normal(0, 0.02, n)])
+
+
+def _spoilt(xyz):
+    bad = xyz.copy()
+    bad[:3, 2] = [-9999.0, np.inf, np.nan]
+    return bad
+
+
+def test_fit_node_elevations_leaves_out_points_no_ground_has():
+    from floodmesh.core.steps.localise import fit_node_elevations
+
+    xyz = _plane_points()
+    nodes = xyz[::500].copy()
+    clean, _ = fit_node_elevations(nodes, xyz[3:], [], 1.5, on_line=0.05)
+    bad = _spoilt(xyz)
+    given = bad.copy()
+    notes = []
+    z, _ = fit_node_elevations(nodes, bad, [], 1.5, on_line=0.05, note=notes.append)
+    assert np.array_equal(bad, given, equal_nan=True)
+    assert np.allclose(z, clean) and np.isfinite(z).all()
+    assert sum("left out" in n for n in notes) == 2
+    with pytest.raises(core.FloodMeshError, match=r"mesh's nodes must be an \(N, 3\)"):
+        fit_node_elevations(nodes[:, :2], xyz, [], 1.5, on_line=0.05)
+    with pytest.raises(core.FloodMeshError, match=r"measured points must be an \(N, 3\)"):
+        fit_node_elevations(nodes, xyz[:, :2], [], 1.5, on_line=0.05)
+
+
+def test_localise_traced_leaves_out_points_no_ground_has():
+    from floodmesh.core.steps.localise import fit_window
+
+    xyz = _plane_points()
+    line = np.column_stack([np.linspace(10, 50, 21) + 500000, np.full(21, 5700030.0),
+                            np.full(21, 10.3)])
+    window = fit_window(xyz[3:], 3600.0, 1.0)
+    clean, _, _ = core.localise_traced([line], xyz[3:], window)
+    notes = []
+    lines, _, _ = core.localise_traced([line], _spoilt(xyz), window, note=notes.append)
+    assert [x.coords.tolist() for x in lines] == [x.coords.tolist() for x in clean]
+    assert sum("left out" in n for n in notes) == 2
+    with pytest.raises(core.FloodMeshError, match=r"measured points must be an \(N, 3\)"):
+        core.localise_traced([line], xyz[:, :2], window)
+
+
+def test_scale_series_takes_dem_cells_and_check_points_no_ground_has_as_nodata():
+    from floodmesh.core.chain.series import Setting, scale_series
+
+    check = _plane_points(60, seed=4)
+    settings = [Setting(50.0)]
+    clean_rows, _ = scale_series(_dem(np.nan), [], check[3:], settings)
+    notes = []
+    rows, meshes = scale_series(_dem(-9999.0), [], _spoilt(check), settings, note=notes.append)
+    assert np.isfinite(meshes[0].nodes).all() and meshes[0].nodes[:, 2].min() > 9
+    assert rows == clean_rows
+    assert sum("nodata" in n for n in notes) == 1 and sum("left out" in n for n in notes) == 2
+    with pytest.raises(core.FloodMeshError, match=r"check points must be an \(N, 3\)"):
+        scale_series(_dem(), [], check[:, :2], settings)
