@@ -15,7 +15,7 @@ from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import EPT_NAME, POINT_EXTENSIONS
 from ..points import PointCloud, clean_points
-from ..raster import RefusedCRS, chosen_crs
+from ..raster import RefusedCRS, chosen_crs, parse_crs
 from .outputs import atomic_output, require_file
 
 GROUND_CLASS = 2
@@ -476,7 +476,8 @@ def write_points_las(path, points: PointCloud, *, classes=GROUND_CLASS) -> None:
     header = laspy.LasHeader(point_format=3, version="1.4")
     header.offsets = np.floor(points.xyz.min(axis=0))
     header.scales = np.array([0.001, 0.001, 0.001])
-    header.add_crs(points.crs)
+    if points.crs is not None:
+        header.add_crs(parse_crs(points.crs, f"the CRS of {Path(path).name}"))
     las = laspy.LasData(header)
     las.x, las.y, las.z = points.xyz[:, 0], points.xyz[:, 1], points.xyz[:, 2]
     las.classification = np.broadcast_to(np.asarray(classes, np.uint8), (len(points),)).copy()

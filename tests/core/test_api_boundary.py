@@ -5,6 +5,7 @@ import pytest
 from affine import Affine
 
 from floodmesh import core
+from floodmesh.core.io import write_points_las
 
 CRS = "EPSG:25832"
 
@@ -199,3 +200,8 @@ def test_simplify_takes_plain_arrays_as_build_mesh_does():
     with pytest.raises(core.FloodMeshError, match="must be a list of lines"):
         core.simplify_breaklines(line, "keep-every", 4)
 
+
+def test_write_points_las_takes_the_crs_as_text(tmp_path):
+    xyz = np.column_stack([np.arange(10.0) + 5e5, np.arange(10.0) % 3 + 5.7e6, np.full(10, 9.0)])
+    write_points_las(tmp_path / "p.laz", core.PointCloud(xyz, "EPSG:25832"))
+    assert core.read_points(tmp_path / "p.laz").crs.to_epsg() == 25832
