@@ -32,6 +32,7 @@ import numpy as np
 from .. import io
 from ..engine.arrays import boundary_edges, edge_nodes, spatial_order
 from ..errors import Cancelled, FloodMeshError
+from ..io.outputs import check_output_folder
 from ..options import RESULT_RASTERS
 from ..raster import Grid, require_metric_crs
 from ..steps.hydraulics import collinear_wall_stencils, hydraulic_checks, inradii, neighbours
@@ -899,6 +900,7 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
     # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import triangle_areas
 
+    check_output_folder(out_dir, [mesh_path], FLOOD_FILES + ("triangles.npz",))
     crs = require_metric_crs(crs or mesh_crs(mesh_path), f"the mesh {Path(mesh_path).name}")
     python = require_flood_python(own_env)
     mesh = io.read_2dm(mesh_path)

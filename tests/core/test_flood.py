@@ -421,6 +421,26 @@ def test_missing_anuga_is_one_line_naming_the_fix(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("out, says", [
+    ("taken", "is a file, not a folder"),
+    ("m.2dm", "is the input"),
+])
+def test_an_output_folder_that_cannot_be_one_is_refused_before_the_flood(tmp_path, out, says):
+    """--out naming a file (or the mesh itself) is refused in one line before ANUGA runs, not
+    a traceback after it; the file stays as it was."""
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0 * x)
+    _write(tmp_path / "s.json", {"duration_s": 10})
+    (tmp_path / "taken").write_text("the user's file")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    done = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "flood",
+                           str(tmp_path / "m.2dm"), "--scenario", str(tmp_path / "s.json"),
+                           "--out", str(tmp_path / out), "--crs", CRS],
+                          capture_output=True, text=True)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and says in done.stderr, done.stderr
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
 def _write(path, data):
     path.write_text(json.dumps(data))
     return path
