@@ -43,7 +43,7 @@ SIDES = ("north", "south", "east", "west")
 BUILDING_MODES = ("raised", "holes")
 WORKER = Path(__file__).with_name("anuga_worker.py")
 FLOOD_FILES = tuple(RESULT_RASTERS.values()) + ("hydrograph.csv", "observations.csv",
-                                                "time_step.gpkg", "report.json")
+                                                "time_step.gpkg", "triangles.npz", "report.json")
 SETTER_FIELDS = ("inradius_m", "share_of_steps", "checks", "max_depth_m", "max_speed_ms")
 # a mass balance's error is given as a share only of volumes above this depth over the mesh
 # (m): a thinner film is below any depth a flood reports (wet_depth_m, the worker's 1 cm
@@ -900,7 +900,7 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
     # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import triangle_areas
 
-    check_output_folder(out_dir, [mesh_path], FLOOD_FILES + ("triangles.npz",))
+    check_output_folder(out_dir, [mesh_path], FLOOD_FILES)
     crs = require_metric_crs(crs or mesh_crs(mesh_path), f"the mesh {Path(mesh_path).name}")
     python = require_flood_python(own_env)
     mesh = io.read_2dm(mesh_path)

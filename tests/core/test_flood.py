@@ -421,6 +421,16 @@ def test_missing_anuga_is_one_line_naming_the_fix(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@needs_anuga
+def test_the_report_names_every_file_the_flood_writes(tmp_path):
+    """report.json's files are the folder's files: triangles.npz, which compare reads, too."""
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0.1 + 0 * x, max_area=4.0)
+    scenario = scenario_from_dict({"duration_s": 10, "output_interval_s": 5,
+                                   "initial_stage_m": 0.2})
+    report = run_flood(tmp_path / "m.2dm", scenario, tmp_path / "out", crs=CRS)
+    assert sorted(report["files"]) == sorted(p.name for p in (tmp_path / "out").iterdir())
+
+
 @pytest.mark.parametrize("out, says", [
     ("taken", "is a file, not a folder"),
     ("m.2dm", "is the input"),
