@@ -86,8 +86,7 @@ def is_tile_set(inputs) -> bool:
     if isinstance(inputs, TileSet):
         return True
     items = _items(inputs)
-    return len(items) > 1 or any(Path(i).is_dir() or any(ch in i for ch in GLOB_CHARACTERS)
-                                 for i in items)
+    return len(items) > 1 or any(Path(i).is_dir() or _is_pattern(i) for i in items)
 
 
 def is_tile(path: Path) -> bool:
@@ -102,6 +101,8 @@ def is_tile(path: Path) -> bool:
 
 
 def _is_pattern(item: str) -> bool:
+    """Whether an input is a glob pattern: it holds ``GLOB_CHARACTERS`` and names no file or
+    folder (one named "survey [1].laz" is that file)."""
     return any(ch in item for ch in GLOB_CHARACTERS) and not Path(item).exists()
 
 
@@ -201,7 +202,7 @@ def _mixed_kinds(tiles: list[Path], inputs) -> str:
     s = "s" if len(stray) > 1 else ""
     mixed = (f"the tiles mix point files and DEM rasters: {len(stray)} {what}{s} "
              f"({first_names([p.name for p in stray])}) beside {len(kept)} {others}: ")
-    if not any(Path(i).is_dir() or any(ch in i for ch in GLOB_CHARACTERS) for i in items):
+    if not any(Path(i).is_dir() or _is_pattern(i) for i in items):
         # files listed one by one: no folder to move them out of
         return (f"{mixed}take {'them' if s else 'it'} out of the list of tiles (keep "
                 f"{first_names([p.name for p in kept])})")

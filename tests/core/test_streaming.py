@@ -304,3 +304,16 @@ def test_a_slope_raster_is_refused_where_a_dem_belongs(dem_file, tmp_path, capsy
         assert (f"{name} holds a slope in degrees, as FloodMesh's slope step wrote it, not "
                 "elevations") in capsys.readouterr().err
         assert not out.exists()
+
+
+def test_a_file_whose_name_holds_brackets_is_one_file_not_tiles(dem_file, tmp_path, capsys):
+    """An existing file named with glob characters ("slope [1].tif") is the file, not a pattern:
+    it was run as DEM tiles, its error naming a tile and telling to take it out of the tiles."""
+    from floodmesh.core.frontends.cli import main
+
+    slope = tmp_path / "slope [1].tif"
+    slope_file(dem_file, slope)
+    assert main(["run", str(slope), "--out", str(tmp_path / "out")]) == 2
+    assert ("floodmesh: error: raster slope [1].tif holds a slope in degrees, as FloodMesh's "
+            "slope step wrote it, not elevations: give the DEM") in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
