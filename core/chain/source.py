@@ -61,6 +61,9 @@ def open_source(given, *, skip_unreadable: bool = False) -> Source:
         kind = POINT_TILES if tile_kind(tiles[0]) == "points" else DEM_TILES
         return Source(kind, tiles, given)
     if not isinstance(given, (str, os.PathLike)):  # one file, given as a list of tiles
+        if not given:
+            raise FloodMeshError("no input given: give a point file (LAS/LAZ, XYZ/CSV), a DEM, "
+                                 "or tiles (a folder, a pattern or several files)")
         (given,) = given
     path = Path(given)
     if path.suffix.lower() in RASTER_EXTENSIONS:

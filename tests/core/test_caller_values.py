@@ -285,3 +285,12 @@ def test_scale_series_takes_dem_cells_and_check_points_no_ground_has_as_nodata()
     assert sum("nodata" in n for n in notes) == 1 and sum("left out" in n for n in notes) == 2
     with pytest.raises(core.FloodMeshError, match=r"check points must be an \(N, 3\)"):
         scale_series(_dem(), [], check[:, :2], settings)
+
+
+@pytest.mark.parametrize("given", [[], ()])
+def test_an_empty_list_of_inputs_is_refused_naming_what_to_give(given, tmp_path):
+    """run_pipeline (and open_source) on an empty list of tiles stopped with a ValueError from
+    unpacking it; a caller's list built from a folder that held nothing is a plain mistake."""
+    with pytest.raises(core.FloodMeshError, match="no input given: give a point file"):
+        core.run_pipeline(given, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
