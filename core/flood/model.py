@@ -108,13 +108,19 @@ class Scenario:
     def __post_init__(self):
         positive = {"duration": self.duration_s, "output interval": self.output_interval_s,
                     "wet depth": self.wet_depth_m, "Manning's n": self.manning,
-                    "unstable speed": self.unstable_speed_m_s}
+                    "unstable speed": self.unstable_speed_m_s,
+                    "buildings' height": self.buildings.height_m}
         for what, value in positive.items():
             if not (value is not None and np.isfinite(value) and value > 0):
                 raise FloodMeshError(f"the scenario's {what} must be above 0, got {value}")
         if self.output_interval_s > self.duration_s:
             raise FloodMeshError(f"the scenario's output interval ({self.output_interval_s} s) "
                                  f"is longer than its duration ({self.duration_s} s)")
+        names = [name for name, _, _ in self.observation_points]
+        for k, name in enumerate(names):
+            if name in names[:k]:
+                raise FloodMeshError(f"observation points {names.index(name) + 1} and {k + 1} "
+                                     f"are both named {name!r}: give each its own name")
         for k, inflow in enumerate(self.inflows, 1):
             if len(inflow.region) < 2:
                 raise FloodMeshError(f"inflow {k} needs a line (2 points) or a region (3 or "

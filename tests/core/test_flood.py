@@ -385,6 +385,27 @@ def test_wrong_kinds_of_value_are_named_not_a_traceback(tmp_path):
             load_scenario(_write(tmp_path / "s.json", scenario))
 
 
+
+@pytest.mark.parametrize("height", [-3, 0])
+def test_buildings_raised_by_no_height_or_below_the_ground_are_refused(tmp_path, height):
+    """A height_m of -3 dug the footprints 3 m into the ground ('buildings raised -3 m'),
+    a pit where a wall was meant, without a word."""
+    house = [[0, 0], [5, 0], [5, 5], [0, 5]]
+    with pytest.raises(FloodMeshError, match=re.escape(
+            f"the scenario's buildings' height must be above 0, got {height}")):
+        load_scenario(_write(tmp_path / "s.json", {
+            "duration_s": 10, "buildings": {"polygons": [house], "height_m": height}}))
+
+
+def test_observation_points_of_one_name_are_refused(tmp_path):
+    """Two points named alike gave observations.csv two columns of one name, which a reader
+    takes for one (or renames), and a comparison's peaks by name mixed up."""
+    with pytest.raises(FloodMeshError, match=re.escape(
+            "observation points 1 and 3 are both named 'gauge': give each its own name")):
+        load_scenario(_write(tmp_path / "s.json", {"duration_s": 10, "observation_points": [
+            {"name": "gauge", "x": 0, "y": 0}, {"name": "b", "x": 1, "y": 0},
+            {"name": "gauge", "x": 2, "y": 0}]}))
+
 @needs_anuga
 def test_an_outflow_given_as_inflow_is_a_note_and_no_mass_balance_share_of_nothing(
         tmp_path, capsys):
