@@ -331,6 +331,9 @@ def _boundary(item: dict, where: str, base: Path) -> Boundary:
     if "kind" not in item:
         raise FloodMeshError(f"{where} lacks 'kind' ({', '.join(BOUNDARY_KINDS)})")
     sides = item.get("sides") or ()
+    if not isinstance(sides, (str, list)):
+        raise FloodMeshError(f"{where}'s sides must be a list of sides ({', '.join(SIDES)} or "
+                             f"all), got {sides!r:.60}")
     levels = item.get("levels")
     return Boundary(str(item["kind"]), (sides,) if isinstance(sides, str) else tuple(sides),
                     tuple(map(tuple, _points(item["line"], f"{where}'s line", 2)))

@@ -380,7 +380,13 @@ def test_wrong_kinds_of_value_are_named_not_a_traceback(tmp_path):
              "inflow 1 needs one of region (a polygon), circle or line"),
             ({"duration_s": 10, "inflows": [{"line": [[0, 0], [1, 1]],
                                              "hydrograph": [[0, 1], [10, 2], [10, 3]]}]},
-             "the times in inflow 1's hydrograph must increase from row to row: row 3 (10 s)")]:
+             "the times in inflow 1's hydrograph must increase from row to row: row 3 (10 s)"),
+            ({"duration_s": 10, "boundaries": [{"kind": "outflow", "sides": ["east"]},
+                                               {"kind": "outflow", "sides": 5}]},
+             "boundary 2's sides must be a list of sides (north, south, east, west or all), "
+             "got 5"),
+            ({"duration_s": 10, "boundaries": [{"kind": "outflow", "sides": {"east": True}}]},
+             "boundary 1's sides must be a list of sides")]:
         with pytest.raises(FloodMeshError, match=re.escape(words)):
             load_scenario(_write(tmp_path / "s.json", scenario))
 
