@@ -390,12 +390,14 @@ def require_numbers(values, what: str, holding: str) -> None:
                              f"{type(values).__name__}{of}: give np.asarray(values, float)")
 
 
-# What a grid of the slope step holds (``Grid.quantity``; in a file, the FLOODMESH_QUANTITY tag
-# that ``io.write_raster`` writes): (description, unit, what it is in words). A grid without it
-# holds elevations, or what the step given it is told
-QUANTITIES = {"slope": ("slope", "degree", "a slope in degrees"),
+# What a grid of the slope or breakpoints step holds (``Grid.quantity``; in a file, the
+# FLOODMESH_QUANTITY tag that ``io.write_raster`` writes): (description, unit, what it is in
+# words, the step that makes it). A grid without it holds elevations, or what the step given it
+# is told
+QUANTITIES = {"slope": ("slope", "degree", "a slope in degrees", "slope"),
               "log": ("Laplacian-of-Gaussian response", "m",
-                      "a Laplacian-of-Gaussian response in metres")}
+                      "a Laplacian-of-Gaussian response in metres", "slope"),
+              "breakpoints": ("breakpoints (1), not (0)", "", "breakpoints", "breakpoints")}
 
 
 @dataclass(frozen=True)
@@ -564,8 +566,9 @@ def step_grid(grid, what: str, holds: str | None = None,
     held = grid.quantity
     if held != holds and held is not None:
         wanted = QUANTITIES[holds][2] if holds in QUANTITIES else holds or "elevations"
-        raise FloodMeshError(f"{what} holds {QUANTITIES[held][2]}, as FloodMesh's slope step "
-                             f"made it, not {wanted}: {fix}")
+        _, _, words, step = QUANTITIES[held]
+        raise FloodMeshError(f"{what} holds {words}, as FloodMesh's {step} step made it, not "
+                             f"{wanted}: {fix}")
     metric_crs_at(grid.crs, grid.bounds, what, "raster")
 
 

@@ -533,7 +533,8 @@ def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, re
         write_front_rasters(front.files, out)
     else:
         io.write_raster(out / "slope.tif", front.slope_grid, quantity="slope")
-        io.write_raster(out / "breakpoints.tif", front.breakpoints, valid=np.isfinite(dem.values))
+        io.write_raster(out / "breakpoints.tif", front.breakpoints, valid=np.isfinite(dem.values),
+                        quantity="breakpoints")
     io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs, fit_rms=confidence)
     # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
     if "2dm" not in options.formats:

@@ -202,10 +202,10 @@ def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
     return profile
 
 
-# What a raster of the slope step holds (``raster.QUANTITIES``), as a GeoTIFF metadata item that
-# the steps taking it read back (``check_quantity``), with the band's description and unit, which
-# QGIS and gdalinfo show. A raster without it, another program's (gdaldem slope), is taken as the
-# step is told
+# What a raster of the slope or breakpoints step holds (``raster.QUANTITIES``), as a GeoTIFF
+# metadata item that the steps taking it read back (``check_quantity``), with the band's
+# description and unit, which QGIS and gdalinfo show. A raster without it, another program's
+# (gdaldem slope), is taken as the step is told
 QUANTITY_TAG = "FLOODMESH_QUANTITY"
 
 
@@ -214,38 +214,43 @@ def describe_band(dst, quantity: str | None) -> None:
     None: nothing is said)."""
     if quantity is None:
         return
-    description, unit, _ = QUANTITIES[quantity]
+    description, unit, _, _ = QUANTITIES[quantity]
     dst.update_tags(**{QUANTITY_TAG: quantity})
     dst.set_band_description(1, description)
-    dst.set_band_unit(1, unit)
+    if unit:
+        dst.set_band_unit(1, unit)
+
+
+def _refuse_held(src, name: str, wanted: str | None, fix: str) -> None:
+    """Refuse the open raster ``src`` (``name``) if a step tagged it (``describe_band``) as
+    holding another quantity than ``wanted`` (None: elevations), naming what it holds and
+    ``fix``."""
+    held = src.tags().get(QUANTITY_TAG)
+    if held in QUANTITIES and held != wanted:
+        _, _, words, step = QUANTITIES[held]
+        raise FloodMeshError(f"{name} holds {words}, as FloodMesh's {step} step wrote it, not "
+                             f"{QUANTITIES[wanted][2] if wanted else 'elevations'}: {fix}")
 
 
 def refuse_non_elevations(src, name: str, fix: str = "give the DEM (a run's dem.tif)") -> None:
-    """Refuse the open raster ``src`` (``name``) where elevations are wanted if the slope step
-    tagged it (``describe_band``) as a slope or a LoG response: a slope gridded, sloped or
+    """Refuse the open raster ``src`` (``name``) where elevations are wanted if a step tagged it
+    (``describe_band``) as a slope, a LoG response or breakpoints: a slope gridded, sloped or
     meshed as ground gives a mesh of degrees without a word."""
-    held = src.tags().get(QUANTITY_TAG)
-    if held in QUANTITIES:
-        raise FloodMeshError(f"{name} holds {QUANTITIES[held][2]}, as FloodMesh's slope step "
-                             f"wrote it, not elevations: {fix}")
+    _refuse_held(src, name, None, fix)
 
 
 def check_quantity(path, wanted: str, fix: str) -> None:
-    """Refuse a raster that the slope step tagged (``describe_band``) as holding another
-    quantity than ``wanted``, naming what it holds and ``fix``; a raster without the tag, or
-    one GDAL cannot open (the step reading it says so), is not judged."""
+    """Refuse a raster that a step tagged (``describe_band``) as holding another quantity than
+    ``wanted``, naming what it holds and ``fix``; a raster without the tag, or one GDAL cannot
+    open (the step reading it says so), is not judged."""
     # lazy: GDAL loads only when this runs
     import rasterio
 
     try:
         with rasterio.open(require_file(path, "raster")) as src:
-            held = src.tags().get(QUANTITY_TAG)
+            _refuse_held(src, f"raster {Path(path).name}", wanted, fix)
     except rasterio.errors.RasterioIOError:
         return
-    if held in QUANTITIES and held != wanted:
-        raise FloodMeshError(
-            f"raster {Path(path).name} holds {QUANTITIES[held][2]}, as FloodMesh's slope step "
-            f"wrote it, not {QUANTITIES[wanted][2]}: {fix}")
 
 
 def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None,

@@ -46,8 +46,8 @@ def breakpoints_file(src_path, out_path, *, s_crit: float | None = None,
     """Breakpoints of a slope raster (``s_crit``) or of a LoG response (``sensitivity``) into a
     uint8 GeoTIFF (1 breakpoint, 0 not, 255 where the input is nodata), streamed block by block
     (``blocks.map_raster``; ``windows`` and ``input_dtype``, what the rules compare, as there).
-    Returns the number of breakpoints. A raster the slope step tagged as holding the other
-    quantity (``io.check_quantity``) is refused."""
+    Returns the number of breakpoints, tagged as such (``io.describe_band``). A raster a step
+    tagged as holding another quantity (``io.check_quantity``) is refused."""
     if sensitivity is None:
         check_quantity(src_path, "slope", "give its LoG sensitivity to take its breakpoints "
                        "(--sensitivity, e.g. 0.02, or LoG sensitivity in QGIS), or the slope of "
@@ -71,8 +71,8 @@ def breakpoints_file(src_path, out_path, *, s_crit: float | None = None,
         return out
 
     map_raster(src_path, out_path, with_nodata, halo=halo, dtype="uint8", crs=crs,
-               windows=windows, input_dtype=input_dtype, progress=progress,
-               cancelled=cancelled)
+               windows=windows, input_dtype=input_dtype, quantity="breakpoints",
+               progress=progress, cancelled=cancelled)
     return count[0]
 
 

@@ -306,6 +306,32 @@ def test_a_slope_raster_is_refused_where_a_dem_belongs(dem_file, tmp_path, capsy
         assert not out.exists()
 
 
+def test_breaklines_given_the_slope_and_breakpoints_swapped_is_refused(dem_file, tmp_path,
+                                                                      capsys):
+    """The breakpoints raster and the slope given the wrong way round (breaklines SLOPE --slope
+    BREAKPOINTS) traced lines along slope values of exactly 1 degree, exit 0: the breakpoints
+    step tags its raster too, and each is refused where the other belongs."""
+    from floodmesh.core.frontends.cli import main
+
+    slope, points = tmp_path / "slope.tif", tmp_path / "bp.tif"
+    slope_file(dem_file, slope)
+    breakpoints_file(slope, points, s_crit=10.0)
+    out = tmp_path / "lines.gpkg"
+    for given, says in (
+            ((slope, points, dem_file), "raster slope.tif holds a slope in degrees, as "
+             "FloodMesh's slope step wrote it, not breakpoints"),
+            ((points, points, dem_file), "raster bp.tif holds breakpoints"),
+            ((points, slope, points), "raster bp.tif holds breakpoints")):
+        breakpoints, slope_given, dem = map(str, given)
+        assert main(["breaklines", breakpoints, "--slope", slope_given, "--dem", dem,
+                     "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err, err
+        assert not out.exists()
+    assert main(["breaklines", str(points), "--slope", str(slope), "--dem", str(dem_file),
+                 "--out", str(out)]) == 0
+
+
 def test_a_file_whose_name_holds_brackets_is_one_file_not_tiles(dem_file, tmp_path, capsys):
     """An existing file named with glob characters ("slope [1].tif") is the file, not a pattern:
     it was run as DEM tiles, its error naming a tile and telling to take it out of the tiles."""
