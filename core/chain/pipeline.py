@@ -976,16 +976,14 @@ def _dem_measured(dem: Grid, seed: int) -> tuple[np.ndarray, CellIndex]:
     """The DEM's valid cells as the terrain fits' points (all of them, in a seeded order) and
     their index, which finds them from the grid (``nearest.CellIndex``, 4 B a cell, where an
     index of the points themselves took 24 B a point)."""
-    cells = _dem_cells(dem, 1.0, seed)
+    cells = _dem_cells(dem, seed)
     return _cell_points(dem, cells), CellIndex(dem.transform, dem.shape, cells)
 
 
-def _dem_cells(dem: Grid, fraction: float, seed: int) -> np.ndarray:
-    """Flat indices of a seeded random ``fraction`` of the DEM's valid cells (at least 30), in
-    the draw's order."""
+def _dem_cells(dem: Grid, seed: int) -> np.ndarray:
+    """Flat indices of all the DEM's valid cells in a seeded random order."""
     cells = np.flatnonzero(np.isfinite(dem.values))
-    n = max(int(round(fraction * cells.size)), min(cells.size, 30))
-    return cells[np.random.default_rng(seed).choice(cells.size, size=n, replace=False)]
+    return cells[np.random.default_rng(seed).choice(cells.size, size=cells.size, replace=False)]
 
 
 def _cell_points(dem: Grid, cells: np.ndarray) -> np.ndarray:

@@ -118,7 +118,7 @@ def test_cell_index_finds_the_points_the_point_index_finds_on_a_dem():
         values[rng.random(values.shape) < 0.2] = np.nan  # nodata cells hold no point
         values[:5, :9] = np.nan
         dem = Grid(values, Affine(cell, 0, x0, 0, -cell, y0), CRS.from_epsg(25832))
-        cells = _dem_cells(dem, 1.0, seed=3)
+        cells = _dem_cells(dem, seed=3)
         points = _cell_points(dem, cells)
         by_cells = CellIndex(dem.transform, dem.shape, cells)
         by_points = point_index(points)
