@@ -330,7 +330,7 @@ def _inflow(item: dict, where: str, base: Path) -> Inflow:
 def _boundary(item: dict, where: str, base: Path) -> Boundary:
     if "kind" not in item:
         raise FloodMeshError(f"{where} lacks 'kind' ({', '.join(BOUNDARY_KINDS)})")
-    sides = item.get("sides") or ()
+    sides = item.get("sides") or []
     if not isinstance(sides, (str, list)):
         raise FloodMeshError(f"{where}'s sides must be a list of sides ({', '.join(SIDES)} or "
                              f"all), got {sides!r:.60}")
