@@ -157,6 +157,19 @@ def check_max_area(value) -> float:
                      "give the largest element area the model may have")
 
 
+def check_size_field_area(value) -> float:
+    """The triangle area (m²) a flood's size field asks where it was wet (``flood
+    --size-field-area``)."""
+    return _positive(value, "size field area", "m²",
+                     "give the triangle area wanted where the flood was wet")
+
+
+def check_comparison_cell_size(value) -> float:
+    """The cell size (m) of the grid two floods are compared on (``compare --cell-size``)."""
+    return _positive(value, "comparison cell size", "metres",
+                     "give the spacing of the grid the floods are compared on (default 1)")
+
+
 def check_max_triangles(value) -> int:
     value = _number(value, "maximum number of triangles")
     if not (value >= 1 and value == int(value)):

@@ -15,10 +15,13 @@ import numpy as np
 
 from .. import io
 from ..errors import FloodMeshError
+from ..io.outputs import check_output_folder
+from ..options import check_comparison_cell_size
 from ..raster import Grid
 from .model import cell_centres
 
 EXTENT_CODES = {1: "wet on the mesh only", 2: "wet on the reference only", 3: "wet on both"}
+COMPARISON_FILES = ("comparison.json", "depth_difference.tif", "extent_difference.tif")
 
 
 def _load(folder) -> tuple[dict, dict]:
@@ -56,6 +59,9 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
     # lazy: PROJ loads only when this runs
     from pyproj import CRS
 
+    check_comparison_cell_size(cell_size)
+    if out_dir is not None:
+        check_output_folder(out_dir, [mesh_run, reference_run], COMPARISON_FILES)
     rep_a, arr_a = _load(mesh_run)
     rep_b, arr_b = _load(reference_run)
     wet = wet_depth or rep_b["scenario"]["wet_depth_m"]

@@ -7,11 +7,16 @@ from .. import io
 from ..flood.compare import compare_floods
 from ..flood.model import load_scenario, run_flood
 from ..flood.summary import time_step_summary
+from ..options import check_comparison_cell_size, check_size_field_area
 from ..steps.hydraulic_lines import flood_size_field, wet_zone
 from .console import ProgressBar, print_notes
 
 
 def cmd_flood(args):
+    if args.size_field_area is not None:
+        check_size_field_area(args.size_field_area)
+    if args.reference:
+        check_comparison_cell_size(args.cell_size)
     scenario = load_scenario(args.scenario)
     runs = [(args.mesh, Path(args.out) if not args.reference else Path(args.out) / "mesh")]
     if args.reference:
@@ -26,7 +31,7 @@ def cmd_flood(args):
             bar.close()
         print_notes(reports[-1]["notes"])
         print(_summary(reports[-1], out))
-        if args.size_field_area:
+        if args.size_field_area is not None:
             print(_write_flow_fields(out, args.size_field_area, reports[-1]))
     if args.reference:
         print(_comparison(compare_floods(runs[0][1], runs[1][1], args.out,

@@ -478,6 +478,50 @@ def test_an_output_folder_that_cannot_be_one_is_refused_before_the_flood(tmp_pat
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
 
 
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--size-field-area", "-5", "size field area must be a positive number of m², got -5"),
+    ("--size-field-area", "0", "size field area must be a positive number of m², got 0"),
+    ("--cell-size", "0", "comparison cell size must be a positive number of metres, got 0"),
+    ("--cell-size", "nan", "comparison cell size must be a number, got NaN")])
+def test_flood_options_out_of_range_are_refused_before_the_flood(tmp_path, capsys, option,
+                                                                 value, says):
+    """--size-field-area -5 wrote a size field of -5 m² after the flood (0 wrote none, without a
+    word); a comparison cell size of 0 or NaN ended in a ValueError traceback after both
+    floods. Each is one line before ANUGA runs, and nothing is written."""
+    from floodmesh.core.frontends.cli import main
+
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0 * x)
+    _write(tmp_path / "s.json", {"duration_s": 10})
+    assert main(["flood", str(tmp_path / "m.2dm"), "--scenario", str(tmp_path / "s.json"),
+                 "--out", str(tmp_path / "out"), "--crs", CRS, "--reference",
+                 str(tmp_path / "m.2dm"), option, value]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err, err
+    assert not (tmp_path / "out").exists()
+
+
+
+@needs_anuga
+@pytest.mark.parametrize("value, says", [
+    ("-1", "comparison cell size must be a positive number of metres, got -1"),
+    ("0", "comparison cell size must be a positive number of metres, got 0")])
+def test_compare_refuses_a_cell_size_out_of_range_writing_nothing(tmp_path, capsys, value,
+                                                                  says):
+    """compare --cell-size -1 said the raster was not north-up (warp it) and left its folder;
+    0 ended in a ValueError traceback."""
+    from floodmesh.core.frontends.cli import main
+
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0.1 + 0 * x, max_area=4.0)
+    run_flood(tmp_path / "m.2dm", scenario_from_dict({"duration_s": 10, "output_interval_s": 5,
+                                                      "initial_stage_m": 0.2}),
+              tmp_path / "run", crs=CRS)
+    assert main(["compare", str(tmp_path / "run"), str(tmp_path / "run"), "--out",
+                 str(tmp_path / "cmp"), "--cell-size", value]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err, err
+    assert not (tmp_path / "cmp").exists()
+
 def _write(path, data):
     path.write_text(json.dumps(data))
     return path
