@@ -82,7 +82,7 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
         "mesh_run": str(mesh_run), "reference_run": str(reference_run),
         "cell_size_m": cell_size, "wet_depth_m": wet,
         "mesh_nodes": rep_a["nodes"], "reference_nodes": rep_b["nodes"],
-        "extent_iou": float(inter.sum() / max(union.sum(), 1)),
+        "extent_iou": float(inter.sum() / union.sum()) if union.any() else None,
         "flooded_area_mesh_m2": float(wet_a.sum() * cell_size ** 2),
         "flooded_area_reference_m2": float(wet_b.sum() * cell_size ** 2),
         "max_depth_rmse_m": float(np.sqrt(np.mean(diff[union] ** 2))) if union.any() else None,

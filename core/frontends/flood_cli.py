@@ -81,9 +81,12 @@ def _share(mb: dict) -> str:
 
 
 def _comparison(c: dict) -> str:
-    lines = [f"extent IoU {c['extent_iou']:.3f}, max-depth RMSE {c['max_depth_rmse_m']:.3f} m "
-             f"(bias {c['max_depth_bias_m']:+.3f} m), CPU {c['mesh_cpu_s']:.1f} s against "
-             f"{c['reference_cpu_s']:.1f} s ({c['cpu_ratio']:.2f}x)"]
+    flood = (f"extent IoU {c['extent_iou']:.3f}, max-depth RMSE {c['max_depth_rmse_m']:.3f} m "
+             f"(bias {c['max_depth_bias_m']:+.3f} m)" if c["extent_iou"] is not None else
+             f"neither flood is deeper than {c['wet_depth_m']:g} m anywhere: no extent or depth "
+             "to compare")
+    lines = [f"{flood}, CPU {c['mesh_cpu_s']:.1f} s against {c['reference_cpu_s']:.1f} s "
+             f"({c['cpu_ratio']:.2f}x)"]
     for o in c["observations"]:
         mesh, reference = (o[f"{run}_peak_stage_m"] for run in ("mesh", "reference"))
         if mesh is not None or reference is not None:

@@ -503,6 +503,21 @@ def test_flood_options_out_of_range_are_refused_before_the_flood(tmp_path, capsy
 
 
 @needs_anuga
+def test_a_reference_run_where_neither_floods_says_so_not_a_traceback(tmp_path, capsys):
+    """Two floods that stay dry compared: the summary formatted the RMSE, None, and stopped with
+    a TypeError after both runs; comparison.json gave an extent IoU of 0, total disagreement."""
+    from floodmesh.core.frontends.cli import main
+
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0 * x, max_area=4.0)
+    _write(tmp_path / "s.json", {"duration_s": 10, "output_interval_s": 5})
+    assert main(["flood", str(tmp_path / "m.2dm"), "--scenario", str(tmp_path / "s.json"),
+                 "--out", str(tmp_path / "out"), "--crs", CRS, "--reference",
+                 str(tmp_path / "m.2dm")]) == 0
+    assert "neither flood is deeper than 0.05 m anywhere" in capsys.readouterr().out
+    comparison = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    assert comparison["extent_iou"] is None and comparison["max_depth_rmse_m"] is None
+
+@needs_anuga
 @pytest.mark.parametrize("value, says", [
     ("-1", "comparison cell size must be a positive number of metres, got -1"),
     ("0", "comparison cell size must be a positive number of metres, got 0")])
