@@ -131,8 +131,8 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
 
     With ``elevations`` (a DEM), cells no ground has are nodata too (``drop_implausible``).
     ``note`` (given for DEMs) receives what was assumed: such cells, further bands left unused,
-    elevations stored as whole numbers. ``dem`` (a step's DEM): a slope or LoG response the
-    slope step wrote is refused (``refuse_non_elevations``).
+    elevations stored as whole numbers. ``dem`` (a step's DEM): a slope, LoG response or
+    breakpoints that FloodMesh's steps wrote are refused (``refuse_non_elevations``).
     """
     # lazy: GDAL loads only when this runs
     import rasterio
@@ -165,8 +165,8 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
 
 
 def read_dem(path, *, crs=None, note=None) -> Grid:
-    """The DEM a step takes (``read_raster``), refusing a slope or LoG response the slope step
-    wrote (``refuse_non_elevations``)."""
+    """The DEM a step takes (``read_raster``), refusing a slope, LoG response or breakpoints
+    that FloodMesh's steps wrote (``refuse_non_elevations``)."""
     return read_raster(path, crs=crs, note=note, dem=True)
 
 
