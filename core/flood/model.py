@@ -32,7 +32,7 @@ import numpy as np
 from .. import io
 from ..engine.arrays import boundary_edges, edge_nodes, spatial_order
 from ..errors import Cancelled, FloodMeshError
-from ..io.outputs import check_output_folder
+from ..io.outputs import check_output_folder, staged_folder
 from ..options import RESULT_RASTERS
 from ..raster import Grid, require_metric_crs
 from ..steps.hydraulics import collinear_wall_stencils, hydraulic_checks, inradii, neighbours
@@ -44,6 +44,9 @@ BUILDING_MODES = ("raised", "holes")
 WORKER = Path(__file__).with_name("anuga_worker.py")
 FLOOD_FILES = tuple(RESULT_RASTERS.values()) + ("hydrograph.csv", "observations.csv",
                                                 "time_step.gpkg", "triangles.npz", "report.json")
+# what floodmesh flood --size-field-area writes beside them, for a second mesh: gone from the
+# folder with the flood it came from
+FLOW_FIELD_FILES = ("size_field.tif", "wet_zone.gpkg")
 SETTER_FIELDS = ("inradius_m", "share_of_steps", "checks", "max_depth_m", "max_speed_ms")
 # a mass balance's error is given as a share only of volumes above this depth over the mesh
 # (m): a thinner film is below any depth a flood reports (wet_depth_m, the worker's 1 cm
@@ -920,20 +923,11 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
         log(f"ANUGA on {len(arrays['triangles'])} triangles; estimated time step "
             f"{checks['cfl_time_step_s']:.3g} s at 1 m depth")
     result = run_anuga(prepared, python=python, progress=progress, cancelled=cancelled, log=log)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     cell = scenario.cell_size_m or default_cell_size(arrays["nodes"], arrays["triangles"])
     grids = result_grids(arrays["nodes"], arrays["triangles"], result, crs, cell)
-    for name, filename in RESULT_RASTERS.items():
-        io.write_raster(out / filename, grids[name])
-    write_table(out / "hydrograph.csv", ("time_s", "outflow_m3s"), outflow_hydrograph(result))
     observations = observation_series(scenario, result)
-    names = [name for name, _, _ in scenario.observation_points]
-    write_table(out / "observations.csv", ["time_s"] + [f"stage_{n}" for n in names]
-                + [f"depth_{n}" for n in names], observations["table"])
     depth = np.asarray(result["max_depth"])
     area = np.abs(triangle_areas(arrays["nodes"], arrays["triangles"]))
-    balance = mass_balance(result, float(area.sum()))
     steps = int(result["steps"][-1])
     report = {
         "mesh": str(mesh_path), "crs": crs.to_string(),
@@ -946,7 +940,7 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
         "cpu_s": float(result["cpu_s"]), "wall_s": float(result["wall_s"]),
         "time_steps": steps, "mean_time_step_s": scenario.duration_s / max(steps, 1),
         "time_step_set_by": time_step_setters(arrays["nodes"], arrays["triangles"], result),
-        "mass_balance": balance,
+        "mass_balance": mass_balance(result, float(area.sum())),
         "flooded_area_m2": float(area[depth > scenario.wet_depth_m].sum()),
         "max_depth_m": float(depth.max()),
         "max_speed_ms": float(np.max(result["max_speed"])),
@@ -956,14 +950,24 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
         "files": sorted(FLOOD_FILES),
     }
     setters = report["time_step_set_by"]
-    io.write_points_gpkg(out / "time_step.gpkg",
-                         np.array([[k["x"], k["y"], k["z"]] for k in setters]).reshape(-1, 3),
-                         crs, layer="time_step_set_by", attributes={
-                             "rank": list(range(1, len(setters) + 1)),
-                             **{name: [k[name] for k in setters] for name in SETTER_FIELDS}})
-    np.savez(out / "triangles.npz", nodes=arrays["nodes"], triangles=arrays["triangles"],
-             **{k: result[k] for k in ("max_depth", "max_stage", "max_speed", "arrival_s")})
-    io.write_json(out / "report.json", report)
+    names = [name for name, _, _ in scenario.observation_points]
+    # the folder is replaced as a whole (an interrupt leaves the last flood's files or these),
+    # without the last flood's files that this one does not write; the user's own stay
+    with staged_folder(out_dir, own=FLOOD_FILES + FLOW_FIELD_FILES, keep=[mesh_path]) as out:
+        for name, filename in RESULT_RASTERS.items():
+            io.write_raster(out / filename, grids[name])
+        write_table(out / "hydrograph.csv", ("time_s", "outflow_m3s"),
+                    outflow_hydrograph(result))
+        write_table(out / "observations.csv", ["time_s"] + [f"stage_{n}" for n in names]
+                    + [f"depth_{n}" for n in names], observations["table"])
+        io.write_points_gpkg(out / "time_step.gpkg",
+                             np.array([[k["x"], k["y"], k["z"]] for k in setters]).reshape(-1, 3),
+                             crs, layer="time_step_set_by", attributes={
+                                 "rank": list(range(1, len(setters) + 1)),
+                                 **{name: [k[name] for k in setters] for name in SETTER_FIELDS}})
+        np.savez(out / "triangles.npz", nodes=arrays["nodes"], triangles=arrays["triangles"],
+                 **{k: result[k] for k in ("max_depth", "max_stage", "max_speed", "arrival_s")})
+        io.write_json(out / "report.json", report)
     return report
 
 

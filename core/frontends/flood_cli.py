@@ -5,7 +5,7 @@ from pathlib import Path
 
 from .. import io
 from ..flood.compare import compare_floods
-from ..flood.model import load_scenario, run_flood
+from ..flood.model import FLOW_FIELD_FILES, load_scenario, run_flood
 from ..flood.summary import time_step_summary
 from ..options import check_comparison_cell_size, check_size_field_area
 from ..steps.hydraulic_lines import flood_size_field, wet_zone
@@ -39,12 +39,13 @@ def cmd_flood(args):
 
 
 def _write_flow_fields(out: Path, wet_area: float, report: dict) -> str:
-    """size_field.tif and wet_zone.gpkg from the run's max depth, for a second mesh."""
+    """size_field.tif and wet_zone.gpkg (``FLOW_FIELD_FILES``) from the run's max depth, for a
+    second mesh."""
     depth = io.read_raster(out / "max_depth.tif", elevations=False)
     wet = report["scenario"]["wet_depth_m"]
-    io.write_raster(out / "size_field.tif", flood_size_field(depth, wet_area=wet_area,
-                                                             wet_depth=wet))
-    write_zone(out / "wet_zone.gpkg", wet_zone(depth, wet_depth=wet), depth.crs)
+    size_field, zone = FLOW_FIELD_FILES
+    io.write_raster(out / size_field, flood_size_field(depth, wet_area=wet_area, wet_depth=wet))
+    write_zone(out / zone, wet_zone(depth, wet_depth=wet), depth.crs)
     return (f"size_field.tif ({wet_area} m² where it flooded) and wet_zone.gpkg written: "
             f"floodmesh run DEM --size-field {out}/size_field.tif --flow-zone "
             f"{out}/wet_zone.gpkg meshes for this flood")

@@ -458,6 +458,27 @@ def test_the_report_names_every_file_the_flood_writes(tmp_path):
     assert sorted(report["files"]) == sorted(p.name for p in (tmp_path / "out").iterdir())
 
 
+
+@needs_anuga
+def test_a_flood_run_again_into_its_folder_leaves_no_file_of_the_last_one(tmp_path, capsys):
+    """A second flood into the folder of one that wrote a size field (--size-field-area) left
+    that size_field.tif and wet_zone.gpkg beside its own results, for a second mesh to be
+    sized by the wrong flood; the user's own files there stay."""
+    from floodmesh.core.frontends.cli import main
+
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0.1 + 0 * x, max_area=4.0)
+    _write(tmp_path / "s.json", {"duration_s": 10, "output_interval_s": 5,
+                                 "initial_stage_m": 0.2})
+    out = tmp_path / "out"
+    flood = ["flood", str(tmp_path / "m.2dm"), "--scenario", str(tmp_path / "s.json"),
+             "--out", str(out), "--crs", CRS]
+    assert main([*flood, "--size-field-area", "4"]) == 0
+    assert {"size_field.tif", "wet_zone.gpkg"} <= {p.name for p in out.iterdir()}
+    (out / "notes.txt").write_text("the modeller's")
+    assert main(flood) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert sorted(p.name for p in out.iterdir()) == sorted([*report["files"], "notes.txt"])
+
 @pytest.mark.parametrize("out, says", [
     ("taken", "is a file, not a folder"),
     ("m.2dm", "is the input"),
