@@ -161,53 +161,68 @@ def expand_tiles(inputs, *, skip_unreadable: bool = False) -> TileSet:
     if isinstance(inputs, TileSet):
         return inputs if inputs.skip_unreadable or not skip_unreadable else TileSet(
             inputs, inputs.notes, True)
-    tiles, others = [], []
+    tiles, others = {}, []
     for item in _items(inputs):
         listed = [p.resolve() for p in _listed(item)]
-        found = {p: None for p in listed if is_tile(p)}
+        found = [p for p in listed if is_tile(p)]
         if not found and (len(listed) > 1 or Path(item).is_dir()):
             raise FloodMeshError(f"{item} holds no LAS/LAZ/XYZ point tiles or GeoTIFF DEM "
                                  "tiles: check the path")
-        tiles += found
+        for path in found:  # each tile once, with the first input that names it
+            tiles.setdefault(path, item)
         others += [p for p in listed if p not in found]
-    tiles = list(dict.fromkeys(tiles))
     if any(p.suffix.lower() in LAS_EXTENSIONS for p in tiles):
         others += [p for p in tiles if p.suffix.lower() in XYZ_EXTENSIONS]
-        tiles = [p for p in tiles if p.suffix.lower() not in XYZ_EXTENSIONS]
+        tiles = {p: item for p, item in tiles.items() if p.suffix.lower() not in XYZ_EXTENSIONS}
     if not tiles:
         raise FloodMeshError(f"none of {', '.join(_items(inputs))} is a LAS/LAZ/XYZ point tile "
                              "or GeoTIFF DEM tile: check the paths")
-    taken = set(tiles)
-    others = sorted(p.name for p in dict.fromkeys(others) if p not in taken)
+    others = sorted(p.name for p in dict.fromkeys(others) if p not in tiles)
     if len({tile_kind(p) for p in tiles}) > 1:
-        raise FloodMeshError(_mixed_kinds(tiles, inputs))
+        raise FloodMeshError(_mixed_kinds(tiles))
     notes = [f"{len(others)} files beside the tiles are not tiles (LAS/LAZ, GeoTIFF or XYZ text "
              f"of x, y, z) and were left out: {_listing(others)}"] if others else []
-    return TileSet(tiles, notes, skip_unreadable)
+    return TileSet(list(tiles), notes, skip_unreadable)
 
 
-def _mixed_kinds(tiles: list[Path], inputs) -> str:
-    """The error for point tiles beside DEM rasters: the fewer kind named (a DEM or overview
-    beside LAS tiles, or LAS files beside DEM tiles), and a pattern that takes the others."""
+def _mixed_kinds(tiles: dict) -> str:
+    """The error for point tiles beside DEM rasters (``tiles``: each tile and the input, as
+    given, that named it): the fewer kind named (a DEM or overview beside LAS tiles, or LAS
+    files beside DEM tiles), and the fix for where they came from: those a folder or pattern
+    took, moved out of its folder or a pattern that takes the others; those listed by name,
+    taken out of the list."""
     rasters = [p for p in tiles if tile_kind(p) == "dem"]
     points = [p for p in tiles if tile_kind(p) == "points"]
     if len(rasters) <= len(points):
         stray, kept, what, others = rasters, points, "DEM raster", "point tiles"
     else:
         stray, kept, what, others = points, rasters, "point file", "DEM tiles"
-    items = _items(inputs)
-    folder = items[0] if len(items) == 1 and Path(items[0]).is_dir() else str(kept[0].parent)
-    suffixes = [p.suffix for p in kept]
-    pattern = Path(folder) / f"*{max(set(suffixes), key=suffixes.count)}"
     s = "s" if len(stray) > 1 else ""
-    mixed = (f"the tiles mix point files and DEM rasters: {len(stray)} {what}{s} "
-             f"({first_names([p.name for p in stray])}) beside {len(kept)} {others}: ")
-    if not any(Path(i).is_dir() or _is_pattern(i) for i in items):
-        # files listed one by one: no folder to move them out of
-        return (f"{mixed}take {'them' if s else 'it'} out of the list of tiles (keep "
-                f"{first_names([p.name for p in kept])})")
-    return (f"{mixed}move {'them' if s else 'it'} out of {folder}, or give the {others} as a "
-            f"quoted pattern, e.g. '{pattern}'")
+    fixes = []
+    by_name = [p for p in stray if not _takes_several(tiles[p])]
+    if by_name:
+        fixes.append(f"take {_them(by_name)} out of the list of tiles (keep "
+                     f"{first_names([p.name for p in kept])})")
+    found = [p for p in stray if _takes_several(tiles[p])]
+    for item in dict.fromkeys(tiles[p] for p in found):
+        folder = item if Path(item).is_dir() else os.path.dirname(item) or "."
+        folder = folder.rstrip("/") or folder
+        suffixes = [p.suffix for p in kept]
+        pattern = os.path.join(folder, f"*{max(set(suffixes), key=suffixes.count)}")
+        fixes.append(f"move {_them([p for p in found if tiles[p] == item])} out of {folder}, "
+                     f"or give the {others} as a quoted pattern, e.g. '{pattern}'")
+    return (f"the tiles mix point files and DEM rasters: {len(stray)} {what}{s} "
+            f"({first_names([p.name for p in stray])}) beside {len(kept)} {others}: "
+            + "; ".join(fixes))
+
+
+def _takes_several(item: str) -> bool:
+    """Whether an input is a folder or a glob pattern, not a file named one by one."""
+    return Path(item).is_dir() or _is_pattern(item)
+
+
+def _them(paths: list) -> str:
+    return "them" if len(paths) > 1 else "it"
 
 
 def tile_kind(path: Path) -> str:

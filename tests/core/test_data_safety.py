@@ -132,6 +132,44 @@ def test_rasters_beside_point_tiles_are_named_with_the_fix(tmp_path, capsys, mon
     assert main(["grid", "tiles/*.las", "--cell-size", "1", "--out", "dem.tif"]) == 0
 
 
+@pytest.mark.parametrize("given, fix", [
+    (["tiles"], "move it out of tiles, or give the point tiles as a quoted pattern, e.g. "
+                "'tiles/*.las'"),
+    (["tiles/*"], "move it out of tiles, or give the point tiles as a quoted pattern, e.g. "
+                  "'tiles/*.las'"),
+    (["tiles/T0.las", "tiles/T1.las", "tiles/dem.tif"],
+     "take it out of the list of tiles (keep T0.las, T1.las)"),
+    (["tiles/*.las", "tiles/dem.tif"], "take it out of the list of tiles (keep T0.las, T1.las)"),
+    (["dem_tiles"], "move it out of dem_tiles, or give the DEM tiles as a quoted pattern, e.g. "
+                    "'dem_tiles/*.tif'"),
+    (["dem_tiles/*"], "move it out of dem_tiles, or give the DEM tiles as a quoted pattern, "
+                      "e.g. 'dem_tiles/*.tif'"),
+    (["dem_tiles/*.tif", "dem_tiles/check.csv"],
+     "take it out of the list of tiles (keep east.tif, west.tif)")])
+def test_a_mix_of_kinds_is_named_with_the_fix_for_how_the_tiles_were_given(
+        tmp_path, capsys, monkeypatch, given, fix):
+    """A DEM beside LAS tiles, or a CSV of points beside DEM tiles, is named the same way whether
+    the tiles come as a folder, a pattern or a list, with the fix that fits how the odd file
+    came in: moved out of the folder a folder or pattern reads (spelled as given), taken out of
+    the list where it was listed by name (moving it would not help)."""
+    monkeypatch.chdir(tmp_path)
+    _las_tiles(Path("tiles"))
+    write_tif(Path("tiles") / "dem.tif", slope_dem())
+    Path("dem_tiles").mkdir()
+    write_tif(Path("dem_tiles") / "west.tif", slope_dem())
+    write_tif(Path("dem_tiles") / "east.tif", slope_dem(),
+              transform=Affine(1.0, 0.0, ORIGIN[0] + 60, 0.0, -1.0, ORIGIN[1] + 60))
+    np.savetxt(Path("dem_tiles") / "check.csv", plane_xyz()[:50], delimiter=",")
+    odd = ("1 DEM raster (dem.tif) beside 2 point tiles" if given[0].startswith("tiles")
+           else "1 point file (check.csv) beside 2 DEM tiles")
+    for command in (["run", *given, "--out", "out"],
+                    ["grid", *given, "--cell-size", "1", "--out", "dem.tif"]):
+        assert main(command) == 2, command
+        err = capsys.readouterr().err.strip().splitlines()[-1]
+        assert err == f"floodmesh: error: the tiles mix point files and DEM rasters: {odd}: {fix}"
+        assert not Path("out").exists() and not Path("dem.tif").exists()
+
+
 def test_a_run_into_its_own_tile_folder_is_refused_before_any_work(tmp_path, capsys):
     """Outputs written among the tiles would be read as tiles by the next run on the folder (a
     DEM, slope and breakpoints beside LAS tiles; silently among DEM tiles): refused up front,
