@@ -57,10 +57,12 @@ def nearest_line(xy: np.ndarray, lines: list) -> tuple[np.ndarray, np.ndarray]:
 def z_along_lines(xy: np.ndarray, lines: list, *, within: float):
     """(horizontal distance in m from each point of ``xy`` (n, 2+) to the nearest of ``lines``
     ((k, 3) arrays; fewer than 2 vertices: left out), indices of the points within ``within`` m
-    of it, their z along it): a line's z interpolated linearly along its segment there, where
-    it has one (a modeller's 2-D line, read with NaN z, gives none). Where two lines are
-    equally near (a crossing, a shared vertex), the one listed first. The one rule for a node on
-    a line, in the mesh and in the terrain fits."""
+    of a line with z, their z along it): the nearest such line's z interpolated linearly along
+    its segment there. A line without z (a modeller's 2-D line, read with NaN z) gives none,
+    nor hides one that has: a node at a 2-D line's crossing with a 3-D line takes the 3-D
+    line's z, whichever is listed first. Where two lines with z are equally near (a crossing, a
+    shared vertex), the one listed first. The one rule for a node on a line, in the mesh and in
+    the terrain fits."""
     # lazy: GEOS loads only when this runs
     import shapely
 
@@ -68,12 +70,17 @@ def z_along_lines(xy: np.ndarray, lines: list, *, within: float):
     if not usable or not len(xy):
         return np.full(len(xy), np.inf), np.zeros(0, np.int64), np.zeros(0)
     nearest, distance = nearest_line(xy, usable)
-    pick = np.flatnonzero(distance <= within)
-    geoms = np.array([shapely.LineString(c[:, :3] if c.shape[1] >= 3 else c[:, :2])
-                      for c in usable], dtype=object)
-    at = geoms[nearest[pick]]
+    with_z = [c for c in usable if c.shape[1] >= 3 and np.isfinite(c[:, 2]).any()]
+    if not with_z:
+        return distance, np.zeros(0, np.int64), np.zeros(0)
+    if len(with_z) < len(usable):  # the nearest line that has z
+        nearest, near_z = nearest_line(xy, with_z)
+    else:
+        near_z = distance
+    pick = np.flatnonzero(near_z <= within)
+    at = np.array([shapely.LineString(c[:, :3]) for c in with_z], dtype=object)[nearest[pick]]
     on = np.asarray(xy, float)[pick, :2]
-    # NaN where the line has no z there: a 2-D line's get_z, or a vertex read without z
+    # NaN where the line has no z there: a vertex read without z
     z = shapely.get_z(shapely.line_interpolate_point(at, shapely.line_locate_point(
         at, shapely.points(on))))
     known = np.isfinite(z)

@@ -361,3 +361,41 @@ def test_an_own_3d_line_crossing_detected_lines_keeps_its_height_in_run(tmp_path
         along = shapely.get_z(shapely.line_interpolate_point(
             line, shapely.line_locate_point(line, points[on])))
         assert np.abs(nodes[on, 2] - along).max() < 1e-3, (name, nodes[on][:, 2] - along)
+
+
+def test_a_2d_own_line_listed_first_leaves_a_3d_line_its_height_at_their_crossing(tmp_path):
+    """From the user's side: one layer of own lines (a GeoPackage whose features may have Z or
+    not, as QGIS saves a layer of mixed lines) holding a road digitised without Z and a bridge
+    deck's 3-D line 8 m above the bank DEM, crossing it between both lines' vertices. With the
+    road listed first, the crossing's node took the DEM's z (the road's) in the mesh step and
+    the run: a dip of 8 m in the deck. It takes the deck's z in either order, in every step."""
+    import numpy as np
+
+    from floodmesh.core import io
+
+    from ..bad_inputs import ORIGIN, slope_dem, write_tif
+
+    dem = write_tif(tmp_path / "dem.tif", slope_dem())
+    x0, y0 = ORIGIN
+    road = [[x0 + 5, y0 + 30], [x0 + 33, y0 + 30]]
+    deck = [[x0 + 20, y0 + 5, 18.0], [x0 + 20, y0 + 55, 20.0]]
+    crossing = (x0 + 20, y0 + 30, 19.0)
+    schema = {"geometry": "Unknown", "properties": {"name": "str"}}
+    for order in ((road, deck), (deck, road)):
+        own = tmp_path / f"own{len(order[0][0])}.gpkg"
+        with fiona.open(own, "w", driver="GPKG", schema=schema,
+                        crs_wkt=CRS.from_epsg(25832).to_wkt()) as dst:
+            for coords in order:
+                dst.write({"geometry": {"type": "LineString", "coordinates": coords},
+                           "properties": {"name": str(len(coords[0]))}})
+        for step, out, mesh in (("mesh", ["--out", tmp_path / "mesh.2dm"], "mesh.2dm"),
+                                ("run", ["--out", tmp_path / "run"], "run/mesh.2dm")):
+            done = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", step,
+                                   str(dem), "--lines", str(own), "--max-area", "4",
+                                   *map(str, out)], capture_output=True, text=True, timeout=600)
+            assert done.returncode == 0, (step, done.stderr[-3000:])
+            nodes, _ = io.read_mesh_2dm(tmp_path / mesh)
+            near = np.hypot(nodes[:, 0] - crossing[0], nodes[:, 1] - crossing[1])
+            assert near.min() < 1e-3, (step, near.min())
+            assert abs(nodes[near.argmin(), 2] - crossing[2]) < 1e-3, (
+                step, len(order[0][0]), nodes[near.argmin()])
