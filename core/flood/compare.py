@@ -3,7 +3,8 @@ one common grid by what a modeller reads from a flood map.
 
 Figures: flood-extent IoU (depth above the wet depth, 5 cm), max-depth RMSE and bias (mesh −
 reference, over cells wet in either), arrival-time differences (cells wet in both), peak stage
-at the observation points, and simulation cost. Maps: the depth difference and where the
+and depth at the observation points (a point dry in one flood: where it got wet, and its depth
+difference with dry as 0 m), and simulation cost. Maps: the depth difference and where the
 extents disagree.
 """
 from __future__ import annotations
@@ -22,6 +23,8 @@ from .model import cell_centres
 
 EXTENT_CODES = {1: "wet on the mesh only", 2: "wet on the reference only", 3: "wet on both"}
 COMPARISON_FILES = ("comparison.json", "depth_difference.tif", "extent_difference.tif")
+WET_AT = {(True, True): "both", (True, False): "mesh only", (False, True): "reference only",
+          (False, False): "neither"}
 
 
 def _load(folder) -> tuple[dict, dict]:
@@ -48,6 +51,19 @@ def _sample(arrays: dict, grid_xy: np.ndarray) -> dict:
         values[inside] = arrays[name][tri[inside]]
         out[name] = values
     return out
+
+
+def _observed(mesh: dict, reference: dict) -> dict:
+    """One observation point in both floods (their reports' peaks): peak stages (m; None where
+    dry) and their difference (mesh − reference; None unless wet in both), peak depths (m; 0
+    where dry, under 1 mm) and their difference, and where it got wet (``WET_AT``)."""
+    stages = mesh["peak_stage_m"], reference["peak_stage_m"]
+    return {"name": mesh["name"], "wet": WET_AT[stages[0] is not None, stages[1] is not None],
+            "mesh_peak_stage_m": stages[0], "reference_peak_stage_m": stages[1],
+            "difference_m": None if None in stages else stages[0] - stages[1],
+            "mesh_peak_depth_m": mesh["peak_depth_m"],
+            "reference_peak_depth_m": reference["peak_depth_m"],
+            "peak_depth_difference_m": mesh["peak_depth_m"] - reference["peak_depth_m"]}
 
 
 def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 1.0,
@@ -94,12 +110,8 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
         "cpu_ratio": rep_a["cpu_s"] / max(rep_b["cpu_s"], 1e-9),
         "mesh_mean_time_step_s": rep_a["mean_time_step_s"],
         "reference_mean_time_step_s": rep_b["mean_time_step_s"],
-        "observations": [
-            {"name": oa["name"], "mesh_peak_stage_m": oa["peak_stage_m"],
-             "reference_peak_stage_m": ob["peak_stage_m"],
-             "difference_m": (oa["peak_stage_m"] - ob["peak_stage_m"])
-             if oa["peak_stage_m"] is not None and ob["peak_stage_m"] is not None else None}
-            for oa, ob in zip(rep_a["observations"], rep_b["observations"])],
+        "observations": [_observed(oa, ob)
+                         for oa, ob in zip(rep_a["observations"], rep_b["observations"])],
     }
     if out_dir is not None:
         out = Path(out_dir)

@@ -91,8 +91,10 @@ def _comparison(c: dict) -> str:
     for o in c["observations"]:
         mesh, reference = (o[f"{run}_peak_stage_m"] for run in ("mesh", "reference"))
         if mesh is not None or reference is not None:
+            only = "" if o["wet"] == "both" else f", wet on the {o['wet']}"
             lines.append(f"  {o['name']}: peak stage {_stage(mesh)}, reference "
-                         f"{_stage(reference)}")
+                         f"{_stage(reference)}; peak depth difference "
+                         f"{o['peak_depth_difference_m']:+.2f} m{only}")
     return "\n".join(lines)
 
 

@@ -181,6 +181,39 @@ def test_flood_with_a_reference_compares_the_two_meshes(tmp_path, capsys):
 
 
 @needs_anuga
+def test_compare_says_where_a_point_is_wet_in_one_flood_only(tmp_path, capsys):
+    """Two floods on one channel (100 × 20 m, slope 0.02): 2 m³/s in at its top, and the same in
+    just above its outflow, for 60 s. The point at 30 m is wet in the first only, the one at
+    95 m in the second only; the comparison gave both a null difference and the command no
+    figure. It says where each got wet and its peak depth difference, dry taken as 0 m deep."""
+    from floodmesh.core.frontends.cli import main
+
+    rectangle_mesh(tmp_path / "m.2dm", 100, 20, lambda x, y: 0.02 * (100 - x), max_area=4)
+    for name, x in (("top", 1), ("foot", 90)):
+        _write(tmp_path / f"{name}.json", {
+            "duration_s": 60, "output_interval_s": 5, "manning": 0.03,
+            "inflows": [{"line": local([[x, 0.5], [x, 19.5]]), "discharge_m3s": 2.0}],
+            "boundaries": [{"kind": "outflow", "sides": ["east"]}],
+            "observation_points": [{"name": "mid", "x": X0 + 30, "y": Y0 + 10},
+                                   {"name": "low", "x": X0 + 95, "y": Y0 + 10}]})
+        assert main(["flood", str(tmp_path / "m.2dm"), "--scenario",
+                     str(tmp_path / f"{name}.json"), "--out", str(tmp_path / name),
+                     "--crs", CRS]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(tmp_path / "top"), str(tmp_path / "foot"), "--out",
+                 str(tmp_path / "cmp")]) == 0
+    printed = capsys.readouterr().out
+    mid, low = json.loads((tmp_path / "cmp" / "comparison.json").read_text())["observations"]
+    top = json.loads((tmp_path / "top" / "report.json").read_text())["observations"][0]
+    assert mid["wet"] == "mesh only" and low["wet"] == "reference only"
+    assert mid["reference_peak_stage_m"] is None and mid["difference_m"] is None
+    assert mid["reference_peak_depth_m"] == low["mesh_peak_depth_m"] == 0
+    assert mid["peak_depth_difference_m"] == mid["mesh_peak_depth_m"] == top["peak_depth_m"] > 0
+    assert low["peak_depth_difference_m"] == -low["reference_peak_depth_m"] < 0
+    assert (f"mid: peak stage {mid['mesh_peak_stage_m']:.2f} m, reference dry; peak depth "
+            f"difference +{top['peak_depth_m']:.2f} m, wet on the mesh only") in printed, printed
+
+@needs_anuga
 def test_the_report_names_the_wet_sliver_that_sets_the_time_step_not_the_smallest_dry_one(
         tmp_path, capsys):
     """A channel (100 × 20 m, slope 0.02) beside a dry bank 2 m higher: a 0.3 m segment in the
