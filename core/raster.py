@@ -390,14 +390,36 @@ def require_numbers(values, what: str, holding: str) -> None:
                              f"{type(values).__name__}{of}: give np.asarray(values, float)")
 
 
-# What a grid of the slope or breakpoints step holds (``Grid.quantity``; in a file, the
+# What a grid or raster FloodMesh makes holds (``Grid.quantity``; in a file, the
 # FLOODMESH_QUANTITY tag that ``io.write_raster`` writes): (description, unit, what it is in
-# words, the step that makes it). A grid without it holds elevations, or what the step given it
-# is told
-QUANTITIES = {"slope": ("slope", "degree", "a slope in degrees", "slope"),
-              "log": ("Laplacian-of-Gaussian response", "m",
-                      "a Laplacian-of-Gaussian response in metres", "slope"),
-              "breakpoints": ("breakpoints (1), not (0)", "", "breakpoints", "breakpoints")}
+# words, what made it). A grid without it holds elevations, or what the step given it is told
+ELEVATION = "elevation"
+QUANTITIES = {
+    ELEVATION: ("elevation", "m", "elevations in metres", "FloodMesh's gridding"),
+    "slope": ("slope", "degree", "a slope in degrees", "FloodMesh's slope step"),
+    "log": ("Laplacian-of-Gaussian response", "m", "a Laplacian-of-Gaussian response in metres",
+            "FloodMesh's slope step"),
+    "breakpoints": ("breakpoints", "", "breakpoints (1) and other cells (0)",
+                    "FloodMesh's breakpoint step"),
+    "max_depth": ("maximum depth", "m", "a flood's maximum depth in metres", "FloodMesh's flood"),
+    "max_stage": ("maximum water level", "m", "a flood's maximum water level in metres",
+                  "FloodMesh's flood"),
+    "max_speed": ("maximum speed", "m/s", "a flood's maximum speed in m/s", "FloodMesh's flood"),
+    "arrival_s": ("arrival time", "s", "a flood's arrival times in seconds", "FloodMesh's flood"),
+    "size_field": ("maximum triangle area", "m2", "a size field of triangle areas in m²",
+                   "FloodMesh's flood"),
+    "depth_difference": ("maximum depth difference", "m",
+                         "two floods' maximum depth difference in metres",
+                         "FloodMesh's flood comparison"),
+    "extent_difference": ("extent difference", "", "two floods' extent difference codes",
+                          "FloodMesh's flood comparison")}
+
+
+def holds_instead(name: str, held: str, wanted: str) -> str:
+    """``name`` holds what FloodMesh marked as ``held`` (a key of ``QUANTITIES``), not
+    ``wanted`` (in words)."""
+    return (f"{name} holds {QUANTITIES[held][2]}, as {QUANTITIES[held][3]} wrote it, not "
+            f"{wanted}")
 
 
 @dataclass(frozen=True)
@@ -563,12 +585,10 @@ def step_grid(grid, what: str, holds: str | None = None,
                              "Grid(values, transform, crs), as grid_points returns")
     if not grid.values.size:
         raise FloodMeshError(f"{what} has no cells (shape {grid.shape}): give a grid with data")
-    held = grid.quantity
+    held = None if grid.quantity == ELEVATION else grid.quantity
     if held != holds and held is not None:
         wanted = QUANTITIES[holds][2] if holds in QUANTITIES else holds or "elevations"
-        _, _, words, step = QUANTITIES[held]
-        raise FloodMeshError(f"{what} holds {words}, as FloodMesh's {step} step made it, not "
-                             f"{wanted}: {fix}")
+        raise FloodMeshError(f"{holds_instead(what, held, wanted)}: {fix}")
     metric_crs_at(grid.crs, grid.bounds, what, "raster")
 
 

@@ -92,7 +92,7 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
             read = f" from {tiles.n_tiles} tiles ({tiles.n_points:,} points)"
         dem = grid_points_linear(gridding, cell_size, max_gap=max_gap, progress=progress,
                                  cancelled=cancelled)
-        io.write_raster(output, dem)
+        io.write_raster(output, dem, quantity=io.ELEVATION)
         written = (f"DEM {dem.shape[1]} x {dem.shape[0]} cells of {dem.cell_size} m{read} "
                    f"written to {output}")
     result = {"OUTPUT": str(output), "crs": points_crs.to_wkt()}

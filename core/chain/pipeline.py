@@ -528,7 +528,7 @@ def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, re
     """The run's files into ``out`` (``OUTPUT_FILES`` but the report's two and the pictures);
     returns the solver exports written; the pictures are drawn apart (``write_report_pngs``)."""
     dem, holdout = front.dem, front.holdout
-    io.write_raster(out / "dem.tif", dem)
+    io.write_raster(out / "dem.tif", dem, quantity=io.ELEVATION)
     if front.files:
         write_front_rasters(front.files, out)
     else:

@@ -45,13 +45,13 @@ from affine import Affine
 from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
-from ..io import (GROUND_CLASS, atomic_output, classes_kept, drop_implausible, file_format,
-                  las_classes, las_crs, las_fields_read, las_xyz, read_band, read_las, read_xyz,
-                  refuse_non_elevations)
+from ..io import (ELEVATION, GROUND_CLASS, NAMED, atomic_output, classes_kept, describe_band,
+                  drop_implausible, file_format, held_quantity, las_classes, las_crs,
+                  las_fields_read, las_xyz, read_band, read_las, read_xyz)
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_points
-from ..raster import (Grid, check_scale, check_transform, chosen_crs, corners_and_centre,
+from ..raster import (QUANTITIES, Grid, check_scale, check_transform, chosen_crs, corners_and_centre,
                       require_metric_crs, same_place)
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
@@ -1244,6 +1244,8 @@ def _dem_writer(path, rows: int, cols: int, transform, crs: CRS, dtype: str = "f
                    blockxsize=256, blockysize=256, BIGTIFF="IF_SAFER",
                    **({"compress": "deflate"} if dtype == "float32" else {}))
     with atomic_output(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
+        describe_band(dst, ELEVATION)
+
         def write(r0, c0, values):
             out = np.where(np.isfinite(values), values, nodata).astype(dtype)
             dst.write(out, 1, window=Window(c0, r0, out.shape[1], out.shape[0]))
@@ -1289,6 +1291,26 @@ def write_front_rasters(files: dict, out) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # DEM tiles
+def _refuse_non_elevations(paths: list, sources: list) -> None:
+    """Refuse DEM tiles (``paths``, open as ``sources``) that hold no elevations: rasters
+    FloodMesh tagged as a slope, breakpoints or a flood's maps (``io.describe_band``), or,
+    untagged, named as it names them (``io.NAMED``: an earlier run's, written before it tagged
+    them), all named in one message."""
+    tagged, named = [], []
+    for path, src in zip(paths, sources):
+        held, name = held_quantity(src), path.name
+        if held is None and name.lower() in NAMED:
+            named.append(f"tile {name} is named as FloodMesh names "
+                         f"{QUANTITIES[NAMED[name.lower()]][2]}, an earlier run's output")
+        elif held not in (None, ELEVATION):
+            tagged.append(holds_instead(f"tile {name}", held, "elevations"))
+    if tagged or named:
+        raise FloodMeshError(
+            f"{'; '.join(tagged + named)}: take {'them' if len(tagged + named) > 1 else 'it'} "
+            "out of the DEM tiles (a run's outputs go into a folder beside them)"
+            + (", or rename a tile of elevations so named" if named else ""))
+
+
 def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
     """Several GeoTIFF DEM tiles (a folder, glob or list) as one Grid, after checking each: one
     CRS in metres (``crs`` replaces theirs, which ``note`` hears of) true to scale there, the
@@ -1304,14 +1326,15 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
     first, sources, replaced = None, [], []
     with contextlib.ExitStack() as stack:
         for path in paths:
-            name = path.name
             try:
-                src = stack.enter_context(rasterio.open(path))
+                sources.append(stack.enter_context(rasterio.open(path)))
             except rasterio.errors.RasterioIOError as exc:
-                raise FloodMeshError(f"tile {name} is not a readable raster ({exc}): replace it "
-                                     "or leave it out") from None
+                raise FloodMeshError(f"tile {path.name} is not a readable raster ({exc}): "
+                                     "replace it or leave it out") from None
+        _refuse_non_elevations(paths, sources)
+        for path, src in zip(paths, sources):
+            name = path.name
             check_transform(src.transform, f"tile {name}")
-            refuse_non_elevations(src, f"tile {name}", "take it out of the DEM tiles")
             own = src.crs.to_wkt() if src.crs else None
             tile_crs = require_metric_crs(chosen_crs(crs, own, f"tile {name}", replaced.append),
                                           f"tile {name}", kind="raster")
@@ -1331,7 +1354,6 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
                         f"tile {name} has cells of {t.a:g} m at ({t.c:g}, {t.f:g}), not on the "
                         f"grid of tile {first[0]} ({t0.a:g} m cells): resample it onto that "
                         f"grid first (gdalwarp -tr {t0.a:g} {t0.a:g} -tap IN OUT)")
-            sources.append(src)
         xmin = min(s.bounds.left for s in sources)
         xmax = max(s.bounds.right for s in sources)
         ymin = min(s.bounds.bottom for s in sources)

@@ -120,8 +120,8 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
         depth = np.where(both & union, diff, np.where(both, 0.0, np.nan)).reshape(rows, cols)
         code = (wet_a.astype(np.uint8) + 2 * wet_b.astype(np.uint8)).reshape(rows, cols)
         io.write_raster(out / "depth_difference.tif", Grid(depth.astype(np.float32), transform,
-                                                           grid_crs))
+                                                           grid_crs), quantity="depth_difference")
         io.write_raster(out / "extent_difference.tif", Grid(code, transform, grid_crs),
-                        valid=both.reshape(rows, cols))
+                        valid=both.reshape(rows, cols), quantity="extent_difference")
         io.write_json(out / "comparison.json", {**figures, "extent_codes": EXTENT_CODES})
     return figures

@@ -955,7 +955,7 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
     # without the last flood's files that this one does not write; the user's own stay
     with staged_folder(out_dir, own=FLOOD_FILES + FLOW_FIELD_FILES, keep=[mesh_path]) as out:
         for name, filename in RESULT_RASTERS.items():
-            io.write_raster(out / filename, grids[name])
+            io.write_raster(out / filename, grids[name], quantity=name)
         write_table(out / "hydrograph.csv", ("time_s", "outflow_m3s"),
                     outflow_hydrograph(result))
         write_table(out / "observations.csv", ["time_s"] + [f"stage_{n}" for n in names]

@@ -44,7 +44,8 @@ def _write_flow_fields(out: Path, wet_area: float, report: dict) -> str:
     depth = io.read_raster(out / "max_depth.tif", elevations=False)
     wet = report["scenario"]["wet_depth_m"]
     size_field, zone = FLOW_FIELD_FILES
-    io.write_raster(out / size_field, flood_size_field(depth, wet_area=wet_area, wet_depth=wet))
+    io.write_raster(out / size_field, flood_size_field(depth, wet_area=wet_area, wet_depth=wet),
+                    quantity="size_field")
     write_zone(out / zone, wet_zone(depth, wet_depth=wet), depth.crs)
     return (f"size_field.tif ({wet_area} m² where it flooded) and wet_zone.gpkg written: "
             f"floodmesh run DEM --size-field {out}/size_field.tif --flow-zone "

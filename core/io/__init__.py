@@ -16,10 +16,11 @@ from .outputs import atomic_output, jsonable, require_file, write_json
 from .points import (GROUND_CLASS, classes_kept, file_format, las_classes, las_crs,
                      las_fields_read, las_xyz, point_file_name, read_las, read_point_file,
                      read_points, read_xyz, write_points_las)
-from .rasters import (INTEGER_COMPRESSION, RASTER_EXTENSIONS, TILE, check_quantity, dem_file,
-                      describe_band, drop_implausible, implausible_note, no_valid_cells,
-                      nodata_range, raster_crs, raster_crs_wkt, raster_profile, read_band,
-                      read_dem, read_input, read_raster, refuse_non_elevations, write_raster)
+from .rasters import (ELEVATION, INTEGER_COMPRESSION, NAMED, RASTER_EXTENSIONS, TILE,
+                      check_quantity, dem_file, describe_band, drop_implausible, held_quantity,
+                      implausible_note, no_valid_cells, nodata_range, raster_crs, raster_crs_wkt,
+                      raster_profile, read_band, read_dem, read_input, read_raster,
+                      refuse_non_elevations, write_raster)
 from .vectors import (read_boundary, read_breaklines, read_lines_gpkg, read_own_lines,
                       read_points_vector, read_regions, vector_crs, vector_path,
                       write_breaklines, write_gpkg, write_lines_gpkg, write_points_gpkg,
@@ -31,10 +32,10 @@ __all__ = [
     "las_xyz", "point_file_name", "read_las", "read_point_file", "read_points", "read_xyz",
     "write_points_las",
     # rasters
-    "INTEGER_COMPRESSION", "RASTER_EXTENSIONS", "TILE", "check_quantity", "dem_file",
-    "describe_band", "drop_implausible", "implausible_note", "no_valid_cells", "nodata_range",
-    "raster_crs", "raster_crs_wkt", "raster_profile", "read_band", "read_input", "read_raster",
-    "read_dem", "refuse_non_elevations", "write_raster",
+    "ELEVATION", "INTEGER_COMPRESSION", "NAMED", "RASTER_EXTENSIONS", "TILE", "check_quantity",
+    "dem_file", "describe_band", "drop_implausible", "held_quantity", "implausible_note",
+    "no_valid_cells", "nodata_range", "raster_crs", "raster_crs_wkt", "raster_profile",
+    "read_band", "read_input", "read_raster", "read_dem", "refuse_non_elevations", "write_raster",
     # vectors
     "read_boundary", "read_breaklines", "read_lines_gpkg", "read_own_lines",
     "read_points_vector", "read_regions",

@@ -12,8 +12,8 @@ import numpy as np
 from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import is_point_source
-from ..raster import (METRE_NAMES, QUANTITIES, SCALE_TOLERANCE, Grid, check_transform,
-                      chosen_crs, drop_implausible, implausible_note, metric_crs_at)
+from ..raster import (ELEVATION, METRE_NAMES, QUANTITIES, SCALE_TOLERANCE, Grid, check_transform,
+                      chosen_crs, drop_implausible, holds_instead, implausible_note, metric_crs_at)
 from .outputs import atomic_output, require_file
 from .points import read_points
 
@@ -161,7 +161,8 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
              "DEM with floating-point elevations (float32) where there is one")
     if not np.isfinite(values).any():
         raise no_valid_cells(path)
-    return Grid(values, transform, crs, held if held in QUANTITIES else None)
+    return Grid(values, transform, crs, held if held in QUANTITIES and held != ELEVATION
+                else None)
 
 
 def read_dem(path, *, crs=None, note=None) -> Grid:
@@ -202,11 +203,17 @@ def raster_profile(shape, transform, crs, dtype, nodata) -> dict:
     return profile
 
 
-# What a raster of the slope or breakpoints step holds (``raster.QUANTITIES``), as a GeoTIFF
-# metadata item that the steps taking it read back (``check_quantity``), with the band's
+# What a raster FloodMesh writes holds (``raster.QUANTITIES``), as a GeoTIFF metadata item that
+# the steps taking it read back (``check_quantity``, ``refuse_non_elevations``), with the band's
 # description and unit, which QGIS and gdalinfo show. A raster without it, another program's
 # (gdaldem slope), is taken as the step is told
 QUANTITY_TAG = "FLOODMESH_QUANTITY"
+# the names FloodMesh gives its rasters other than a DEM, for those it wrote before it tagged them
+NAMED = {"slope.tif": "slope", "breakpoints.tif": "breakpoints", "max_depth.tif": "max_depth",
+         "max_water_level.tif": "max_stage", "max_speed.tif": "max_speed",
+         "arrival_time.tif": "arrival_s", "size_field.tif": "size_field",
+         "depth_difference.tif": "depth_difference",
+         "extent_difference.tif": "extent_difference"}
 
 
 def describe_band(dst, quantity: str | None) -> None:
@@ -221,36 +228,36 @@ def describe_band(dst, quantity: str | None) -> None:
         dst.set_band_unit(1, unit)
 
 
-def _refuse_held(src, name: str, wanted: str | None, fix: str) -> None:
-    """Refuse the open raster ``src`` (``name``) if a step tagged it (``describe_band``) as
-    holding another quantity than ``wanted`` (None: elevations), naming what it holds and
-    ``fix``."""
+def held_quantity(src) -> str | None:
+    """What the open raster ``src`` holds by FloodMesh's tag (``describe_band``), or None."""
     held = src.tags().get(QUANTITY_TAG)
-    if held in QUANTITIES and held != wanted:
-        _, _, words, step = QUANTITIES[held]
-        raise FloodMeshError(f"{name} holds {words}, as FloodMesh's {step} step wrote it, not "
-                             f"{QUANTITIES[wanted][2] if wanted else 'elevations'}: {fix}")
+    return held if held in QUANTITIES else None
 
 
 def refuse_non_elevations(src, name: str, fix: str = "give the DEM (a run's dem.tif)") -> None:
-    """Refuse the open raster ``src`` (``name``) where elevations are wanted if a step tagged it
-    (``describe_band``) as a slope, a LoG response or breakpoints: a slope gridded, sloped or
-    meshed as ground gives a mesh of degrees without a word."""
-    _refuse_held(src, name, None, fix)
+    """Refuse the open raster ``src`` (``name``) where elevations are wanted if FloodMesh tagged
+    it (``describe_band``) as holding anything else, a slope, breakpoints or a flood's depths:
+    a slope gridded, sloped or meshed as ground gives a mesh of degrees without a word."""
+    held = held_quantity(src)
+    if held not in (None, ELEVATION):
+        raise FloodMeshError(f"{holds_instead(name, held, 'elevations')}: {fix}")
 
 
 def check_quantity(path, wanted: str, fix: str) -> None:
-    """Refuse a raster that a step tagged (``describe_band``) as holding another quantity than
-    ``wanted``, naming what it holds and ``fix``; a raster without the tag, or one GDAL cannot
-    open (the step reading it says so), is not judged."""
+    """Refuse a raster that FloodMesh tagged (``describe_band``) as holding another quantity
+    than ``wanted`` (a key of ``QUANTITIES``), naming what it holds and ``fix``; a raster
+    without the tag, or one GDAL cannot open (the step reading it says so), is not judged."""
     # lazy: GDAL loads only when this runs
     import rasterio
 
     try:
         with rasterio.open(require_file(path, "raster")) as src:
-            _refuse_held(src, f"raster {Path(path).name}", wanted, fix)
+            held = held_quantity(src)
     except rasterio.errors.RasterioIOError:
         return
+    if held is not None and held != wanted:
+        name = f"raster {Path(path).name}"
+        raise FloodMeshError(f"{holds_instead(name, held, QUANTITIES[wanted][2])}: {fix}")
 
 
 def write_raster(path, grid: Grid, *, valid: np.ndarray | None = None,

@@ -212,6 +212,14 @@ def test_compare_says_where_a_point_is_wet_in_one_flood_only(tmp_path, capsys):
     assert low["peak_depth_difference_m"] == -low["reference_peak_depth_m"] < 0
     assert (f"mid: peak stage {mid['mesh_peak_stage_m']:.2f} m, reference dry; peak depth "
             f"difference +{top['peak_depth_m']:.2f} m, wet on the mesh only") in printed, printed
+    # the maps say what they hold, so that none is taken for a DEM
+    for path, held in ((tmp_path / "top" / "max_depth.tif", "max_depth"),
+                       (tmp_path / "top" / "max_water_level.tif", "max_stage"),
+                       (tmp_path / "top" / "arrival_time.tif", "arrival_s"),
+                       (tmp_path / "cmp" / "depth_difference.tif", "depth_difference"),
+                       (tmp_path / "cmp" / "extent_difference.tif", "extent_difference")):
+        with rasterio.open(path) as src:
+            assert src.tags()["FLOODMESH_QUANTITY"] == held, path
 
 @needs_anuga
 def test_the_report_names_the_wet_sliver_that_sets_the_time_step_not_the_smallest_dry_one(

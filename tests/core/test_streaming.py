@@ -343,3 +343,57 @@ def test_a_file_whose_name_holds_brackets_is_one_file_not_tiles(dem_file, tmp_pa
     assert ("floodmesh: error: raster slope [1].tif holds a slope in degrees, as FloodMesh's "
             "slope step wrote it, not elevations: give the DEM") in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_run_s_other_rasters_left_among_dem_tiles_are_refused_by_tag_or_name(tmp_path,
+                                                                                capsys):
+    """A run on two DEM tiles, then its rasters left in the tile folder (a copy of the run
+    folder's files, or a run of an older FloodMesh, which tagged none). The next run on the
+    folder read breakpoints.tif (0s and 1s) as a DEM tile, ended 0 and meshed a terrain of
+    breakpoints. Every raster FloodMesh writes now says what it holds (the DEM that it is
+    elevations); those that are not elevations are refused among DEM tiles, by their tag, or
+    untagged by the names FloodMesh gives them, all named in one line, before any output."""
+    import shutil
+
+    from floodmesh.core.frontends.cli import main
+
+    from ..bad_inputs import ORIGIN, slope_dem, write_tif
+
+    tiles = tmp_path / "tiles"
+    tiles.mkdir()
+    write_tif(tiles / "west.tif", slope_dem())
+    write_tif(tiles / "east.tif", slope_dem(),
+              transform=Affine(1.0, 0.0, ORIGIN[0] + 60, 0.0, -1.0, ORIGIN[1] + 60))
+    assert main(["run", str(tiles), "--out", str(tmp_path / "first")]) == 0
+    quantities = {}
+    for name in ("dem.tif", "slope.tif", "breakpoints.tif"):
+        with rasterio.open(tmp_path / "first" / name) as src:
+            quantities[name] = (src.tags().get("FLOODMESH_QUANTITY"), src.descriptions[0])
+    assert quantities == {"dem.tif": ("elevation", "elevation"),
+                          "slope.tif": ("slope", "slope"),
+                          "breakpoints.tif": ("breakpoints", "breakpoints")}
+    shutil.copy(tmp_path / "first" / "breakpoints.tif", tiles)
+    capsys.readouterr()
+    out = tmp_path / "out"
+    assert main(["run", str(tiles), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["floodmesh: error: tile breakpoints.tif holds breakpoints (1) and other cells "
+                   "(0), as FloodMesh's breakpoint step wrote it, not elevations: take it out "
+                   "of the DEM tiles (a run's outputs go into a folder beside them)"], err
+    assert not out.exists()
+    # an older run's, untagged: by their names
+    (tiles / "breakpoints.tif").unlink()
+    write_tif(tiles / "breakpoints.tif", (slope_dem() > 10).astype(np.uint8))
+    write_tif(tiles / "max_depth.tif", np.zeros_like(slope_dem()))
+    assert main(["run", str(tiles), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["floodmesh: error: tile breakpoints.tif is named as FloodMesh names "
+                   "breakpoints (1) and other cells (0), an earlier run's output; tile "
+                   "max_depth.tif is named as FloodMesh names a flood's maximum depth in "
+                   "metres, an earlier run's output: take them out of the DEM tiles (a run's "
+                   "outputs go into a folder beside them), or rename a tile of elevations so "
+                   "named"], err
+    assert not out.exists()
+    for name in ("breakpoints.tif", "max_depth.tif"):
+        (tiles / name).rename(tmp_path / name)
+    assert main(["run", str(tiles), "--out", str(out)]) == 0
