@@ -18,9 +18,11 @@ only by its numbers, and the rest (a README, a tile index, a .prj) is named in a
 out. An empty tile, a sliver of one or two points, a tile over water or without ground go
 through with a note: a sparse tile's points are all edge band, gridded in its neighbours'
 blocks, so the DEM is still the one of all the points. A tile repeating another's points (the
-same tile under two names) is counted once; an unreadable tile is refused by name, or left out
-with a note (``skip_unreadable``). A task's FloodMeshError comes back to the client as a value,
-so the user sees the one message, never a Dask log.
+same tile under two names) is counted once, and so are the points overlapping tiles share (a
+buffered delivery), dropped from the later tile before the check points are drawn, in memory
+and on the cluster (``_repeats_of``, ``_cluster_repeats``); an unreadable tile is refused by
+name, or left out with a note (``skip_unreadable``). A task's FloodMeshError comes back to the
+client as a value, so the user sees the one message, never a Dask log.
 
 The tasks run on a ``dask.distributed`` cluster: a local one (``workers`` processes, or threads
 where processes cannot be started) or a running scheduler's (``scheduler`` address), whose
@@ -530,14 +532,16 @@ def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int,
             "kind": kind, "digest": digest, "sparse": sparse, "resolution": resolution}
 
 
-def _tile_points(path: str, crs_wkt: str, classes, held_below: int | None, seed: int):
+def _tile_points(path: str, crs_wkt: str, classes, held_below: int | None, seed: int,
+                 drop: np.ndarray | None = None):
     """Round two's read of a tile: (its points to grid, its check points: ``_held`` by
     ``held_below``), of the points round one kept (the same classes, the same non-finite points
-    dropped)."""
+    dropped), less those in ``drop`` (the points it repeats of an earlier tile it overlaps,
+    ``tile_repeats``)."""
     xyz, cls = _read_raw(Path(path))
     kept = _kept(xyz, cls, classes, Path(path).name)[0]
     del xyz, cls
-    kept = usable_points(kept)
+    kept = _not_dropped(usable_points(kept), drop)
     held = _held(kept, held_below, seed)
     return kept[~held], kept[held]
 
@@ -548,6 +552,22 @@ def _held(xyz: np.ndarray, held_below: int | None, seed: int) -> np.ndarray:
     if held_below is None or not len(xyz):
         return np.zeros(len(xyz), bool)
     return place_hashes(xyz, seed) <= np.uint64(held_below)
+
+
+def _kept_rows(xyz: np.ndarray, drop: np.ndarray) -> np.ndarray:
+    """Which points of ``xyz`` are none of ``drop``'s (the very same x, y, z: both as one read
+    of the tile gives them)."""
+    as_rows = np.dtype((np.void, 24))
+    rows = np.ascontiguousarray(xyz, np.float64).reshape(-1, 3).view(as_rows).ravel()
+    return ~np.isin(rows, np.ascontiguousarray(drop, np.float64).reshape(-1, 3).view(
+        as_rows).ravel())
+
+
+def _not_dropped(xyz: np.ndarray, drop: np.ndarray | None) -> np.ndarray:
+    """The points of ``xyz`` less ``drop`` (None: all; ``_kept_rows``)."""
+    if drop is None or not len(drop) or not len(xyz):
+        return xyz
+    return xyz[_kept_rows(xyz, drop)]
 
 
 def _within(xyz: np.ndarray, box) -> np.ndarray:
@@ -626,30 +646,36 @@ def _edge(result):
     return None if isinstance(result, _Failed) else result.get("edge")
 
 
+def _band_points(edge) -> np.ndarray:
+    """A tile's edge band (``read_tile``): the points, or the ``.npy`` file they wait in."""
+    return np.load(edge, mmap_mode="r") if isinstance(edge, str) else edge
+
+
 def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes,
                held_below: int | None, seed: int, survey: list) -> np.ndarray:
     """Round two: the cells of one block, from the points within its ``box`` (its halo around
     it): of the tiles under it (``full``: paths, re-read) and its neighbours' edge bands
-    (``edges``: arrays, or ``.npy`` files read in place), without the check points (hash at
-    most ``held_below``, ``_held``). Where a triangle that gives a cell has a circle reaching
+    (``edges``: arrays, or ``.npy`` files read in place), each with the points it repeats of
+    an earlier tile (None: none; ``tile_repeats``), without those and the check points (hash
+    at most ``held_below``, ``_held``). Where a triangle that gives a cell has a circle reaching
     past the box (a thin one by a void), the points beyond, which may make it none of the
-    whole TIN's, are read from the tiles of the ``survey`` (path, bounds) that the circle
+    whole TIN's, are read from the tiles of the ``survey`` (path, bounds, repeats) that the circle
     reaches, and the block gridded again with them: the cells of one TIN of all the points."""
     # lazy: numba loads only when this runs
     from ..steps.grid import grid_window
 
     known = window["box"]
     parts = []
-    for edge in edges:
-        xyz = np.load(edge, mmap_mode="r") if isinstance(edge, str) else edge
-        xyz = np.array(xyz[_within(xyz, known)])
+    for edge, drop in edges:
+        xyz = _band_points(edge)
+        xyz = _not_dropped(np.array(xyz[_within(xyz, known)]), drop)
         parts.append(xyz[~_held(xyz, held_below, seed)])
         del xyz
-    for path in full:
-        xyz = _tile_points(path, crs_wkt, classes, held_below, seed)[0]
+    for path, drop in full:
+        xyz = _tile_points(path, crs_wkt, classes, held_below, seed, drop)[0]
         parts.append(xyz[_within(xyz, known)])
-    extent = (min(b[0] for _, b in survey), min(b[1] for _, b in survey),
-              max(b[2] for _, b in survey), max(b[3] for _, b in survey))
+    extent = (min(b[0] for _, b, _ in survey), min(b[1] for _, b, _ in survey),
+              max(b[2] for _, b, _ in survey), max(b[3] for _, b, _ in survey))
     while True:
         xyz = np.concatenate(parts) if parts else np.empty((0, 3))
         values, needed = grid_window(xyz, window["cell_size"], window["max_gap"], window["x0"],
@@ -662,10 +688,10 @@ def grid_block(window: dict, full: list, edges: list, crs_wkt: str, classes,
         known = (*[n - pad if n < k else k for n, k in zip(needed[:2], known[:2])],
                  *[n + pad if n > k else k for n, k in zip(needed[2:], known[2:])])
         parts, xyz = [], None
-        for path, bounds in survey:
+        for path, bounds, drop in survey:
             if (bounds[0] <= known[2] and bounds[2] >= known[0] and bounds[1] <= known[3]
                     and bounds[3] >= known[1]):
-                points = _tile_points(path, crs_wkt, classes, held_below, seed)[0]
+                points = _tile_points(path, crs_wkt, classes, held_below, seed, drop)[0]
                 parts.append(points[_within(points, known)])
 
 
@@ -764,6 +790,7 @@ class TiledDem:
     n_gridding: int = 0      # points gridded (all tiles)
     held_below: int | None = None  # the check points' hashes are at most this (``_held``)
     seed: int = 0            # ... hashed with this seed
+    repeats: tuple = ()      # per tile of ``gridded`` the points it repeats of another, or None
 
 
 def _tiles_counted(meta: list, classes, skip_unreadable: bool, notes: list) -> list[int]:
@@ -847,25 +874,6 @@ def _round_one(client, tiles: list, crs_wkt: str, classes, holdout: float, seed:
     return meta, edges
 
 
-def _overlaps(tiles: list) -> list[str]:
-    """A note on tiles whose points' bounds overlap (a buffered delivery), for a cluster, which
-    cannot tell their shared points apart as ``read_point_tiles`` does in memory."""
-    pairs = []
-    for i, a in enumerate(tiles):
-        for b in tiles[i + 1:]:
-            (ax0, ay0, ax1, ay1), (bx0, by0, bx1, by1) = a["bounds"], b["bounds"]
-            if min(ax1, bx1) > max(ax0, bx0) and min(ay1, by1) > max(ay0, by0):
-                pairs.append(f"{Path(a['path']).name} and {Path(b['path']).name}")
-    if not pairs:
-        return []
-    named = "; ".join(pairs[:3]) + (f"; {len(pairs) - 3} more" if len(pairs) > 3 else "")
-    return [f"{len(pairs)} pair{'s' * (len(pairs) > 1)} of tiles overlap ({named}): "
-            "on a cluster a point both hold is gridded once (the TIN keeps one) but counted "
-            "twice, and where held out, held out twice; give the tiles "
-            "without their buffer (lastile -remove_buffer), or run without --scheduler where "
-            "they fit in memory, which counts them once"]
-
-
 @dataclass
 class _Layout:
     """Round two's layout of the DEM over the tiles that count (``_tile_layout``)."""
@@ -877,20 +885,26 @@ class _Layout:
     block: int               # cells a side of a block of round two
     plan: dict               # ``check_layout``'s
     held_below: int | None   # the check points' hashes are at most this (``_check_points``)
+    repeats: dict            # index: the points (n, 3) a tile repeats of an earlier one
 
 
 def _tile_layout(meta: list, classes, holdout: float, cell_size: float, max_gap: float | None,
                  band: float, *, largest: int, parallel: int, keep: bool,
-                 skip_unreadable: bool, notes: list) -> _Layout:
-    """The tiles that count (``_tiles_counted``; their notes join ``notes``) and round two's
-    layout over them: bounds, blocks of about a tile's width (at least 256 cells) and the plan
-    (``check_layout``); refused where the points are too few, or where ``parallel`` blocks (a
-    tile of up to ``largest`` points and its neighbours' bands each) or, with ``keep``, the
-    whole DEM would not fit in memory."""
+                 skip_unreadable: bool, notes: list, repeats: Callable[[list], dict]
+                 ) -> _Layout:
+    """The tiles that count (``_tiles_counted``; their notes join ``notes``), less the points
+    each repeats of an earlier one (``repeats`` of their indices: ``_cluster_repeats``) before
+    the check points are drawn, and round two's layout over them: bounds, blocks of about a
+    tile's width (at least 256 cells) and the plan (``check_layout``); refused where the points
+    are too few, or where ``parallel`` blocks (a tile of up to ``largest`` points and its
+    neighbours' bands each) or, with ``keep``, the whole DEM would not fit in memory."""
     # lazy: numba loads only when this runs
     from ..steps.grid import check_layout
 
     indices = _tiles_counted(meta, classes, skip_unreadable, notes)
+    repeated = repeats(indices)
+    for i, xyz in repeated.items():
+        _without_points(meta[i], xyz)
     counted = [meta[i] for i in indices]
     held_below = _check_points(counted, holdout, notes)
     gridded = [i for i in indices if meta[i]["n_gridding"]]  # sparse tiles too
@@ -899,7 +913,6 @@ def _tile_layout(meta: list, classes, holdout: float, cell_size: float, max_gap:
     _check_enough(n_gridding, len(meta), classes)
     if classes is None and any(m["kind"] == "ground" for m in counted):
         classes = (GROUND_CLASS,)  # round two re-reads tiles with ground: their ground
-    notes += _overlaps([meta[i] for i in gridded])
     bounds = (min(meta[i]["bounds"][0] for i in gridded),
               min(meta[i]["bounds"][1] for i in gridded),
               max(meta[i]["bounds"][2] for i in gridded),
@@ -918,13 +931,14 @@ def _tile_layout(meta: list, classes, holdout: float, cell_size: float, max_gap:
         check_memory(cells=plan["rows"] * plan["cols"], points=per_block * parallel,
                      advice="give a larger cell size, or grid the tiles alone "
                             "(floodmesh grid TILES --out dem.tif) and mesh a part")
-    return _Layout(counted, gridded, classes, n_points, area, block, plan, held_below)
+    return _Layout(counted, gridded, classes, n_points, area, block, plan, held_below, repeated)
 
 
 def _block_sources(box: tuple, gridded: list, meta: list, tiles: list, edges: list,
-                   band: float) -> tuple[list, list]:
+                   band: float, drops: dict) -> tuple[list, list]:
     """What the block within ``box`` (m) grids: the paths of the tiles it reaches more than
-    ``band`` m inside, re-read whole, and the edge bands (futures) of the others it reaches."""
+    ``band`` m inside, re-read whole, and the edge bands (futures) of the others it reaches,
+    each with the points it repeats of an earlier tile (``drops``' future, or None)."""
     full, near = [], []
     for i in gridded:
         tb = meta[i]["bounds"]
@@ -935,9 +949,9 @@ def _block_sources(box: tuple, gridded: list, meta: list, tiles: list, edges: li
                          and box[0] <= inner[2] and box[2] >= inner[0]
                          and box[1] <= inner[3] and box[3] >= inner[1])
         if reaches_inner:
-            full.append(tiles[i].path)
+            full.append((tiles[i].path, drops.get(i)))
         else:
-            near.append(edges[i])
+            near.append((edges[i], drops.get(i)))
     return full, near
 
 
@@ -950,8 +964,9 @@ def _submit_blocks(client, layout: _Layout, meta: list, tiles: list, edges: list
     (row, col) of each block's first cell)."""
     plan, block = layout.plan, layout.block
     rows, cols, x0, y1 = plan["rows"], plan["cols"], plan["x0"], plan["y1"]
-    survey = client.scatter([[(tiles[i].path, meta[i]["bounds"]) for i in layout.gridded]],
-                            hash=False)[0]
+    survey = client.scatter([[(tiles[i].path, meta[i]["bounds"], layout.repeats.get(i))
+                              for i in layout.gridded]], hash=False)[0]
+    drops = {i: client.scatter(xyz, hash=False) for i, xyz in layout.repeats.items()}
     tasks, windows = [], []
     for r0 in range(0, rows, block):
         for c0 in range(0, cols, block):
@@ -959,7 +974,7 @@ def _submit_blocks(client, layout: _Layout, meta: list, tiles: list, edges: list
             bx0, by1 = x0 + c0 * cell_size, y1 - r0 * cell_size
             bx1, by0 = x0 + c1 * cell_size, y1 - r1 * cell_size
             box = (bx0 - halo, by0 - halo, bx1 + halo, by1 + halo)
-            full, near = _block_sources(box, layout.gridded, meta, tiles, edges, band)
+            full, near = _block_sources(box, layout.gridded, meta, tiles, edges, band, drops)
             window = {"box": box, "x0": bx0, "y1": by1, "rows": r1 - r0, "cols": c1 - c0,
                       "cell_size": cell_size, "max_gap": plan["max_gap"]}
             windows.append((r0, c0))
@@ -1090,45 +1105,157 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
 
 def _repeated_rows(points: list, meta: list, notes: list) -> list[np.ndarray]:
     """The rows of each tile's ``points`` that repeat a point of an earlier tile where the two
-    overlap (a buffered delivery, a tile cut again with a margin, or stored at another LAS
-    scale), with a note naming both tiles: the same x, y and z to within half the sum of the
-    two tiles' coordinate steps (``meta``'s ``resolution``), the most that two copies of one
-    point stored at those steps differ by. Only the points within another tile's bounds are
-    compared, so tiles that meet without overlapping cost nothing."""
+    overlap (``_repeats_of``), with a note naming both tiles."""
+    names = [Path(m["path"]).name for m in meta]
+    repeats = []
+    for i, xyz in enumerate(points):
+        rows, found = _repeats_of(xyz, meta[i], ((j, points[j], meta[j]) for j in range(i)))
+        notes += [_repeats_note(names[i], names[j], n, meta[i]["resolution"],
+                                meta[j]["resolution"]) for j, n in found]
+        repeats.append(rows)
+    return repeats
+
+
+def _step(mine: dict, theirs: dict) -> np.ndarray:
+    """How far (m; x, y, z) two tiles' copies of a point may lie apart: a little less than half
+    the sum of their coordinate steps (round one's figures' ``resolution``), since two distinct
+    points of tiles of one step lie a whole step apart at the least."""
+    return 0.999 * (np.asarray(mine["resolution"]) + np.asarray(theirs["resolution"])) / 2
+
+
+def _padded(box, step: np.ndarray) -> np.ndarray:
+    return np.asarray(box, float) + (-step[0], -step[1], step[0], step[1])
+
+
+def _meet(a, b) -> bool:
+    return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
+
+
+def _repeats_of(xyz: np.ndarray, figures: dict, earlier) -> tuple[np.ndarray, list]:
+    """(the rows of a tile's points ``xyz`` (round one's ``figures``: bounds, resolution) that
+    repeat a point of an earlier tile where the two overlap, (index, how many) per earlier tile
+    repeated), ``earlier`` giving each earlier tile's (index, points, figures), its points
+    wanted only near this tile's bounds (a buffered delivery, a tile cut again with a margin, or
+    stored at another LAS scale): the same x, y and z to within ``_pad``, the most that two
+    copies of one point stored at those steps differ by. Only the points within the other
+    tile's bounds are compared, so tiles that meet without overlapping cost little."""
     # lazy: scipy loads only where tiles overlap
     from scipy.spatial import cKDTree
 
-    boxes = [np.array([p[:, 0].min(), p[:, 1].min(), p[:, 0].max(), p[:, 1].max()])
-             if len(p) else None for p in points]
-    names = [Path(m["path"]).name for m in meta]
-    repeats = []
-    for i, (xyz, box) in enumerate(zip(points, boxes)):
-        repeat = np.zeros(len(xyz), bool)
-        for j, other in enumerate(boxes[:i]):
-            if box is None or other is None:
+    repeat, found_in = np.zeros(len(xyz), bool), []
+    box = figures["bounds"]
+    for j, theirs, other in earlier:
+        if box is None or other["bounds"] is None:
+            continue
+        step = _step(figures, other)
+        reach = _padded(other["bounds"], step)
+        if not _meet(reach, box):
+            continue
+        mine = np.flatnonzero(_within(xyz, reach) & ~repeat)
+        theirs = theirs[_within(theirs, _padded(box, step))]
+        if not len(mine) or not len(theirs):
+            continue
+        origin = np.array([box[0], box[1], 0.0])
+        gap, _ = cKDTree((theirs - origin) / step).query((xyz[mine] - origin) / step,
+                                                          p=np.inf, distance_upper_bound=1)
+        found = mine[gap <= 1]
+        if len(found):
+            repeat[found] = True
+            found_in.append((j, len(found)))
+    return np.flatnonzero(repeat), found_in
+
+
+def _round_one_points(path: str, crs_wkt: str, classes) -> np.ndarray:
+    """A tile's points as round one keeps them (``_tile_read``), read again."""
+    xyz, cls = _read_raw(Path(path))
+    kept = _kept(xyz, cls, classes, Path(path).name)[0]
+    del xyz, cls
+    return _usable(kept, crs_wkt, Path(path).name, [])[0]
+
+
+def tile_repeats(mine: tuple, figures: dict, earlier: list, crs_wkt: str, classes
+                 ) -> tuple[np.ndarray, list]:
+    """On a worker: (the points of a tile that repeat an earlier tile's where they overlap, (index,
+    how many) per earlier tile; ``_repeats_of``) from ``mine``, its points near the others:
+    ("band", its edge band) where they all lie in the band, else ("tile", path) to read it
+    again, and ``earlier``: (index, such a source, figures) of each earlier tile it meets, read
+    one at a time."""
+    def points(source):
+        kind, what = source
+        return _round_one_points(what, crs_wkt, classes) if kind == "tile" else \
+            _band_points(what)
+
+    xyz = points(mine)
+    rows, found = _repeats_of(xyz, figures, ((j, points(source), other)
+                                              for j, source, other in earlier))
+    return np.array(xyz[rows]), found
+
+
+def _in_band(region, figures: dict, band: float) -> bool:
+    """Whether a tile's points within ``region`` (a box, m) all lie in its edge band (within
+    ``band`` m of its bounds: ``read_tile``)."""
+    x0, y0, x1, y1 = figures["bounds"]
+    inner = (x0 + band, y0 + band, x1 - band, y1 - band)
+    return not (inner[0] < inner[2] and inner[1] < inner[3]) or not _meet(region, inner)
+
+
+def _cluster_repeats(client, counted: list, meta: list, tiles: list, edges: list, band: float,
+                     crs_wkt: str, classes, notes: list, *, cancelled) -> dict:
+    """The points each counted tile (indices into round one's ``meta``) repeats of an earlier
+    counted tile it overlaps, found on the cluster (``tile_repeats``: from the tiles' edge bands
+    where the overlap lies in them, else from the tiles read again), as ``read_point_tiles``
+    finds them in memory: {index: points (n, 3)}, with the same notes joining ``notes``.
+    Tiles that do not meet cost nothing."""
+    tasks, owners = [], []
+    for p, i in enumerate(counted):
+        m = meta[i]
+        if m["bounds"] is None:
+            continue
+        earlier, whole = [], False
+        for j in counted[:p]:
+            other = meta[j]
+            if other["bounds"] is None:
                 continue
-            # a little less than the half sum: two points of tiles of one step lie a whole
-            # step apart at the least
-            step = 0.999 * (meta[i]["resolution"] + meta[j]["resolution"]) / 2
-            pad = np.array([-step[0], -step[1], step[0], step[1]])
-            reach = other + pad
-            if not (reach[0] <= box[2] and box[0] <= reach[2] and reach[1] <= box[3]
-                    and box[1] <= reach[3]):
+            step = _step(m, other)
+            if not _meet(_padded(other["bounds"], step), m["bounds"]):
                 continue
-            mine = np.flatnonzero(_within(xyz, reach) & ~repeat)
-            theirs = points[j][_within(points[j], box + pad)]
-            if not len(mine) or not len(theirs):
-                continue
-            origin = np.array([box[0], box[1], 0.0])
-            gap, _ = cKDTree((theirs - origin) / step).query((xyz[mine] - origin) / step,
-                                                              p=np.inf, distance_upper_bound=1)
-            found = mine[gap <= 1]
-            if len(found):
-                repeat[found] = True
-                notes.append(_repeats_note(names[i], names[j], len(found),
-                                           meta[i]["resolution"], meta[j]["resolution"]))
-        repeats.append(np.flatnonzero(repeat))
+            in_band = _in_band(_padded(m["bounds"], step), other, band)
+            earlier.append((j, ("band", edges[j]) if in_band else ("tile", tiles[j].path),
+                            _figures_only(other)))
+            whole = whole or not _in_band(_padded(other["bounds"], step), m, band)
+        if earlier:
+            mine = ("tile", tiles[i].path) if whole else ("band", edges[i])
+            tasks.append(client.submit(_task, tile_repeats, mine, _figures_only(m), earlier,
+                                       crs_wkt, classes, key=f"repeats-{i}"))
+            owners.append(i)
+    found = {}
+    for k, (xyz, repeated) in _as_completed(client, tasks, progress=None, cancelled=cancelled,
+                                            base=0.3, weight=0.0):
+        found[owners[k]] = (xyz, repeated)
+    repeats = {}
+    for i in owners:  # the notes in the tiles' order, as in memory
+        xyz, repeated = found[i]
+        name = Path(meta[i]["path"]).name
+        notes += [_repeats_note(name, Path(meta[j]["path"]).name, n, meta[i]["resolution"],
+                                meta[j]["resolution"]) for j, n in repeated]
+        if len(xyz):
+            repeats[i] = xyz
     return repeats
+
+
+def _figures_only(figures: dict) -> dict:
+    """What ``_repeats_of`` reads of a tile's figures, to send to a worker."""
+    return {"bounds": figures["bounds"], "resolution": figures["resolution"]}
+
+
+def _without_points(figures: dict, xyz: np.ndarray) -> None:
+    """A tile's figures on the cluster made to count its points less ``xyz`` (those it repeats
+    of an earlier tile), its candidate check points too (in place)."""
+    candidates = figures["candidates"]
+    keep = _kept_rows(candidates["xyz"], xyz)
+    figures["candidates"] = {**candidates, "rows": candidates["rows"][keep],
+                             "hashes": candidates["hashes"][keep], "xyz": candidates["xyz"][keep]}
+    figures["n_points"] -= len(xyz)
 
 
 def _repeats_note(name: str, first: str, n: int, mine: np.ndarray, theirs: np.ndarray) -> str:
@@ -1192,9 +1319,12 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
         meta, edges = _round_one(client, tiles, crs_wkt, classes, holdout, seed, band, bands,
                                  progress=progress, cancelled=cancelled)
         _check_text_tiles(meta, tile_crs)
-        layout = _tile_layout(meta, classes, holdout, cell_size, max_gap, band, largest=largest,
-                              parallel=parallel, keep=keep,
-                              skip_unreadable=skip_unreadable, notes=notes)
+        layout = _tile_layout(
+            meta, classes, holdout, cell_size, max_gap, band, largest=largest,
+            parallel=parallel, keep=keep, skip_unreadable=skip_unreadable, notes=notes,
+            repeats=lambda counted: _cluster_repeats(client, counted, meta, tiles, edges, band,
+                                                     crs_wkt, classes, notes,
+                                                     cancelled=cancelled))
         if check is not None:
             check(layout.plan)
         tasks, windows = _submit_blocks(client, layout, meta, tiles, edges, cell_size, halo,
@@ -1209,7 +1339,8 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
     held = np.concatenate([m["holdout"] for m in layout.counted])
     return TiledDem(dem, held, layout.n_points, len(layout.counted), layout.area, notes,
                     tile_crs, tuple(tiles[i].path for i in layout.gridded), layout.classes,
-                    sum(meta[i]["n_gridding"] for i in layout.gridded), layout.held_below, seed)
+                    sum(meta[i]["n_gridding"] for i in layout.gridded), layout.held_below, seed,
+                    tuple(layout.repeats.get(i) for i in layout.gridded))
 
 
 def read_gridded_points(tiled: TiledDem, *,
@@ -1218,10 +1349,11 @@ def read_gridded_points(tiled: TiledDem, *,
     reads them (the same classes, the same points held out): what the terrain fits take, as
     for one file (``grid_point_tiles`` keeps none of them)."""
     crs_wkt, parts = tiled.crs.to_wkt(), []
-    for path in tiled.gridded:
+    for path, drop in zip(tiled.gridded, tiled.repeats or [None] * len(tiled.gridded)):
         if cancelled is not None and cancelled():
             raise Cancelled()
-        parts.append(_tile_points(path, crs_wkt, tiled.classes, tiled.held_below, tiled.seed)[0])
+        parts.append(_tile_points(path, crs_wkt, tiled.classes, tiled.held_below, tiled.seed,
+                                  drop)[0])
     return np.concatenate(parts) if parts else np.empty((0, 3))
 
 

@@ -21,7 +21,7 @@ from floodmesh.core.raster import Grid
 from floodmesh.core.steps.breakpoints import breakpoints_file, classify_breakpoints
 from floodmesh.core.steps.slope import slope
 from floodmesh.core.engine.tiles import (_tile_points, grid_point_tiles, read_back, read_dem_tiles,
-                                         read_point_tiles, slope_file64)
+                                         read_gridded_points, read_point_tiles, slope_file64)
 
 from ..bad_inputs import plane_xyz
 from ..conftest import survey_tiles
@@ -479,19 +479,42 @@ def test_buffered_xyz_tiles_of_other_decimals_count_their_shared_points_once(sur
     assert any("tile b.xyz repeats" in n and "to 1 and 10 mm" in n for n in read.notes)
 
 
-def test_overlapping_tiles_on_a_cluster_are_named_in_a_note(survey, scheduler, tmp_path):
-    """On a cluster the shared points of overlapping tiles cannot be told apart: the note names
-    the tiles and the way to count them once; tiles that only meet get no such note."""
+@pytest.mark.parametrize("buffer, scales", [(5.0, None), (15.0, (0.01, 0.001, 0.01, 0.001))])
+def test_buffered_tiles_on_a_cluster_grid_and_hold_out_what_one_file_does(
+        survey, scheduler, tmp_path, buffer, scales):
+    """Buffered tiles (``buffer`` m of each neighbour's points; the wider buffer beyond the
+    tiles' edge bands, at LAS scales of 1 cm and 1 mm) through `grid --scheduler` as a user
+    runs it on a cluster: the shared points are counted once before the check points are drawn,
+    as in memory, so the tiles hold out the check points one file of their points holds out
+    and grid its DEM, and `run` reads back the points one file grids. On a cluster they were
+    counted twice, with a note only: other check points, and another DEM."""
     whole = io.read_points(survey / "single.laz")
-    xyz = whole.xyz
-    (tmp_path / "buffered").mkdir()
-    for xs in (0, 150):
-        inside = (xyz[:, 0] >= X0 + xs - 10) & (xyz[:, 0] < X0 + xs + 160)
-        io.write_points_las(tmp_path / "buffered" / f"strip_{xs}.laz",
-                            PointCloud(xyz[inside], whole.crs))
-    tiled = grid_point_tiles(tmp_path / "buffered", 1.0, scheduler=scheduler)
-    overlap = [n for n in tiled.notes if "of tiles overlap" in n]
-    assert len(overlap) == 1 and "strip_0.laz and strip_150.laz" in overlap[0], tiled.notes
-    assert "without --scheduler" in overlap[0]
-    alone = grid_point_tiles(survey / "tiles", 1.0, scheduler=scheduler)
-    assert not any("of tiles overlap" in n for n in alone.notes), alone.notes
+    _buffered(whole.xyz, whole.crs, tmp_path / "buffered", buffer, scales)
+    said = []
+    for source, out, extra in ((tmp_path / "buffered", "tiles", ["--scheduler", scheduler]),
+                               (tmp_path / "buffered", "memory", []),
+                               (survey / "single.laz", "one", [])):
+        (tmp_path / out).mkdir()
+        result = subprocess.run([FLOODMESH, "grid", str(source), "--cell-size", "1",
+                                 "--holdout", "0.01", "--out", str(tmp_path / out / "dem.tif"),
+                                 *extra], capture_output=True, text=True, timeout=600)
+        assert result.returncode == 0, result.stderr
+        said.append(result.stdout + result.stderr)
+    assert "DEM of 4 tiles (288,000 points)" in said[0], said[0]
+    # 3 later tiles meet the first; 2 more pairs
+    assert said[0].count("where the two overlap: they are counted once") == 5, said[0]
+    # the one file's points where the tiles store them as it does (at 1 mm), else the tiles'
+    # in memory, whose coordinates at 1 cm are another survey's
+    same = ("tiles", "one" if scales is None else "memory")
+    tiles, other = (_check_points_gpkg(tmp_path / out / "holdout.gpkg") for out in same)
+    assert len(tiles) == len(other) == 2880 and tiles == other
+    np.testing.assert_array_equal(*(io.read_raster(tmp_path / out / "dem.tif").values
+                                    for out in same))
+    tiled = grid_point_tiles(tmp_path / "buffered", 1.0, holdout=0.01, scheduler=scheduler,
+                             keep=False)
+    read = read_point_tiles(tmp_path / "buffered", 1.0, holdout=0.01)
+    assert tiled.n_points == read.n_points == len(whole.xyz)
+    assert [n for n in tiled.notes if "counted once" in n] == \
+        [n for n in read.notes if "counted once" in n]
+    gridded = read_gridded_points(tiled)
+    assert sorted(map(tuple, gridded)) == sorted(map(tuple, read.gridding))
