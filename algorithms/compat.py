@@ -51,3 +51,10 @@ else:
     from qgis.core import QgsProcessingParameterFile
 
     FOLDER = QgsProcessingParameterFile.Folder
+
+if hasattr(Qgis, "RasterRangeLimit"):  # QGIS >= 3.38
+    USER_DEFINED_LIMITS = Qgis.RasterRangeLimit.NotSet
+else:
+    from qgis.core import QgsRasterMinMaxOrigin
+
+    USER_DEFINED_LIMITS = QgsRasterMinMaxOrigin.None_

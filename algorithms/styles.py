@@ -10,7 +10,7 @@ from qgis.PyQt.QtGui import QColor
 
 from ..core.options import (BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR, OUTSIDE_MESH_COLOUR,
                             RESIDUAL_CLASS_COLOURS, RESIDUAL_CLASS_LABELS)
-from .compat import LINE_GEOMETRY
+from .compat import LINE_GEOMETRY, USER_DEFINED_LIMITS
 
 RESIDUAL_CLASSES = tuple(zip((0, 1, 2, -1), RESIDUAL_CLASS_LABELS,
                              (*RESIDUAL_CLASS_COLOURS, OUTSIDE_MESH_COLOUR)))
@@ -250,10 +250,40 @@ def reload_rewritten(context) -> None:
             keep[key] = details
         for old in stale:
             old.reload()
+            if old.type() == QgsMapLayerType.RasterLayer:
+                _restretch(old)
             if old.dataProvider() is not None:
                 old.setExtent(old.dataProvider().extent())
             old.triggerRepaint()
     context.setLayersToLoadOnCompletion(keep)
+
+
+def _restretch(layer) -> None:
+    """A raster reloaded on its rewritten file, stretched over the new values as a fresh load
+    would be (its renderer and the kind of stretch kept; user-defined min/max stay). The
+    statistics of the old file go first: QGIS's handle on it, closed by the reload, wrote them
+    to the new file's ``.aux.xml``, and its provider caches them."""
+    import os
+
+    from qgis.core import QgsContrastEnhancement, QgsDataProvider
+
+    aux = _file_of(layer.source())[0] + ".aux.xml"
+    if os.path.exists(aux):
+        os.remove(aux)
+    options = QgsDataProvider.ProviderOptions()
+    options.transformContext = layer.transformContext()
+    layer.setDataSource(layer.source(), layer.name(), layer.providerType(), options, False)
+    renderer = layer.renderer()
+    if renderer is None or not layer.isValid():
+        return
+    limits = renderer.minMaxOrigin().limits()
+    if limits == USER_DEFINED_LIMITS:
+        return
+    enhancement = (getattr(renderer, "contrastEnhancement", None)
+                   or getattr(renderer, "redContrastEnhancement", lambda: None))()
+    algorithm = (enhancement.contrastEnhancementAlgorithm() if enhancement is not None
+                 else QgsContrastEnhancement.StretchToMinimumMaximum)
+    layer.setContrastEnhancement(algorithm, limits)
 
 
 def run_group_name(folder, source=None) -> str:

@@ -241,6 +241,10 @@ def atomic_output(path):
         with contextlib.suppress(FileNotFoundError):
             if not path.is_dir():
                 path.unlink()
+        # GDAL's sidecar of the previous file (statistics QGIS or gdalinfo -stats wrote) would
+        # describe the new one
+        with contextlib.suppress(FileNotFoundError):
+            Path(f"{path}.aux.xml").unlink()
         os.replace(tmp, path)
     finally:
         for leftover in (tmp, Path(f"{tmp}-journal"), Path(f"{tmp}-wal"), Path(f"{tmp}-shm")):

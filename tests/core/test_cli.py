@@ -315,3 +315,29 @@ def test_a_dem_run_holds_its_check_cells_out_of_the_dem(tmp_path):
     assert "not assessed: no check points were held out" in said.stdout
     np.testing.assert_allclose(io.read_raster(tmp_path / "r0" / "dem.tif").values, given,
                                atol=1e-5)
+
+
+def test_a_rewritten_raster_shows_its_own_statistics_not_the_old_files(tmp_path):
+    """A slope opened in QGIS (or gdalinfo -stats), which writes its statistics to
+    slope.tif.aux.xml, then rewritten as the LoG response: GDAL and QGIS read the new file's
+    statistics, not the old file's left beside it."""
+    from affine import Affine
+    from osgeo import gdal
+    from rasterio.crs import CRS
+
+    from floodmesh.core.raster import Grid
+
+    dem = tmp_path / "dem.tif"
+    x = np.arange(40.0)
+    io.write_raster(dem, Grid(np.add.outer(0.3 * x, 0.1 * x ** 1.5),
+                              Affine(1, 0, 500_000, 0, -1, 6_000_040), CRS.from_epsg(32756)))
+    slope = tmp_path / "slope.tif"
+    floodmesh("slope", dem, "--out", slope)
+    gdal.Info(str(slope), stats=True)  # as QGIS does on loading it: the .aux.xml is written
+    assert (tmp_path / "slope.tif.aux.xml").exists()
+    floodmesh("slope", dem, "--method", "log", "--out", slope)
+    with rasterio.open(slope) as src:
+        values = src.read(1, masked=True)
+    shown = gdal.Info(str(slope), stats=True, format="json")["bands"][0]
+    assert shown["minimum"] == pytest.approx(float(values.min()), abs=2e-3)
+    assert shown["maximum"] == pytest.approx(float(values.max()), abs=2e-3)

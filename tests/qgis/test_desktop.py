@@ -452,3 +452,33 @@ def test_export_mesh_loads_what_qgis_opens(tmp_path):
     assert len(set(seen["faces"])) == 1, seen
     assert sorted(row["layer"] for row in tree[0]["children"]) == [
         "boundary", "nodes", "triangles"], seen
+
+
+RESTRETCH_SCRIPT = desktop_script(r"""
+    import processing
+    slope = os.environ["FM_OUTPUT"] + " slope.tif"
+    for method in (1, 6):  # slope in degrees, then the LoG response (m) into the same file
+        processing.runAndLoadResults("floodmesh:slope", {
+            "INPUT": os.environ["FM_DEM"], "METHOD": method, "OUTPUT": slope})
+        settle()
+    layers = [l for l in QgsProject.instance().mapLayers().values() if l.source() == slope]
+    out["stretch"] = [[l.renderer().contrastEnhancement().minimumValue(),
+                       l.renderer().contrastEnhancement().maximumValue()] for l in layers]
+    out["slope"] = slope
+""")
+
+
+def test_a_rerun_into_a_loaded_raster_stretches_it_for_its_new_values(tmp_path):
+    """Slope for break lines run in degrees, then as the LoG response (m) into the same GeoTIFF:
+    the layer, reloaded in place, is stretched over the new values, as a fresh load of the file
+    would be, not over the first run's degrees (which leave the LoG's metres one grey)."""
+    import rasterio
+
+    seen = run_on_real_data(RESTRETCH_SCRIPT, tmp_path)
+    with rasterio.open(seen["slope"]) as src:
+        values = src.read(1, masked=True)
+    low, high = float(values.min()), float(values.max())
+    assert len(seen["stretch"]) == 1, seen
+    shown = seen["stretch"][0]
+    assert abs(shown[0] - low) < 0.05 * (high - low), (shown, low, high)
+    assert abs(shown[1] - high) < 0.05 * (high - low), (shown, low, high)
