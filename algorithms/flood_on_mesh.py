@@ -82,5 +82,6 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
         for name, label, key in RASTERS:
             results[name] = str(out / RESULT_RASTERS[key])
             layers.append((QgsRasterLayer(results[name], label), lambda layer: None, name))
-        load_results(context, crs, layers, group=run_group_name(out, mesh_path))
+        load_results(context, crs, layers, group=run_group_name(out, mesh_path),
+                     folder=out)
         return results

@@ -244,7 +244,7 @@ class LidarToMeshAlgorithm(FloodMeshAlgorithm):
             (QgsVectorLayer(str(out / "residuals.gpkg"), "Residuals", "ogr"), style_residuals,
              self.REPORT),
             (QgsVectorLayer(breaklines, "Break lines", "ogr"), style_breaklines,
-             self.BREAKLINES)), group=run_group_name(out, source))
+             self.BREAKLINES)), group=run_group_name(out, source), folder=out)
         return {self.OUTPUT_FOLDER: str(out), self.BREAKLINES: breaklines, self.MESH: mesh,
                 self.REPORT: str(out / "report.json"),
                 self.REPORT_HTML: str(out / "report.html"), self.NODES: report["nodes"],

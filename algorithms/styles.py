@@ -2,7 +2,7 @@
 mesh, residuals by class, the mesh shaded by elevation with its edges drawn, in the run's CRS,
 the view zoomed to it."""
 from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSystem,
-                       QgsCoordinateTransform, QgsMapLayerType, QgsProcessingContext,
+                       QgsCoordinateTransform, QgsLayerTree, QgsMapLayerType, QgsProcessingContext,
                        QgsProcessingException, QgsProcessingLayerPostProcessorInterface,
                        QgsRendererCategory, QgsSimpleLineSymbolLayer, QgsSingleSymbolRenderer,
                        QgsSymbol)
@@ -85,7 +85,7 @@ class _StyleOnLoad(QgsProcessingLayerPostProcessorInterface):
         layer.triggerRepaint()
 
 
-RUN_GROUP = "floodmesh/run"  # the custom property that marks a run's group
+RUN_GROUP = "floodmesh/run"  # the custom property that marks a run's group: its folder
 RESULT = "floodmesh/result"  # ... and a result loaded on its own (a step, a model's outputs)
 
 
@@ -124,25 +124,42 @@ def _among_results(project, layer) -> None:
             _move(moving, parent, start + offset)
 
 
+def _folder_group(node, folder):
+    """The group under ``node`` of an earlier run into ``folder``, or None."""
+    for child in node.children():
+        if QgsLayerTree.isGroup(child):
+            if folder and child.customProperty(RUN_GROUP) == folder:
+                return child
+            found = _folder_group(child, folder)
+            if found is not None:
+                return found
+    return None
+
+
 def _into_group(project, layer, run: dict) -> None:
-    """Move ``layer``'s tree node into the run's group (made where the run's first layer was
-    put), at its place in rank order. The node is cloned in before the original is taken out:
-    QGIS removes a layer from the project, in a queued call, when its last tree node goes."""
+    """Move ``layer``'s tree node into the run's group, at its place in rank order: the group
+    of an earlier run into the same folder (a rerun adds there what it did not reload), else
+    one made where the run's first layer was put. The node is cloned in before the original is
+    taken out: QGIS removes a layer from the project, in a queued call, when its last tree node
+    goes."""
     root = project.layerTreeRoot()
     node = root.findLayer(layer.id())
     if node is None or not run.get("name"):
         return
     group = run.get("group")
     if group is None or root.findGroup(run["name"]) is not group:
+        group = run["group"] = _folder_group(root, run.get("folder"))
+    if group is None:
         parent, below = node.parent(), node
         # QGIS puts new layers into the selected group: not into an earlier run's group
         while parent.customProperty(RUN_GROUP) and parent.parent() is not None:
             parent, below = parent.parent(), parent
         group = run["group"] = parent.insertGroup(parent.children().index(below), run["name"])
-        group.setCustomProperty(RUN_GROUP, True)
+        group.setCustomProperty(RUN_GROUP, run.get("folder") or True)
     rank = _rank(layer)
     position = sum(1 for child in group.children()
-                   if child.layer() is not None and _rank(child.layer()) <= rank)
+                   if QgsLayerTree.isLayer(child) and child.layer() is not None
+                   and _rank(child.layer()) <= rank)
     _move(node, group, position)
 
 
@@ -195,13 +212,16 @@ def style_when_loaded(context, output_path: str, style) -> None:
         context.layerToLoadOnCompletionDetails(output_path).setPostProcessor(styler)
 
 
-def load_results(context, crs_wkt, layers, group: str | None = None) -> None:
+def load_results(context, crs_wkt, layers, group: str | None = None, folder=None) -> None:
     """Hand one run's finished layers (``(layer, style, output name)``) to QGIS to add to the
     project when the algorithm ends: each in the run's CRS (an SMS 2DM carries none) and
-    styled; with ``group``, in one layer group of that name, lines above points above rasters
-    above the mesh; the map zoomed to them."""
+    styled; with ``group``, in one layer group of that name (the run ``folder``'s group where
+    an earlier run into it left one), lines above points above rasters above the mesh; the map
+    zoomed to them."""
+    import os
+
     crs = QgsCoordinateReferenceSystem.fromWkt(crs_wkt) if crs_wkt else None
-    run = {"name": group}
+    run = {"name": group, "folder": os.path.realpath(folder) if folder else None}
     for layer, style, output_name in layers:
         if not layer.isValid():
             raise QgsProcessingException(f"the output {layer.source()} could not be opened by "

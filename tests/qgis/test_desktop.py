@@ -482,3 +482,28 @@ def test_a_rerun_into_a_loaded_raster_stretches_it_for_its_new_values(tmp_path):
     shown = seen["stretch"][0]
     assert abs(shown[0] - low) < 0.05 * (high - low), (shown, low, high)
     assert abs(shown[1] - high) < 0.05 * (high - low), (shown, low, high)
+
+
+REGROUP_SCRIPT = desktop_script(r"""
+    import processing
+    project = QgsProject.instance()
+    parameters = {"INPUT": os.environ["FM_INPUT"], "CELL_SIZE": 2.0, "MAX_AREA": 200,
+                  "OUTPUT_FOLDER": os.environ["FM_OUTPUT"]}
+    processing.runAndLoadResults("floodmesh:lidartomesh", parameters)
+    settle()
+    project.removeMapLayers([l.id() for l in project.mapLayersByName("Residuals")])
+    settle()
+    processing.runAndLoadResults("floodmesh:lidartomesh", parameters)  # the same folder again
+    settle()
+    out["tree"] = tree(project.layerTreeRoot())
+""")
+
+
+def test_a_rerun_loads_what_is_missing_into_the_run_group(tmp_path):
+    """LiDAR to mesh run, its residuals removed from the project, run again into the same
+    folder: the residuals come back into the folder's one group, in their place, beside the
+    reloaded break lines and mesh, not into a second group of the same name."""
+    seen = run_on_real_data(REGROUP_SCRIPT, tmp_path)
+    assert [row.get("group") for row in seen["tree"]] == ["run"], seen
+    assert [row["layer"] for row in seen["tree"][0]["children"]] == [
+        "Break lines", "Residuals", "Mesh"], seen
