@@ -10,8 +10,8 @@ from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
 from qgis.PyQt.QtCore import QCoreApplication
 
 from ..core.errors import FloodMeshError
-from ..core.options import is_point_source
-from .compat import METRES, VECTOR_LINE, VECTOR_POLYGON
+from ..core.options import GEOMETRY_KINDS, is_point_source, wrong_geometry
+from .compat import METRES, VECTOR_LINE, VECTOR_POINT, VECTOR_POLYGON
 from .child import run_step
 from .styles import reload_rewritten
 
@@ -31,6 +31,17 @@ LABELS = {"max-slope": "Maximum slope (Shanholtz)", "one-over-distance":
           "analytic": "Analytic LoG kernel", "auto": "Automatic (steep where the median slope "
           "reaches S_crit)", "flat": "Flat: least slope", "steep": "Steep: least change of slope"}
 
+
+
+
+def _number(source_type) -> int:
+    """A Processing source type as a number (QGIS >= 3.36 gives enum members)."""
+    return int(getattr(source_type, "value", source_type))
+
+
+# what a layer parameter of one source type needs, as GEOMETRY_KINDS names it
+SOURCE_GEOMETRIES = {_number(VECTOR_POINT): "points", _number(VECTOR_LINE): "lines",
+                     _number(VECTOR_POLYGON): "polygons"}
 
 # per-parameter help (the tooltip), by parameter name: one text for the same parameter everywhere
 PARAMETER_HELP = {
@@ -163,6 +174,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
     def checkParameterValues(self, parameters, context):  # noqa: N802
         try:
             self.check_values(parameters, context)
+            self.check_geometries(parameters, context)
         except FloodMeshError as exc:  # core's own message, before QGIS's generic range check
             return False, str(exc)
         return super().checkParameterValues(parameters, context)
@@ -170,6 +182,26 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
     def check_values(self, parameters, context):
         """Check parameter values with core's checks (raising FloodMeshError) before the run;
         subclasses override it. Core checks them again when it runs, with the same message."""
+
+    def check_geometries(self, parameters, context):
+        """A layer of points, lines or polygons given where another kind belongs (a file chosen
+        with the dialog's … button, a path in a script or model): core's one line, before the
+        run."""
+        from qgis.core import QgsProcessingParameterFeatureSource, QgsWkbTypes
+
+        for definition in self.parameterDefinitions():
+            if (not isinstance(definition, QgsProcessingParameterFeatureSource)
+                    or parameters.get(definition.name()) in (None, "")):
+                continue
+            needed = {SOURCE_GEOMETRIES.get(_number(t)) for t in definition.dataTypes()}
+            layer = self.parameterAsVectorLayer(parameters, definition.name(), context)
+            if len(needed) != 1 or None in needed or layer is None or not layer.isValid():
+                continue
+            has = GEOMETRY_KINDS.get(QgsWkbTypes.displayString(
+                QgsWkbTypes.flatType(layer.wkbType())))
+            if has is not None and has not in needed:
+                raise wrong_geometry(Path(layer.source().split("|")[0]).name or layer.name(),
+                                     has, *needed)
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         # core's step (core.steps) checks its files before any work: no output is or replaces

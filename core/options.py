@@ -37,6 +37,20 @@ EPT_NAME = "ept.json"
 # the flood's result rasters by what they hold, as run_flood writes them and QGIS loads them
 RESULT_RASTERS = {"max_depth": "max_depth.tif", "max_stage": "max_water_level.tif",
                   "max_speed": "max_speed.tif", "arrival_s": "arrival_time.tif"}
+# a vector layer's geometries as messages name them, and how QGIS turns a layer into each kind
+GEOMETRY_KINDS = {"Point": "points", "MultiPoint": "points", "LineString": "lines",
+                  "MultiLineString": "lines", "Polygon": "polygons", "MultiPolygon": "polygons"}
+MAKE_GEOMETRY = {"points": "Extract vertices", "lines": "Polygons to lines",
+                 "polygons": "Lines to polygons"}
+
+
+def wrong_geometry(name: str, has: str, needed: str) -> FloodMeshError:
+    """The error for the layer ``name`` of ``has`` (points, lines, polygons, as GEOMETRY_KINDS
+    names them) given where ``needed`` are needed."""
+    return FloodMeshError(f"{name} has {has}; {needed} are needed here: give a layer of "
+                          f"{needed} (QGIS: {MAKE_GEOMETRY[needed]} makes one)")
+
+
 # solver export formats (core.steps.export), named by the extension each writes
 EXPORT_FORMATS = ("2dm", "slf", "14", "gr3", "nc", "gpkg")
 EXPORT_EXTENSIONS = {f: f".{f}" for f in EXPORT_FORMATS}

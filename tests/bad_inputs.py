@@ -385,6 +385,19 @@ def _line_layer(folder):
     return path
 
 
+def _check_lines(folder):
+    """3-D lines on _mesh_2dm's square where check points belong."""
+    import fiona
+
+    path = folder / "check_lines.gpkg"
+    with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(UTM).to_wkt(),
+                    schema={"geometry": "3D LineString", "properties": {}}) as dst:
+        dst.write({"geometry": {"type": "LineString", "coordinates": [
+            (ORIGIN[0] + x, ORIGIN[1] + y, 1.0) for x, y in ((1, 1), (5, 6), (9, 2))]},
+            "properties": {}})
+    return path
+
+
 def _mesh_2dm(folder):
     """A small valid mesh (two triangles of a 10 m square)."""
     path = folder / "mesh.2dm"
@@ -743,9 +756,16 @@ CASES = [
     BadInput("boundary-layer-not-there", "but none named 'roads'",
              lambda f: ["mesh", _tif("dem.tif")(f), "--boundary",
                         f"{layered_boundary(f)}|layername=roads", "--out", "{out}/mesh.2dm"]),
-    BadInput("boundary-given-lines", "a model domain (boundary) must be polygons",
+    BadInput("boundary-given-lines", "domain_line.gpkg has lines; polygons are needed",
              lambda f: ["mesh", _tif("dem.tif")(f), "--boundary", _line_layer(f), "--out",
-                        "{out}/mesh.2dm"]),
+                        "{out}/mesh.2dm"],
+             _qgis("buildmesh", DEM=_tif("dem.tif"), BOUNDARY=_line_layer,
+                   OUTPUT="{out}/mesh.2dm")),
+    BadInput("assess-given-lines", "check_lines.gpkg has lines; points are needed",
+             lambda f: ["assess", _mesh_2dm(f), "--points", _check_lines(f), "--crs", UTM,
+                        "--out", "{out}/res.gpkg"],
+             _qgis("assessaccuracy", MESH=_mesh_2dm, POINTS=_check_lines,
+                   OUTPUT="{out}/res.gpkg")),
     _export_case("export-geographic-crs", "is not a projected CRS in metres", "EPSG:4326"),
     _export_case("export-feet-crs", "is not a projected CRS in metres", "EPSG:2229"),
     BadInput("grid-too-large-for-memory", "of memory",

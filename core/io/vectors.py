@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FloodMeshError
+from ..options import GEOMETRY_KINDS, wrong_geometry
 from .outputs import atomic_output, require_file
 
 # GeoPackages record when their content last changed; a fixed time makes the same inputs give
@@ -370,6 +371,19 @@ def open_vector(source, what: str):
         raise FloodMeshError(f"{path.name} is not a readable vector file ({exc})") from None
 
 
+def _features(src, name: str, needed: str):
+    """(number from 1, feature, geometry) of the features of ``src`` (fiona) that have a
+    geometry; one that is not ``needed`` (points, lines or polygons) is refused."""
+    for number, feat in enumerate(src, 1):
+        geom = feat["geometry"]
+        if geom is None:
+            continue
+        has = GEOMETRY_KINDS.get(geom["type"], f"{geom['type']} features")
+        if has != needed:
+            raise wrong_geometry(name, has, needed)
+        yield number, feat, geom
+
+
 def read_breaklines(path) -> list:
     """Read a line layer as BreakLines (slopes unknown: NaN; component from ``component_id``
     where the layer has it, else 0)."""
@@ -421,15 +435,9 @@ def _line_parts(path, note=None, *,
     parts_out, dropped = [], []
     try:
         with open_vector(source, "line file") as src:
-            for number, feat in enumerate(src, 1):
-                geom = feat["geometry"]
-                if geom is None:
-                    continue
+            for number, feat, geom in _features(src, path.name, "lines"):
                 parts = ([geom["coordinates"]] if geom["type"] == "LineString"
-                         else geom["coordinates"] if geom["type"] == "MultiLineString" else None)
-                if parts is None:
-                    raise FloodMeshError(f"{path.name} holds {geom['type']} features; "
-                                         "break lines must be lines")
+                         else geom["coordinates"])
                 properties = dict(feat["properties"])
                 for k, part in enumerate(parts, 1):
                     if finite:
@@ -467,7 +475,7 @@ def _refuse_non_finite(part, where: str) -> None:
                              f"{value}, not a number; {fix}")
 
 
-def read_regions(path, *, field: str | None = None, what: str = "regions") -> list:
+def read_regions(path, *, field: str | None = None) -> list:
     """Polygon features as (shapely geometry, material id): the integer attribute ``field``, or
     2, 3, … in feature order (1 being the rest of the domain)."""
     # lazy: OGR and GEOS load only when this runs
@@ -482,14 +490,7 @@ def read_regions(path, *, field: str | None = None, what: str = "regions") -> li
             if field and field not in fields:
                 raise FloodMeshError(f"{path.name} has no field {field!r} (its fields: "
                                      f"{', '.join(fields) or 'none'}); name the material id field")
-            for feat in src:
-                geom = feat["geometry"]
-                if geom is None:
-                    continue
-                if geom["type"] not in ("Polygon", "MultiPolygon"):
-                    raise FloodMeshError(f"{path.name} holds {geom['type']} features; {what} "
-                                         "must be polygons: give a polygon layer (QGIS: "
-                                         "Lines to polygons)")
+            for _, feat, geom in _features(src, path.name, "polygons"):
                 value = len(regions) + 2 if not field else feat["properties"][field]
                 try:
                     material = float(value)
@@ -512,16 +513,18 @@ def read_points_vector(path) -> np.ndarray:
     import fiona
 
     path = require_file(path, "point layer")
+    xyz = []
     with fiona.open(path) as src:
-        xyz = [feat["geometry"]["coordinates"] for feat in src if feat["geometry"]]
-    if not xyz or len(xyz[0]) < 3:
+        for _, _, geom in _features(src, path.name, "points"):
+            xyz.extend([geom["coordinates"]] if geom["type"] == "Point" else geom["coordinates"])
+    if not xyz or min(len(p) for p in xyz) < 3:
         raise FloodMeshError(f"{path.name} has no 3-D points")
     return np.asarray(xyz, dtype=float)[:, :3]
 
 
 def read_boundary(path) -> list:
     """The polygons (shapely) of a polygon layer, e.g. a model domain, as drawn (unchecked)."""
-    return [geometry for geometry, _ in read_regions(path, what="a model domain (boundary)")]
+    return [geometry for geometry, _ in read_regions(path)]
 
 
 # The CRSs a GeoPackage layer without one is given (its spec's srs_id 0 and -1)

@@ -507,3 +507,54 @@ def test_a_rerun_loads_what_is_missing_into_the_run_group(tmp_path):
     assert [row.get("group") for row in seen["tree"]] == ["run"], seen
     assert [row["layer"] for row in seen["tree"][0]["children"]] == [
         "Break lines", "Residuals", "Mesh"], seen
+
+
+WRONG_GEOMETRY_SCRIPT = desktop_script(r"""
+    import processing
+    from qgis.core import (QgsCoordinateTransformContext, QgsFeature, QgsGeometry,
+                           QgsVectorFileWriter, QgsVectorLayer)
+    base = os.environ["FM_OUTPUT"]
+    processing.run("floodmesh:buildmesh", {"DEM": os.environ["FM_DEM"], "MAX_AREA": 400,
+                                           "OUTPUT": base + ".2dm"})
+    for kind, wkt in (("lines", "LineStringZ (382300 6354300 10, 382400 6354400 12, "
+                                "382450 6354380 11)"),
+                      ("points", "PointZ (382300 6354300 10)")):
+        layer = QgsVectorLayer(wkt.split()[0] + "?crs=EPSG:32756", kind, "memory")
+        feature = QgsFeature()
+        feature.setGeometry(QgsGeometry.fromWkt(wkt))
+        layer.dataProvider().addFeatures([feature])
+        options = QgsVectorFileWriter.SaveVectorOptions()
+        options.driverName = "GPKG"
+        QgsVectorFileWriter.writeAsVectorFormatV2(layer, f"{base} {kind}.gpkg",
+                                                  QgsCoordinateTransformContext(), options)
+        iface.addVectorLayer(f"{base} {kind}.gpkg", kind, "ogr")
+    try:  # the break lines given as check points (the dialog's … button, a script)
+        processing.run("floodmesh:assessaccuracy", {
+            "MESH": base + ".2dm", "POINTS": base + " lines.gpkg",
+            "OUTPUT": base + " residuals.gpkg"})
+        out["said"] = None
+    except Exception as exc:
+        out["said"] = str(exc)
+    out["written"] = os.path.exists(base + " residuals.gpkg")
+    # what the dialog offers as check points among the project's layers
+    from qgis.PyQt.QtWidgets import QComboBox
+    dialog = processing.createAlgorithmDialog("floodmesh:assessaccuracy", {})
+    dialog.show()
+    settle()
+    combo = dialog.mainWidget().wrappers["POINTS"].wrappedWidget().findChild(QComboBox)
+    out["offered"] = [combo.itemText(i) for i in range(combo.count())]
+    dialog.close()
+""")
+
+
+def test_assess_accuracy_given_lines_says_points_are_needed(tmp_path):
+    """A line layer given as Assess accuracy's check points is refused in one line that says it
+    has lines and points are needed (not numpy's words), before any output is written; the
+    dialog offers only the project's point layers there."""
+    seen = run_on_real_data(WRONG_GEOMETRY_SCRIPT, tmp_path)
+    said = seen["said"] or ""
+    last = said.strip().splitlines()[-1] if said.strip() else ""
+    assert "lines" in last and "points are needed" in last, said
+    assert "array" not in said and "sequence" not in said and "Traceback" not in said, said
+    assert not seen["written"], seen
+    assert [text.split(" [")[0] for text in seen["offered"]] == ["points"], seen
