@@ -13,7 +13,7 @@ from ..core.errors import FloodMeshError
 from ..core.options import GEOMETRY_KINDS, is_point_source, wrong_geometry
 from .compat import METRES, VECTOR_LINE, VECTOR_POINT, VECTOR_POLYGON
 from .child import run_step
-from .styles import reload_rewritten
+from .styles import reload_rewritten, stack_when_loaded
 
 
 # what toolbox searches find every FloodMesh algorithm by (each adds its own, ``TAGS``)
@@ -214,6 +214,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
     def postProcessAlgorithm(self, context, feedback):  # noqa: N802
         # in QGIS's main thread, after the run, before QGIS loads its results
         reload_rewritten(context)
+        stack_when_loaded(context)
         return {}
 
     def run_step(self, step, args, feedback, *outputs):

@@ -202,14 +202,28 @@ def _zoom_to(layer, project) -> None:
 _PENDING = []  # QGIS holds post-processors by pointer only: keep them alive here
 
 
+def _kept(styler):
+    _PENDING.append(styler)
+    del _PENDING[:-64]
+    return styler
+
+
 def style_when_loaded(context, output_path: str, style) -> None:
     """Apply ``style`` to the layer QGIS loads from ``output_path`` when the algorithm ends (a
     destination parameter the user asked to open)."""
     if context.willLoadLayerOnCompletion(output_path):
-        styler = _StyleOnLoad(style)
-        _PENDING.append(styler)
-        del _PENDING[:-16]
-        context.layerToLoadOnCompletionDetails(output_path).setPostProcessor(styler)
+        context.layerToLoadOnCompletionDetails(output_path).setPostProcessor(
+            _kept(_StyleOnLoad(style)))
+
+
+def stack_when_loaded(context) -> None:
+    """Every output QGIS loads when the algorithm ends, styled or not (a DEM, a slope, the
+    triangles), takes its place among the FloodMesh results around it: without the mark a
+    step's mesh, loaded on top, would cover the lines and rasters of earlier steps."""
+    for key in context.layersToLoadOnCompletion():
+        details = context.layerToLoadOnCompletionDetails(key)
+        if details.postProcessor() is None:
+            details.setPostProcessor(_kept(_StyleOnLoad(None)))
 
 
 def load_results(context, crs_wkt, layers, group: str | None = None, folder=None) -> None:
@@ -231,10 +245,7 @@ def load_results(context, crs_wkt, layers, group: str | None = None, folder=None
         style(layer)
         context.temporaryLayerStore().addMapLayer(layer)
         details = QgsProcessingContext.LayerDetails(layer.name(), context.project(), output_name)
-        styler = _StyleOnLoad(None, run)
-        _PENDING.append(styler)
-        del _PENDING[:-16]
-        details.setPostProcessor(styler)
+        details.setPostProcessor(_kept(_StyleOnLoad(None, run)))
         context.addLayerToLoadOnCompletion(layer.id(), details)
 
 

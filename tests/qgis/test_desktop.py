@@ -558,3 +558,41 @@ def test_assess_accuracy_given_lines_says_points_are_needed(tmp_path):
     assert "array" not in said and "sequence" not in said and "Traceback" not in said, said
     assert not seen["written"], seen
     assert [text.split(" [")[0] for text in seen["offered"]] == ["points"], seen
+
+
+STACK_SCRIPT = desktop_script(r"""
+    import processing
+    from qgis.core import (QgsCoordinateTransformContext, QgsFeature, QgsGeometry,
+                           QgsVectorFileWriter, QgsVectorLayer)
+    base = os.environ["FM_OUTPUT"]
+    lines = QgsVectorLayer("LineStringZ?crs=EPSG:32756", "lines", "memory")
+    feature = QgsFeature()
+    feature.setGeometry(QgsGeometry.fromWkt("LineStringZ (" + ", ".join(
+        f"{382300 + 10 * k} {6354400 + 3 * k} {20 + 0.1 * k}" for k in range(12)) + ")"))
+    lines.dataProvider().addFeatures([feature])
+    options = QgsVectorFileWriter.SaveVectorOptions()
+    options.driverName = "GPKG"
+    QgsVectorFileWriter.writeAsVectorFormatV2(lines, base + " lines.gpkg",
+                                              QgsCoordinateTransformContext(), options)
+    # a modeller's steps, one after another: lines, a slope, then the mesh
+    processing.runAndLoadResults("floodmesh:simplifybreaklines", {
+        "INPUT": base + " lines.gpkg", "OUTPUT": base + " simple.gpkg"})
+    settle()
+    processing.runAndLoadResults("floodmesh:slope", {
+        "INPUT": os.environ["FM_DEM"], "OUTPUT": base + " slope.tif"})
+    settle()
+    processing.runAndLoadResults("floodmesh:buildmesh", {
+        "DEM": os.environ["FM_DEM"], "MAX_AREA": 400, "OUTPUT": base + ".2dm"})
+    settle()
+    out["tree"] = tree(QgsProject.instance().layerTreeRoot())
+""")
+
+
+def test_steps_run_one_after_another_stack_lines_above_rasters_above_the_mesh(tmp_path):
+    """Simplify break lines, Slope and Build mesh run one after another: the mesh, loaded last,
+    goes below the slope and the lines, as it does among a model's outputs, instead of on top
+    of them where its shaded faces hide them."""
+    seen = run_on_real_data(STACK_SCRIPT, tmp_path)
+    assert [row["layer"] for row in seen["tree"]] == [
+        "Simplified break lines", "Slope (degrees) or LoG response (m)", "Mesh"], seen
+
