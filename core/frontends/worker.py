@@ -72,14 +72,23 @@ class Channel:
 
 # ---------------------------------------------------------------------------------------------
 # the steps: core.steps' file-level functions, with the worker's progress and notes
-def _file_step(func):
-    """``func`` (one of ``core.steps``) with the worker's progress and notes; its summary goes
-    to QGIS's log."""
+def _file_step(func, describe=None):
+    """``func`` (one of ``core.steps``) with the worker's progress and notes; its summary (or
+    ``describe`` of its result, where the summary is the command line's JSON) goes to QGIS's
+    log."""
     def run(ch, **args):
         result = func(**args, progress=ch.progress, cancelled=ch.cancelled, note=ch.note)
-        ch.info(result.pop("summary"))
+        summary = result.pop("summary")
+        ch.info(describe(result) if describe else summary)
         return result
     return run
+
+
+def _accuracy_text(result):
+    # lazy: numpy loads only when this runs
+    from ..steps.accuracy import accuracy_text
+
+    return accuracy_text(result["statistics"])
 
 
 def step_run(ch, *, input, output_folder, options, skip_unreadable=False):
@@ -124,8 +133,9 @@ def _pipeline_log(ch):
 STEPS = {"grid": _file_step(steps.grid), "slope": _file_step(steps.slope),
          "breakpoints": _file_step(steps.breakpoints), "trace": _file_step(steps.trace),
          "simplify": _file_step(steps.simplify), "build_mesh": _file_step(steps.mesh),
-         "refine_mesh": _file_step(steps.refine), "assess": _file_step(steps.assess),
-         "export": _file_step(steps.export), "run": step_run, "flood": step_flood}
+         "refine_mesh": _file_step(steps.refine),
+         "assess": _file_step(steps.assess, _accuracy_text), "export": _file_step(steps.export),
+         "run": step_run, "flood": step_flood}
 
 
 def run_job(job: dict, ch: Channel) -> int:

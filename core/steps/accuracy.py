@@ -130,3 +130,26 @@ def accuracy_statistics(res: np.ndarray, *, alpha: float | None = None,
         stats.update(alpha=float(alpha), delta_m=float(delta),
                      vertex_error_bound_m=rmse + float(alpha) * float(delta))
     return stats
+
+
+def accuracy_text(stats: dict) -> str:
+    """``accuracy_statistics`` as a modeller reads them: centimetres, shares in %, the FEMA/NSSDA
+    test passed or failed."""
+    n, held = stats["n_assessed"], stats["n_holdout"]
+    if not n:
+        return f"not assessed: none of the {held} check points lies inside the mesh"
+
+    def cm(metres):
+        return f"{100 * metres:.1f} cm"
+
+    outside = stats["n_outside_mesh"]
+    classes = {name: f"{100 * share:.0f} %" for name, share in stats["classes"].items()}
+    test = ("FEMA/NSSDA test not made: it needs 20 check points" if stats["nssda_pass"] is None
+            else f"FEMA/NSSDA test {'passed' if stats['nssda_pass'] else 'failed'} (RMSE at "
+                 f"most {cm(stats['nssda_threshold_m'])} on {n} points)")
+    return (f"RMSE {cm(stats['rmse_m'])} on {n} of {held} check points"
+            f"{f' ({outside} outside the mesh)' if outside else ''}; mean {cm(stats['mean_m'])}, "
+            f"standard deviation {cm(stats['std_m'])}, 95 % (1.96 RMSE) "
+            f"{cm(stats['accuracy_95_m'])}, largest {cm(stats['max_abs_residual_m'])}\n"
+            f"{classes['<10 cm']} under 10 cm, {classes['10-25 cm']} 10–25 cm, "
+            f"{classes['>25 cm']} over 25 cm; {test}")

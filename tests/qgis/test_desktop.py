@@ -7,6 +7,7 @@ mesh opened by hand in its CRS; the dialog's distances in metres and its help; t
 valid as opened; none of FloodMesh's numerical packages in the QGIS process."""
 import json
 import os
+import re
 import shutil
 import subprocess
 
@@ -596,3 +597,39 @@ def test_steps_run_one_after_another_stack_lines_above_rasters_above_the_mesh(tm
     assert [row["layer"] for row in seen["tree"]] == [
         "Simplified break lines", "Slope (degrees) or LoG response (m)", "Mesh"], seen
 
+
+ASSESS_LOG_SCRIPT = desktop_script(r"""
+    import processing
+    from qgis.core import QgsProcessingFeedback
+
+    class Log(QgsProcessingFeedback):  # what the dialog's log shows
+        def __init__(self):
+            super().__init__()
+            self.lines = []
+
+        def pushInfo(self, text):  # noqa: N802
+            self.lines.append(text)
+
+    base = os.environ["FM_OUTPUT"]
+    processing.run("floodmesh:gridpoints", {
+        "INPUT": os.environ["FM_INPUT"], "CELL_SIZE": 2.0, "HOLDOUT": 0.01,
+        "OUTPUT": base + " dem.tif", "HOLDOUT_OUTPUT": base + " holdout.gpkg"})
+    processing.run("floodmesh:buildmesh", {"DEM": base + " dem.tif", "MAX_AREA": 100,
+                                           "OUTPUT": base + ".2dm"})
+    log = Log()
+    processing.runAndLoadResults("floodmesh:assessaccuracy", {
+        "MESH": base + ".2dm", "POINTS": base + " holdout.gpkg",
+        "OUTPUT": base + " residuals.gpkg"}, feedback=log)
+    out["log"] = log.lines
+""")
+
+
+def test_assess_accuracy_says_its_figures_in_words_and_centimetres(tmp_path):
+    """Assess accuracy's log gives the RMSE, the classes and the FEMA/NSSDA test's outcome as
+    a modeller reads them (cm, %, passed or failed), not core's JSON with keys and 16 digits."""
+    seen = run_on_real_data(ASSESS_LOG_SCRIPT, tmp_path)
+    text = "\n".join(line for line in seen["log"] if not line.startswith("Results: "))  # QGIS's
+    assert "{" not in text and "rmse_m" not in text, text
+    assert re.search(r"RMSE \d+\.\d cm on \d+ of \d+ check points", text), text
+    assert re.search(r"FEMA/NSSDA test (passed|failed)", text), text
+    assert re.search(r"\d+ % under 10 cm", text), text
