@@ -8,7 +8,7 @@ from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POLYGON
 from ..core.options import (DEFAULT_MAX_TRIANGLES, MAX_MIN_ANGLE, check_flow_area,
                             check_max_area, check_max_triangles, check_min_angle)
 from .base import FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args
-from .styles import load_mesh
+from .styles import load_mesh, style_triangles, style_when_loaded
 
 
 class BuildMeshAlgorithm(FloodMeshAlgorithm):
@@ -75,6 +75,8 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
             "flow_area": self.optional_number(parameters, self.FLOW_AREA, context),
             "output": out, "triangles": triangles_out or None}, feedback, out, triangles_out)
         load_mesh(context, out, "Mesh", self.OUTPUT, result["crs"])
+        if triangles_out:
+            style_when_loaded(context, triangles_out, style_triangles)
         return {k: v for k, v in result.items()
                 if k in (self.OUTPUT, self.NODES, self.TRIANGLE_COUNT, self.TRIANGLES)}
 

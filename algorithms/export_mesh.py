@@ -11,7 +11,7 @@ from .compat import DOUBLE, VECTOR_LINE, VECTOR_POLYGON
 from ..core.options import EXPORT_EXTENSIONS as EXTENSIONS
 from ..core.options import EXPORT_FORMAT_LABELS, EXPORT_FORMATS
 from .base import FloodMeshAlgorithm, crs_or_none, distance, layer_file
-from .styles import load_results, style_breaklines, style_mesh
+from .styles import load_results, style_breaklines, style_mesh, style_triangles
 
 GPKG_LAYERS = ("breaklines", "boundary", "nodes", "triangles")  # what write_gpkg writes
 FILE_FILTER = ";;".join(f"{label} (*{EXTENSIONS[f]})"
@@ -105,9 +105,9 @@ class ExportMeshAlgorithm(FloodMeshAlgorithm):
         if fmt in ("2dm", "nc"):
             layers = [(QgsMeshLayer(str(out), "Exported mesh", "mdal"), style_mesh)]
         elif fmt == "gpkg":
+            styles = {"breaklines": style_breaklines, "triangles": style_triangles}
             layers = [(QgsVectorLayer(f"{out}|layername={name}", name, "ogr"),
-                       style_breaklines if name == "breaklines" else lambda _: None)
-                      for name in GPKG_LAYERS]
+                       styles.get(name, lambda _: None)) for name in GPKG_LAYERS]
         else:
             return
         load_results(context, crs, [(layer, style, self.OUTPUT) for layer, style in layers

@@ -41,6 +41,19 @@ def style_residuals(layer):
     _categorised(layer, "class", RESIDUAL_CLASSES)
 
 
+def style_triangles(layer):
+    """Triangles as polygons (Build mesh's, an exported GeoPackage's) drawn as the mesh's edges,
+    unfilled, so that what lies below shows through."""
+    from qgis.core import QgsSimpleFillSymbolLayer
+    from qgis.PyQt.QtCore import Qt
+
+    fill = QgsSimpleFillSymbolLayer(QColor(0, 0, 0, 0), Qt.NoBrush, QColor(MESH_EDGE_COLOUR),
+                                    Qt.SolidLine, 0.1)
+    symbol = QgsSymbol.defaultSymbol(layer.geometryType())
+    symbol.changeSymbolLayer(0, fill)
+    layer.setRenderer(QgsSingleSymbolRenderer(symbol))
+
+
 def style_mesh(layer):
     """Shade the faces by the nodes' elevation (the mesh's first dataset group) and draw the
     edges, thin and grey, so that it reads as a mesh."""

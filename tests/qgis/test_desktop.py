@@ -633,3 +633,33 @@ def test_assess_accuracy_says_its_figures_in_words_and_centimetres(tmp_path):
     assert re.search(r"RMSE \d+\.\d cm on \d+ of \d+ check points", text), text
     assert re.search(r"FEMA/NSSDA test (passed|failed)", text), text
     assert re.search(r"\d+ % under 10 cm", text), text
+
+
+TRIANGLES_SCRIPT = desktop_script(r"""
+    import processing
+    from qgis.core import QgsProject
+    from qgis.PyQt.QtCore import Qt
+    base = os.environ["FM_OUTPUT"]
+    processing.runAndLoadResults("floodmesh:buildmesh", {
+        "DEM": os.environ["FM_DEM"], "MAX_AREA": 400, "OUTPUT": base + ".2dm",
+        "TRIANGLES": base + " triangles.gpkg"})
+    settle()
+    processing.runAndLoadResults("floodmesh:exportmesh", {
+        "INPUT": base + ".2dm", "CRS": "EPSG:32756", "FORMAT": 5,
+        "OUTPUT": base + " export.gpkg"})
+    settle()
+    out["fills"] = {}
+    for layer in QgsProject.instance().mapLayers().values():
+        if layer.name() in ("Triangles", "triangles"):
+            symbol = layer.renderer().symbol()
+            out["fills"][layer.source()] = [
+                symbol.symbolLayer(0).brushStyle() == Qt.NoBrush, symbol.color().alpha()]
+""")
+
+
+def test_triangles_load_as_outlines_over_what_lies_below(tmp_path):
+    """Build mesh's Triangles and Export mesh's GeoPackage triangles load as the mesh's edges,
+    unfilled, not as polygons filled with a random colour that hide the layers below."""
+    seen = run_on_real_data(TRIANGLES_SCRIPT, tmp_path)
+    assert len(seen["fills"]) == 2, seen
+    assert all(unfilled for unfilled, _ in seen["fills"].values()), seen
