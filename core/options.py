@@ -40,15 +40,18 @@ RESULT_RASTERS = {"max_depth": "max_depth.tif", "max_stage": "max_water_level.ti
 # a vector layer's geometries as messages name them, and how QGIS turns a layer into each kind
 GEOMETRY_KINDS = {"Point": "points", "MultiPoint": "points", "LineString": "lines",
                   "MultiLineString": "lines", "Polygon": "polygons", "MultiPolygon": "polygons"}
-MAKE_GEOMETRY = {"points": "Extract vertices", "lines": "Polygons to lines",
-                 "polygons": "Lines to polygons"}
+MAKE_GEOMETRY = {("lines", "points"): "Extract vertices", ("polygons", "points"):
+                 "Extract vertices", ("points", "lines"): "Points to path",
+                 ("polygons", "lines"): "Polygons to lines", ("lines", "polygons"):
+                 "Lines to polygons"}
 
 
 def wrong_geometry(name: str, has: str, needed: str) -> FloodMeshError:
     """The error for the layer ``name`` of ``has`` (points, lines, polygons, as GEOMETRY_KINDS
     names them) given where ``needed`` are needed."""
+    make = MAKE_GEOMETRY.get((has, needed))
     return FloodMeshError(f"{name} has {has}; {needed} are needed here: give a layer of "
-                          f"{needed} (QGIS: {MAKE_GEOMETRY[needed]} makes one)")
+                          f"{needed}{f' (QGIS: {make} makes one of {has})' if make else ''}")
 
 
 # solver export formats (core.steps.export), named by the extension each writes

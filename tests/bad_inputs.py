@@ -385,17 +385,24 @@ def _line_layer(folder):
     return path
 
 
-def _check_lines(folder):
-    """3-D lines on _mesh_2dm's square where check points belong."""
-    import fiona
+def _vertices(kind, name):
+    """A layer of 3-D ``kind`` (Point or LineString) at three places on _mesh_2dm's square,
+    written as ``name``: lines where check points belong, points where break lines do."""
+    def write(folder):
+        import fiona
 
-    path = folder / "check_lines.gpkg"
-    with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(UTM).to_wkt(),
-                    schema={"geometry": "3D LineString", "properties": {}}) as dst:
-        dst.write({"geometry": {"type": "LineString", "coordinates": [
-            (ORIGIN[0] + x, ORIGIN[1] + y, 1.0) for x, y in ((1, 1), (5, 6), (9, 2))]},
-            "properties": {}})
-    return path
+        path = folder / name
+        corners = [(ORIGIN[0] + x, ORIGIN[1] + y, 1.0) for x, y in ((1, 1), (5, 6), (9, 2))]
+        with fiona.open(path, "w", driver="GPKG", crs_wkt=CRS.from_user_input(UTM).to_wkt(),
+                        schema={"geometry": f"3D {kind}", "properties": {}}) as dst:
+            for geometry in ([{"type": "Point", "coordinates": c} for c in corners]
+                             if kind == "Point" else [{"type": kind, "coordinates": corners}]):
+                dst.write({"geometry": geometry, "properties": {}})
+        return path
+    return write
+
+
+_check_lines = _vertices("LineString", "check_lines.gpkg")
 
 
 def _mesh_2dm(folder):
@@ -761,6 +768,12 @@ CASES = [
                         "{out}/mesh.2dm"],
              _qgis("buildmesh", DEM=_tif("dem.tif"), BOUNDARY=_line_layer,
                    OUTPUT="{out}/mesh.2dm")),
+    BadInput("simplify-given-points", "points.gpkg has points; lines are needed here: give a "
+             "layer of lines (QGIS: Points to path makes one of points)",
+             lambda f: ["simplify", _vertices("Point", "points.gpkg")(f), "--out",
+                        "{out}/simple.gpkg"],
+             _qgis("simplifybreaklines", INPUT=_vertices("Point", "points.gpkg"),
+                   OUTPUT="{out}/simple.gpkg")),
     BadInput("assess-given-lines", "check_lines.gpkg has lines; points are needed",
              lambda f: ["assess", _mesh_2dm(f), "--points", _check_lines(f), "--crs", UTM,
                         "--out", "{out}/res.gpkg"],
