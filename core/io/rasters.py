@@ -255,6 +255,9 @@ def check_quantity(path, wanted: str, fix: str) -> None:
             held = held_quantity(src)
     except rasterio.errors.RasterioIOError:
         return
+    if held == ELEVATION:  # a DEM where its slope or LoG response belongs
+        fix = (f"give the DEM's {QUANTITIES[wanted][0]} (floodmesh slope DEM"
+               f"{' --method log' if wanted == 'log' else ''}; Slope for break lines in QGIS)")
     if held is not None and held != wanted:
         name = f"raster {Path(path).name}"
         raise FloodMeshError(f"{holds_instead(name, held, QUANTITIES[wanted][2])}: {fix}")

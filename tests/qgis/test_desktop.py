@@ -663,3 +663,30 @@ def test_triangles_load_as_outlines_over_what_lies_below(tmp_path):
     seen = run_on_real_data(TRIANGLES_SCRIPT, tmp_path)
     assert len(seen["fills"]) == 2, seen
     assert all(unfilled for unfilled, _ in seen["fills"].values()), seen
+
+
+DEM_AS_SLOPE_SCRIPT = desktop_script(r"""
+    import processing
+    base = os.environ["FM_OUTPUT"]
+    processing.runAndLoadResults("floodmesh:gridpoints", {
+        "INPUT": os.environ["FM_INPUT"], "CELL_SIZE": 2.0, "OUTPUT": base + " dem.tif"})
+    settle()
+    try:  # the DEM picked where the slope belongs: every raster of the project is offered
+        processing.run("floodmesh:classifybreakpoints", {
+            "INPUT": base + " dem.tif", "OUTPUT": base + " breakpoints.tif"})
+        out["said"] = None
+    except Exception as exc:
+        out["said"] = str(exc)
+    out["written"] = os.path.exists(base + " breakpoints.tif")
+""")
+
+
+def test_classify_breakpoints_given_the_dem_says_a_slope_is_needed(tmp_path):
+    """Grid LiDAR points' DEM picked as Classify breakpoints' slope: refused in one line that
+    says it holds elevations and names the Slope step, instead of breakpoints wherever the
+    ground is above S_crit metres."""
+    seen = run_on_real_data(DEM_AS_SLOPE_SCRIPT, tmp_path)
+    last = (seen["said"] or "").strip().splitlines()[-1:]
+    assert last and "holds elevations" in last[0] and "not a slope in degrees" in last[0], seen
+    assert "Slope for break lines" in last[0], seen
+    assert not seen["written"], seen
