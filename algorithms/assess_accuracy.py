@@ -4,7 +4,7 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber, QgsProcessingPa
                        QgsProcessingParameterVectorDestination)
 
 from .compat import VECTOR_POINT
-from .base import FloodMeshAlgorithm, layer_file
+from .base import FloodMeshAlgorithm, layer_file, vector_crs, vector_file
 from .styles import style_residuals, style_when_loaded
 
 
@@ -32,12 +32,12 @@ class AssessAccuracyAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("RMSE (m)")))
 
     def process(self, parameters, context, feedback):
-        layer = self.parameterAsVectorLayer(parameters, self.POINTS, context)
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
         report = self.parameterAsFileOutput(parameters, self.REPORT, context)
         result = self.run_step("assess", {
             "mesh": layer_file(self.parameterAsMeshLayer(parameters, self.MESH, context), "Mesh"),
-            "points": layer_file(layer, "Check points"), "crs": layer.crs().toWkt() or None,
+            "points": vector_file(self, parameters, self.POINTS, context, feedback),
+            "crs": vector_crs(self, parameters, self.POINTS, context),
             "output": out, "report": report or None}, feedback, out, report)
         style_when_loaded(context, out, style_residuals)
         return {k: v for k, v in result.items() if k in (self.OUTPUT, self.RMSE, self.REPORT)}

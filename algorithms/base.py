@@ -249,6 +249,29 @@ def layer_file(layer, what: str) -> str:
     return path
 
 
+# vector formats core reads as QGIS has them; any other layer is saved to a GeoPackage first
+VECTOR_FILES = ["gpkg", "shp", "geojson", "json", "fgb"]
+
+
+def vector_file(algorithm, parameters, name, context, feedback=None):
+    """The file core reads for the vector parameter ``name``, None when it is not given: the
+    layer's own file (``file.gpkg|layername=NAME`` for one layer of a GeoPackage), or, for
+    what only QGIS holds (a memory or database layer, selected features only, a layer's
+    filter), a temporary GeoPackage of those features, as QGIS hands layers to GDAL's tools."""
+    path, layer = algorithm.parameterAsCompatibleSourceLayerPathAndLayerName(
+        parameters, name, context, VECTOR_FILES, "gpkg", feedback)
+    if not path:
+        return None
+    return f"{path}|layername={layer}" if layer else path
+
+
+def vector_crs(algorithm, parameters, name, context):
+    """The WKT of the vector parameter's CRS as QGIS has it (set on a file without one), or
+    None."""
+    source = algorithm.parameterAsSource(parameters, name, context)
+    return (source.sourceCrs().toWkt() or None) if source is not None else None
+
+
 def crs_or_none(algorithm, parameters, name, context):
     """The CRS parameter as core takes it: its EPSG code where it has one (so that messages name
     it as the command line does), else its WKT; None when not given."""
@@ -298,20 +321,16 @@ def add_domain_parameters(algorithm):
         [VECTOR_LINE], optional=True))
 
 
-def domain_files(algorithm, parameters, context) -> tuple:
+def domain_files(algorithm, parameters, context, feedback=None) -> tuple:
     """(boundary file or None, user line file or None) from add_domain_parameters."""
-    def path(name, what):
-        layer = algorithm.parameterAsVectorLayer(parameters, name, context)
-        return layer_file(layer, what) if layer is not None else None
-
-    return path(BOUNDARY, "Model domain polygon"), path(USER_LINES, "Own lines")
+    return tuple(vector_file(algorithm, parameters, name, context, feedback)
+                 for name in (BOUNDARY, USER_LINES))
 
 
-def mesh_input_args(algorithm, parameters, context) -> dict:
+def mesh_input_args(algorithm, parameters, context, feedback=None) -> dict:
     """The worker's arguments for the DEM, BREAKLINES, BOUNDARY and USER_LINES parameters of a
     meshing algorithm."""
-    lines = algorithm.parameterAsVectorLayer(parameters, "BREAKLINES", context)
-    boundary, user_lines = domain_files(algorithm, parameters, context)
+    boundary, user_lines = domain_files(algorithm, parameters, context, feedback)
     return {"dem": layer_file(algorithm.parameterAsRasterLayer(parameters, "DEM", context), "DEM"),
-            "breaklines": layer_file(lines, "Break lines") if lines is not None else None,
+            "breaklines": vector_file(algorithm, parameters, "BREAKLINES", context, feedback),
             "boundary": boundary, "user_lines": user_lines}

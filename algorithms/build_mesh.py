@@ -67,7 +67,7 @@ class BuildMeshAlgorithm(FloodMeshAlgorithm):
         out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         triangles_out = self.parameterAsOutputLayer(parameters, self.TRIANGLES, context)
         result = self.run_step("build_mesh", {
-            **mesh_input_args(self, parameters, context),
+            **mesh_input_args(self, parameters, context, feedback),
             "min_angle": self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
             "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
             "size_field": layer_file(size_layer, "Size field") if size_layer else None,

@@ -10,7 +10,7 @@ from .compat import DOUBLE, VECTOR_LINE, VECTOR_POLYGON
 
 from ..core.options import EXPORT_EXTENSIONS as EXTENSIONS
 from ..core.options import EXPORT_FORMAT_LABELS, EXPORT_FORMATS
-from .base import FloodMeshAlgorithm, crs_or_none, distance, layer_file
+from .base import FloodMeshAlgorithm, crs_or_none, distance, layer_file, vector_file
 from .styles import load_results, style_breaklines, style_mesh, style_triangles
 
 GPKG_LAYERS = ("breaklines", "boundary", "nodes", "triangles")  # what write_gpkg writes
@@ -75,11 +75,8 @@ class ExportMeshAlgorithm(FloodMeshAlgorithm):
         crs = crs_or_none(self, parameters, self.CRS, context)
         if crs is None and mesh_layer is not None and mesh_layer.crs().isValid():
             crs = mesh_layer.crs().toWkt()
-        files = {}
-        for name, what in ((self.OPEN_BOUNDARIES, "Open boundary lines"),
-                           (self.REGIONS, "Region polygons"), (self.BREAKLINES, "Break lines")):
-            layer = self.parameterAsVectorLayer(parameters, name, context)
-            files[name] = layer_file(layer, what) if layer is not None else None
+        files = {name: vector_file(self, parameters, name, context, feedback)
+                 for name in (self.OPEN_BOUNDARIES, self.REGIONS, self.BREAKLINES)}
         out = Path(self.parameterAsFileOutput(parameters, self.OUTPUT, context))
         if out.suffix.lower() != EXTENSIONS[fmt]:  # the format chosen decides the extension
             out = out.with_suffix(EXTENSIONS[fmt])

@@ -7,8 +7,8 @@ from qgis.core import (QgsProcessing, QgsProcessingOutputNumber,
 from ..core.errors import FloodMeshError
 from ..core.options import check_refinement
 from .compat import DOUBLE, INTEGER, VECTOR_LINE, VECTOR_POINT
-from .base import (FloodMeshAlgorithm, add_domain_parameters, layer_file, mesh_input_args,
-                   point_cloud_file, point_cloud_parameter)
+from .base import (FloodMeshAlgorithm, add_domain_parameters, mesh_input_args,
+                   point_cloud_file, point_cloud_parameter, vector_file)
 from .grid_points import POINT_FILTER
 from .styles import load_mesh
 
@@ -77,9 +77,8 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.NODES, self.tr("Nodes")))
         self.addOutput(QgsProcessingOutputNumber(self.RMSE, self.tr("RMSE of the points (m)")))
 
-    def measured_points(self, parameters, context):
-        layer = self.parameterAsVectorLayer(parameters, self.POINTS, context)
-        given = [g for g in (layer_file(layer, "Measured points") if layer is not None else None,
+    def measured_points(self, parameters, context, feedback=None):
+        given = [g for g in (vector_file(self, parameters, self.POINTS, context, feedback),
                              point_cloud_file(self, parameters, context),
                              self.parameterAsFile(parameters, self.POINTS_FILE, context)) if g]
         if len(given) > 1:
@@ -106,16 +105,12 @@ class RefineMeshAlgorithm(FloodMeshAlgorithm):
         check_refinement(**self.refinement(parameters, context))
 
     def process(self, parameters, context, feedback):
-        def points(name, what):
-            layer = self.parameterAsVectorLayer(parameters, name, context)
-            return layer_file(layer, what) if layer else None
-
         out = self.parameterAsFileOutput(parameters, self.OUTPUT, context)
         report = self.parameterAsFileOutput(parameters, self.REPORT, context)
         result = self.run_step("refine_mesh", {
-            **mesh_input_args(self, parameters, context),
-            "points": self.measured_points(parameters, context),
-            "check": points(self.CHECK, "Check points"),
+            **mesh_input_args(self, parameters, context, feedback),
+            "points": self.measured_points(parameters, context, feedback),
+            "check": vector_file(self, parameters, self.CHECK, context, feedback),
             "min_angle": self.parameterAsDouble(parameters, self.MIN_ANGLE, context),
             "max_area": self.parameterAsDouble(parameters, self.MAX_AREA, context),
             **self.refinement(parameters, context), "output": out,

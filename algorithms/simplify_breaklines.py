@@ -5,7 +5,7 @@ from qgis.core import (QgsProcessingParameterEnum,
 from .compat import INTEGER, VECTOR_LINE
 
 from ..core.options import SIMPLIFY_METHODS
-from .base import FloodMeshAlgorithm, distance, layer_file
+from .base import FloodMeshAlgorithm, distance, vector_crs, vector_file
 from .styles import style_breaklines, style_when_loaded
 
 METHODS = ("keep every n-th point", "Douglas-Peucker", "cubic smoothing spline")
@@ -44,14 +44,14 @@ class SimplifyBreaklinesAlgorithm(FloodMeshAlgorithm):
             self.OUTPUT, self.tr("Simplified break lines"), VECTOR_LINE))
 
     def process(self, parameters, context, feedback):
-        layer = self.parameterAsVectorLayer(parameters, self.INPUT, context)
         method = SIMPLIFY_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
         amount = (self.parameterAsInt(parameters, self.KEEP_EVERY, context)
                   if method == "keep-every"
                   else self.parameterAsDouble(parameters, self.TOLERANCE, context))
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
         self.run_step("simplify", {
-            "input": layer_file(layer, "Break lines"), "crs": layer.crs().toWkt() or None,
+            "input": vector_file(self, parameters, self.INPUT, context, feedback),
+            "crs": vector_crs(self, parameters, self.INPUT, context),
             "method": method, "amount": amount,
             "min_distance": self.parameterAsDouble(parameters, self.MIN_DISTANCE, context),
             "output": out}, feedback, out)

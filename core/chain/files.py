@@ -162,7 +162,7 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
     from ..steps.simplify import simplify_breaklines
 
     _files([input], [output], gpkg=[output])
-    name = Path(input).name
+    name = io.vector_path(input).name
     crs = require_metric_crs(chosen_crs(crs, io.vector_crs(input), name, note), name)
     lines = io.read_breaklines(input)
     simple = simplify_breaklines(lines, method, amount, min_distance=min_distance)
@@ -235,7 +235,7 @@ def measured_points(path, crs=None, fallback=None, note=None):
     if is_point_source(path):
         cloud = io.read_points(path, crs=crs, note=note)
         return cloud.xyz, cloud.crs
-    name = Path(path).name
+    name = io.vector_path(path).name
     # the point readers' rule: points without a finite x, y, z or with a z no ground has
     # (-9999) are left out, ``note`` told; none left is refused
     xyz = step_points(io.read_points_vector(path), f"point layer {name}", note, least=1)

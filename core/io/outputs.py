@@ -48,6 +48,12 @@ def _identity(path):
         return real, None
 
 
+def vector_path(source) -> Path:
+    """The file of a vector source: ``file.gpkg`` or, as QGIS writes a layer's source,
+    ``file.gpkg|layername=NAME``."""
+    return Path(str(source).split("|", 1)[0])
+
+
 def same_file(a, b) -> bool:
     """Whether two paths name one file, however spelled: relative, through a symbolic link, or
     a hard link of it."""
@@ -63,7 +69,7 @@ def check_outputs(inputs, outputs) -> None:
 
     ``inputs``: paths (None entries are skipped); ``outputs``: file paths to be written.
     """
-    inputs = [str(p) for p in inputs if p]
+    inputs = [str(vector_path(p)) for p in inputs if p]
     folders = set()
     for out in outputs:
         if not out:

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import FloodMeshError
 from ..options import GEOMETRY_KINDS, wrong_geometry
-from .outputs import atomic_output, require_file
+from .outputs import atomic_output, require_file, vector_path
 
 # GeoPackages record when their content last changed; a fixed time makes the same inputs give
 # byte-identical files (GDAL's OGR_CURRENT_DATE), as reproducible builds do.
@@ -344,12 +344,6 @@ def write_residuals(path, xyz: np.ndarray, res: np.ndarray, crs) -> None:
                                   "class": residual_class(res)})
 
 
-def vector_path(source) -> Path:
-    """The file of a vector source: ``file.gpkg`` or, as QGIS writes a layer's source,
-    ``file.gpkg|layername=NAME``."""
-    return Path(str(source).split("|", 1)[0])
-
-
 def open_vector(source, what: str):
     """``source`` (see ``vector_path``) opened with fiona: the layer it names, else the file's
     only layer; refuses a file of several layers without a name, and a name it lacks."""
@@ -509,16 +503,12 @@ def read_regions(path, *, field: str | None = None) -> list:
 
 def read_points_vector(path) -> np.ndarray:
     """Read the PointZ features of a vector file (e.g. holdout points) as an (N, 3) array."""
-    # lazy: OGR loads only when this runs
-    import fiona
-
-    path = require_file(path, "point layer")
-    xyz = []
-    with fiona.open(path) as src:
-        for _, _, geom in _features(src, path.name, "points"):
+    name, xyz = vector_path(path).name, []
+    with open_vector(path, "point layer") as src:
+        for _, _, geom in _features(src, name, "points"):
             xyz.extend([geom["coordinates"]] if geom["type"] == "Point" else geom["coordinates"])
     if not xyz or min(len(p) for p in xyz) < 3:
-        raise FloodMeshError(f"{path.name} has no 3-D points")
+        raise FloodMeshError(f"{name} has no 3-D points")
     return np.asarray(xyz, dtype=float)[:, :3]
 
 

@@ -1,0 +1,195 @@
+"""A QGIS user's chains of the steps: the layers a previous step, a QGIS algorithm or the user
+hands a FloodMesh step are what it reads — a memory layer, selected features only, a layer's
+filter, one layer of a GeoPackage of several — in processing.run and in a model of one's own."""
+import json
+import subprocess
+
+import pytest
+from qgis.core import (QgsApplication, QgsCoordinateTransformContext, QgsMeshLayer,
+                       QgsProcessingFeatureSourceDefinition, QgsProcessingModelAlgorithm,
+                       QgsProcessingModelChildAlgorithm, QgsProcessingModelChildDependency,
+                       QgsProcessingModelChildParameterSource, QgsProcessingModelOutput,
+                       QgsProcessingModelParameter, QgsProcessingParameterFile,
+                       QgsProcessingParameterRasterLayer, QgsProject, QgsVectorFileWriter,
+                       QgsVectorLayer)
+
+LONG = "length_m > 20"  # the filter the tests apply to the traced lines
+
+
+@pytest.fixture(scope="module")
+def traced(processing, demo_points_file, tmp_path_factory):
+    """The demo's DEM, held-out points and traced break lines at 2 m, by the steps."""
+    t = tmp_path_factory.mktemp("chaining")
+    grid = processing.run("floodmesh:gridpoints", {
+        "INPUT": str(demo_points_file), "CELL_SIZE": 2.0, "HOLDOUT": 0.01,
+        "OUTPUT": str(t / "dem.tif"), "HOLDOUT_OUTPUT": str(t / "holdout.gpkg")})
+    slope = processing.run("floodmesh:slope", {"INPUT": grid["OUTPUT"],
+                                               "OUTPUT": str(t / "slope.tif")})["OUTPUT"]
+    bp = processing.run("floodmesh:classifybreakpoints", {
+        "INPUT": slope, "OUTPUT": str(t / "bp.tif")})["OUTPUT"]
+    lines = processing.run("floodmesh:tracebreaklines", {
+        "BREAKPOINTS": bp, "SLOPE": slope, "DEM": grid["OUTPUT"],
+        "OUTPUT": str(t / "lines.gpkg")})["OUTPUT"]
+    long_lines = processing.run("native:extractbyexpression", {
+        "INPUT": lines, "EXPRESSION": LONG, "OUTPUT": str(t / "long.gpkg")})["OUTPUT"]
+    return {"folder": t, "dem": grid["OUTPUT"], "holdout": grid["HOLDOUT_OUTPUT"],
+            "lines": lines, "long": long_lines}
+
+
+def count(layer_or_path):
+    layer = (layer_or_path if isinstance(layer_or_path, QgsVectorLayer)
+             else QgsVectorLayer(layer_or_path, "l", "ogr"))
+    return layer.featureCount()
+
+
+def mesh_size(path):
+    layer = QgsMeshLayer(path, "m", "mdal")
+    return layer.dataProvider().vertexCount(), layer.dataProvider().faceCount()
+
+
+def simplified(processing, lines, out):
+    return processing.run("floodmesh:simplifybreaklines", {
+        "INPUT": lines, "MIN_DISTANCE": 1.0, "OUTPUT": str(out)})["OUTPUT"]
+
+
+def test_a_memory_layer_from_a_qgis_algorithm_is_simplified(processing, traced, tmp_path):
+    """native:extractbyexpression's temporary layer (memory) between two FloodMesh steps is
+    read as its file would be, not refused with a traceback."""
+    memory = processing.run("native:extractbyexpression", {
+        "INPUT": traced["lines"], "EXPRESSION": LONG, "OUTPUT": "memory:"})["OUTPUT"]
+    assert memory.providerType() == "memory"
+    from_memory = simplified(processing, memory, tmp_path / "a.gpkg")
+    from_file = simplified(processing, traced["long"], tmp_path / "b.gpkg")
+    assert 0 < count(from_memory) == count(from_file) < count(traced["lines"])
+
+
+def model_with_a_qgis_step(path):
+    """A model of one's own: break lines → native:extractbyexpression (its temporary output, a
+    memory layer) → Simplify break lines → Build mesh; saved as path (.model3)."""
+    model = QgsProcessingModelAlgorithm("Long break lines to mesh", "tests")
+    model.addModelParameter(QgsProcessingParameterFile("lines", "Break lines"),
+                            QgsProcessingModelParameter("lines"))
+    model.addModelParameter(QgsProcessingParameterRasterLayer("dem", "DEM"),
+                            QgsProcessingModelParameter("dem"))
+
+    def child(child_id, algorithm, after=None, **sources):
+        step = QgsProcessingModelChildAlgorithm(algorithm)
+        step.setChildId(child_id)
+        step.setDescription(child_id)
+        for name, source in sources.items():
+            step.addParameterSources(name, [source])
+        if after:
+            step.setDependencies([QgsProcessingModelChildDependency(after)])
+        return step
+
+    source = QgsProcessingModelChildParameterSource
+    model.addChildAlgorithm(child("filter", "native:extractbyexpression",
+                                  INPUT=source.fromModelParameter("lines"),
+                                  EXPRESSION=source.fromStaticValue(LONG)))
+    model.addChildAlgorithm(child("simplify", "floodmesh:simplifybreaklines", "filter",
+                                  INPUT=source.fromChildOutput("filter", "OUTPUT"),
+                                  MIN_DISTANCE=source.fromStaticValue(1.0)))
+    mesh = child("mesh", "floodmesh:buildmesh", "simplify",
+                 DEM=source.fromModelParameter("dem"),
+                 BREAKLINES=source.fromChildOutput("simplify", "OUTPUT"))
+    output = QgsProcessingModelOutput("mesh", "Mesh")
+    output.setChildId("mesh")
+    output.setChildOutputName("OUTPUT")
+    mesh.setModelOutputs({"mesh": output})
+    model.addChildAlgorithm(mesh)
+    model.updateDestinationParameters()
+    assert model.toFile(str(path))
+    return path
+
+
+def test_own_model_with_a_qgis_step_between_floodmesh_steps(processing, qgis_process, traced,
+                                                            tmp_path):
+    """The model runs through processing.run and qgis_process, and meshes what the steps
+    give on the file of the same lines."""
+    expected = processing.run("floodmesh:buildmesh", {
+        "DEM": traced["dem"],
+        "BREAKLINES": simplified(processing, traced["long"], tmp_path / "s.gpkg"),
+        "OUTPUT": str(tmp_path / "expected.2dm")})["OUTPUT"]
+    path = model_with_a_qgis_step(tmp_path / "long_lines.model3")
+    model = QgsProcessingModelAlgorithm()
+    assert model.fromFile(str(path))
+    result = processing.run(model, {"lines": traced["lines"], "dem": traced["dem"],
+                                    "mesh:mesh": str(tmp_path / "model.2dm")})
+    assert mesh_size(result["mesh:mesh"]) == mesh_size(expected)
+
+    exe, env = qgis_process
+    run = subprocess.run(
+        [exe, "run", str(path), "--json", "--", f"lines={traced['lines']}",
+         f"dem={traced['dem']}", f"mesh:mesh={tmp_path / 'headless.2dm'}"],
+        env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
+    results = json.loads(run.stdout[run.stdout.index("{"):])["results"]
+    assert mesh_size(results["mesh:mesh"]) == mesh_size(expected)
+
+
+def test_selected_features_only(processing, traced, tmp_path):
+    """Ticking 'Selected features only' meshes and simplifies the selected lines: the same
+    mesh as from a file of just those lines (not all the lines, nor none)."""
+    layer = QgsVectorLayer(traced["lines"], "traced lines", "ogr")
+    QgsProject.instance().addMapLayer(layer)
+    try:
+        layer.selectByExpression(LONG)
+        assert 0 < layer.selectedFeatureCount() < layer.featureCount()
+        selected = QgsProcessingFeatureSourceDefinition(layer.id(), True)
+        meshes = [processing.run("floodmesh:buildmesh", {
+            "DEM": traced["dem"], "BREAKLINES": lines,
+            "OUTPUT": str(tmp_path / f"{name}.2dm")})["OUTPUT"]
+            for name, lines in (("selected", selected), ("long", traced["long"]))]
+        assert mesh_size(meshes[0]) == mesh_size(meshes[1])
+        assert count(simplified(processing, selected, tmp_path / "s.gpkg")) == count(
+            simplified(processing, traced["long"], tmp_path / "l.gpkg"))
+    finally:
+        QgsProject.instance().removeMapLayer(layer.id())
+
+
+def test_a_layer_filter_is_kept(processing, traced, tmp_path):
+    """A layer filtered in QGIS (Query Builder: a subset string) gives its filtered lines."""
+    layer = QgsVectorLayer(traced["lines"], "traced lines", "ogr")
+    assert layer.setSubsetString(LONG)
+    assert count(simplified(processing, layer, tmp_path / "s.gpkg")) == count(
+        simplified(processing, traced["long"], tmp_path / "l.gpkg"))
+
+
+def test_one_layer_of_a_geopackage_of_several(processing, traced, tmp_path):
+    """Break lines and check points as layers of one GeoPackage (as a user gathers a model's
+    inputs): each step reads the layer it is given."""
+    gpkg = str(tmp_path / "inputs.gpkg")
+    for name, source in (("holdout", traced["holdout"]), ("lines", traced["lines"])):
+        options = QgsVectorFileWriter.SaveVectorOptions()
+        options.driverName, options.layerName = "GPKG", name
+        if name == "lines":
+            options.actionOnExistingFile = QgsVectorFileWriter.CreateOrOverwriteLayer
+        error = QgsVectorFileWriter.writeAsVectorFormatV3(
+            QgsVectorLayer(source, name, "ogr"), gpkg, QgsCoordinateTransformContext(),
+            options)
+        assert error[0] == QgsVectorFileWriter.NoError, error
+    lines = QgsVectorLayer(f"{gpkg}|layername=lines", "lines", "ogr")
+    points = QgsVectorLayer(f"{gpkg}|layername=holdout", "holdout", "ogr")
+    assert lines.isValid() and points.isValid()
+    simple = simplified(processing, lines, tmp_path / "s.gpkg")
+    assert count(simple) == count(simplified(processing, traced["lines"], tmp_path / "l.gpkg"))
+    mesh = processing.run("floodmesh:buildmesh", {"DEM": traced["dem"], "BREAKLINES": simple,
+                                                  "OUTPUT": str(tmp_path / "m.2dm")})["OUTPUT"]
+    residuals = [processing.run("floodmesh:assessaccuracy", {
+        "MESH": mesh, "POINTS": check, "OUTPUT": str(tmp_path / f"r{i}.gpkg")})["RMSE"]
+        for i, check in enumerate((points, traced["holdout"]))]
+    assert residuals[0] == residuals[1] > 0
+
+
+def test_an_output_into_the_input_geopackage_is_refused(processing, traced):
+    """One layer of a GeoPackage named as input, the same GeoPackage as output: refused in one
+    line, the input untouched."""
+    from qgis.core import QgsProcessingException
+
+    before = count(traced["lines"])
+    with pytest.raises(QgsProcessingException, match="is the input"):
+        simplified(processing, QgsVectorLayer(f"{traced['lines']}|layername=breaklines", "l",
+                                              "ogr"),
+                   traced["lines"])
+    assert count(traced["lines"]) == before
+    assert QgsApplication.processingRegistry().algorithmById("floodmesh:simplifybreaklines")
