@@ -101,6 +101,14 @@ def same_place(a: CRS, b: CRS, *, heights: bool = False) -> bool:
     return not heights or va is None or vb is None or va.equals(vb)
 
 
+def require_same_place(own: CRS, crs: CRS, what: str, of: str, *, heights: bool = False):
+    """Refuse ``what`` (a file, by name) in ``own`` where it does not lie alike in ``crs``,
+    the ``of``'s (``same_place``)."""
+    if not same_place(own, crs, heights=heights):
+        raise FloodMeshError(f"the {what} is in {own.name}, the {of} in {crs.name}; reproject "
+                             f"it to the {of}'s CRS")
+
+
 def chosen_crs(given, own, what: str, note=None):
     """The CRS to take: ``given`` (--crs, QGIS's CRS parameter) over the file's ``own``, where
     ``note`` hears that it replaces a different one; ``own`` when none is given."""

@@ -20,7 +20,8 @@ from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, ch
                        check_holdout, check_max_area, check_max_gap, check_max_triangles,
                        check_min_angle, check_refinement, check_seed, is_point_source)
 from ..points import PointCloud, at_places_of, split_holdout, step_points
-from ..raster import check_dem_size, chosen_crs, require_metric_crs
+from ..raster import (check_dem_size, chosen_crs, parse_crs, require_metric_crs,
+                      require_same_place)
 from ..steps.breakpoints import breakpoints_file
 from ..steps.slope import slope_raster_file
 
@@ -176,10 +177,12 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
 def _mesh_inputs(dem, breaklines, boundary, user_lines, crs=None, note=None):
     """(DEM, break lines, the user's own lines, domain) of a meshing step."""
     # lazy: numba, PROJ and GEOS load only when this runs
-    from .pipeline import mesh_constraints
+    from .pipeline import layer_crs, mesh_constraints
 
     terrain = io.read_dem(dem, crs=crs, note=note)
     check_dem_size(terrain.values, terrain.cell_size, f"raster {Path(dem).name}")
+    if breaklines:
+        layer_crs(breaklines, "break line", terrain.crs, note=note)
     lines = io.read_lines_gpkg(breaklines) if breaklines else []
     domain, own = mesh_constraints(terrain, boundary, user_lines, note=note)
     return terrain, lines, own, domain
@@ -227,20 +230,26 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
                        f"to {output}"}
 
 
-def measured_points(path, crs=None, fallback=None, note=None):
+def measured_points(path, crs=None, fallback=None, note=None, *, what="point", of="mesh"):
     """(xyz, CRS) of measured points: a LiDAR point file (LAS/LAZ ground, XYZ/CSV; ``crs``
     overrides its own) or a point layer (GeoPackage, Shapefile, GeoJSON; ``crs``, which
-    ``note`` hears replace its own, else its own, else ``fallback``, the mesh's or DEM's).
-    Either way ``note`` hears of the points left out (``points.drop_unusable``)."""
+    ``note`` hears replace its own, else its own, else ``fallback``, the ``of``'s, mesh's or
+    DEM's); refused where their CRS is not ``fallback`` (the ``what`` file, by name). Either way
+    ``note`` hears of the points left out (``points.drop_unusable``)."""
+    name = io.vector_path(path).name
     if is_point_source(path):
         cloud = io.read_points(path, crs=crs, note=note)
-        return cloud.xyz, cloud.crs
-    name = io.vector_path(path).name
-    # the point readers' rule: points without a finite x, y, z or with a z no ground has
-    # (-9999) are left out, ``note`` told; none left is refused
-    xyz = step_points(io.read_points_vector(path), f"point layer {name}", note, least=1)
-    return xyz, require_metric_crs(chosen_crs(crs, io.vector_crs(path), name, note) or fallback,
-                                   name)
+        xyz, points_crs = cloud.xyz, cloud.crs
+    else:
+        # the point readers' rule: points without a finite x, y, z or with a z no ground has
+        # (-9999) are left out, ``note`` told; none left is refused
+        xyz = step_points(io.read_points_vector(path), f"point layer {name}", note, least=1)
+        points_crs = require_metric_crs(
+            chosen_crs(crs, io.vector_crs(path), name, note) or fallback, name)
+    if fallback is not None and points_crs is not None:
+        require_same_place(parse_crs(points_crs, name), parse_crs(fallback, name),
+                           f"{what} file {name}", of)
+    return xyz, points_crs
 
 
 def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=None, check=None,
@@ -263,8 +272,10 @@ def refine(dem, points, output, *, breaklines=None, boundary=None, user_lines=No
     check_refinement(lower, upper, target_rmse=target_rmse, target_max=target_max, noise=noise,
                      max_rounds=max_rounds, max_nodes=max_nodes)
     terrain, lines, own, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
-    measured = measured_points(points, crs, terrain.crs, note)[0]
-    check_xyz = measured_points(check, crs, terrain.crs, note)[0] if check else None
+    measured = measured_points(points, crs, terrain.crs, note, what="measured point",
+                               of="DEM")[0]
+    check_xyz = (measured_points(check, crs, terrain.crs, note, what="check point", of="DEM")[0]
+                 if check else None)
     if check_xyz is not None:
         measured = _without_check_points(measured, check_xyz, points, check, note)
     refined, rounds = refine_mesh(terrain, lines, measured, check=check_xyz, domain=domain,
@@ -319,7 +330,7 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
     if png:  # a folder, made if missing
         check_output_folder(png, [mesh, points], [HISTOGRAM_PNG, MAP_PNG])
     read = io.read_2dm(mesh)
-    xyz, points_crs = measured_points(points, crs, read.crs, note)
+    xyz, points_crs = measured_points(points, crs, read.crs, note, what="check point")
     # the library's step, with its notes (too few check points for the NSSDA test)
     res, stats = assess_mesh(Mesh(read.nodes, read.triangles, points_crs), xyz, note=note)
     io.write_residuals(output, xyz, res, points_crs)

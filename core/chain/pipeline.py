@@ -34,7 +34,7 @@ from ..options import (BRIDGE_GAP_CELLS, DEFAULT_CELL_SIZE, EXPORT_EXTENSIONS, E
 from ..points import (PointCloud, every_nth_by_place, repeated_positions_note, sparse_survey_note,
                       split_holdout)
 from ..raster import (Grid, bilinear, check_dem_size, fill_from_around, inner_cells,
-                      nearest_value, parse_crs, same_place)
+                      nearest_value, parse_crs, require_same_place)
 from ..steps.accuracy import accuracy_statistics, outside_mesh_note, residuals
 from ..steps.breaklines import trace_breaklines
 from ..steps.breakpoints import breakpoints_file, classify_breakpoints, log_breakpoints
@@ -870,10 +870,24 @@ def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: f
         return size_from_slope(slope_grid, max_area=max_area, s_crit=s_crit,
                                min_area=max_area / 25 if min_area is None else min_area)
     field = io.read_raster(source, default_crs=dem.crs, elevations=False)
-    if not same_place(field.crs, dem.crs):
-        raise FloodMeshError(f"the size field {Path(source).name} is in {field.crs.name}, the "
-                             f"DEM in {dem.crs.name}; reproject it to the DEM's CRS")
+    require_same_place(field.crs, dem.crs, f"size field {Path(source).name}", "DEM")
     return field
+
+
+def layer_crs(path, what: str, crs, *, of: str = "DEM", heights: bool = False, note=None):
+    """The CRS of the vector file ``path`` (a ``what`` file), refused where it is not ``crs``,
+    the ``of``'s (with ``heights``, the vertical CRS too where both name one); a layer without
+    one is taken in ``crs``, as QGIS takes it in the project's, which ``note`` hears."""
+    name, own = io.vector_path(path).name, io.vector_crs(path)
+    if own is None:
+        if note:
+            note(f"the {what} file {name} has no CRS: it is taken to be in the {of}'s, "
+                 f"{crs.name}; if it is not, assign its own (ogr2ogr -a_srs EPSG:XXXX "
+                 "OUT IN, or in QGIS: Assign projection)")
+        return crs
+    own = parse_crs(own, name)
+    require_same_place(own, crs, f"{what} file {name}", of, heights=heights)
+    return own
 
 
 def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
@@ -887,24 +901,15 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
     that, of line parts left out (zero length) and of domain left without data."""
     for path, what, heights in ((boundary, "boundary polygon", False),
                                 (user_lines, "user line", True)):
-        if path is None:
-            continue
-        name, crs = Path(path).name, io.vector_crs(path)
-        if crs is None:
-            if note:
-                note(f"the {what} file {name} has no CRS: it is taken to be in the DEM's, "
-                     f"{dem.crs.name}; if it is not, assign its own (ogr2ogr -a_srs EPSG:XXXX "
-                     "OUT IN, or in QGIS: Assign projection)")
-        elif not same_place(parse_crs(crs, name), dem.crs, heights=heights):
-            raise FloodMeshError(f"the {what} file {name} is in {parse_crs(crs, name).name}, "
-                                 f"the DEM in {dem.crs.name}; reproject it to the DEM's CRS")
-    domain = (user_domain(io.read_boundary(boundary), dem, name=Path(boundary).name,
+        if path is not None:
+            layer_crs(path, what, dem.crs, heights=heights, note=note)
+    domain = (user_domain(io.read_boundary(boundary), dem, name=io.vector_path(boundary).name,
                           tolerance=tolerance, note=note) if boundary is not None else None)
     lines, features = io.read_own_lines(user_lines, note) if user_lines is not None else ([], [])
     if lines:
-        _refuse_height_clashes(lines, features, dem.cell_size, Path(user_lines).name)
+        _refuse_height_clashes(lines, features, dem.cell_size, io.vector_path(user_lines).name)
     if lines and note:
-        _note_own_z_off_the_ground(lines, dem, Path(user_lines).name, note)
+        _note_own_z_off_the_ground(lines, dem, io.vector_path(user_lines).name, note)
     return domain, lines
 
 

@@ -193,3 +193,51 @@ def test_an_output_into_the_input_geopackage_is_refused(processing, traced):
                    traced["lines"])
     assert count(traced["lines"]) == before
     assert QgsApplication.processingRegistry().algorithmById("floodmesh:simplifybreaklines")
+
+
+@pytest.fixture(scope="module")
+def in_utm33(processing, traced):
+    """The traced lines and the held-out points reprojected to UTM zone 33N by QGIS, as a
+    model's step of another CRS hands them on (the DEM and mesh stay in 32N)."""
+    return {name: processing.run("native:reprojectlayer", {
+        "INPUT": traced[name], "TARGET_CRS": "EPSG:25833",
+        "OUTPUT": str(traced["folder"] / f"{name}_33.gpkg")})["OUTPUT"]
+        for name in ("lines", "holdout")}
+
+
+def test_break_lines_of_another_crs_are_refused(processing, traced, in_utm33, tmp_path):
+    """Build mesh and Refine mesh refuse break lines in another CRS than the DEM's, in one
+    line with the fix, instead of meshing without them (they lie off the DEM)."""
+    from qgis.core import QgsProcessingException
+
+    for algorithm, extra in (("buildmesh", {}),
+                             ("refinemesh", {"POINTS": traced["holdout"], "MAX_ROUNDS": 1})):
+        with pytest.raises(QgsProcessingException) as error:
+            processing.run(f"floodmesh:{algorithm}", {
+                "DEM": traced["dem"], "BREAKLINES": in_utm33["lines"], **extra,
+                "OUTPUT": str(tmp_path / f"{algorithm}.2dm")})
+        message = str(error.value)
+        assert "lines_33.gpkg is in ETRS89 / UTM zone 33N" in message, message
+        assert "reproject it to the DEM's CRS" in message and "\n" not in message.strip()
+        assert not (tmp_path / f"{algorithm}.2dm").exists()
+
+
+def test_check_points_of_another_crs_are_refused(processing, traced, in_utm33, tmp_path):
+    """Assess accuracy and Refine mesh's check points in another CRS than the mesh's or DEM's
+    are refused with the fix, not assessed off the mesh."""
+    from qgis.core import QgsProcessingException
+
+    mesh = processing.run("floodmesh:buildmesh", {
+        "DEM": traced["dem"], "OUTPUT": str(tmp_path / "m.2dm")})["OUTPUT"]
+    runs = (("assessaccuracy", {"MESH": mesh, "POINTS": in_utm33["holdout"],
+                                "OUTPUT": str(tmp_path / "r.gpkg")}, "mesh"),
+            ("refinemesh", {"DEM": traced["dem"], "POINTS": traced["holdout"],
+                            "CHECK": in_utm33["holdout"], "MAX_ROUNDS": 1,
+                            "OUTPUT": str(tmp_path / "refined.2dm")}, "DEM"))
+    for algorithm, parameters, against in runs:
+        with pytest.raises(QgsProcessingException) as error:
+            processing.run(f"floodmesh:{algorithm}", parameters)
+        message = str(error.value)
+        assert "holdout_33.gpkg is in ETRS89 / UTM zone 33N" in message, message
+        assert f"reproject it to the {against}'s CRS" in message
+    assert not (tmp_path / "r.gpkg").exists() and not (tmp_path / "refined.2dm").exists()
