@@ -241,3 +241,19 @@ def test_check_points_of_another_crs_are_refused(processing, traced, in_utm33, t
         assert "holdout_33.gpkg is in ETRS89 / UTM zone 33N" in message, message
         assert f"reproject it to the {against}'s CRS" in message
     assert not (tmp_path / "r.gpkg").exists() and not (tmp_path / "refined.2dm").exists()
+
+
+def test_lines_where_check_points_belong_are_refused(processing, traced, tmp_path):
+    """Break lines handed to Assess accuracy as its check points: one line naming the layer and
+    what to give, not the worker's numpy error."""
+    from qgis.core import QgsProcessingException
+
+    mesh = processing.run("floodmesh:buildmesh", {
+        "DEM": traced["dem"], "OUTPUT": str(tmp_path / "m.2dm")})["OUTPUT"]
+    with pytest.raises(QgsProcessingException) as error:
+        processing.run("floodmesh:assessaccuracy", {
+            "MESH": mesh, "POINTS": traced["lines"], "OUTPUT": str(tmp_path / "r.gpkg")})
+    message = str(error.value).strip()
+    assert message.startswith("lines.gpkg has lines") and "\n" not in message, message
+    assert "points are needed" in message and "worker" not in message
+    assert not (tmp_path / "r.gpkg").exists()
