@@ -6,7 +6,6 @@ from __future__ import annotations
 import contextlib
 import math
 import sqlite3
-from pathlib import Path
 
 import numpy as np
 
