@@ -47,9 +47,10 @@ from affine import Affine
 from pyproj import CRS
 
 from ..errors import Cancelled, FloodMeshError
-from ..io import (ELEVATION, GROUND_CLASS, NAMED, atomic_output, classes_kept, describe_band,
+from ..io import (ELEVATION, GROUND_CLASS, atomic_output, classes_kept, describe_band,
                   drop_implausible, file_format, held_quantity, las_classes, las_crs,
                   las_fields_read, las_xyz, read_band, read_las, read_xyz)
+from ..io.rasters import named_instead
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_points
@@ -1426,14 +1427,14 @@ def write_front_rasters(files: dict, out) -> None:
 def _refuse_non_elevations(paths: list, sources: list) -> None:
     """Refuse DEM tiles (``paths``, open as ``sources``) that hold no elevations: rasters
     FloodMesh tagged as a slope, breakpoints or a flood's maps (``io.describe_band``), or,
-    untagged, named as it names them (``io.NAMED``: an earlier run's, written before it tagged
-    them), all named in one message."""
+    untagged, named as it names them (``io.rasters.named_instead``: an earlier run's, written
+    before it tagged them), all named in one message."""
     tagged, named = [], []
     for path, src in zip(paths, sources):
         held, name = held_quantity(src), path.name
-        if held is None and name.lower() in NAMED:
-            named.append(f"tile {name} is named as FloodMesh names "
-                         f"{QUANTITIES[NAMED[name.lower()]][2]}, an earlier run's output")
+        said = named_instead(f"tile {name}", path) if held is None else None
+        if said:
+            named.append(said)
         elif held not in (None, ELEVATION):
             tagged.append(holds_instead(f"tile {name}", held, "elevations"))
     if tagged or named:

@@ -234,13 +234,26 @@ def held_quantity(src) -> str | None:
     return held if held in QUANTITIES else None
 
 
+def named_instead(name: str, path) -> str | None:
+    """That ``name`` (file ``path``) is named as FloodMesh names a raster of another quantity
+    than elevations (``NAMED``), or None."""
+    quantity = NAMED.get(Path(path).name.lower())
+    return None if quantity is None else (f"{name} is named as FloodMesh names "
+                                          f"{QUANTITIES[quantity][2]}, an earlier run's output")
+
+
 def refuse_non_elevations(src, name: str, fix: str = "give the DEM (a run's dem.tif)") -> None:
     """Refuse the open raster ``src`` (``name``) where elevations are wanted if FloodMesh tagged
-    it (``describe_band``) as holding anything else, a slope, breakpoints or a flood's depths:
-    a slope gridded, sloped or meshed as ground gives a mesh of degrees without a word."""
+    it (``describe_band``) as holding anything else, a slope, breakpoints or a flood's depths,
+    or, untagged, is named as FloodMesh names those (``named_instead``: an earlier run's,
+    written before it tagged them): a slope gridded, sloped or meshed as ground gives a mesh of
+    degrees without a word."""
     held = held_quantity(src)
     if held not in (None, ELEVATION):
         raise FloodMeshError(f"{holds_instead(name, held, 'elevations')}: {fix}")
+    named = named_instead(name, src.name) if held is None else None
+    if named:
+        raise FloodMeshError(f"{named}: {fix}, or rename it if it holds elevations")
 
 
 def check_quantity(path, wanted: str, fix: str) -> None:

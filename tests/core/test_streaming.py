@@ -397,3 +397,11 @@ def test_a_run_s_other_rasters_left_among_dem_tiles_are_refused_by_tag_or_name(t
     for name in ("breakpoints.tif", "max_depth.tif"):
         (tiles / name).rename(tmp_path / name)
     assert main(["run", str(tiles), "--out", str(out)]) == 0
+    # given alone where a DEM belongs
+    capsys.readouterr()
+    assert main(["mesh", str(tmp_path / "breakpoints.tif"), "--out", str(tmp_path / "m.2dm")]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "floodmesh: error: raster breakpoints.tif is named as FloodMesh names breakpoints (1) and "
+        "other cells (0), an earlier run's output: give the DEM (a run's dem.tif), or rename it "
+        "if it holds elevations"]
+    assert not (tmp_path / "m.2dm").exists()

@@ -510,6 +510,8 @@ def test_buffered_tiles_on_a_cluster_grid_and_hold_out_what_one_file_does(
     assert len(tiles) == len(other) == 2880 and tiles == other
     np.testing.assert_array_equal(*(io.read_raster(tmp_path / out / "dem.tif").values
                                     for out in same))
+    with rasterio.open(tmp_path / "tiles" / "dem.tif") as src:  # as every DEM FloodMesh writes
+        assert src.tags()["FLOODMESH_QUANTITY"] == "elevation"
     tiled = grid_point_tiles(tmp_path / "buffered", 1.0, holdout=0.01, scheduler=scheduler,
                              keep=False)
     read = read_point_tiles(tmp_path / "buffered", 1.0, holdout=0.01)
