@@ -1201,12 +1201,13 @@ def _in_band(region, figures: dict, band: float) -> bool:
 
 
 def _cluster_repeats(client, counted: list, meta: list, tiles: list, edges: list, band: float,
-                     crs_wkt: str, classes, notes: list, *, cancelled) -> dict:
+                     crs_wkt: str, classes, notes: list, *, held: int, cancelled) -> dict:
     """The points each counted tile (indices into round one's ``meta``) repeats of an earlier
     counted tile it overlaps, found on the cluster (``tile_repeats``: from the tiles' edge bands
-    where the overlap lies in them, else from the tiles read again), as ``read_point_tiles``
-    finds them in memory: {index: points (n, 3)}, with the same notes joining ``notes``.
-    Tiles that do not meet cost nothing."""
+    where the overlap lies in them, else from the tiles read again, two at a time on a worker,
+    ``held`` points of round one's reading at most on the workers together, which the memory
+    guard checks twice over then), as ``read_point_tiles`` finds them in memory: {index: points
+    (n, 3)}, with the same notes joining ``notes``. Tiles that do not meet cost nothing."""
     tasks, owners = [], []
     for p, i in enumerate(counted):
         m = meta[i]
@@ -1225,6 +1226,10 @@ def _cluster_repeats(client, counted: list, meta: list, tiles: list, edges: list
                             _figures_only(other)))
             whole = whole or not _in_band(_padded(other["bounds"], step), m, band)
         if earlier:
+            if whole or any(source[0] == "tile" for _, source, _ in earlier):
+                check_memory(points=2 * held, advice="a worker compares two overlapping tiles "
+                             "read whole: give fewer --workers, or the tiles without their "
+                             "buffer (lastile -remove_buffer)")
             mine = ("tile", tiles[i].path) if whole else ("band", edges[i])
             tasks.append(client.submit(_task, tile_repeats, mine, _figures_only(m), earlier,
                                        crs_wkt, classes, key=f"repeats-{i}"))
@@ -1325,6 +1330,7 @@ def grid_point_tiles(inputs, cell_size: float, *, max_gap: float | None = None,
             parallel=parallel, keep=keep, skip_unreadable=skip_unreadable, notes=notes,
             repeats=lambda counted: _cluster_repeats(client, counted, meta, tiles, edges, band,
                                                      crs_wkt, classes, notes,
+                                                     held=largest * parallel,
                                                      cancelled=cancelled))
         if check is not None:
             check(layout.plan)
