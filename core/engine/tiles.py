@@ -54,7 +54,7 @@ from ..io.rasters import named_instead
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_points
-from ..raster import (QUANTITIES, Grid, check_scale, check_transform, chosen_crs,
+from ..raster import (Grid, check_scale, check_transform, chosen_crs,
                       corners_and_centre, holds_instead, require_metric_crs, same_place)
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
