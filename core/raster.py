@@ -604,11 +604,16 @@ def lines_near(lines, bounds, what: str, where: str) -> None:
     """Refuse any of ``lines`` ((k, 2|3) arrays, named ``what``) lying wholly beyond ``bounds``
     (xmin, ymin, xmax, ymax; m; of ``where``, e.g. "the DEM") widened by their larger side
     each way: a line of another place or CRS, not one drawn a little past the data (which the
-    step leaves out with a note). Lines without finite x, y are left to the step."""
+    step leaves out with a note); and lines of other than numbers. Lines without finite x, y
+    are left to the step."""
     xmin, ymin, xmax, ymax = bounds
     margin = max(xmax - xmin, ymax - ymin)
     for k, line in enumerate(lines):
-        xy = np.asarray(line, float)
+        try:
+            xy = np.asarray(line, float)
+        except (TypeError, ValueError):
+            raise FloodMeshError(f"{what} {k + 1} must be an array of numbers, x, y (and z) a "
+                                 f"row, got {type(line).__name__} {str(line)[:40]}") from None
         xy = xy[:, :2] if xy.ndim == 2 and xy.shape[1] >= 2 else np.empty((0, 2))
         xy = xy[np.isfinite(xy).all(axis=1)]  # own lines' z is NaN where they are 2-D
         if len(xy) and (xy[:, 0].max() < xmin - margin or xy[:, 0].min() > xmax + margin

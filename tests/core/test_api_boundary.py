@@ -169,6 +169,8 @@ def test_lines_far_from_the_dem_are_refused_naming_both_places(case):
         core.build_mesh(dem, [far], max_area=50)
     with pytest.raises(core.FloodMeshError, match="own line 1 lies at"):
         core.build_mesh(dem, [], own_lines=[far * [1, 1, np.nan]], max_area=50)
+    with pytest.raises(core.FloodMeshError, match="break line 2 must be an array of numbers"):
+        core.build_mesh(dem, [far + [5e5, 5.7e6, 0], [["a", "b"], ["c", "d"]]], max_area=50)
     near = far + [500_045, 5_700_000, 0]  # just past the DEM's edge: left out with a note
     notes = []
     core.build_mesh(dem, [near], max_area=50, note=notes.append)
