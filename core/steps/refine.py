@@ -102,6 +102,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     def build(picked: _Picks) -> Mesh:
         """The mesh with the points and triangles of earlier rounds and ``picked``."""
         nonlocal domain
+        if cancelled is not None and cancelled():  # each mesh, the node budget's tries too
+            raise Cancelled()
         if domain is None:  # the DEM's outline once, where build_mesh would trace it each round
             domain = domain_from_dem(dem)
         mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area,
@@ -174,6 +176,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
             break
         if not len(picks.points) and not len(misfit):
             break
+    if cancelled is not None and cancelled():  # pressed while the last mesh was made
+        raise Cancelled()
     if note is not None and tried > taken:
         note(_not_inserted(tried, taken))
     if note is not None and upper is not None and left is not None and any(left):

@@ -294,3 +294,25 @@ def test_an_empty_list_of_inputs_is_refused_naming_what_to_give(given, tmp_path)
     with pytest.raises(core.FloodMeshError, match="no input given: give a point file"):
         core.run_pipeline(given, tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("max_nodes", [1_000_000, 200])
+def test_refine_mesh_stops_on_a_cancel_given_while_its_last_mesh_is_built(max_nodes):
+    """Cancel pressed while the last round's mesh is built (the round's own, or one of the
+    meshes that fit the node budget, 200 nodes here): the refinement stops with ``Cancelled``,
+    as in any earlier round, rather than hand back a mesh for QGIS to write."""
+    rng = np.random.default_rng(1)
+    pts = np.column_stack([rng.uniform(2, 78, 2000) + 500000,
+                           rng.uniform(8, 58, 2000) + 5700000,
+                           10 + rng.normal(0, 0.3, 2000)])
+    first, _ = core.refine_mesh(_dem(), [], pts, max_area=50, max_rounds=1)
+    pressed = []
+
+    def elevations(mesh):  # every mesh built: the user presses Cancel after the first
+        if len(mesh.nodes) > len(first.nodes):
+            pressed.append(True)
+        return mesh
+
+    with pytest.raises(core.Cancelled):
+        core.refine_mesh(_dem(), [], pts, max_area=50, max_rounds=2, max_nodes=max_nodes,
+                         elevations=elevations, cancelled=lambda: bool(pressed))
