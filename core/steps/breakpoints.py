@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine.blocks import BYTE_NODATA, map_overlap, map_raster
+from ..errors import FloodMeshError
 from ..io import check_quantity
 from ..options import check_s_crit, check_sensitivity
 from ..raster import Grid, step_grid
@@ -47,7 +48,8 @@ def breakpoints_file(src_path, out_path, *, s_crit: float | None = None,
     uint8 GeoTIFF (1 breakpoint, 0 not, 255 where the input is nodata), streamed block by block
     (``blocks.map_raster``; ``windows`` and ``input_dtype``, what the rules compare, as there).
     Returns the number of breakpoints, tagged as such (``io.describe_band``). A raster a step
-    tagged as holding another quantity (``io.check_quantity``) is refused."""
+    tagged as holding another quantity (``io.check_quantity``) is refused, and so are
+    ``zero_crossings`` without a ``sensitivity``."""
     if sensitivity is None:
         check_quantity(src_path, "slope", "give its LoG sensitivity to take its breakpoints "
                        "(--sensitivity, e.g. 0.02, or LoG sensitivity in QGIS), or the slope of "
@@ -57,6 +59,12 @@ def breakpoints_file(src_path, out_path, *, s_crit: float | None = None,
                        "(--sensitivity, --zero-crossings, or those parameters in QGIS) to take "
                        "breakpoints where the slope reaches S_crit, or give the DEM's LoG "
                        "response (floodmesh slope DEM --method log)")
+    if sensitivity is None and zero_crossings:  # a raster without the tag: nothing said yet
+        raise FloodMeshError("breakpoints at zero crossings are taken of a LoG response, at "
+                             "least its sensitivity apart: give the sensitivity too "
+                             "(--sensitivity, e.g. 0.02, or LoG sensitivity in QGIS), or leave "
+                             "out the zero crossings to take breakpoints where the slope "
+                             "reaches S_crit")
     if sensitivity is None:
         block, halo = _threshold_block(check_s_crit(s_crit), True)
     else:

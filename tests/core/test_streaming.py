@@ -405,3 +405,20 @@ def test_a_run_s_other_rasters_left_among_dem_tiles_are_refused_by_tag_or_name(t
         "other cells (0), an earlier run's output: give the DEM (a run's dem.tif), or rename it "
         "if it holds elevations"]
     assert not (tmp_path / "m.2dm").exists()
+
+
+def test_zero_crossings_without_a_sensitivity_are_refused(dem_file, tmp_path, capsys):
+    """Zero crossings are the LoG response's, at least its sensitivity apart: asked for without
+    a sensitivity, on a raster without FloodMesh's tag (another tool's LoG response), the
+    switch was dropped without a word and the response thresholded as degrees of slope."""
+    from floodmesh.core.frontends.cli import main
+
+    laplacian_of_gaussian_file(dem_file, tmp_path / "log.tif", 1.0)
+    io.write_raster(tmp_path / "other.tif", io.read_raster(tmp_path / "log.tif",
+                                                           elevations=False))  # no tag
+    out = tmp_path / "bp.tif"
+    assert main(["breakpoints", str(tmp_path / "other.tif"), "--zero-crossings", "--out",
+                 str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "zero crossings" in err[0] and "--sensitivity" in err[0], err
+    assert not out.exists()
