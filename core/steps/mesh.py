@@ -761,7 +761,9 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     # lazy: numba loads only when this runs
     from ..engine.nearest import z_along_lines
 
-    _, at, value = z_along_lines(vertices, own_lines, within=snap / 5)
+    # the own lines the PSLG kept, as _line_vertex_z takes them
+    kept = [c for c in (np.asarray(c, float) for c in own_lines) if _usable(c)]
+    _, at, value = z_along_lines(vertices, kept, within=snap / 5)
     z[at] = value
     if not np.isfinite(z).all():
         raise FloodMeshError(f"{int((~np.isfinite(z)).sum())} mesh nodes fall where the DEM has no "

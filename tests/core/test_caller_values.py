@@ -316,3 +316,15 @@ def test_refine_mesh_stops_on_a_cancel_given_while_its_last_mesh_is_built(max_no
     with pytest.raises(core.Cancelled):
         core.refine_mesh(_dem(), [], pts, max_area=50, max_rounds=2, max_nodes=max_nodes,
                          elevations=elevations, cancelled=lambda: bool(pressed))
+
+
+def test_an_own_line_left_out_of_the_mesh_gives_no_node_its_height():
+    """An own line with a vertex without coordinates is left out of the mesh (with a note):
+    its heights are left out too, not given to the nodes of a break line beside it."""
+    crest = np.array([[500041.0, 5700010.0, 12.0], [500041.0, 5700050.0, 12.4]])
+    own = np.vstack([crest + [0, 0, 0.5], [np.nan, np.nan, 12.0]])  # one vertex unreadable
+    notes = []
+    mesh = core.build_mesh(_dem(), [crest], own_lines=[own], max_area=50, note=notes.append)
+    alone = core.build_mesh(_dem(), [crest], max_area=50)
+    assert any("left out" in n for n in notes)
+    assert np.array_equal(mesh.nodes, alone.nodes)
