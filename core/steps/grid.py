@@ -49,8 +49,9 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
     cancellation are polled per tile. ``plan``: what ``check_grid`` returned for these points
     and arguments, where the caller checked them already (the points' footprint is a pass over
     all of them). Points without a finite x, y, z or with a z no ground has are left out, as
-    the readers leave them out (``points.step_cloud``; ``note`` is told), and a CRS
-    the readers refuse is refused.
+    the readers leave them out (``points.step_cloud``; ``note`` is told), and a CRS the readers
+    refuse is refused; without a ``plan``, points on one line or at one place are refused, as
+    the readers refuse them (``points.check_spread``).
     """
     cell_size = check_cell_size(cell_size)
     xyz = step_cloud(points, "the point cloud", note, least=3)
