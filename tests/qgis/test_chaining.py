@@ -3,6 +3,7 @@ hands a FloodMesh step are what it reads — a memory layer, selected features o
 filter, one layer of a GeoPackage of several — in processing.run and in a model of one's own."""
 import json
 import subprocess
+from pathlib import Path
 
 import pytest
 from qgis.core import (QgsApplication, QgsCoordinateTransformContext, QgsMeshLayer,
@@ -33,7 +34,7 @@ def traced(processing, demo_points_file, tmp_path_factory):
     long_lines = processing.run("native:extractbyexpression", {
         "INPUT": lines, "EXPRESSION": LONG, "OUTPUT": str(t / "long.gpkg")})["OUTPUT"]
     return {"folder": t, "dem": grid["OUTPUT"], "holdout": grid["HOLDOUT_OUTPUT"],
-            "lines": lines, "long": long_lines}
+            "slope": slope, "bp": bp, "lines": lines, "long": long_lines}
 
 
 def count(layer_or_path):
@@ -257,3 +258,39 @@ def test_lines_where_check_points_belong_are_refused(processing, traced, tmp_pat
     assert message.startswith("lines.gpkg has lines") and "\n" not in message, message
     assert "points are needed" in message and "worker" not in message
     assert not (tmp_path / "r.gpkg").exists()
+
+
+WRONG_RASTERS = [  # (algorithm, parameter given the wrong raster, which, what the message says)
+    ("classifybreakpoints", "INPUT", "dem", "holds elevations in metres"),
+    ("classifybreakpoints", "INPUT", "bp", "holds breakpoints"),
+    ("tracebreaklines", "SLOPE", "dem", "holds elevations in metres"),
+    ("tracebreaklines", "SLOPE", "bp", "holds breakpoints"),
+    ("tracebreaklines", "BREAKPOINTS", "dem", "holds elevations in metres"),
+    ("tracebreaklines", "BREAKPOINTS", "slope", "holds a slope in degrees"),
+    ("tracebreaklines", "DEM", "bp", "holds breakpoints"),
+    ("buildmesh", "DEM", "bp", "holds breakpoints"),
+    ("buildmesh", "SIZE_FIELD", "slope", "holds a slope in degrees"),
+    ("buildmesh", "SIZE_FIELD", "dem", "holds elevations in metres"),
+]
+
+
+@pytest.mark.parametrize("algorithm, name, which, held", WRONG_RASTERS)
+def test_a_step_s_raster_where_another_belongs_is_refused(processing, traced, tmp_path,
+                                                          algorithm, name, which, held):
+    """A raster of one step wired to the wrong input of the next (the DEM as the slope, the
+    breakpoints as the DEM, the slope as the size field…): one line naming what it holds,
+    no output, instead of a run on the wrong quantity."""
+    from qgis.core import QgsProcessingException
+
+    right = {"classifybreakpoints": {"INPUT": traced["slope"]},
+             "tracebreaklines": {"BREAKPOINTS": traced["bp"], "SLOPE": traced["slope"],
+                                 "DEM": traced["dem"]},
+             "buildmesh": {"DEM": traced["dem"]}}[algorithm]
+    out = tmp_path / ("out.2dm" if algorithm == "buildmesh" else
+                      "out.gpkg" if algorithm == "tracebreaklines" else "out.tif")
+    with pytest.raises(QgsProcessingException) as error:
+        processing.run(f"floodmesh:{algorithm}", {**right, name: traced[which],
+                                                   "OUTPUT": str(out)})
+    message = str(error.value).strip()
+    assert f"{Path(traced[which]).name} {held}" in message and "\n" not in message, message
+    assert not out.exists()
