@@ -103,7 +103,7 @@ def test_slope_headless_through_qgis_process(qgis_process, real_data, tmp_path):
 
 def test_grid_and_breakpoints_headless_with_las_classes(qgis_process, demo_points_file,
                                                         tmp_path):
-    """Grid only the vegetation class (1) headless, then classify breakpoints headless."""
+    """Grid only the vegetation class (1) headless, then its slope and breakpoints headless."""
     exe, env = qgis_process
 
     def run(algorithm, *args):
@@ -119,7 +119,8 @@ def test_grid_and_breakpoints_headless_with_las_classes(qgis_process, demo_point
     # vegetation sits 0.5-12 m above the ground: its surface is far above the ground DEM's
     ground = mean_ground_z(demo_points_file)
     assert np.nanmean(io.read_raster(dem).values) > ground + 2
-    bp = run("floodmesh:classifybreakpoints", f"INPUT={dem}", "CRITICAL_SLOPE=30",
+    slope = run("floodmesh:slope", f"INPUT={dem}", f"OUTPUT={tmp_path / 'slope.tif'}")["OUTPUT"]
+    bp = run("floodmesh:classifybreakpoints", f"INPUT={slope}", "CRITICAL_SLOPE=30",
              f"OUTPUT={tmp_path / 'bp.tif'}")["OUTPUT"]
     assert QgsRasterLayer(bp, "bp").isValid() and np.nansum(io.read_raster(bp).values) > 100
 
