@@ -217,6 +217,18 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         stack_when_loaded(context)
         return {}
 
+    def parameterAsOutputLayer(self, parameters, name, context):  # noqa: N802
+        """QGIS's, refusing what is no file of its own: a table of a GeoPackage or database (the
+        dialog's 'Save to GeoPackage…', 'Save to Database Table…') or a memory layer."""
+        out = super().parameterAsOutputLayer(parameters, name, context)
+        if out and (out.startswith("memory:") or "dbname=" in out):
+            definition = self.parameterDefinition(name)
+            raise FloodMeshError(
+                f"{definition.description()}: FloodMesh writes each output as a file of its "
+                f"own, not into a GeoPackage or database table nor a memory layer: give a file "
+                f"name ending in .{definition.defaultFileExtension()} or a temporary output")
+        return out
+
     def run_step(self, step, args, feedback, *outputs):
         """Core's ``step`` on ``args`` in the worker process (see ``child.run_step``); the
         ``outputs`` (files or folders) are where a killed worker's temporaries are removed."""

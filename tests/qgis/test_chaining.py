@@ -294,3 +294,23 @@ def test_a_step_s_raster_where_another_belongs_is_refused(processing, traced, tm
     message = str(error.value).strip()
     assert f"{Path(traced[which]).name} {held}" in message and "\n" not in message, message
     assert not out.exists()
+
+
+@pytest.mark.parametrize("destination", [
+    "ogr:dbname='{folder}/project.gpkg' table=\"simple\" (geom)",  # Save to GeoPackage…
+    "memory:"])
+def test_an_output_into_a_geopackage_table_or_memory_says_what_to_give(processing, traced,
+                                                                      tmp_path, destination):
+    """The dialog's 'Save to GeoPackage…' (a table in a GeoPackage) and a memory layer as a
+    step's output: one line saying that the step writes a file of its own and what to give,
+    not a garbled file name; nothing written."""
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException) as error:
+        processing.run("floodmesh:simplifybreaklines", {
+            "INPUT": traced["lines"], "OUTPUT": destination.format(folder=tmp_path)})
+    message = str(error.value).strip()
+    assert message.startswith("Simplified break lines: FloodMesh writes each output as a "
+                              "file of its own"), message
+    assert "give a file name ending in .gpkg or a temporary output" in message
+    assert not list(tmp_path.iterdir())
