@@ -109,4 +109,4 @@ class ExportMeshAlgorithm(FloodMeshAlgorithm):
             return
         load_results(context, crs, [(layer, style, self.OUTPUT) for layer, style in layers
                                     if layer.isValid()],
-                     group=out.name if fmt == "gpkg" else None)
+                     **({"group": out.name, "folder": out} if fmt == "gpkg" else {}))

@@ -242,9 +242,9 @@ def stack_when_loaded(context) -> None:
 def load_results(context, crs_wkt, layers, group: str | None = None, folder=None) -> None:
     """Hand one run's finished layers (``(layer, style, output name)``) to QGIS to add to the
     project when the algorithm ends: each in the run's CRS (an SMS 2DM carries none) and
-    styled; with ``group``, in one layer group of that name (the run ``folder``'s group where
-    an earlier run into it left one), lines above points above rasters above the mesh; the map
-    zoomed to them."""
+    styled; with ``group``, in one layer group of that name (the group of ``folder``, the run's
+    folder or file, where an earlier run into it left one), lines above points above rasters
+    above the mesh; the map zoomed to them."""
     import os
 
     crs = QgsCoordinateReferenceSystem.fromWkt(crs_wkt) if crs_wkt else None

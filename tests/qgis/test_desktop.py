@@ -690,3 +690,30 @@ def test_classify_breakpoints_given_the_dem_says_a_slope_is_needed(tmp_path):
     assert last and "holds elevations" in last[0] and "not a slope in degrees" in last[0], seen
     assert "Slope for break lines" in last[0], seen
     assert not seen["written"], seen
+
+
+REEXPORT_SCRIPT = desktop_script(r"""
+    import processing
+    project = QgsProject.instance()
+    base = os.environ["FM_OUTPUT"]
+    processing.run("floodmesh:buildmesh", {"DEM": os.environ["FM_DEM"], "MAX_AREA": 400,
+                                           "OUTPUT": base + ".2dm"})
+    parameters = {"INPUT": base + ".2dm", "CRS": "EPSG:32756", "FORMAT": 5,
+                  "OUTPUT": base + " export.gpkg"}
+    processing.runAndLoadResults("floodmesh:exportmesh", parameters)
+    settle()
+    project.removeMapLayers([l.id() for l in project.mapLayersByName("nodes")])
+    settle()
+    processing.runAndLoadResults("floodmesh:exportmesh", parameters)  # the same file again
+    settle()
+    out["tree"] = tree(project.layerTreeRoot())
+""")
+
+
+def test_a_reexport_loads_what_is_missing_into_the_geopackage_group(tmp_path):
+    """Export mesh to a GeoPackage, one of its layers removed, exported again to the same
+    file: the layer comes back into the file's one group, not into a second one."""
+    seen = run_on_real_data(REEXPORT_SCRIPT, tmp_path)
+    assert [row.get("group") for row in seen["tree"]] == ["run export.gpkg"], seen
+    assert sorted(row["layer"] for row in seen["tree"][0]["children"]) == [
+        "boundary", "nodes", "triangles"], seen
