@@ -485,19 +485,27 @@ def test_a_rerun_into_a_loaded_raster_stretches_it_for_its_new_values(tmp_path):
     assert abs(shown[1] - high) < 0.05 * (high - low), (shown, low, high)
 
 
-REGROUP_SCRIPT = desktop_script(r"""
+def rerun_script(setup: str, algorithm: str, removed: str) -> str:
+    """A desktop script: ``setup`` (lines indented once, setting ``parameters``), then
+    ``algorithm`` run as from the toolbox, the layer ``removed`` taken out of the project, the
+    same run again; the tree that then shows is ``out["tree"]``."""
+    return desktop_script(setup + f"""
+    processing.runAndLoadResults("floodmesh:{algorithm}", parameters)
+    settle()
+    project.removeMapLayers([l.id() for l in project.mapLayersByName("{removed}")])
+    settle()
+    processing.runAndLoadResults("floodmesh:{algorithm}", parameters)  # the same output again
+    settle()
+    out["tree"] = tree(project.layerTreeRoot())
+""")
+
+
+REGROUP_SCRIPT = rerun_script(r"""
     import processing
     project = QgsProject.instance()
     parameters = {"INPUT": os.environ["FM_INPUT"], "CELL_SIZE": 2.0, "MAX_AREA": 200,
                   "OUTPUT_FOLDER": os.environ["FM_OUTPUT"]}
-    processing.runAndLoadResults("floodmesh:lidartomesh", parameters)
-    settle()
-    project.removeMapLayers([l.id() for l in project.mapLayersByName("Residuals")])
-    settle()
-    processing.runAndLoadResults("floodmesh:lidartomesh", parameters)  # the same folder again
-    settle()
-    out["tree"] = tree(project.layerTreeRoot())
-""")
+""", "lidartomesh", "Residuals")
 
 
 def test_a_rerun_loads_what_is_missing_into_the_run_group(tmp_path):
@@ -692,7 +700,7 @@ def test_classify_breakpoints_given_the_dem_says_a_slope_is_needed(tmp_path):
     assert not seen["written"], seen
 
 
-REEXPORT_SCRIPT = desktop_script(r"""
+REEXPORT_SCRIPT = rerun_script(r"""
     import processing
     project = QgsProject.instance()
     base = os.environ["FM_OUTPUT"]
@@ -700,14 +708,7 @@ REEXPORT_SCRIPT = desktop_script(r"""
                                            "OUTPUT": base + ".2dm"})
     parameters = {"INPUT": base + ".2dm", "CRS": "EPSG:32756", "FORMAT": 5,
                   "OUTPUT": base + " export.gpkg"}
-    processing.runAndLoadResults("floodmesh:exportmesh", parameters)
-    settle()
-    project.removeMapLayers([l.id() for l in project.mapLayersByName("nodes")])
-    settle()
-    processing.runAndLoadResults("floodmesh:exportmesh", parameters)  # the same file again
-    settle()
-    out["tree"] = tree(project.layerTreeRoot())
-""")
+""", "exportmesh", "nodes")
 
 
 def test_a_reexport_loads_what_is_missing_into_the_geopackage_group(tmp_path):
