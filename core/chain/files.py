@@ -138,12 +138,11 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
     from ..steps.breaklines import trace_breaklines
 
     _files([breakpoints, slope, dem], [output], gpkg=[output])
-    io.check_quantity(breakpoints, "breakpoints", "give the breakpoints step's raster as the "
-                      "breakpoints (the first argument; Breakpoints in QGIS) and the slope as "
-                      "the slope (--slope; Slope in QGIS)")
     io.check_quantity(slope, "slope", "the tracer follows the slope, also where the breakpoints "
                       "come from the LoG response: give the DEM's slope (floodmesh slope DEM, "
                       "without --method log)")
+    io.check_quantity(breakpoints, "breakpoints", "give the slope's breakpoints (floodmesh "
+                      "breakpoints SLOPE; Classify breakpoints in QGIS)")
     points = io.read_raster(breakpoints, crs=crs, elevations=False)
     points = points.with_values((points.values == 1).astype("uint8"))
     terrain = io.read_dem(dem, crs=crs, note=note)

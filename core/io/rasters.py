@@ -268,7 +268,7 @@ def check_quantity(path, wanted: str, fix: str) -> None:
             held = held_quantity(src)
     except rasterio.errors.RasterioIOError:
         return
-    if held == ELEVATION:  # a DEM where its slope or LoG response belongs
+    if held == ELEVATION and wanted in ("slope", "log"):  # a DEM where its slope belongs
         fix = (f"give the DEM's {QUANTITIES[wanted][0]} (floodmesh slope DEM"
                f"{' --method log' if wanted == 'log' else ''}; Slope for break lines in QGIS)")
     if held is not None and held != wanted:

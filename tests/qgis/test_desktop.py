@@ -686,18 +686,31 @@ DEM_AS_SLOPE_SCRIPT = desktop_script(r"""
     except Exception as exc:
         out["said"] = str(exc)
     out["written"] = os.path.exists(base + " breakpoints.tif")
+    processing.run("floodmesh:slope", {"INPUT": base + " dem.tif", "OUTPUT": base + " slope.tif"})
+    try:  # the slope picked where the breakpoints belong
+        processing.run("floodmesh:tracebreaklines", {
+            "BREAKPOINTS": base + " slope.tif", "SLOPE": base + " slope.tif",
+            "DEM": base + " dem.tif", "OUTPUT": base + " lines.gpkg"})
+        out["traced"] = None
+    except Exception as exc:
+        out["traced"] = str(exc)
 """)
 
 
-def test_classify_breakpoints_given_the_dem_says_a_slope_is_needed(tmp_path):
-    """Grid LiDAR points' DEM picked as Classify breakpoints' slope: refused in one line that
-    says it holds elevations and names the Slope step, instead of breakpoints wherever the
-    ground is above S_crit metres."""
+def test_a_raster_picked_for_another_is_refused_naming_the_right_step(tmp_path):
+    """Grid LiDAR points' DEM picked as Classify breakpoints' slope, and a slope as Trace break
+    lines' breakpoints: refused in one line that says what the raster holds and names the step
+    that makes the right one, instead of breakpoints wherever the ground is above S_crit metres
+    and lines through the cells whose slope is exactly 1 degree."""
     seen = run_on_real_data(DEM_AS_SLOPE_SCRIPT, tmp_path)
     last = (seen["said"] or "").strip().splitlines()[-1:]
     assert last and "holds elevations" in last[0] and "not a slope in degrees" in last[0], seen
     assert "Slope for break lines" in last[0], seen
     assert not seen["written"], seen
+    assert seen["traced"] and seen["traced"].splitlines()[-1].endswith(
+        "holds a slope in degrees, as FloodMesh's slope step wrote it, not breakpoints (1) and "
+        "other cells (0): give the slope's breakpoints (floodmesh breakpoints SLOPE; Classify "
+        "breakpoints in QGIS)"), seen
 
 
 REEXPORT_SCRIPT = rerun_script(r"""
