@@ -33,10 +33,14 @@ class SlopeAlgorithm(FloodMeshAlgorithm):
 
     def process(self, parameters, context, feedback):
         out = self.parameterAsOutputLayer(parameters, self.OUTPUT, context)
+        method = BREAKPOINT_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)]
+        if context.willLoadLayerOnCompletion(out):  # the layer says which of the two it holds
+            context.layerToLoadOnCompletionDetails(out).name = self.tr(
+                "LoG response (m)" if method == "log" else "Slope (degrees)")
         return {self.OUTPUT: self.run_step("slope", {
             "input": layer_file(self.parameterAsRasterLayer(parameters, self.INPUT, context),
                                 "DEM"),
-            "method": BREAKPOINT_METHODS[self.parameterAsEnum(parameters, self.METHOD, context)],
+            "method": method,
             "sigma": self.parameterAsDouble(parameters, self.SIGMA, context),
             "log_kernel": LOG_KERNELS[self.parameterAsEnum(parameters, self.LOG_KERNEL, context)],
             "output": out}, feedback, out)["OUTPUT"]}

@@ -420,7 +420,7 @@ def test_a_later_result_loads_outside_the_run_group(tmp_path):
     it, as it would without the run, not into the group."""
     seen = run_on_real_data(AFTER_RUN_SCRIPT, tmp_path)
     assert [row.get("layer", row.get("group")) for row in seen["tree"]] == [
-        "Slope (degrees) or LoG response (m)", "run"], seen
+        "Slope (degrees)", "run"], seen
     assert len(seen["tree"][1]["children"]) == 3, seen
 
 
@@ -466,6 +466,14 @@ RESTRETCH_SCRIPT = desktop_script(r"""
     out["stretch"] = [[l.renderer().contrastEnhancement().minimumValue(),
                        l.renderer().contrastEnhancement().maximumValue()] for l in layers]
     out["slope"] = slope
+    names = {}
+    for method in (1, 6):  # the same two, each into a file of its own
+        processing.runAndLoadResults("floodmesh:slope", {
+            "INPUT": os.environ["FM_DEM"], "METHOD": method, "OUTPUT": f"{slope}{method}.tif"})
+        settle()
+        names[method] = [l.name() for l in QgsProject.instance().mapLayers().values()
+                         if l.source() == f"{slope}{method}.tif"]
+    out["names"] = names
 """)
 
 
@@ -603,7 +611,7 @@ def test_steps_run_one_after_another_stack_lines_above_rasters_above_the_mesh(tm
     of them where its shaded faces hide them."""
     seen = run_on_real_data(STACK_SCRIPT, tmp_path)
     assert [row["layer"] for row in seen["tree"]] == [
-        "Simplified break lines", "Slope (degrees) or LoG response (m)", "Mesh"], seen
+        "Simplified break lines", "Slope (degrees)", "Mesh"], seen
 
 
 ASSESS_LOG_SCRIPT = desktop_script(r"""
@@ -731,3 +739,10 @@ def test_a_reexport_loads_what_is_missing_into_the_geopackage_group(tmp_path):
     assert [row.get("group") for row in seen["tree"]] == ["run export.gpkg"], seen
     assert sorted(row["layer"] for row in seen["tree"][0]["children"]) == [
         "boundary", "nodes", "triangles"], seen
+
+
+def test_a_slope_layer_is_named_after_what_it_holds(tmp_path):
+    """Slope for break lines in degrees and as the LoG response load as "Slope (degrees)" and
+    "LoG response (m)", not both as "Slope (degrees) or LoG response (m)"."""
+    seen = run_on_real_data(RESTRETCH_SCRIPT, tmp_path)
+    assert seen["names"] == {"1": ["Slope (degrees)"], "6": ["LoG response (m)"]}, seen
