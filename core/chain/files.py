@@ -13,6 +13,8 @@ import json
 from dataclasses import asdict
 from pathlib import Path
 
+import numpy as np
+
 from .. import io
 from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, check_outputs, require_suffix
@@ -138,12 +140,17 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
     from ..steps.breaklines import trace_breaklines
 
     _files([breakpoints, slope, dem], [output], gpkg=[output])
+    fix = "give the slope's breakpoints (floodmesh breakpoints SLOPE; Classify breakpoints in QGIS)"
     io.check_quantity(slope, "slope", "the tracer follows the slope, also where the breakpoints "
                       "come from the LoG response: give the DEM's slope (floodmesh slope DEM, "
                       "without --method log)")
-    io.check_quantity(breakpoints, "breakpoints", "give the slope's breakpoints (floodmesh "
-                      "breakpoints SLOPE; Classify breakpoints in QGIS)")
+    io.check_quantity(breakpoints, "breakpoints", fix)
     points = io.read_raster(breakpoints, crs=crs, elevations=False)
+    # an untagged raster (another program's, or a DEM given in its place) is judged by its values
+    other = points.values[(points.values != 0) & (points.values != 1) & ~np.isnan(points.values)]
+    if other.size:
+        raise FloodMeshError(f"raster {Path(breakpoints).name} holds values other than 0 and 1 "
+                             f"(such as {other[0]:g}): it is no breakpoints raster: {fix}")
     points = points.with_values((points.values == 1).astype("uint8"))
     terrain = io.read_dem(dem, crs=crs, note=note)
     slope_grid = io.read_raster(slope, crs=crs, elevations=False)

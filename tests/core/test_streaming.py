@@ -332,6 +332,23 @@ def test_breaklines_given_the_slope_and_breakpoints_swapped_is_refused(dem_file,
                  "--out", str(out)]) == 0
 
 
+def test_breaklines_refuses_breakpoints_of_other_values_than_0_and_1(dem_file, tmp_path, capsys):
+    """A DEM (or another program's slope, untagged) given as the breakpoints traced lines where
+    a cell happened to hold exactly 1, exit 0."""
+    from floodmesh.core.frontends.cli import main
+
+    slope = tmp_path / "slope.tif"
+    slope_file(dem_file, slope)
+    out = tmp_path / "lines.gpkg"
+    assert main(["breaklines", str(dem_file), "--slope", str(slope), "--dem", str(dem_file),
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "raster dem.tif holds values other than 0 and 1 (such as " in err
+    assert "it is no breakpoints raster: give the breakpoints step's raster" in err
+    assert not out.exists()
+
+
 def test_a_file_whose_name_holds_brackets_is_one_file_not_tiles(dem_file, tmp_path, capsys):
     """An existing file named with glob characters ("slope [1].tif") is the file, not a pattern:
     it was run as DEM tiles, its error naming a tile and telling to take it out of the tiles."""
