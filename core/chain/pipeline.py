@@ -769,7 +769,7 @@ def _read_dem(source: Source, options: RunOptions, steps: _Steps, *, cancelled,
     triangles = check_triangles(valid_area, options.max_area, options.max_triangles)
     check_memory(cells=dem.values.size, triangles=triangles, cell_bytes=BYTES_PER_FITTED_CELL,
                  advice="resample the DEM to larger cells or split it into tiles")
-    check = _hold_dem_cells_out(dem, options.holdout, options.seed)
+    check = _hold_dem_cells_out(dem, options.holdout, options.seed, note)
     if note and len(check):
         note(f"{len(check):,} check cells of the DEM (holdout {options.holdout:g}) were taken "
              "out of it and filled from their neighbours before anything was built from it, as "
@@ -963,16 +963,22 @@ def _note_own_z_off_the_ground(lines, dem: Grid, name: str, note) -> None:
              "heights has z 0: save such lines without Z to give them the DEM's")
 
 
-def _hold_dem_cells_out(dem: Grid, fraction: float, seed: int) -> PointCloud:
+def _hold_dem_cells_out(dem: Grid, fraction: float, seed: int, note=None) -> PointCloud:
     """The check points of a DEM: a seeded random ``fraction`` of its valid cells (at least 30;
     none for 0), drawn among those inside the data (``inner_cells``, so that its edge stays), as
     points (cell centre, z) in the draw's order; the cells are then taken out of ``dem`` and
     filled from their neighbours (``fill_from_around``), so that nothing built from it saw
-    them."""
+    them. ``note`` hears where fewer cells than asked are inside the data."""
     if fraction == 0:
         return PointCloud(np.empty((0, 3)), dem.crs)
     inner = inner_cells(dem.values)
-    n = min(inner.size, max(int(round(fraction * np.isfinite(dem.values).sum())), 30))
+    wanted = max(int(round(fraction * np.isfinite(dem.values).sum())), 30)
+    n = min(inner.size, wanted)
+    if note and n < wanted:
+        note(f"{n:,} of the {wanted:,} check cells asked (holdout {fraction:g}) could be held out "
+             "of the DEM: a check cell needs data in its eight neighbours, to be filled from "
+             "them, and " + ("no cell has it: the mesh is not assessed" if n == 0 else
+                             f"only {n:,} cells have it"))
     cells = inner[np.random.default_rng(seed).choice(inner.size, size=n, replace=False)]
     check = PointCloud(_cell_points(dem, cells), dem.crs)
     fill_from_around(dem.values, cells)

@@ -341,3 +341,22 @@ def test_a_rewritten_raster_shows_its_own_statistics_not_the_old_files(tmp_path)
     shown = gdal.Info(str(slope), stats=True, format="json")["bands"][0]
     assert shown["minimum"] == pytest.approx(float(values.min()), abs=2e-3)
     assert shown["maximum"] == pytest.approx(float(values.max()), abs=2e-3)
+
+
+def test_a_dem_too_thin_for_check_cells_says_why_it_is_not_assessed(tmp_path):
+    """A check cell must have data all round (it is filled from its neighbours): a DEM of a band
+    two cells wide has none, and the run said 'no check points were held out' though
+    --holdout asked for them, and nothing said why."""
+    from affine import Affine
+    from pyproj import CRS
+
+    from floodmesh.core.raster import Grid
+
+    z = np.full((40, 40), np.nan)
+    z[:2, :] = z[-2:, :] = z[:, :2] = z[:, -2:] = 10.0
+    io.write_raster(tmp_path / "ring.tif", Grid(z, Affine(1, 0, 500_000, 0, -1, 6_000_100),
+                                                CRS.from_epsg(32632)))
+    said = floodmesh("run", tmp_path / "ring.tif", "--out", tmp_path / "r", "--holdout", 0.01)
+    assert ("0 of the 30 check cells asked (holdout 0.01) could be held out of the DEM: a check "
+            "cell needs data in its eight neighbours, to be filled from them, and no cell has "
+            "it: the mesh is not assessed") in said.stderr
