@@ -137,9 +137,10 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
           crs=None, progress=None, cancelled=None, note=None) -> dict:
     """Step 5: break lines through the breakpoints (GeoPackage of LineStringZ)."""
     # lazy: numba loads only when this runs
-    from ..steps.breaklines import trace_breaklines
+    from ..steps.breaklines import check_tracing, trace_breaklines
 
     _files([breakpoints, slope, dem], [output], gpkg=[output])
+    check_tracing(s_crit, mode, min_points, min_length, seed)
     fix = "give the slope's breakpoints (floodmesh breakpoints SLOPE; Classify breakpoints in QGIS)"
     io.check_quantity(slope, "slope", "the tracer follows the slope, also where the breakpoints "
                       "come from the LoG response: give the DEM's slope (floodmesh slope DEM, "

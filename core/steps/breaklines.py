@@ -82,6 +82,14 @@ def _no_slopes(coords: np.ndarray) -> BreakLine:
 BREAKPOINTS_FIX = "give classify_breakpoints(slope, s_crit), 1 where a cell is a breakpoint"
 
 
+def check_tracing(s_crit, mode, min_points, min_length, seed) -> tuple:
+    """The tracing options checked (``options``' ranges): (S_crit, minimum points, minimum
+    length, seed) as numbers."""
+    check_choice(mode, MODES, "tracing mode")
+    return (check_s_crit(s_crit), check_min_points(min_points), check_min_length(min_length),
+            check_seed(seed))
+
+
 def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *,
                      mode: str = "auto", min_points: int = 3, min_length: float = 0.0,
                      join: bool = True, seed: int = 0, crests: bool = True,
@@ -97,11 +105,8 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     continuity rule strictly. ``seed`` settles ties that the 7x7 kernel leaves. DEM cells no
     ground has (-9999, inf) are nodata (``raster.usable_dem``, ``note`` told).
     """
-    check_choice(mode, MODES, "tracing mode")
-    s_crit = check_s_crit(s_crit)
-    min_points = check_min_points(min_points)
-    min_length = check_min_length(min_length)
-    seed = check_seed(seed)
+    s_crit, min_points, min_length, seed = check_tracing(s_crit, mode, min_points, min_length,
+                                                         seed)
     if breakpoints.shape != slope.shape or slope.shape != dem.shape:
         raise FloodMeshError("breakpoints, slope and DEM rasters must have the same shape "
                              f"(got {breakpoints.shape}, {slope.shape}, {dem.shape})")
