@@ -365,9 +365,11 @@ def open_vector(source, what: str):
 
 
 def _features(src, name: str, needed: str):
-    """(number from 1, feature, geometry) of the features of ``src`` (fiona) that have a
-    geometry; one that is not ``needed`` (points, lines or polygons) is refused."""
-    for number, feat in enumerate(src, 1):
+    """(number, feature, geometry) of the features of ``src`` (fiona) that have a geometry, the
+    number the feature id QGIS shows (a GeoPackage's fid, after deletions too), else its place
+    from 1; one that is not ``needed`` (points, lines or polygons) is refused."""
+    for order, feat in enumerate(src, 1):
+        number = int(feat.id) if str(feat.id).isdigit() else order
         geom = feat["geometry"]
         if geom is None:
             continue
@@ -396,8 +398,8 @@ def read_lines_gpkg(path, note=None) -> list[np.ndarray]:
 
 
 def read_own_lines(path, note=None) -> tuple[list[np.ndarray], list[int]]:
-    """A modeller's own lines as ``read_lines_gpkg`` reads them, and the number of the feature
-    (1, 2, … in the layer's order) each came from. A vertex whose x, y or z (where the layer
+    """A modeller's own lines as ``read_lines_gpkg`` reads them, and the id of the feature each
+    came from (as QGIS shows it: a GeoPackage's fid). A vertex whose x, y or z (where the layer
     has z) is no finite number is refused, naming it: the line it belongs to is a structure
     the modeller drew, which neither a note nor the DEM's z at one vertex may stand in for."""
     parts = _line_parts(path, note, finite=True)
@@ -419,7 +421,7 @@ def _line_part(part, z_missing=np.nan) -> np.ndarray | None:
 def _line_parts(path, note=None, *,
                 finite: bool = False) -> list[tuple[np.ndarray, dict, int]]:
     """Each part of each line feature as ((k, 3) coordinates, the feature's attributes, its
-    number: 1, 2, … in the layer's order); with ``finite``, a vertex whose x, y or z (where
+    feature id as QGIS shows it: a GeoPackage's fid); with ``finite``, a vertex whose x, y or z (where
     given) is no finite number is refused (``_refuse_non_finite``)."""
     # lazy: OGR loads only when this runs
     import fiona

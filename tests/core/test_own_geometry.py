@@ -399,3 +399,32 @@ def test_a_2d_own_line_listed_first_leaves_a_3d_line_its_height_at_their_crossin
             assert near.min() < 1e-3, (step, near.min())
             assert abs(nodes[near.argmin(), 2] - crossing[2]) < 1e-3, (
                 step, len(order[0][0]), nodes[near.argmin()])
+
+
+def test_an_own_line_is_named_by_its_feature_id_as_qgis_shows_it(tmp_path):
+    """A layer whose first feature was deleted (fid 2 and 3 left) named its second feature,
+    fid 3, 'feature 2': the modeller, looking for fid 2 in QGIS's attribute table, was sent to
+    the line without the fault."""
+    import sqlite3
+
+    import numpy as np
+    from affine import Affine
+
+    from floodmesh.core import io
+    from floodmesh.core.raster import Grid
+
+    x0, y0 = 412_000.0, 5_652_000.0
+    io.write_raster(tmp_path / "dem.tif", Grid(np.full((60, 60), 10.0),
+                                               Affine(1, 0, x0, 0, -1, y0 + 60),
+                                               CRS.from_epsg(25832)))
+    _lines(tmp_path / "own.gpkg", [
+        ("gone", [(x0 + 5, y0 + 10), (x0 + 40, y0 + 10)]),
+        ("good", [(x0 + 5, y0 + 20), (x0 + 40, y0 + 20)]),
+        ("bad", [(x0 + 5, y0 + 30), (float("nan"), y0 + 30), (x0 + 40, y0 + 30)])])
+    with sqlite3.connect(tmp_path / "own.gpkg") as db:  # as QGIS saves a deletion
+        db.execute("DELETE FROM own WHERE fid = 1")
+    done = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "mesh",
+                           str(tmp_path / "dem.tif"), "--lines", str(tmp_path / "own.gpkg"),
+                           "--out", str(tmp_path / "m.2dm")], capture_output=True, text=True)
+    assert done.returncode == 2, done.stderr
+    assert "own.gpkg: feature 3, vertex 2 of 3, has an x of nan, not a number" in done.stderr
