@@ -175,7 +175,7 @@ def _polygon_list(spec, base: Path, where: str = "the scenario") -> list:
         paths = sorted(glob.glob(pattern))
         if not paths:
             raise FloodMeshError(f"{where} names {spec['file']}, which matches no file "
-                                 f"beside the scenario ({base}): check the path")
+                                 f"beside the scenario ({base.resolve()}): check the path")
         polygons = []
         for path in paths:
             if path.lower().endswith((".csv", ".txt")):

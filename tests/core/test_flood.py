@@ -444,6 +444,18 @@ def test_buildings_raised_by_no_height_or_below_the_ground_are_refused(tmp_path,
             "duration_s": 10, "buildings": {"polygons": [house], "height_m": height}}))
 
 
+def test_a_missing_polygon_file_is_looked_for_in_the_scenario_s_folder_named_whole(
+        tmp_path, monkeypatch):
+    """A scenario loaded by a relative name said its roughness file matched no file 'beside the
+    scenario (.)'; the folder is named as the hydrograph's is, in full."""
+    monkeypatch.chdir(tmp_path)
+    _write(tmp_path / "s.json", {"duration_s": 10, "roughness": [
+        {"file": "landuse.gpkg", "manning": 0.08}]})
+    with pytest.raises(FloodMeshError, match=re.escape(
+            f"roughness zone 1 names landuse.gpkg, which matches no file beside the scenario "
+            f"({tmp_path.resolve()}): check the path")):
+        load_scenario("s.json")
+
 def test_observation_points_of_one_name_are_refused(tmp_path):
     """Two points named alike gave observations.csv two columns of one name, which a reader
     takes for one (or renames), and a comparison's peaks by name mixed up."""
