@@ -913,6 +913,7 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
     from ..steps.mesh import triangle_areas
 
     check_output_folder(out_dir, [mesh_path], FLOOD_FILES)
+    _refuse_others_report(Path(out_dir))
     crs = require_metric_crs(crs or mesh_crs(mesh_path), f"the mesh {Path(mesh_path).name}")
     python = require_flood_python(own_env)
     mesh = io.read_2dm(mesh_path)
@@ -969,6 +970,22 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
                  **{k: result[k] for k in ("max_depth", "max_stage", "max_speed", "arrival_s")})
         io.write_json(out / "report.json", report)
     return report
+
+
+def _refuse_others_report(out: Path) -> None:
+    """Refuse an output folder holding a report.json that no flood wrote (a run's, beside its
+    mesh), which the flood's own would replace."""
+    earlier = out / "report.json"
+    if not earlier.is_file():
+        return
+    try:
+        flood = "solver" in json.loads(earlier.read_text())
+    except (OSError, ValueError, TypeError):
+        flood = False
+    if not flood:
+        raise FloodMeshError(f"the output folder {out} holds a report.json that no flood wrote "
+                             "(a run's), which the flood's would replace: give the flood a "
+                             f"folder of its own, e.g. {out / 'flood'}")
 
 
 def observation_series(scenario: Scenario, result: dict) -> dict:

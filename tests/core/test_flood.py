@@ -532,6 +532,32 @@ def test_a_flood_run_again_into_its_folder_leaves_no_file_of_the_last_one(tmp_pa
     report = json.loads((out / "report.json").read_text())
     assert sorted(p.name for p in out.iterdir()) == sorted([*report["files"], "notes.txt"])
 
+
+def test_a_flood_into_a_run_s_folder_is_refused_keeping_the_run_s_report(tmp_path, capsys):
+    """floodmesh flood run/mesh.2dm --out run replaced the run's report.json (its accuracy,
+    options and notes, which report.html shows) by the flood's, without a word."""
+    from affine import Affine
+    from pyproj import CRS as ProjCRS
+
+    from floodmesh.core.frontends.cli import main
+    from floodmesh.core.raster import Grid
+
+    x = np.arange(40)[None, :]
+    z = 10 + 0.02 * x + np.random.default_rng(0).normal(0, 0.05, (30, 40))
+    io.write_raster(tmp_path / "dem.tif", Grid(z, Affine(1, 0, X0, 0, -1, Y0 + 30),
+                                               ProjCRS.from_user_input(CRS)))
+    run = tmp_path / "run"
+    assert main(["run", str(tmp_path / "dem.tif"), "--out", str(run)]) == 0
+    before = (run / "report.json").read_bytes()
+    _write(tmp_path / "s.json", {"duration_s": 10, "output_interval_s": 5})
+    assert main(["flood", str(run / "mesh.2dm"), "--scenario", str(tmp_path / "s.json"),
+                 "--out", str(run)]) == 2
+    assert (f"the output folder {run} holds a report.json that no flood wrote (a run's), which "
+            f"the flood's would replace: give the flood a folder of its own, e.g. {run / 'flood'}"
+            in capsys.readouterr().err)
+    assert (run / "report.json").read_bytes() == before
+    assert not (run / "max_depth.tif").exists()
+
 @pytest.mark.parametrize("out, says", [
     ("taken", "is a file, not a folder"),
     ("m.2dm", "is the input"),
