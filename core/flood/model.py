@@ -23,7 +23,7 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -107,6 +107,7 @@ class Scenario:
     unstable_speed_m_s: float = 20.0  # water this fast (deeper than wet) stops the run
     observation_points: tuple = ()    # ((name, x, y), ...)
     cell_size_m: float | None = None  # of the result rasters (None: from the mesh)
+    input_files: tuple = ()           # the files it was read from (never written over)
 
     def __post_init__(self):
         positive = {"duration": self.duration_s, "output interval": self.output_interval_s,
@@ -390,11 +391,30 @@ def scenario_from_dict(data: dict, base=".") -> Scenario:
                         wet_depth_m=_number(data, "wet_depth_m", where, 0.05),
                         unstable_speed_m_s=_number(data, "unstable_speed_m_s", where, 20.0),
                         observation_points=points,
-                        cell_size_m=_number(data, "cell_size_m", where, None, positive=True))
+                        cell_size_m=_number(data, "cell_size_m", where, None, positive=True),
+                        input_files=_named_files(data, base))
     except (TypeError, ValueError) as exc:
         if isinstance(exc, FloodMeshError):
             raise
         raise FloodMeshError(f"the scenario has a value of the wrong type ({exc})") from None
+
+
+def _named_files(data, base: Path) -> tuple:
+    """The files a scenario's JSON names (its ``file``, ``hydrograph`` and ``levels`` given as
+    file names or patterns, relative to ``base``), as paths."""
+    found = []
+
+    def walk(value, key=None):
+        if isinstance(value, dict):
+            for k, v in value.items():
+                walk(v, k)
+        elif isinstance(value, list):
+            for v in value:
+                walk(v, key)
+        elif isinstance(value, str) and key in ("file", "hydrograph", "levels"):
+            found.extend(sorted(glob.glob(str(base / value))) or [str(base / value)])
+    walk(data)
+    return tuple(found)
 
 
 def load_scenario(path) -> Scenario:
@@ -406,7 +426,8 @@ def load_scenario(path) -> Scenario:
         data = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise FloodMeshError(f"the scenario {path.name} is not valid JSON ({exc})") from None
-    return scenario_from_dict(data, path.parent)
+    scenario = scenario_from_dict(data, path.parent)
+    return replace(scenario, input_files=(str(path), *scenario.input_files))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -912,7 +933,8 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
     # lazy: PROJ and GEOS load only when this runs
     from ..steps.mesh import triangle_areas
 
-    check_output_folder(out_dir, [mesh_path], FLOOD_FILES)
+    inputs = [mesh_path, *scenario.input_files]
+    check_output_folder(out_dir, inputs, FLOOD_FILES)
     _refuse_others_report(Path(out_dir))
     crs = require_metric_crs(crs or mesh_crs(mesh_path), f"the mesh {Path(mesh_path).name}")
     python = require_flood_python(own_env)
@@ -954,7 +976,7 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
     names = [name for name, _, _ in scenario.observation_points]
     # the folder is replaced as a whole (an interrupt leaves the last flood's files or these),
     # without the last flood's files that this one does not write; the user's own stay
-    with staged_folder(out_dir, own=FLOOD_FILES + FLOW_FIELD_FILES, keep=[mesh_path]) as out:
+    with staged_folder(out_dir, own=FLOOD_FILES + FLOW_FIELD_FILES, keep=inputs) as out:
         for name, filename in RESULT_RASTERS.items():
             io.write_raster(out / filename, grids[name], quantity=name)
         write_table(out / "hydrograph.csv", ("time_s", "outflow_m3s"),

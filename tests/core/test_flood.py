@@ -558,6 +558,22 @@ def test_a_flood_into_a_run_s_folder_is_refused_keeping_the_run_s_report(tmp_pat
     assert (run / "report.json").read_bytes() == before
     assert not (run / "max_depth.tif").exists()
 
+
+def test_a_flood_never_writes_over_a_file_its_scenario_reads(tmp_path, capsys):
+    """A scenario whose inflow is hydrograph.csv beside it, flooded into its own folder: the
+    outflow hydrograph was written over the inflow the scenario had read, after the run."""
+    from floodmesh.core.frontends.cli import main
+
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0 * x, max_area=4.0)
+    inflow = _write_text(tmp_path / "hydrograph.csv", "time_s,q\n0,1\n10,1\n")
+    _write(tmp_path / "s.json", {"duration_s": 10, "output_interval_s": 5, "inflows": [
+        {"line": local([[1, 1], [1, 9]]), "hydrograph": "hydrograph.csv"}]})
+    assert main(["flood", str(tmp_path / "m.2dm"), "--scenario", str(tmp_path / "s.json"),
+                 "--out", str(tmp_path), "--crs", CRS]) == 2
+    assert (f"the output {tmp_path / 'hydrograph.csv'} is the input {inflow}: FloodMesh never "
+            "overwrites an input" in capsys.readouterr().err)
+    assert inflow.read_text() == "time_s,q\n0,1\n10,1\n"
+
 @pytest.mark.parametrize("out, says", [
     ("taken", "is a file, not a folder"),
     ("m.2dm", "is the input"),
