@@ -10,7 +10,7 @@ from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
 from qgis.PyQt.QtCore import QCoreApplication
 
 from ..core.errors import FloodMeshError
-from ..core.options import GEOMETRY_KINDS, is_point_source, wrong_geometry
+from ..core.options import is_point_source, wrong_geometry
 from .compat import METRES, VECTOR_LINE, VECTOR_POINT, VECTOR_POLYGON
 from .child import run_step
 from .styles import reload_rewritten, stack_when_loaded
@@ -42,6 +42,9 @@ def _number(source_type) -> int:
 # what a layer parameter of one source type needs, as GEOMETRY_KINDS names it
 SOURCE_GEOMETRIES = {_number(VECTOR_POINT): "points", _number(VECTOR_LINE): "lines",
                      _number(VECTOR_POLYGON): "polygons"}
+# what a layer holds by its geometry type (QGIS's GeometryType enum, moved into Qgis in 3.30:
+# Point 0, Line 1, Polygon 2 before and after), as GEOMETRY_KINDS names it
+LAYER_GEOMETRIES = {0: "points", 1: "lines", 2: "polygons"}
 
 # per-parameter help (the tooltip), by parameter name: one text for the same parameter everywhere
 PARAMETER_HELP = {
@@ -187,7 +190,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         """A layer of points, lines or polygons given where another kind belongs (a file chosen
         with the dialog's … button, a path in a script or model): core's one line, before the
         run."""
-        from qgis.core import QgsProcessingParameterFeatureSource, QgsWkbTypes
+        from qgis.core import QgsProcessingParameterFeatureSource
 
         for definition in self.parameterDefinitions():
             if (not isinstance(definition, QgsProcessingParameterFeatureSource)
@@ -197,8 +200,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
             layer = self.parameterAsVectorLayer(parameters, definition.name(), context)
             if len(needed) != 1 or None in needed or layer is None or not layer.isValid():
                 continue
-            has = GEOMETRY_KINDS.get(QgsWkbTypes.displayString(
-                QgsWkbTypes.flatType(layer.wkbType())))
+            has = LAYER_GEOMETRIES.get(_number(layer.geometryType()))
             if has is not None and has not in needed:
                 raise wrong_geometry(Path(layer.source().split("|")[0]).name or layer.name(),
                                      has, *needed)
