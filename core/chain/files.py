@@ -142,10 +142,10 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
     _files([breakpoints, slope, dem], [output], gpkg=[output])
     check_tracing(s_crit, mode, min_points, min_length, seed)
     fix = "give the slope's breakpoints (floodmesh breakpoints SLOPE; Classify breakpoints in QGIS)"
+    io.check_quantity(breakpoints, "breakpoints", fix)
     io.check_quantity(slope, "slope", "the tracer follows the slope, also where the breakpoints "
                       "come from the LoG response: give the DEM's slope (floodmesh slope DEM, "
                       "without --method log)")
-    io.check_quantity(breakpoints, "breakpoints", fix)
     points = io.read_raster(breakpoints, crs=crs, elevations=False)
     # an untagged raster (another program's, or a DEM given in its place) is judged by its values
     other = points.values[(points.values != 0) & (points.values != 1) & ~np.isnan(points.values)]

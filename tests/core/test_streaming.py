@@ -345,7 +345,7 @@ def test_breaklines_refuses_breakpoints_of_other_values_than_0_and_1(dem_file, t
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
     assert "raster dem.tif holds values other than 0 and 1 (such as " in err
-    assert "it is no breakpoints raster: give the breakpoints step's raster" in err
+    assert "it is no breakpoints raster: give the slope's breakpoints" in err
     assert not out.exists()
 
 
@@ -431,8 +431,8 @@ def test_zero_crossings_without_a_sensitivity_are_refused(dem_file, tmp_path, ca
     from floodmesh.core.frontends.cli import main
 
     laplacian_of_gaussian_file(dem_file, tmp_path / "log.tif", 1.0)
-    io.write_raster(tmp_path / "other.tif", io.read_raster(tmp_path / "log.tif",
-                                                           elevations=False))  # no tag
+    response = io.read_raster(tmp_path / "log.tif", elevations=False)
+    io.write_raster(tmp_path / "other.tif", response.with_values(response.values))  # no tag
     out = tmp_path / "bp.tif"
     assert main(["breakpoints", str(tmp_path / "other.tif"), "--zero-crossings", "--out",
                  str(out)]) == 2
