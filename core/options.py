@@ -188,11 +188,7 @@ def check_comparison_cell_size(value) -> float:
 
 
 def check_max_triangles(value) -> int:
-    value = _number(value, "maximum number of triangles")
-    if not (value >= 1 and value == int(value)):
-        raise FloodMeshError(f"maximum number of triangles must be a whole number of at least 1, "
-                             f"got {value:g}")
-    return int(value)
+    return check_positive_int(value, "maximum number of triangles")
 
 
 def check_flow_area(value) -> float | None:
@@ -235,9 +231,10 @@ def holdout_count(fraction: float, n_points: int, note=None) -> int:
 
 def check_seed(value) -> int:
     """A random seed: a whole number of at least 0 (numpy's generators take no negative one)."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+    value = whole_number(value, "the random seed")
+    if not (isinstance(value, int) and value >= 0):
         raise FloodMeshError(f"the random seed must be a whole number of at least 0, got "
-                             f"{value!r}: any such number makes the result reproducible (0 is "
+                             f"{value:g}: any such number makes the result reproducible (0 is "
                              "usual)")
     return value
 
@@ -276,11 +273,28 @@ def check_classes(classes) -> tuple[int, ...] | None:
     return tuple(int(c) for c in classes)
 
 
+def whole_number(value, what: str) -> int | float:
+    """``value`` as an int where it is a whole number: an int, a whole float (3.0) or text ("3",
+    "3.0"), one rule for RunOptions, the steps and the command line; else the number it is (3.5,
+    inf) for the caller's range check to refuse, or a FloodMeshError for no number."""
+    if isinstance(value, bool):
+        raise FloodMeshError(f"{what} must be a number, got {value!r}")
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if isinstance(value, str):
+        try:
+            return int(value)
+        except ValueError:
+            pass
+    number = _number(value, what)
+    return int(number) if number.is_integer() else number
+
+
 def check_positive_int(value, what: str, minimum: int = 1) -> int:
-    value = _number(value, what)
-    if not (value >= minimum and value == int(value)):
+    value = whole_number(value, what)
+    if not (isinstance(value, int) and value >= minimum):
         raise FloodMeshError(f"{what} must be a whole number of at least {minimum}, got {value:g}")
-    return int(value)
+    return value
 
 
 def check_min_points(value) -> int:
@@ -361,7 +375,8 @@ def check_choice(value, choices, what: str) -> str:
 def _field_value(name: str, kind: str, value):
     """One RunOptions field's value in the type the chain uses: True or False for a switch (a
     string such as "False" is truthy, so it is refused); a number given as text ("1.0", as a
-    config file or argv gives it) converted, as the step functions' checks convert it; formats
+    config file or argv gives it) converted, as the step functions' checks convert it (a whole
+    number, 3, 3.0, "3" or "3.0", is the int an integer field takes: ``whole_number``); formats
     and classes as ``"2dm,slf"`` and ``"2,9"`` (or one class number) as the command line takes
     them. Anything else is left for ``validate`` to check."""
     if kind == "bool":
@@ -376,10 +391,10 @@ def _field_value(name: str, kind: str, value):
     if kind.startswith(("float", "int")):
         if isinstance(value, bool):
             raise FloodMeshError(f"{name} must be a number, got {value!r}")
+        if kind.startswith("int"):
+            return whole_number(value, name)
         number = _number(value, name)
-        if not isinstance(value, str):
-            return value
-        return int(number) if kind.startswith("int") and number.is_integer() else number
+        return number if isinstance(value, str) else value
     if name == "formats" and isinstance(value, str):
         return parse_formats(value)
     if name == "classes":

@@ -310,7 +310,7 @@ def split_holdout(points: PointCloud, fraction: float, seed: int,
     """
     n = len(points)
     n_out = holdout_count(fraction, n, note)
-    check_seed(seed)
+    seed = check_seed(seed)
     # lazy: numba loads only where points are read
     import numba
 

@@ -60,7 +60,7 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
     check_cell_size(cell_size)
     check_max_gap(max_gap)
     check_holdout(holdout)
-    check_seed(seed)
+    seed = check_seed(seed)
     classes = check_classes(classes) if classes else None
     # lazy: PROJ loads only when this runs
     from ..engine.tiles import grid_point_tiles, read_point_tiles

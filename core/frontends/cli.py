@@ -18,7 +18,8 @@ from ..chain import files as steps
 from ..errors import (Cancelled, FloodMeshError, Terminated, interrupts_unwrapped,
                       stop_signals_as_interrupts)
 from ..options import (BREAKPOINT_METHODS, DEFAULT_MAX_TRIANGLES, EXPORT_FORMATS, LOG_KERNELS,
-                       NODE_ELEVATIONS, RunOptions, parse_classes, parse_formats)
+                       NODE_ELEVATIONS, RunOptions, parse_classes, parse_formats,
+                       whole_number)
 from .console import ProgressBar, print_note, print_notes
 from .flood_cli import add_flood_commands
 from .process import end_process, keep_freed_memory
@@ -41,6 +42,17 @@ def _positive(kind):
             raise argparse.ArgumentTypeError(f"must be positive, got {text}")
         return value
     return parse
+
+
+def _whole(text: str) -> int:
+    """An integer option: "3" or "3.0", as RunOptions takes it (``whole_number``)."""
+    try:
+        value = whole_number(text, "it")
+    except FloodMeshError:
+        value = None
+    if not isinstance(value, int):
+        raise argparse.ArgumentTypeError(f"must be a whole number, got {text}")
+    return value
 
 
 def _list(kind):
@@ -72,7 +84,7 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
     _add_log_options(p)
     simplify = p.add_mutually_exclusive_group()
     if series:
-        simplify.add_argument("--keep-every", type=_list(_positive(int)), default=(4,),
+        simplify.add_argument("--keep-every", type=_list(_positive(_whole)), default=(4,),
                               help="keep every n-th break-line point, one mesh per n and "
                                    "area, e.g. 2,4,8 (default 4)")
         simplify.add_argument("--tolerances", type=_list(_positive(float)),
@@ -80,7 +92,7 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
                                    "tolerance and area, e.g. 0.5,1,2")
         p.set_defaults(tolerance=None, spline=None, formats="", max_area=DEFAULTS.max_area)
     else:
-        simplify.add_argument("--keep-every", type=int, help="keep every n-th break-line point "
+        simplify.add_argument("--keep-every", type=_whole, help="keep every n-th break-line point "
                               "(default 4)")
         simplify.add_argument("--tolerance", type=float,
                               help="Douglas–Peucker tolerance in metres")
@@ -119,7 +131,7 @@ def _add_chain_options(p: argparse.ArgumentParser, *, series=False):
     _add_max_triangles(p)
     p.add_argument("--holdout", type=float, default=DEFAULTS.holdout,
                    help="fraction of points held out for assessment (default %(default)s)")
-    p.add_argument("--seed", type=int, default=DEFAULTS.seed, help="random seed (default 0)")
+    p.add_argument("--seed", type=_whole, default=DEFAULTS.seed, help="random seed (default 0)")
     p.add_argument("--max-gap", type=float,
                    help="longest triangle edge bridged when gridding, m (default 10 cells)")
     p.add_argument("--classes", type=_las_classes,
@@ -151,7 +163,7 @@ def _add_terrain_fit_options(p: argparse.ArgumentParser):
     p.add_argument("--join-gap", type=float,
                    help="join localised break-line pieces whose ends face each other across at "
                         "most this gap, m (default 10 cell sizes; 0: off)")
-    p.add_argument("--misfit-passes", type=int, default=DEFAULTS.misfit_passes,
+    p.add_argument("--misfit-passes", type=_whole, default=DEFAULTS.misfit_passes,
                    help="passes splitting the triangles whose points misfit the mesh beyond "
                         "their noise (folds no break line describes: crossings, junctions, "
                         "rounded ends), with plane node elevations (default %(default)s; 0: off)")
@@ -188,7 +200,7 @@ def _add_domain_options(p: argparse.ArgumentParser):
 
 
 def _add_max_triangles(p: argparse.ArgumentParser):
-    p.add_argument("--max-triangles", type=int, default=DEFAULT_MAX_TRIANGLES,
+    p.add_argument("--max-triangles", type=_whole, default=DEFAULT_MAX_TRIANGLES,
                    help="refuse, before meshing, a mesh estimated to have more triangles than "
                         "this (default %(default)s)")
 
@@ -248,7 +260,7 @@ def _input(args):
 
 
 def _add_dask_options(p: argparse.ArgumentParser):
-    p.add_argument("--workers", type=int,
+    p.add_argument("--workers", type=_whole,
                    help="point tiles: threads reading them, or local Dask worker processes "
                         "(default one per core)")
     p.add_argument("--scheduler", metavar="ADDRESS",
@@ -458,7 +470,7 @@ def _add_step_commands(sub) -> None:
     p.add_argument("--classes", type=_las_classes)
     p.add_argument("--holdout", type=float, default=0.0)
     p.add_argument("--holdout-out", help="held-out points (default holdout.gpkg beside --out)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_whole, default=0)
     _add_dask_options(p)
     p.set_defaults(func=cmd_grid)
 
@@ -489,12 +501,12 @@ def _add_step_commands(sub) -> None:
     p.add_argument("--dem", required=True)
     p.add_argument("--s-crit", type=float, default=DEFAULTS.s_crit)
     p.add_argument("--mode", choices=["auto", "flat", "steep"], default="auto")
-    p.add_argument("--min-points", type=int, default=DEFAULTS.min_points)
+    p.add_argument("--min-points", type=_whole, default=DEFAULTS.min_points)
     p.add_argument("--min-length", type=float, default=DEFAULTS.min_length,
                    help="drop lines shorter than this, m (default %(default)s)")
     p.add_argument("--no-join", action="store_true",
                    help="keep pieces apart where thinning cut a line at a staircase corner")
-    p.add_argument("--seed", type=int, default=DEFAULTS.seed,
+    p.add_argument("--seed", type=_whole, default=DEFAULTS.seed,
                    help="seed for ties the 7x7 kernel leaves (default 0)")
     p.add_argument("--out", required=True)
     p.add_argument("--crs")
@@ -503,7 +515,7 @@ def _add_step_commands(sub) -> None:
     p = sub.add_parser("simplify", help="simplify break lines")
     p.add_argument("breaklines")
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--keep-every", type=int)
+    group.add_argument("--keep-every", type=_whole)
     group.add_argument("--tolerance", type=float, help="Douglas–Peucker tolerance, m")
     group.add_argument("--spline", type=float, metavar="TOLERANCE",
                        help="cubic smoothing spline within this many metres")
@@ -561,8 +573,8 @@ def _add_mesh_commands(sub) -> None:
                         "median RMS of planes fitted to some 30 points each; 0: exact points)")
     p.add_argument("--target-rmse", type=float, help="stop when the RMSE is at most this, m")
     p.add_argument("--target-max", type=float, help="stop when max |residual| is at most this, m")
-    p.add_argument("--max-nodes", type=int, default=1_000_000, help="node budget")
-    p.add_argument("--max-rounds", type=int, default=8)
+    p.add_argument("--max-nodes", type=_whole, default=1_000_000, help="node budget")
+    p.add_argument("--max-rounds", type=_whole, default=8)
     p.add_argument("--out", required=True, help="SMS 2DM mesh")
     p.add_argument("--report", help="rounds and mesh quality as JSON")
     p.add_argument("--crs")

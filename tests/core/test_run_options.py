@@ -52,3 +52,30 @@ def test_formats_and_classes_as_text_are_read_as_the_command_line_reads_them():
 def test_bad_formats_and_classes_are_named(kw, words):
     with pytest.raises(FloodMeshError, match=words):
         RunOptions(**kw)
+
+
+@pytest.mark.parametrize("name", ["seed", "keep_every", "min_points", "max_triangles",
+                                  "misfit_passes", "workers"])
+def test_an_integer_field_takes_a_whole_number_as_a_number_or_as_text(name):
+    # seed="3.0" was 3 but seed=3.0 was refused (and keep_every=3.0 stayed a float)
+    for value in (3.0, "3.0", "3", 3):
+        given = getattr(RunOptions(**{name: value}), name)
+        assert given == 3 and type(given) is int, value
+    for value in (3.5, "3.5"):
+        with pytest.raises(FloodMeshError, match=r"whole number.*got 3\.5"):
+            RunOptions(**{name: value})
+
+
+def test_the_command_line_takes_integers_by_the_same_rule(tmp_path, capsys):
+    from floodmesh.core.frontends.cli import main
+
+    missing = tmp_path / "missing.laz"
+    with pytest.raises(SystemExit):
+        main(["run", str(missing), "--out", str(tmp_path / "out"), "--seed", "3.5"])
+    assert capsys.readouterr().err.strip() == (
+        "floodmesh: error: argument --seed: must be a whole number, got 3.5 "
+        "(see floodmesh run --help)")
+    assert main(["run", str(missing), "--out", str(tmp_path / "out"), "--seed", "3.0",
+                 "--misfit-passes", "1.0"]) == 2  # --seed 3.0 was "invalid int value"
+    err = capsys.readouterr().err
+    assert "missing.laz" in err and "--seed" not in err, err
