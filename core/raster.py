@@ -582,12 +582,12 @@ def fill_from_around(values: np.ndarray, cells: np.ndarray) -> None:
 
 
 def step_grid(grid, what: str, holds: str | None = None,
-              fix: str = "give the DEM (what grid_points returns), not its slope") -> None:
+              fix: str | None = None) -> None:
     """Refuse ``grid`` where a step takes it as ``what``, holding ``holds`` (a key of
     ``QUANTITIES``, else in words; None: elevations), as the readers refuse a file: not a
     ``Grid``, without cells, in a CRS not in metres or far from true scale or its area of use
     there (``require_metric_crs``, ``check_scale``), or holding another quantity (``fix``
-    said)."""
+    said; default: give the DEM, not its slope or what else it holds)."""
     if not isinstance(grid, Grid):
         raise FloodMeshError(f"{what} must be a Grid, got {type(grid).__name__}: give "
                              "Grid(values, transform, crs), as grid_points returns")
@@ -596,6 +596,7 @@ def step_grid(grid, what: str, holds: str | None = None,
     held = None if grid.quantity == ELEVATION else grid.quantity
     if held != holds and held is not None:
         wanted = QUANTITIES[holds][2] if holds in QUANTITIES else holds or "elevations"
+        fix = fix or f"give the DEM (what grid_points returns), not its {QUANTITIES[held][0]}"
         raise FloodMeshError(f"{holds_instead(what, held, wanted)}: {fix}")
     metric_crs_at(grid.crs, grid.bounds, what, "raster")
 

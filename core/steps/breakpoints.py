@@ -17,11 +17,13 @@ from ..raster import Grid, step_grid
 
 
 def classify_breakpoints(slope: Grid, s_crit: float, *, thin: bool = True) -> Grid:
-    """Binary (uint8) breakpoint grid: slope ≥ ``s_crit`` degrees, then thinned."""
+    """Binary (uint8) breakpoint grid: slope ≥ ``s_crit`` degrees, then thinned; marked as
+    breakpoints (``Grid.quantity``), refused where a DEM or a slope belongs."""
     step_grid(slope, "the slope", "slope", "give terrain_slope(dem), or for a LoG response "
               "log_breakpoints")
     block, halo = _threshold_block(check_s_crit(s_crit), thin)
-    return slope.with_values(map_overlap(slope.values, block, halo=halo).astype(np.uint8))
+    return slope.with_values(map_overlap(slope.values, block, halo=halo).astype(np.uint8),
+                             "breakpoints")
 
 
 def log_breakpoints(response: Grid, sensitivity: float, *, zero_crossings: bool = False) -> Grid:
@@ -31,13 +33,13 @@ def log_breakpoints(response: Grid, sensitivity: float, *, zero_crossings: bool 
     crests and concave toes where slope breaks. With ``zero_crossings`` it is where the response
     changes sign (zero counts as positive) between a cell and its right or lower neighbour by at
     least ``sensitivity``; the cell of the pair nearer to zero is marked (Marr & Hildreth 1980,
-    doi:10.1098/rspb.1980.0020): the mid-slope edges.
+    doi:10.1098/rspb.1980.0020): the mid-slope edges. Marked as breakpoints (``Grid.quantity``).
     """
     step_grid(response, "the LoG response", "log", "give laplacian_of_gaussian(dem), or for a "
               "slope classify_breakpoints")
     block, halo = _log_block(check_sensitivity(sensitivity), zero_crossings)
     return response.with_values(map_overlap(response.values, block, halo=halo)
-                                .astype(np.uint8))
+                                .astype(np.uint8), "breakpoints")
 
 
 def breakpoints_file(src_path, out_path, *, s_crit: float | None = None,

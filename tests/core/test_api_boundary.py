@@ -133,6 +133,25 @@ def test_a_slope_grid_is_refused_where_a_dem_belongs(case):
         core.classify_breakpoints(log, 10.0)
 
 
+def test_a_breakpoints_grid_is_refused_where_a_dem_belongs(case, tmp_path):
+    # classify_breakpoints' 0/1 grid was untagged: build_mesh meshed it as a DEM 0-1 m high,
+    # though its file (breakpoints.tif, tagged) is refused there
+    dem = case[0]
+    slope = core.terrain_slope(dem)
+    for breakpoints in (core.classify_breakpoints(slope, 10.0),
+                        core.log_breakpoints(core.laplacian_of_gaussian(dem, 1.0), 0.02)):
+        assert breakpoints.quantity == "breakpoints"
+        for run in (lambda: core.terrain_slope(breakpoints),
+                    lambda: core.build_mesh(breakpoints, [], max_area=50)):
+            with pytest.raises(core.FloodMeshError, match=r"the DEM holds breakpoints \(1\) and "
+                               r"other cells \(0\).*not elevations: give the DEM \(what "
+                               r"grid_points returns\), not its breakpoints$"):
+                run()
+        core.trace_breaklines(breakpoints, slope, dem, 10.0)  # where breakpoints belong
+    core.write_raster(tmp_path / "bp.tif", breakpoints)
+    assert core.read_raster(tmp_path / "bp.tif", elevations=False).quantity == "breakpoints"
+
+
 def test_the_quantity_travels_with_the_file(case, tmp_path):
     slope = core.terrain_slope(case[0])
     core.write_raster(tmp_path / "slope.tif", slope)
