@@ -8,7 +8,7 @@ import numpy as np
 
 from .errors import FloodMeshError
 from .options import check_seed, holdout_count
-from .raster import (HIGHEST_GROUND_M, LOWEST_GROUND_M, check_scale, corners_and_centre,
+from .raster import (CLOUD_CRS, HIGHEST_GROUND_M, LOWEST_GROUND_M, check_scale, corners_and_centre,
                      metric_crs_at, require_metric_crs, require_numbers)
 
 if TYPE_CHECKING:  # pyproj is imported where a CRS is checked: it costs 0.1 s of start-up
@@ -137,9 +137,9 @@ def step_cloud(points, what: str, note=None, *, least: int = 0) -> np.ndarray:
                              "PointCloud(xyz, crs), as read_points returns")
     xyz = step_points(points.xyz, what, note, least=least)
     if len(xyz):
-        metric_crs_at(points.crs, _sampled_bounds(xyz), what, "points")
+        metric_crs_at(points.crs, _sampled_bounds(xyz), what, "points", given=CLOUD_CRS)
     else:
-        require_metric_crs(points.crs, what, "points")
+        require_metric_crs(points.crs, what, "points", given=CLOUD_CRS)
     return xyz
 
 

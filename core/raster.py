@@ -126,17 +126,21 @@ def chosen_crs(given, own, what: str, note=None):
     return given
 
 
-def require_metric_crs(crs, what: str, kind: str | None = None) -> CRS:
+def require_metric_crs(crs, what: str, kind: str | None = None, *,
+                       given: str | None = None) -> CRS:
     """Return ``crs`` as a pyproj CRS, refusing none (and a ``RefusedCRS``), geographic,
     geocentric and vertical ones (only a projected CRS, or a local engineering one, places x, y
     on a plane), and horizontal or vertical units other than metres. ``kind`` ("points" or
-    "raster") picks the commands the message suggests."""
+    "raster") picks the commands the message suggests; ``given`` says how a library user gives
+    the CRS of what they built in memory (e.g. ``GRID_CRS``; None: a file's, on the command line
+    or in QGIS)."""
     if isinstance(crs, RefusedCRS):
         raise FloodMeshError(f"{what} {crs.reason}")
     if crs is None:
         raise FloodMeshError(
-            f"{what} has no coordinate reference system: give one (--crs EPSG:XXXX, or the CRS "
-            "parameter in QGIS), a projected CRS in metres such as the survey's UTM zone")
+            f"{what} has no coordinate reference system: give one "
+            f"({given or '--crs EPSG:XXXX, or the CRS parameter in QGIS'}), a projected CRS in "
+            "metres such as the survey's UTM zone")
     crs = parse_crs(crs, what)
     horizontal = horizontal_crs(crs)
     if crs.is_geographic or horizontal.is_geographic:
@@ -318,11 +322,18 @@ def _place_fix(horizontal: CRS, x: np.ndarray, y: np.ndarray, box) -> str:
             f"{zone * UTM_ZONE_PREFIX_M:,.0f} m off x first")
 
 
-def metric_crs_at(crs, bounds, what: str, kind: str | None = None) -> CRS:
+# how a library user gives the CRS of a Grid, a PointCloud or a Mesh (``require_metric_crs``)
+GRID_CRS = 'Grid(values, transform, crs="EPSG:XXXX")'
+CLOUD_CRS = 'PointCloud(xyz, crs="EPSG:XXXX")'
+MESH_CRS = 'Mesh(nodes, triangles, crs="EPSG:XXXX")'
+
+
+def metric_crs_at(crs, bounds, what: str, kind: str | None = None, *,
+                  given: str | None = None) -> CRS:
     """``crs`` as a pyproj CRS where data of ``bounds`` (xmin, ymin, xmax, ymax; m) may be
-    taken in it: in metres (``require_metric_crs``), true to scale there and not far outside
-    its area of use (``check_scale``, at the box's corners and centre)."""
-    crs = require_metric_crs(crs, what, kind)
+    taken in it: in metres (``require_metric_crs``, ``given`` as there), true to scale there
+    and not far outside its area of use (``check_scale``, at the box's corners and centre)."""
+    crs = require_metric_crs(crs, what, kind, given=given)
     check_scale(crs, *corners_and_centre(*bounds), what, kind)
     return crs
 
@@ -598,7 +609,7 @@ def step_grid(grid, what: str, holds: str | None = None,
         wanted = QUANTITIES[holds][2] if holds in QUANTITIES else holds or "elevations"
         fix = fix or f"give the DEM (what grid_points returns), not its {QUANTITIES[held][0]}"
         raise FloodMeshError(f"{holds_instead(what, held, wanted)}: {fix}")
-    metric_crs_at(grid.crs, grid.bounds, what, "raster")
+    metric_crs_at(grid.crs, grid.bounds, what, "raster", given=GRID_CRS)
 
 
 def lines_near(lines, bounds, what: str, where: str) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..options import MIN_CHECK_POINTS
 from ..points import step_points, usable_rows, xyz_array
-from ..raster import Grid, metric_crs_at, nearest_value
+from ..raster import MESH_CRS, Grid, metric_crs_at, nearest_value
 from .mesh import Mesh
 
 CLASS_LIMITS_M = (0.10, 0.25)
@@ -43,7 +43,8 @@ def assess(mesh: Mesh, points_xyz: np.ndarray, *, alpha: float | None = None,
     readers leave them out (``points.step_points``, ``note`` told): their residual is NaN and
     no figure counts them, not even ``n_outside_mesh``."""
     nodes = xyz_array(mesh.nodes, "the mesh's nodes")
-    metric_crs_at(mesh.crs, (*nodes[:, :2].min(axis=0), *nodes[:, :2].max(axis=0)), "the mesh")
+    metric_crs_at(mesh.crs, (*nodes[:, :2].min(axis=0), *nodes[:, :2].max(axis=0)), "the mesh",
+                  given=MESH_CRS)
     given = xyz_array(points_xyz, "the check points")
     usable = step_points(given, "the check points", note) if len(given) else given
     if usable is given:

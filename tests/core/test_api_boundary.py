@@ -109,6 +109,31 @@ def test_the_steps_refuse_a_crs_the_readers_refuse(case, crs, said):
             run()
 
 
+def test_a_missing_crs_is_asked_for_as_the_library_gives_it(case):
+    # the library user was told "--crs EPSG:XXXX, or the CRS parameter in QGIS", neither of
+    # which they have
+    dem, xyz, mesh = case
+    runs = {'Grid(values, transform, crs="EPSG:XXXX")': lambda: core.terrain_slope(_on(dem, None)),
+            'PointCloud(xyz, crs="EPSG:XXXX")': lambda: core.grid_points(
+                core.PointCloud(xyz, None), 1.0),
+            'Mesh(nodes, triangles, crs="EPSG:XXXX")': lambda: core.assess(
+                core.Mesh(mesh.nodes, mesh.triangles, None), xyz)}
+    for how, run in runs.items():
+        with pytest.raises(core.FloodMeshError) as error:
+            run()
+        message = str(error.value)
+        assert f"has no coordinate reference system: give one ({how})" in message, message
+        assert "--crs" not in message and "QGIS" not in message, message
+
+
+def test_a_file_without_a_crs_is_still_asked_for_as_the_command_line_and_qgis_give_it(tmp_path):
+    from ..bad_inputs import slope_dem, write_tif
+
+    with pytest.raises(core.FloodMeshError, match=r"has no coordinate reference system: give "
+                       r"one \(--crs EPSG:XXXX, or the CRS parameter in QGIS\)"):
+        core.io.read_dem(write_tif(tmp_path / "dem.tif", slope_dem(), crs=None))
+
+
 def test_a_grid_far_outside_its_crs_area_is_refused_naming_the_zone(case):
     dem = case[0]
     prefixed = _on(dem, transform=Affine(1, 0, 32_500_000, 0, -1, 5_700_030))
