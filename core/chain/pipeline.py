@@ -42,12 +42,12 @@ from ..steps.drainage import (CHANNEL_AREA, flow_area_for, flow_refined, flow_si
                               flow_spacing, height_above_drainage)
 from ..steps.export import export_formats
 from ..steps.grid import check_grid, grid_points_linear
-from ..steps.hydraulic_lines import JOIN_RISE, lines_for_hydraulics, without_wet_bridges
+from ..steps.hydraulic_lines import lines_for_hydraulics, without_wet_bridges
 from ..steps.hydraulics import hydraulic_checks
-from ..steps.joining import crossing_points, height_clashes
+from ..steps.joining import crossing_points
 from ..steps.localise import fit_node_elevations, fit_window, localise_traced
-from ..steps.mesh import (build_mesh, domain_from_dem, edge_tolerance, honoured_lines,
-                          mesh_quality, size_from_slope, user_domain)
+from ..steps.mesh import (OwnLines, build_mesh, domain_from_dem, edge_tolerance, honoured_lines,
+                          mesh_quality, refuse_height_clashes, size_from_slope, user_domain)
 from ..steps.refine import refine_mesh
 from ..steps.simplify import max_deviation, simplify_breaklines
 from ..steps.sizing import far_field_size, finer
@@ -899,7 +899,8 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
     DEM's CRS (their horizontal parts; the lines' heights too where both name them); a layer
     without a CRS is taken in the DEM's, as QGIS takes it in the project's; lines with a
     coordinate that is no number, or crossing at heights apart, are refused
-    (``_refuse_height_clashes``); ``tolerance`` (m) as ``user_domain``'s; ``note`` hears of
+    (``refuse_height_clashes``: ``OwnLines``, which ``build_mesh`` takes
+    unchecked); ``tolerance`` (m) as ``user_domain``'s; ``note`` hears of
     that, of line parts left out (zero length) and of domain left without data."""
     for path, what, heights in ((boundary, "boundary polygon", False),
                                 (user_lines, "user line", True)):
@@ -909,34 +910,11 @@ def mesh_constraints(dem: Grid, boundary=None, user_lines=None, *,
                           tolerance=tolerance, note=note) if boundary is not None else None)
     lines, features = io.read_own_lines(user_lines, note) if user_lines is not None else ([], [])
     if lines:
-        _refuse_height_clashes(lines, features, dem.cell_size, io.vector_path(user_lines).name)
+        refuse_height_clashes(lines, dem.cell_size, name=io.vector_path(user_lines).name,
+                              features=features)
     if lines and note:
         _note_own_z_off_the_ground(lines, dem, io.vector_path(user_lines).name, note)
-    return domain, lines
-
-
-def _refuse_height_clashes(lines, features, cell_size: float, name: str) -> None:
-    """Refuse own lines ((k, 3), z NaN where 2-D; from the ``features`` numbered so) that cross
-    or touch at heights more than ``JOIN_RISE`` apart (a bridge deck's line over a road's): the
-    mesh's node there takes one z, and the other line gets a spike. That rise is the one a
-    detected line's end may take to join another line (``hydraulic_lines``): within it the
-    heights of two surveys meeting agree; beyond it one is a wall's or a deck's. Lines closer
-    than ``cell_size``/20 m, the grid ``build_mesh`` nodes lines on (its snap, d/4, over 5),
-    share a node there."""
-    clashes = height_clashes(lines, near=cell_size / 20, rise=JOIN_RISE)
-    if not len(clashes):
-        return
-    x, y, z1, z2, i, j = clashes[0]
-    which = (f"feature {features[int(i)]} crosses itself" if features[int(i)] == features[int(j)]
-             else f"features {features[int(i)]} and {features[int(j)]} cross")
-    places = len(np.unique(np.round(clashes[:, :2] / (cell_size / 20)), axis=0))
-    more = f" (and at {places - 1} other place(s))" if places > 1 else ""
-    raise FloodMeshError(
-        f"{name}: {which} at ({x:.2f}, {y:.2f}) at heights {z1:.2f} and {z2:.2f} m, "
-        f"{abs(z1 - z2):.2f} m apart{more}; a mesh node has one height, so one line would get "
-        "a spike there. Cut one line short of the crossing (a 2-D mesh holds no deck above a "
-        "road), give both the same height there, or give the lines without Z so that the mesh "
-        "takes the terrain's")
+    return domain, OwnLines(lines)
 
 
 # An own line whose z lies this many metres (median over its vertices) from the DEM's surface is

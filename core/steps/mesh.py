@@ -18,6 +18,8 @@ from ..options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangle
                        check_tolerance)
 from ..points import line_list, step_points
 from ..raster import Grid, bilinear, lines_near, nearest_value, usable_dem
+from .hydraulic_lines import JOIN_RISE
+from .joining import height_clashes
 from .outline import smooth_outline
 
 # Triangle leaves skinny triangles in the concentric shells it builds around input corners
@@ -712,6 +714,41 @@ def containing_triangle(xy: np.ndarray, triangles: np.ndarray, points: np.ndarra
     return locate(xy, triangles, points)[0]
 
 
+class OwnLines(list):
+    """The modeller's own lines as read from their file, checked there with the file's name and
+    feature ids (``refuse_height_clashes``): ``build_mesh`` takes them without a second check."""
+
+
+def refuse_height_clashes(lines, cell_size: float, *, name: str | None = None,
+                          features=None) -> None:
+    """Refuse own lines ((k, 3), z NaN where 2-D) that cross or touch at heights more than
+    ``JOIN_RISE`` apart (a bridge deck's line over a road's): the mesh's node there takes one
+    z, and the other line gets a spike. That rise is the one a detected line's end may take to
+    join another line (``hydraulic_lines``): within it the heights of two surveys meeting agree;
+    beyond it one is a wall's or a deck's. Lines closer than ``cell_size``/20 m, the grid
+    ``build_mesh`` nodes lines on (its snap, d/4, over 5), share a node there. The message names
+    the file ``name`` and its ``features`` (ids, one a line), or else own_lines[i]."""
+    clashes = height_clashes(lines, near=cell_size / 20, rise=JOIN_RISE)
+    if not len(clashes):
+        return
+    x, y, z1, z2, i, j = clashes[0]
+    i, j = int(i), int(j)
+    if features is None:
+        which = (f"own_lines[{i}] crosses itself" if i == j
+                 else f"own_lines[{i}] and own_lines[{j}] cross")
+    else:
+        which = (f"feature {features[i]} crosses itself" if features[i] == features[j]
+                 else f"features {features[i]} and {features[j]} cross")
+    places = len(np.unique(np.round(clashes[:, :2] / (cell_size / 20)), axis=0))
+    more = f" (and at {places - 1} other place(s))" if places > 1 else ""
+    raise FloodMeshError(
+        f"{f'{name}: ' if name else ''}{which} at ({x:.2f}, {y:.2f}) at heights {z1:.2f} and "
+        f"{z2:.2f} m, {abs(z1 - z2):.2f} m apart{more}; a mesh node has one height, so one line "
+        "would get a spike there. Cut one line short of the crossing (a 2-D mesh holds no deck "
+        "above a road), give both the same height there, or give the lines without Z so that "
+        "the mesh takes the terrain's")
+
+
 def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float = 25.0,
                max_area: float = 100.0, conforming: bool = False, snap: float | None = None,
                domain=None, points: np.ndarray | None = None,
@@ -719,7 +756,8 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
                max_triangles: int = DEFAULT_MAX_TRIANGLES, corner_gap: float | None = None,
                note=None) -> Mesh:
     """Mesh the DEM's valid area honouring the break lines (``BreakLine``s or (n, 2|3) arrays)
-    and the modeller's ``own_lines`` ((k, 3) arrays, NaN z where 2-D); node z along an own line
+    and the modeller's ``own_lines`` ((k, 3) arrays, NaN z where 2-D; refused where two cross at
+    heights apart, ``refuse_height_clashes``); node z along an own line
     where it has z there (linear along its segment, ``z_along_lines``: the surveyed crest
     between its vertices too, and at a crossing with a break line), else from the lines where a
     node is a break-line vertex, from ``points`` (k, 3: measurements put into the TIN) at
@@ -732,6 +770,7 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     min_angle = check_min_angle(min_angle)
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
+    checked = isinstance(own_lines, OwnLines)  # read from a file and checked there
     lines, own_lines = line_list(lines, "lines"), line_list(own_lines, "own_lines")
     dem = usable_dem(dem, "the DEM", note)  # -9999, inf: nodata, as in a DEM file
     if points is not None:  # (N, 3); as the readers leave them out
@@ -740,6 +779,8 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     lines = [getattr(line, "coords", line) for line in lines]
     lines_near(lines, dem.bounds, "break line", "the DEM")
     lines_near(own_lines, dem.bounds, "own line", "the DEM")
+    if not checked:
+        refuse_height_clashes(own_lines, dem.cell_size)
     lines += own_lines
     snap = dem.cell_size / 4 if snap is None else snap
     domain = domain_from_dem(dem) if domain is None else domain

@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import fiona
+import pytest
 import shapely.geometry
 from pyproj import CRS
 
@@ -428,3 +429,32 @@ def test_an_own_line_is_named_by_its_feature_id_as_qgis_shows_it(tmp_path):
                            "--out", str(tmp_path / "m.2dm")], capture_output=True, text=True)
     assert done.returncode == 2, done.stderr
     assert "own.gpkg: feature 3, vertex 2 of 3, has an x of nan, not a number" in done.stderr
+
+
+def test_own_3d_lines_crossing_at_two_heights_are_refused_by_the_library_step_too():
+    """From a library user's side: build_mesh(own_lines=[road, deck]) with a deck's line 7 m
+    above the road's where they cross. The file's reader refused them, but the step meshed them
+    without a word, the crossing's node taking the road's z and the deck a 7 m spike. It refuses
+    them as the reader does, naming them by their place in own_lines; lines crossing at one
+    height are meshed."""
+    import numpy as np
+    from affine import Affine
+
+    from floodmesh.core import FloodMeshError, Grid, build_mesh
+
+    from ..bad_inputs import ORIGIN
+
+    x0, y0 = ORIGIN
+    dem = Grid(np.full((240, 300), 10.0), Affine(1, 0, x0, 0, -1, y0 + 240), crs="EPSG:25832")
+    road, deck = _bridge(x0, y0, lambda x, y: np.full(np.shape(x), 10.0), 7.0)
+    with pytest.raises(FloodMeshError) as error:
+        build_mesh(dem, [], own_lines=[road, deck], max_area=200)
+    message = str(error.value)
+    assert "\n" not in message and message.startswith(
+        f"own_lines[0] and own_lines[1] cross at ({x0 + 150:.2f}, {y0 + 100:.2f}) at heights "
+        "10.00 and 17.00 m, 7.00 m apart"), message
+    assert "Cut one line short of the crossing" in message
+    level = deck.copy()
+    level[:, 2] = 10.0
+    mesh = build_mesh(dem, [], own_lines=[road, level], max_area=200)
+    assert np.allclose(mesh.nodes[:, 2], 10.0)
