@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import io
 from ..errors import FloodMeshError
-from ..io.outputs import check_output_folder
+from ..io.outputs import check_output_folder, staged_folder
 from ..options import check_comparison_cell_size
 from ..raster import Grid
 from .model import cell_centres
@@ -70,8 +70,8 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
                    wet_depth: float | None = None, crs=None) -> dict:
     """Compare the flood in folder ``mesh_run`` with the one in ``reference_run`` (both written
     by ``run_flood``) on a grid of ``cell_size`` m over their common extent; with ``out_dir``
-    write ``comparison.json``, ``depth_difference.tif`` and ``extent_difference.tif`` there.
-    Returns the figures."""
+    write ``comparison.json``, ``depth_difference.tif`` and ``extent_difference.tif`` there, the
+    three in one step (``outputs.staged_folder``). Returns the figures."""
     # lazy: PROJ loads only when this runs
     from pyproj import CRS
 
@@ -113,12 +113,14 @@ def compare_floods(mesh_run, reference_run, out_dir=None, *, cell_size: float = 
         "observations": [_observed(oa, ob)
                          for oa, ob in zip(rep_a["observations"], rep_b["observations"])],
     }
-    if out_dir is not None:
-        out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        grid_crs = CRS.from_user_input(crs or rep_a["crs"])
-        depth = np.where(both & union, diff, np.where(both, 0.0, np.nan)).reshape(rows, cols)
-        code = (wet_a.astype(np.uint8) + 2 * wet_b.astype(np.uint8)).reshape(rows, cols)
+    if out_dir is None:
+        return figures
+    grid_crs = CRS.from_user_input(crs or rep_a["crs"])
+    depth = np.where(both & union, diff, np.where(both, 0.0, np.nan)).reshape(rows, cols)
+    code = (wet_a.astype(np.uint8) + 2 * wet_b.astype(np.uint8)).reshape(rows, cols)
+    # the folder is replaced as a whole, as a flood's is (an interrupt leaves the last
+    # comparison's files or these, never some of each); the user's own files stay
+    with staged_folder(out_dir, own=COMPARISON_FILES) as out:
         io.write_raster(out / "depth_difference.tif", Grid(depth.astype(np.float32), transform,
                                                            grid_crs), quantity="depth_difference")
         io.write_raster(out / "extent_difference.tif", Grid(code, transform, grid_crs),

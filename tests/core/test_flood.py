@@ -653,6 +653,45 @@ def test_compare_refuses_a_cell_size_out_of_range_writing_nothing(tmp_path, caps
     assert err.count("\n") == 1 and says in err, err
     assert not (tmp_path / "cmp").exists()
 
+@needs_anuga
+def test_compare_interrupted_leaves_the_last_comparison_whole(tmp_path):
+    """Ctrl-C as compare_floods writes comparison.json (raised there by a trace function, as
+    test_interrupt's Ctrl-C inside a kernel), over the last comparison (cell size 2 m) and a
+    note of the user's: the two rasters were already the new ones (1 m) beside the last json,
+    a half comparison. The folder changes in one step: all the last files, or all new ones, and
+    the user's note kept."""
+    from floodmesh.core.flood.compare import COMPARISON_FILES, compare_floods
+
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0.1 + 0 * x, max_area=4.0)
+    run_flood(tmp_path / "m.2dm", scenario_from_dict({"duration_s": 10, "output_interval_s": 5,
+                                                      "initial_stage_m": 0.2}),
+              tmp_path / "run", crs=CRS)
+    cmp = tmp_path / "cmp"
+    compare_floods(tmp_path / "run", tmp_path / "run", cmp, cell_size=2.0)
+    (cmp / "notes.txt").write_text("mine")
+    last = {p.name: p.read_bytes() for p in cmp.iterdir()}
+    fired = []
+
+    def ctrl_c(frame, event, arg):
+        if event == "call" and frame.f_code.co_name == "write_json" and not fired:
+            fired.append(True)
+            raise KeyboardInterrupt
+
+    previous = sys.gettrace()
+    sys.settrace(ctrl_c)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            compare_floods(tmp_path / "run", tmp_path / "run", cmp, cell_size=1.0)
+    finally:
+        sys.settrace(previous)
+    assert fired
+    assert {p.name: p.read_bytes() for p in cmp.iterdir()} == last
+    compare_floods(tmp_path / "run", tmp_path / "run", cmp, cell_size=1.0)
+    now = {p.name: p.read_bytes() for p in cmp.iterdir()}
+    assert set(now) == {*COMPARISON_FILES, "notes.txt"} and now["notes.txt"] == b"mine"
+    assert all(now[name] != last[name] for name in COMPARISON_FILES)
+
+
 def _write(path, data):
     path.write_text(json.dumps(data))
     return path
