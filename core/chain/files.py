@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import io
+from ..engine.progress import part, report as stage
 from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, check_outputs, require_suffix
 from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, check_flow_area,
@@ -155,9 +156,12 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
     points = points.with_values((points.values == 1).astype("uint8"))
     terrain = io.read_dem(dem, crs=crs, note=note)
     slope_grid = io.read_raster(slope, crs=crs, elevations=False)
+    stage(progress, cancelled, 0.1)
     lines = trace_breaklines(points, slope_grid, terrain, s_crit, mode=mode,
-                             min_points=min_points, min_length=min_length, join=join, seed=seed)
+                             min_points=min_points, min_length=min_length, join=join, seed=seed,
+                             progress=part(progress, 0.1, 0.9), cancelled=cancelled)
     io.write_breaklines(output, lines, terrain.crs)
+    stage(progress, None, 1.0)
     return {"OUTPUT": str(output), "crs": terrain.crs.to_wkt(),
             "summary": f"{len(lines)} break lines written to {output}"}
 
@@ -173,8 +177,11 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
     name = io.vector_path(input).name
     crs = require_metric_crs(chosen_crs(crs, io.vector_crs(input), name, note), name)
     lines = io.read_breaklines(input)
-    simple = simplify_breaklines(lines, method, amount, min_distance=min_distance)
+    stage(progress, cancelled, 0.1)
+    simple = simplify_breaklines(lines, method, amount, min_distance=min_distance,
+                                 progress=part(progress, 0.1, 0.9), cancelled=cancelled)
     io.write_breaklines(output, simple, crs)
+    stage(progress, None, 1.0)
     before, after = sum(len(x.coords) for x in lines), sum(len(x.coords) for x in simple)
     return {"OUTPUT": str(output), "crs": crs.to_wkt(),
             "summary": f"{len(simple)} break lines, {before} → {after} points, written to "
@@ -216,21 +223,27 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     check_max_triangles(max_triangles)
     check_flow_area(flow_area)
     terrain, lines, own, domain = _mesh_inputs(dem, breaklines, boundary, user_lines, crs, note)
+    stage(progress, cancelled, 0.05)
     size = size_from(size_field, terrain, max_area=max_area, min_area=min_area)
     flow_area = flow_area_for(flow_area, terrain.cell_size)
     # smaller triangles where water flows and the terrain needs them (see drainage)
     flow = None if flow_area is None else flow_size(terrain, flow_area=flow_area)
+    stage(progress, cancelled, 0.1)
+    # the first mesh, then (where the flow zone asks) the one refined there
+    shares = iter([(0.1, 0.85)] if flow is None else [(0.1, 0.5), (0.5, 0.85)])
     result_mesh, _, _ = flow_refined(lambda size, _, told: build_mesh(
         terrain, lines, own_lines=own, min_angle=min_angle, max_area=max_area,
         conforming=conforming, domain=domain, size_field=size, max_triangles=max_triangles,
-        note=told),
+        note=told, progress=part(progress, *next(shares)), cancelled=cancelled),
         size, flow, None, terrain, lines=lines + own, note=note)
     io.write_mesh_2dm(output, result_mesh.nodes, result_mesh.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "crs": terrain.crs.to_wkt()}
+    stage(progress, None, 0.9)  # written: no more stopping
     if triangles:
         io.write_mesh_gpkg(triangles, result_mesh.nodes, result_mesh.triangles, terrain.crs)
         result["TRIANGLES"] = str(triangles)
     q = mesh_quality(result_mesh, min_angle=min_angle, max_area=max_area)
+    stage(progress, None, 1.0)
     return {**result, "NODES": q["nodes"], "TRIANGLE_COUNT": q["triangles"],
             "summary": f"{q['nodes']} nodes, {q['triangles']} triangles (min angle "
                        f"{q['min_angle_deg']:.2f}°, max area {q['max_area_m2']:.1f} m²) written "
@@ -337,18 +350,24 @@ def assess(mesh, points, output, *, report=None, png=None, crs=None, progress=No
     if png:  # a folder, made if missing
         check_output_folder(png, [mesh, points], [HISTOGRAM_PNG, MAP_PNG])
     read = io.read_2dm(mesh)
+    stage(progress, cancelled, 0.1)
     xyz, points_crs = measured_points(points, crs, read.crs, note, what="check point")
+    stage(progress, cancelled, 0.2)
     # the library's step, with its notes (too few check points for the NSSDA test)
-    res, stats = assess_mesh(Mesh(read.nodes, read.triangles, points_crs), xyz, note=note)
+    res, stats = assess_mesh(Mesh(read.nodes, read.triangles, points_crs), xyz, note=note,
+                             progress=part(progress, 0.2, 0.7), cancelled=cancelled)
     io.write_residuals(output, xyz, res, points_crs)
+    stage(progress, None, 0.8)  # written: no more stopping
     result = {"OUTPUT": str(output), "RMSE": stats["rmse_m"], "statistics": stats}
     if report:
         io.write_json(report, stats)
         result["REPORT"] = str(report)
     if png:
         Path(png).mkdir(parents=True, exist_ok=True)
+        stage(progress, None, 0.85)
         result["figures"] = [str(p) for p in write_report_pngs(png, read.nodes, read.triangles,
                                                                xyz, res)]
+    stage(progress, None, 1.0)
     return {**result, "summary": json.dumps(stats, indent=2)}
 
 
@@ -365,16 +384,19 @@ def export(mesh, output, *, fmt=None, crs=None, open_boundaries=None, snap: floa
     _files([mesh, open_boundaries, regions, breaklines],
            [output, Path(output).with_suffix(".cli") if fmt == "slf" else None])
     read = io.read_2dm(mesh)
+    stage(progress, cancelled, 0.2)
     crs = layers_crs(chosen_crs(crs, read.crs, f"mesh {Path(mesh).name}", note),
                      {"open boundary": open_boundaries, "region": regions,
                       "break line": breaklines})
+    open_lines = io.read_lines_gpkg(open_boundaries) if open_boundaries else ()
+    regions = io.read_regions(regions, field=material_field) if regions else ()
+    breaklines = io.read_lines_gpkg(breaklines) if breaklines else ()
+    stage(progress, cancelled, 0.3)
     written = export_mesh(
-        output, read.nodes, read.triangles, fmt=fmt, crs=crs,
-        open_lines=io.read_lines_gpkg(open_boundaries) if open_boundaries else (),
-        snap=snap, regions=io.read_regions(regions, field=material_field) if regions else (),
-        materials=read.materials, datum_offset=datum_offset,
-        element_elevations=element_elevations,
-        breaklines=io.read_lines_gpkg(breaklines) if breaklines else ())
+        output, read.nodes, read.triangles, fmt=fmt, crs=crs, open_lines=open_lines, snap=snap,
+        regions=regions, materials=read.materials, datum_offset=datum_offset,
+        element_elevations=element_elevations, breaklines=breaklines,
+        progress=part(progress, 0.3, 1.0), cancelled=cancelled)
     result = {"OUTPUT": str(output), "files": [str(p) for p in written],
               "crs": crs.to_wkt() if crs is not None else None}
     if fmt == "slf":

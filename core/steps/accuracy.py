@@ -10,10 +10,13 @@ import math
 
 import numpy as np
 
+from ..engine.progress import REPORTS, along
 from ..options import MIN_CHECK_POINTS
 from ..points import step_points, usable_rows, xyz_array
 from ..raster import MESH_CRS, Grid, metric_crs_at, nearest_value
 from .mesh import Mesh
+
+CHUNK_POINTS = 20_000  # check points located at a time, at least (each time sorts the buckets)
 
 CLASS_LIMITS_M = (0.10, 0.25)
 CLASS_NAMES = ("<10 cm", "10-25 cm", ">25 cm")
@@ -28,31 +31,44 @@ def tin_elevation(mesh: Mesh, x, y) -> np.ndarray:
     return locate(mesh.nodes, mesh.triangles, points, mesh.nodes[:, 2])[1]
 
 
-def residuals(mesh: Mesh, points_xyz: np.ndarray) -> np.ndarray:
-    """Measured minus TIN elevation (m) for each point; NaN for points outside the mesh."""
+def residuals(mesh: Mesh, points_xyz: np.ndarray, *, progress=None,
+              cancelled=None) -> np.ndarray:
+    """Measured minus TIN elevation (m) for each point; NaN for points outside the mesh.
+    Found in chunks of points, ``progress`` told the share done and ``cancelled`` polled
+    between them."""
+    # lazy: numba loads only when this runs
+    from .._kernels.mesh import Locator
+
     if not len(points_xyz):  # holdout 0: no accuracy test
         return np.empty(0)
-    return points_xyz[:, 2] - tin_elevation(mesh, points_xyz[:, 0], points_xyz[:, 1])
+    points_xyz = np.asarray(points_xyz, float)
+    locator, z = Locator(mesh.nodes, mesh.triangles), np.empty(len(points_xyz))
+    size = max(-(-len(points_xyz) // REPORTS), CHUNK_POINTS)
+    for start in along(range(0, len(points_xyz), size), progress, cancelled):
+        z[start:start + size] = locator(points_xyz[start:start + size, :2], mesh.nodes[:, 2])[1]
+    return points_xyz[:, 2] - z
 
 
 def assess(mesh: Mesh, points_xyz: np.ndarray, *, alpha: float | None = None,
-           delta: float | None = None, note=None) -> tuple[np.ndarray, dict]:
+           delta: float | None = None, note=None, progress=None,
+           cancelled=None) -> tuple[np.ndarray, dict]:
     """Step 8: the residuals of held-out points against the mesh's TIN (m, NaN outside it) and
     their statistics (``accuracy_statistics``: RMSE, NSSDA test, classes, E = RMSE + α·Δ).
     Points without a finite x, y, z or with a z no ground has (-9999) are left out, as the
     readers leave them out (``points.step_points``, ``note`` told): their residual is NaN and
-    no figure counts them, not even ``n_outside_mesh``."""
+    no figure counts them, not even ``n_outside_mesh``. ``progress`` and ``cancelled`` as
+    ``residuals``'."""
     nodes = xyz_array(mesh.nodes, "the mesh's nodes")
     metric_crs_at(mesh.crs, (*nodes[:, :2].min(axis=0), *nodes[:, :2].max(axis=0)), "the mesh",
                   given=MESH_CRS)
     given = xyz_array(points_xyz, "the check points")
     usable = step_points(given, "the check points", note) if len(given) else given
     if usable is given:
-        res = residuals(mesh, given)
+        res = residuals(mesh, given, progress=progress, cancelled=cancelled)
         return res, accuracy_statistics(res, alpha=alpha, delta=delta, note=note)
     kept = usable_rows(given)
     res = np.full(len(given), np.nan)
-    res[kept] = residuals(mesh, usable)
+    res[kept] = residuals(mesh, usable, progress=progress, cancelled=cancelled)
     return res, accuracy_statistics(res[kept], alpha=alpha, delta=delta, note=note)
 
 

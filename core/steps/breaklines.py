@@ -32,6 +32,7 @@ from contextlib import contextmanager
 import numba
 import numpy as np
 
+from ..engine.progress import REPORTS, part, report
 from ..errors import FloodMeshError
 from ..options import (TRACING_MODES, check_choice, check_min_length, check_min_points,
                        check_s_crit, check_seed)
@@ -93,7 +94,7 @@ def check_tracing(s_crit, mode, min_points, min_length, seed) -> tuple:
 def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *,
                      mode: str = "auto", min_points: int = 3, min_length: float = 0.0,
                      join: bool = True, seed: int = 0, crests: bool = True,
-                     note=None) -> list[BreakLine]:
+                     note=None, progress=None, cancelled=None) -> list[BreakLine]:
     """Join thinned breakpoints into break lines (see the module docstring for the rules), and
     with ``crests`` add the crest lines of ridges and the bed lines of troughs too narrow for
     their sides to be traced apart (``narrow_crest_cells``), traced by the same rules.
@@ -103,7 +104,9 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     are dropped. ``join`` joins pieces end to end across the corners that thinning leaves on
     bands oblique to the grid (see ``_join_fragments``); without it every line obeys the slope
     continuity rule strictly. ``seed`` settles ties that the 7x7 kernel leaves. DEM cells no
-    ground has (-9999, inf) are nodata (``raster.usable_dem``, ``note`` told).
+    ground has (-9999, inf) are nodata (``raster.usable_dem``, ``note`` told). ``progress``
+    hears the share done as the breakpoints open lines, batch by batch, ``cancelled`` is polled
+    between the batches.
     """
     s_crit, min_points, min_length, seed = check_tracing(s_crit, mode, min_points, min_length,
                                                          seed)
@@ -128,12 +131,16 @@ def trace_breaklines(breakpoints: Grid, slope: Grid, dem: Grid, s_crit: float, *
     # (slope >= S_crit), and crest cells, which have a height all round
     slope_values = np.ascontiguousarray(slope.values, dtype=np.float64)
     lines = _traced(breakpoints.values, slope, slope_values, dem, s_crit, mode == "steep",
-                    min_points, min_length, join, seed)
+                    min_points, min_length, join, seed,
+                    progress=part(progress, 0.0, 0.8 if crests else 1.0), cancelled=cancelled)
     if not crests:
         return lines
-    narrow = _traced(narrow_crest_cells(dem, s_crit), slope, slope_values, dem, s_crit,
+    crest_cells = narrow_crest_cells(dem, s_crit)
+    report(progress, cancelled, 0.85)
+    narrow = _traced(crest_cells, slope, slope_values, dem, s_crit,
                      mode == "steep", min_points,
-                     max(min_length, CREST_MIN_LENGTH * dem.cell_size), join, seed)
+                     max(min_length, CREST_MIN_LENGTH * dem.cell_size), join, seed,
+                     progress=part(progress, 0.85, 1.0), cancelled=cancelled)
     first = 1 + max((line.component for line in lines), default=-1)
     for line in narrow:
         line.component += first
@@ -187,13 +194,14 @@ def narrow_crest_cells(dem: Grid, s_crit: float) -> np.ndarray:
 
 def _traced(cells_traced: np.ndarray, slope: Grid, slope_values: np.ndarray, dem: Grid,
             s_crit: float, steep: bool, min_points: int, min_length: float, join: bool,
-            seed: int) -> list[BreakLine]:
+            seed: int, *, progress=None, cancelled=None) -> list[BreakLine]:
     """``trace_breaklines``' lines through the marked cells ``cells_traced`` alone, its
     arguments checked and its mode settled (``steep``); ``slope_values``: ``slope``'s values
     as float64, which the tracer reads."""
     bp = np.ascontiguousarray(cells_traced, dtype=np.bool_)
     cells, starts = _trace(bp, slope_values, _opening_order(bp, slope_values), float(s_crit),
-                           steep, np.uint64(seed & 0xFFFFFFFFFFFFFFFF))
+                           steep, np.uint64(seed & 0xFFFFFFFFFFFFFFFF),
+                           progress=part(progress, 0.0, 0.9), cancelled=cancelled)
     if join:
         cells, starts = _join_fragments(cells, starts, *bp.shape)
     cells, starts = _select(cells, starts, np.diff(starts) >= max(min_points, 2))
@@ -700,20 +708,38 @@ def _chosen_step(cur, n_cand, cand_k, cand_score, cand_turn, bp, slope, used, st
     return cand_k[0] if n_tied == 1 else cand_k[_seeded_pick(seed, cur, n_tied)]
 
 
-@numba.njit(cache=True)
-def _trace(bp, slope, order, s_crit, steep, seed):
+def _trace(bp, slope, order, s_crit, steep, seed, *, progress=None, cancelled=None):
+    """(cells, starts): the paths the breakpoints ``bp`` open in ``order``, their flat cells
+    one after another, path k from starts[k] to starts[k + 1]; traced in some ``REPORTS``
+    batches of opening points, ``progress`` told the share done and ``cancelled`` polled between
+    them (the same paths as in one: the batches share the tracer's state)."""
     rows, cols = bp.shape
+    n_bp = order.size
     used = np.zeros((rows, cols), dtype=np.bool_)
     links = np.zeros(rows * cols, dtype=np.uint8)
-    n_bp = order.size
     cells = np.empty(2 * n_bp + 16, dtype=np.int64)
-    starts = np.empty(n_bp + 1, dtype=np.int64)
-    path_a = np.empty(n_bp + 1, dtype=np.int64)
-    path_b = np.empty(n_bp + 1, dtype=np.int64)
-    n_cells = 0
-    n_lines = 0
-    starts[0] = 0
-    for k in range(n_bp):
+    starts = np.zeros(n_bp + 1, dtype=np.int64)
+    paths = np.empty((2, n_bp + 1), dtype=np.int64)
+    counts = np.zeros(2, dtype=np.int64)  # cells and paths so far
+    batch = max(1, -(-n_bp // REPORTS))
+    for k in range(0, n_bp, batch):
+        report(progress, cancelled, k / max(n_bp, 1))
+        _trace_batch(bp, slope, order[k:k + batch], s_crit, steep, seed, used, links, cells,
+                     starts, paths, counts)
+    report(progress, cancelled, 1.0)
+    return cells[:counts[0]].copy(), starts[:counts[1] + 1].copy()
+
+
+@numba.njit(cache=True)
+def _trace_batch(bp, slope, order, s_crit, steep, seed, used, links, cells, starts, paths,
+                 counts):
+    """``_trace`` of the opening points ``order``, after those before them: the state
+    (``used``, ``links``, the paths so far in ``cells`` and ``starts``, their ``counts``) goes
+    on from one batch to the next."""
+    rows, cols = bp.shape
+    path_a, path_b = paths[0], paths[1]
+    n_cells, n_lines = counts[0], counts[1]
+    for k in range(order.size):
         s = order[k]
         if used[s // cols, s % cols]:
             continue
@@ -746,4 +772,4 @@ def _trace(bp, slope, order, s_crit, steep, seed):
                 n_cells += 1
             n_lines += 1
             starts[n_lines] = n_cells
-    return cells[:n_cells].copy(), starts[:n_lines + 1].copy()
+    counts[0], counts[1] = n_cells, n_lines

@@ -24,6 +24,7 @@ import numpy as np
 
 from .. import io
 from ..engine.arrays import unique_rows
+from ..engine.progress import report
 from ..errors import FloodMeshError
 from ..options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
 from ..points import xyz_array
@@ -295,15 +296,19 @@ def region_materials(nodes, triangles, regions, materials) -> np.ndarray:
 def export_mesh(path, nodes, triangles, *, fmt: str | None = None, crs=None, open_lines=(),
                 snap: float = 1.0, regions=(), materials=None, datum_offset: float = 0.0,
                 element_elevations: bool = False, breaklines=(),
-                title: str = "FloodMesh mesh") -> list[Path]:
+                title: str = "FloodMesh mesh", progress=None, cancelled=None) -> list[Path]:
     """Write the mesh as ``fmt`` (default: from ``path``'s extension); return the files written
     (Selafin adds the ``.cli`` beside it). See ``prepare`` for the options; ``breaklines`` go
-    into the GeoPackage."""
+    into the GeoPackage. ``progress`` hears the share done by stages (checked and prepared,
+    written), ``cancelled`` is polled before the writing."""
     fmt = format_of(path, fmt)
     mesh = prepare(nodes, triangles, crs=crs, open_lines=open_lines, snap=snap, regions=regions,
                    materials=materials, datum_offset=datum_offset)
-    return write(path, mesh, fmt, element_elevations=element_elevations, breaklines=breaklines,
-                 title=title)
+    report(progress, cancelled, 0.5)
+    written = write(path, mesh, fmt, element_elevations=element_elevations,
+                    breaklines=breaklines, title=title)
+    report(progress, None, 1.0)
+    return written
 
 
 def export_formats(stem, nodes, triangles, formats, **options) -> list[Path]:

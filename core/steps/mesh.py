@@ -13,6 +13,7 @@ from pyproj import CRS
 
 from ..engine.arrays import boundary_edges, edge_nodes, spatial_order, unique_rows
 from ..engine.limits import check_triangles
+from ..engine.progress import part, report
 from ..errors import FloodMeshError
 from ..options import (DEFAULT_MAX_TRIANGLES, check_max_area, check_max_triangles, check_min_angle,
                        check_tolerance)
@@ -28,6 +29,8 @@ SHARP_CORNER = 60.0
 # Triangle's refinement passes over its own output that triangulate_pslg makes at most, to mend
 # triangles below the angle bound that Triangle's first pass left (see there)
 REPAIR_PASSES = 12
+# passes of Triangle's refinement to the local areas and the size field, at most
+REFINE_PASSES = 12
 
 
 @dataclass(frozen=True)
@@ -429,7 +432,8 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
                      conforming: bool = True, points: np.ndarray | None = None,
                      local_areas: np.ndarray | None = None, size_field=None,
                      max_triangles: int = DEFAULT_MAX_TRIANGLES,
-                     area: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     area: float | None = None, progress=None,
+                     cancelled=None) -> tuple[np.ndarray, np.ndarray]:
     """Quality triangulation of a PSLG with Triangle (Shewchuk 1996, doi:10.1007/BFb0014497).
 
     No angle below ``min_angle`` degrees (except at small input angles), no triangle above
@@ -443,6 +447,7 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     one whose angle bound needs more (a sliver, features far closer than the area implies) is
     refused when Triangle reaches that many new vertices.
     Returns vertices (n, 2), the PSLG's vertices first, then ``points``, and triangles (m, 3).
+    ``progress`` hears the share done after each call to Triangle, ``cancelled`` is polled there.
 
     The one function that calls Triangle: its helpers only prepare its input or check its output.
     """
@@ -465,8 +470,9 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     if "triangles" not in result or len(result["triangles"]) == 0:
         raise FloodMeshError("Triangle produced no triangles: the domain boundary is not closed "
                              "or a hole point lies outside its hole")
+    report(progress, cancelled, 0.5)
     has_local = local_areas is not None and len(local_areas)
-    for _ in range(12 if (has_local or size_field is not None) else 0):
+    for k in range(REFINE_PASSES if (has_local or size_field is not None) else 0):
         limit = _area_limits(result, origin, max_area, local_areas if has_local else None,
                              size_field)
         refine = _refinement(result, limit, data, max_triangles,
@@ -475,6 +481,7 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
             break
         result = _within_steiner_limit(triangle.triangulate(refine, f"rp{quality}a"), refine,
                                        steiner, max_triangles, min_angle)
+        report(progress, cancelled, 0.5 + 0.3 * (k + 1) / REFINE_PASSES)
     # Triangle leaves a triangle below the bound now and then where the angle rule
     # (below_angle_bound) allows none: it declines to split a skinny triangle whose shortest edge
     # joins two segments at equal distances from their common vertex (Miller, Pav & Walkington's
@@ -483,9 +490,10 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
     # own output again (switch r) splits them: every vertex is an input vertex there, so that
     # rule no longer holds them back, though a pass may leave new ones where it splits a segment.
     # Go on while any are left, pass after pass, and deliver no mesh that breaks the rule.
-    for _ in range(REPAIR_PASSES):
+    for k in range(REPAIR_PASSES):
         if not _angle_defects(result, pslg, min_angle):
             break
+        report(progress, cancelled, 0.8 + 0.2 * k / REPAIR_PASSES)
         before = len(result["vertices"])
         repair = {key: result[key] for key in ("vertices", "triangles", "segments")}
         result = _within_steiner_limit(triangle.triangulate(repair, "r" + switches), repair,
@@ -493,6 +501,7 @@ def triangulate_pslg(pslg: PSLG, *, min_angle: float, max_area: float,
         if len(result["vertices"]) == before:  # Triangle added nothing: it will not again
             break
     _check_angle_rule(result, pslg, min_angle)
+    report(progress, None, 1.0)
     return result["vertices"] + origin, result["triangles"].astype(np.int64)
 
 
@@ -754,7 +763,7 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
                domain=None, points: np.ndarray | None = None,
                local_areas: np.ndarray | None = None, size_field: Grid | None = None,
                max_triangles: int = DEFAULT_MAX_TRIANGLES, corner_gap: float | None = None,
-               note=None) -> Mesh:
+               note=None, progress=None, cancelled=None) -> Mesh:
     """Mesh the DEM's valid area honouring the break lines (``BreakLine``s or (n, 2|3) arrays)
     and the modeller's ``own_lines`` ((k, 3) arrays, NaN z where 2-D; refused where two cross at
     heights apart, ``refuse_height_clashes``); node z along an own line
@@ -766,7 +775,9 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     ``size_from_slope``). A mesh estimated above ``max_triangles`` triangles is refused before
     any work; ``note`` receives the repairs made to the lines. Lines meeting at a sharp corner
     stop ``corner_gap`` m (default: 4 ``snap``, the cell size at the default snap: the spacing
-    ``lines_for_hydraulics`` keeps lines apart by) short of each other (see ``build_pslg``)."""
+    ``lines_for_hydraulics`` keeps lines apart by) short of each other (see ``build_pslg``).
+    ``progress`` hears the share done by stages (PSLG built, meshed, node z fitted, numbered),
+    ``cancelled`` is polled between them."""
     min_angle = check_min_angle(min_angle)
     max_area = check_max_area(max_area)
     max_triangles = check_max_triangles(max_triangles)
@@ -786,6 +797,7 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     domain = domain_from_dem(dem) if domain is None else domain
     check_triangles(domain.area, max_area, max_triangles)
     pslg = build_pslg(lines, domain, snap=snap, corner_gap=corner_gap, note=note)
+    report(progress, cancelled, 0.1)
     if points is not None and len(points):
         points = _points_apart(points, pslg.vertices, domain, snap, segments=pslg.segments)
     vertices, triangles = triangulate_pslg(pslg, min_angle=min_angle, max_area=max_area,
@@ -793,7 +805,9 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
                                            local_areas=local_areas,
                                            size_field=None if size_field is None else
                                            lambda x, y: nearest_value(size_field, x, y),
-                                           max_triangles=max_triangles, area=domain.area)
+                                           max_triangles=max_triangles, area=domain.area,
+                                           progress=part(progress, 0.1, 0.8),
+                                           cancelled=cancelled)
     z = bilinear(dem, vertices[:, 0], vertices[:, 1])
     if points is not None and len(points):
         z[len(pslg.vertices):len(pslg.vertices) + len(points)] = points[:, 2]
@@ -809,9 +823,12 @@ def build_mesh(dem: Grid, lines: list, *, own_lines: list = (), min_angle: float
     if not np.isfinite(z).all():
         raise FloodMeshError(f"{int((~np.isfinite(z)).sum())} mesh nodes fall where the DEM has no "
                              "data; check the domain against the DEM's nodata")
-    return in_spatial_order(Mesh(np.column_stack([vertices, z]),
+    report(progress, cancelled, 0.9)
+    mesh = in_spatial_order(Mesh(np.column_stack([vertices, z]),
                                  _counter_clockwise(vertices, triangles), dem.crs,
                                  pslg.segments.astype(np.int64)))
+    report(progress, None, 1.0)
+    return mesh
 
 
 def honoured_lines(mesh: Mesh) -> list[np.ndarray]:

@@ -16,6 +16,7 @@ import shapely
 
 from ..engine.arrays import distance_along
 from ..engine.nearest import nearest_line
+from ..engine.progress import along, part, poll, report
 from ..options import (SIMPLIFY_METHODS, check_choice, check_min_distance, check_positive_int,
                        check_tolerance)
 from .breaklines import BreakLine, as_breaklines
@@ -89,28 +90,32 @@ def max_deviation(original: list[BreakLine], simplified: list[BreakLine]) -> flo
 
 
 def simplify_breaklines(lines: list[BreakLine], method: str, amount: float, *,
-                        min_distance: float = 0.0) -> list[BreakLine]:
+                        min_distance: float = 0.0, progress=None,
+                        cancelled=None) -> list[BreakLine]:
     """Simplify ``lines`` (BreakLines, or (k, 3) arrays: ``as_breaklines``) by ``method``
     ("keep-every": every ``amount``-th point;
     "douglas-peucker" or "spline": within ``amount`` metres), then repair crossings and merge
     slivers and near-duplicate vertices closer than ``min_distance`` metres (see the module
-    docstring)."""
+    docstring). ``progress`` hears the share done line by line, then by stages (crossings
+    repaired, slivers merged); ``cancelled`` is polled on the way."""
     check_choice(method, SIMPLIFY_METHODS, "simplification")
     min_distance = check_min_distance(min_distance)
     lines = as_breaklines(lines, "line")
     if method == "keep-every":
         amount = check_positive_int(amount, "keep-every")
-        plans = [(line.coords, _keep_every_mask(len(line.coords), amount)) for line in lines]
     else:
         amount = check_tolerance(amount)
-        if method == "douglas-peucker":
-            plans = [(line.coords, douglas_peucker_mask(line.coords, amount)) for line in lines]
-        else:
-            plans = [spline_plan(line.coords, amount) for line in lines]
+    plan = {"keep-every": lambda c: (c, _keep_every_mask(len(c), amount)),
+            "douglas-peucker": lambda c: (c, douglas_peucker_mask(c, amount)),
+            "spline": lambda c: spline_plan(c, amount)}[method]
+    plans = [plan(line.coords) for line in along(lines, part(progress, 0.0, 0.7), cancelled)]
     positions = [p.copy() for p, _ in plans]
     masks = [m.copy() for _, m in plans]
-    _repair_crossings(lines, positions, masks)
-    return _separate(lines, positions, masks, min_distance)
+    _repair_crossings(lines, positions, masks, cancelled=cancelled)
+    report(progress, cancelled, 0.9)
+    separate = _separate(lines, positions, masks, min_distance)
+    report(progress, None, 1.0)
+    return separate
 
 
 def spline_plan(coords: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
@@ -164,11 +169,13 @@ def _kept_lines(positions, masks) -> np.ndarray:
     return np.array(lines + [None], dtype=object)[:-1]  # an object array even when empty
 
 
-def _repair_crossings(lines, positions, masks, max_rounds=1000):
+def _repair_crossings(lines, positions, masks, max_rounds=1000, cancelled=None):
     """Give simplified segments that cross another line (or their own) back the original
     vertex they skipped that lies farthest from them, or, on a segment between neighbouring
-    vertices, the original positions, until nothing crosses that the originals did not."""
+    vertices, the original positions, until nothing crosses that the originals did not;
+    ``cancelled`` polled each round."""
     for _ in range(max_rounds):
+        poll(cancelled)
         geoms = _kept_lines(positions, masks)
         # the pairs that touch, then those that cross, overlap or contain (collinear, inside)
         # among them: one query instead of one per predicate
