@@ -319,3 +319,38 @@ def test_build_mesh_and_assess_accuracy_load_styled(processing, demo_rasters, tm
     classes = {f["class"] for f in layer.getFeatures()}
     assert {0, 2} <= classes  # a 400 m² mesh misses the banks: some residuals over 25 cm
     QgsProject.instance().clear()
+
+
+def test_long_steps_move_the_progress_bar_before_they_end(processing, demo_rasters, tmp_path):
+    """Trace, Simplify, Build mesh, Assess accuracy and Export mesh move the dialog's bar while
+    they work, not only to 100 % when done (the worker passes a step's first report at once,
+    later ones at most every 0.1 s: at least one lies between)."""
+    from qgis.core import QgsProcessingContext, QgsProcessingFeedback
+
+    from floodmesh.core.frontends import demo
+
+    rng = np.random.default_rng(3)
+    xy = rng.uniform([1, 1], [299, 239], (500, 2))
+    xyz = np.column_stack([xy + np.array(demo.DEMO_ORIGIN), demo.ground_elevation(*xy.T)])
+    io.write_points_gpkg(tmp_path / "check.gpkg", xyz, io.read_raster(demo_rasters["dem"]).crs)
+    t, d = tmp_path, demo_rasters
+    steps = [
+        ("tracebreaklines", {"BREAKPOINTS": d["bp"], "SLOPE": d["slope"], "DEM": d["dem"],
+                             "OUTPUT": str(t / "lines.gpkg")}),
+        ("simplifybreaklines", {"INPUT": str(t / "lines.gpkg"), "OUTPUT": str(t / "s.gpkg")}),
+        ("buildmesh", {"DEM": d["dem"], "BREAKLINES": str(t / "s.gpkg"), "MAX_AREA": 100.0,
+                       "OUTPUT": str(t / "mesh.2dm")}),
+        ("assessaccuracy", {"MESH": str(t / "mesh.2dm"), "POINTS": str(t / "check.gpkg"),
+                            "OUTPUT": str(t / "residuals.gpkg")}),
+        ("exportmesh", {"INPUT": str(t / "mesh.2dm"), "FORMAT": 1, "CRS": "EPSG:25832",
+                        "OUTPUT": str(t / "geo.slf")}),
+    ]
+    seen = {}
+    for name, params in steps:
+        feedback = QgsProcessingFeedback()
+        feedback.progressChanged.connect(seen.setdefault(name, []).append)
+        processing.run(f"floodmesh:{name}", params, context=QgsProcessingContext(),
+                       feedback=feedback)
+    moved = {name: any(0 < p < 100 for p in values) and values == sorted(values)
+             and values[-1] == pytest.approx(100) for name, values in seen.items()}
+    assert moved == dict.fromkeys(seen, True), seen
