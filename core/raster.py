@@ -17,6 +17,7 @@ METRE_NAMES = {"metre", "meter", "metres", "meters"}
 REPROJECT_POINTS = ("pdal translate IN OUT -f filters.reprojection "
                     "--filters.reprojection.out_srs=EPSG:{code}")
 REPROJECT_RASTER = "gdalwarp -t_srs EPSG:{code} IN OUT"
+REPROJECT_VECTOR = "ogr2ogr -t_srs EPSG:{code} OUT IN"
 # Elevations (m) no ground has: the lowest dry land, the Dead Sea shore, lies at -430 m and
 # Everest at 8849 m. They catch the no-data values that no nodata tag names, such as -9999,
 # -32768 and ±3.4e38 (cells outside them are nodata, with a note: io.read_raster).
@@ -45,6 +46,10 @@ class RefusedCRS:
 
 
 def _reproject_hint(kind: str | None, code: str = "XXXX") -> str:
+    """How to reproject data of ``kind`` ("points", "raster", "vector": a line or polygon layer;
+    None: not known) to EPSG:``code``."""
+    if kind == "vector":
+        return f"`{REPROJECT_VECTOR.format(code=code)}`"
     return _for_kind(kind, REPROJECT_POINTS.format(code=code), REPROJECT_RASTER.format(code=code))
 
 

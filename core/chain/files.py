@@ -23,8 +23,8 @@ from ..options import (DEFAULT_MAX_TRIANGLES, check_cell_size, check_classes, ch
                        check_holdout, check_max_area, check_max_gap, check_max_triangles,
                        check_min_angle, check_refinement, check_seed, is_point_source)
 from ..points import PointCloud, at_places_of, split_holdout, step_points
-from ..raster import (check_dem_size, chosen_crs, parse_crs, require_metric_crs,
-                      require_same_place)
+from ..raster import (check_dem_size, check_scale, chosen_crs, corners_and_centre, parse_crs,
+                      require_metric_crs, require_same_place)
 from ..steps.breakpoints import breakpoints_file
 from ..steps.slope import slope_raster_file
 
@@ -175,8 +175,11 @@ def simplify(input, output, *, method: str, amount: float, min_distance: float =
 
     _files([input], [output], gpkg=[output])
     name = io.vector_path(input).name
-    crs = require_metric_crs(chosen_crs(crs, io.vector_crs(input), name, note), name)
+    crs = require_metric_crs(chosen_crs(crs, io.vector_crs(input), name, note), name, "vector")
     lines = io.read_breaklines(input)
+    if lines:  # tolerances and distances are metres on the ground: a CRS true to scale there
+        xy = np.concatenate([line.coords[:, :2] for line in lines])
+        check_scale(crs, *corners_and_centre(*xy.min(axis=0), *xy.max(axis=0)), name, "vector")
     stage(progress, cancelled, 0.1)
     simple = simplify_breaklines(lines, method, amount, min_distance=min_distance,
                                  progress=part(progress, 0.1, 0.9), cancelled=cancelled)

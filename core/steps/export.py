@@ -28,7 +28,8 @@ from ..engine.progress import report
 from ..errors import FloodMeshError
 from ..options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
 from ..points import xyz_array
-from ..raster import parse_crs, require_metric_crs, same_place
+from ..raster import (check_scale, corners_and_centre, parse_crs, require_metric_crs,
+                      same_place)
 from .accuracy import tin_elevation
 from .mesh import boundary_loops
 
@@ -135,7 +136,11 @@ def prepare(nodes, triangles, *, crs=None, open_lines=(), snap: float = 1.0, reg
     if len(mats) != len(triangles):
         raise FloodMeshError(f"{len(mats)} material ids for {len(triangles)} triangles")
     mats = region_materials(nodes, triangles, regions, mats)
-    return SolverMesh(shifted, triangles, mats, boundary, _crs(crs))
+    crs = _crs(crs)
+    if crs is not None:  # the snapping distance and the solvers' lengths are metres on the ground
+        check_scale(crs, *corners_and_centre(*nodes[:, :2].min(axis=0), *nodes[:, :2].max(axis=0)),
+                    "the mesh")
+    return SolverMesh(shifted, triangles, mats, boundary, crs)
 
 
 def _refuse_flat_triangles(corners: np.ndarray, cross: np.ndarray) -> None:

@@ -215,3 +215,38 @@ def test_data_far_outside_a_national_grid_are_refused_naming_its_area(tmp_path, 
     assert ("point file points.xyz lies at x 412,0" in err[0] and "far outside the area "
             "where Amersfoort / RD New is used (Netherlands - onshore" in err[0]), err
     assert "check its CRS and give the one its x, y are in (--crs EPSG:XXXX" in err[0], err
+
+
+# Web Mercator at 50° N: x, y of a line across a floodplain there, its metre 0.64 m on the ground
+MERCATOR_50N = (1_001_875.0, 6_446_275.0)
+
+
+def test_simplify_refuses_break_lines_far_from_true_scale(tmp_path, capsys):
+    """``floodmesh simplify`` of break lines in Web Mercator at 50° N: its tolerance (m) would be
+    1.56 m on the ground; refused in one line, as such a DEM is, naming how to reproject."""
+    x, y = MERCATOR_50N
+    lines = write_line(tmp_path / "lines.gpkg",
+                       [(x + 10 * i, y + (i % 3), 30.0) for i in range(20)], "EPSG:3857")
+    code, err = floodmesh(["simplify", lines, "--tolerance", 0.5, "--out",
+                           tmp_path / "simple.gpkg"], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert "whose metre is 0.64 m on the ground at the data" in err[0], err
+    assert "ogr2ogr -t_srs EPSG:32632" in err[0], err
+    assert not (tmp_path / "simple.gpkg").exists()
+
+
+def test_export_refuses_a_mesh_far_from_true_scale(tmp_path, capsys):
+    """``floodmesh export`` of a mesh in Web Mercator (its open boundaries snapped within metres
+    that are not metres there) is refused in one line; nothing is written."""
+    from floodmesh.core import io
+
+    x, y = MERCATOR_50N
+    nodes = np.array([[x, y, 1.0], [x + 100, y, 1.0], [x + 100, y + 100, 1.0], [x, y + 100, 1.0]])
+    io.write_mesh_2dm(tmp_path / "mesh.2dm", nodes, np.array([[0, 1, 2], [0, 2, 3]]),
+                      crs="EPSG:3857")
+    sections = write_line(tmp_path / "open.gpkg", [(x, y), (x, y + 100)], "EPSG:3857")
+    code, err = floodmesh(["export", tmp_path / "mesh.2dm", tmp_path / "out.2dm",
+                           "--open-boundaries", sections], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert "whose metre is 0.64 m on the ground at the data" in err[0], err
+    assert not (tmp_path / "out.2dm").exists()
