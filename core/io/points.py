@@ -469,12 +469,14 @@ def file_format(path) -> str | None:
 
 
 def write_points_las(path, points: PointCloud, *, classes=GROUND_CLASS) -> None:
-    """Write points as LAS/LAZ (by extension) with the CRS; ``classes`` one code or one per point."""
+    """Write points as LAS/LAZ (by extension) with the CRS; ``classes`` one code or one per point.
+    No points write a valid LAS of none (a header alone), as ``write_points_gpkg`` writes an
+    empty layer; FloodMesh's readers refuse it as having no usable points."""
     # lazy: laspy loads only when this runs
     import laspy
 
     header = laspy.LasHeader(point_format=3, version="1.4")
-    header.offsets = np.floor(points.xyz.min(axis=0))
+    header.offsets = np.floor(points.xyz.min(axis=0)) if len(points) else np.zeros(3)
     header.scales = np.array([0.001, 0.001, 0.001])
     if points.crs is not None:
         header.add_crs(parse_crs(points.crs, f"the CRS of {Path(path).name}"))

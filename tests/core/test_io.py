@@ -105,6 +105,21 @@ def test_laz_of_las_1_4_layers_reads_its_ground_exactly(tmp_path):
         assert read.crs == UTM32
 
 
+@pytest.mark.parametrize("ext", [".las", ".laz"])
+def test_no_points_write_a_valid_empty_las(tmp_path, ext):
+    """A library user writing a cloud of no points (a tile left empty by a filter) gets a valid
+    LAS of none with its CRS, as write_points_gpkg writes an empty layer; reading it back as
+    terrain is refused in one line."""
+    import laspy
+
+    path = tmp_path / f"empty{ext}"
+    io.write_points_las(path, PointCloud(np.zeros((0, 3)), CRS.from_epsg(25832)))
+    las = laspy.read(path)
+    assert len(las.points) == 0 and las.header.parse_crs().to_epsg() == 25832
+    with pytest.raises(FloodMeshError, match="holds no points"):
+        io.read_points(path)
+
+
 def test_crs_given_for_a_las_in_another_is_said(tmp_path):
     """--crs over a LAS's own, different CRS is used, and said; the same CRS is said nothing."""
     path = tmp_path / "points.laz"
