@@ -934,9 +934,7 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
     from ..steps.mesh import triangle_areas
 
     inputs = [mesh_path, *scenario.input_files]
-    check_output_folder(out_dir, inputs, FLOOD_FILES)
-    _refuse_others_report(Path(out_dir))
-    crs = require_metric_crs(crs or mesh_crs(mesh_path), f"the mesh {Path(mesh_path).name}")
+    crs = check_flood_inputs(mesh_path, scenario, out_dir, crs=crs)
     python = require_flood_python(own_env)
     mesh = io.read_2dm(mesh_path)
     prepared = prepare(mesh.nodes, mesh.triangles, scenario)
@@ -992,6 +990,16 @@ def run_flood(mesh_path, scenario: Scenario, out_dir, *, crs=None, own_env=None,
                  **{k: result[k] for k in ("max_depth", "max_stage", "max_speed", "arrival_s")})
         io.write_json(out / "report.json", report)
     return report
+
+
+def check_flood_inputs(mesh_path, scenario: Scenario, out_dir, *, crs=None):
+    """What ``run_flood`` refuses before ANUGA runs: an output folder ``out_dir`` it cannot
+    write or whose files would replace an input or a run's report, and a mesh without a CRS in
+    metres (``crs``, else the mesh's, ``mesh_crs``). Returns that CRS; callers running several
+    floods check them all first, so that no flood runs for minutes before another is refused."""
+    check_output_folder(out_dir, [mesh_path, *scenario.input_files], FLOOD_FILES)
+    _refuse_others_report(Path(out_dir))
+    return require_metric_crs(crs or mesh_crs(mesh_path), f"the mesh {Path(mesh_path).name}")
 
 
 def _refuse_others_report(out: Path) -> None:

@@ -4,8 +4,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import io
-from ..flood.compare import compare_floods
-from ..flood.model import FLOW_FIELD_FILES, load_scenario, run_flood
+from ..flood.compare import COMPARISON_FILES, compare_floods
+from ..flood.model import FLOW_FIELD_FILES, check_flood_inputs, load_scenario, run_flood
+from ..io.outputs import check_output_folder
 from ..flood.summary import time_step_summary
 from ..options import check_comparison_cell_size, check_size_field_area
 from ..steps.hydraulic_lines import flood_size_field, wet_zone
@@ -21,6 +22,10 @@ def cmd_flood(args):
     runs = [(args.mesh, Path(args.out) if not args.reference else Path(args.out) / "mesh")]
     if args.reference:
         runs.append((args.reference, Path(args.out) / "reference"))
+    for mesh, out in runs:  # every flood's folder and mesh, before minutes of the first
+        check_flood_inputs(mesh, scenario, out, crs=args.crs)
+    if args.reference:
+        check_output_folder(args.out, [out for _, out in runs], COMPARISON_FILES)
     reports = []
     for mesh, out in runs:
         bar = ProgressBar(f"flood {Path(mesh).stem}")

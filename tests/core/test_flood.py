@@ -618,6 +618,32 @@ def test_flood_options_out_of_range_are_refused_before_the_flood(tmp_path, capsy
 
 
 
+@pytest.mark.parametrize("reference, says", [
+    ("file", "reference is a file, not a folder"),
+    ("run", "holds a report.json that no flood wrote")])
+def test_flood_refuses_the_reference_folder_before_the_first_flood(tmp_path, capsys, reference,
+                                                                  says):
+    """flood --reference with OUT/reference a file, or holding a run's report.json: refused only
+    after the first flood had run for minutes (its results left in OUT/mesh). Now one line
+    before ANUGA runs, and OUT/mesh is never written."""
+    from floodmesh.core.frontends.cli import main
+
+    rectangle_mesh(tmp_path / "m.2dm", 20, 10, lambda x, y: 0 * x, max_area=4.0)
+    _write(tmp_path / "s.json", {"duration_s": 10, "output_interval_s": 5})
+    out = tmp_path / "out"
+    out.mkdir()
+    if reference == "file":
+        (out / "reference").write_text("not a folder")
+    else:
+        (out / "reference").mkdir()
+        _write(out / "reference" / "report.json", {"nodes": 10, "min_angle_deg": 30})
+    assert main(["flood", str(tmp_path / "m.2dm"), "--scenario", str(tmp_path / "s.json"),
+                 "--out", str(out), "--crs", CRS, "--reference", str(tmp_path / "m.2dm")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and says in err, err
+    assert not (out / "mesh").exists()
+
+
 @needs_anuga
 def test_a_reference_run_where_neither_floods_says_so_not_a_traceback(tmp_path, capsys):
     """Two floods that stay dry compared: the summary formatted the RMSE, None, and stopped with
