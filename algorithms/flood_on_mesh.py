@@ -1,5 +1,5 @@
 """Flood on mesh: ANUGA run on a FloodMesh mesh with a scenario (core.flood.model), in a child
-process; its maxima load as rasters."""
+process; its maxima load as rasters on colour ramps, dry cells clear."""
 from pathlib import Path
 
 from qgis.core import (QgsProcessingOutputFile, QgsProcessingOutputRasterLayer,
@@ -11,12 +11,13 @@ from ..core.flood.summary import time_step_summary
 from ..core.options import RESULT_RASTERS
 from .base import FloodMeshAlgorithm, crs_or_none, layer_file
 from .child import flood_env
-from .styles import load_results, run_group_name
+from .styles import (load_results, run_group_name, style_arrival, style_max_depth,
+                     style_max_level, style_max_speed)
 
-RASTERS = (("MAX_DEPTH", "Maximum depth (m)", "max_depth"),
-           ("MAX_LEVEL", "Maximum water level (m)", "max_stage"),
-           ("MAX_SPEED", "Maximum speed (m/s)", "max_speed"),
-           ("ARRIVAL", "Arrival time (s)", "arrival_s"))
+RASTERS = (("MAX_DEPTH", "Maximum depth (m)", "max_depth", style_max_depth),
+           ("MAX_LEVEL", "Maximum water level (m)", "max_stage", style_max_level),
+           ("MAX_SPEED", "Maximum speed (m/s)", "max_speed", style_max_speed),
+           ("ARRIVAL", "Arrival time (s)", "arrival_s", style_arrival))
 
 
 class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
@@ -49,7 +50,7 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
             self.CRS, self.tr("CRS of the mesh (when the layer has none)"), optional=True))
         self.addParameter(QgsProcessingParameterFolderDestination(
             self.OUTPUT, self.tr("Output folder")))
-        for name, label, _ in RASTERS:
+        for name, label, *_ in RASTERS:
             self.addOutput(QgsProcessingOutputRasterLayer(name, self.tr(label)))
         self.addOutput(QgsProcessingOutputVectorLayer(
             self.TIME_STEP, self.tr("Where the time step was set")))
@@ -79,9 +80,9 @@ class FloodOnMeshAlgorithm(FloodMeshAlgorithm):
         layers = [(QgsVectorLayer(f"{results[self.TIME_STEP]}|layername=time_step_set_by",
                                   "Where the time step was set"), lambda layer: None,
                    self.TIME_STEP)]
-        for name, label, key in RASTERS:
+        for name, label, key, style in RASTERS:
             results[name] = str(out / RESULT_RASTERS[key])
-            layers.append((QgsRasterLayer(results[name], label), lambda layer: None, name))
+            layers.append((QgsRasterLayer(results[name], label), style, name))
         load_results(context, crs, layers, group=run_group_name(out, mesh_path),
                      folder=out)
         return results

@@ -1,6 +1,8 @@
 """How FloodMesh's results look when they load: break lines in one readable style above the
-mesh, residuals by class, the mesh shaded by elevation with its edges drawn, in the run's CRS,
-the view zoomed to it."""
+mesh, residuals by class, the mesh shaded by elevation with its edges drawn, a flood's maxima on
+colour ramps with dry cells clear, in the run's CRS, the view zoomed to it."""
+import math
+
 from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSystem,
                        QgsCoordinateTransform, QgsLayerTree, QgsMapLayerType, QgsProcessingContext,
                        QgsProcessingException, QgsProcessingLayerPostProcessorInterface,
@@ -8,8 +10,8 @@ from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSyste
                        QgsSymbol)
 from qgis.PyQt.QtGui import QColor
 
-from ..core.options import (BREAKLINE_COLOUR, HALO_COLOUR, MESH_EDGE_COLOUR, OUTSIDE_MESH_COLOUR,
-                            RESIDUAL_CLASS_COLOURS, RESIDUAL_CLASS_LABELS)
+from ..core.options import (BREAKLINE_COLOUR, DRY_BELOW_M, HALO_COLOUR, MESH_EDGE_COLOUR,
+                            OUTSIDE_MESH_COLOUR, RESIDUAL_CLASS_COLOURS, RESIDUAL_CLASS_LABELS)
 from .compat import LINE_GEOMETRY, USER_DEFINED_LIMITS
 
 RESIDUAL_CLASSES = tuple(zip((0, 1, 2, -1), RESIDUAL_CLASS_LABELS,
@@ -65,6 +67,62 @@ def style_mesh(layer):
     edges.setLineWidth(0.1)
     settings.setNativeMeshSettings(edges)
     layer.setRendererSettings(settings)
+
+
+# a flood's maxima: (fraction of the range, colour) stops; depth and speed from light to dark over
+# the wet range with dry cells (0) transparent, the water level and arrival time over their range
+DEPTH_STOPS = ((0.0, "#c6dbef"), (0.5, "#4292c6"), (1.0, "#08306b"))
+LEVEL_STOPS = ((0.0, "#edf8b1"), (0.5, "#41b6c4"), (1.0, "#253494"))
+SPEED_STOPS = ((0.0, "#ffffb2"), (0.5, "#fd8d3c"), (1.0, "#bd0026"))
+ARRIVAL_STOPS = ((0.0, "#bd0026"), (0.5, "#fd8d3c"), (1.0, "#ffffb2"))  # first reached: darkest
+
+
+def _pseudocolour(layer, stops, unit: str, dry: bool = False) -> None:
+    """Shade a one-band raster through ``stops`` over its values (``unit`` in the legend); with
+    ``dry``, cells of 0 (dry: no depth, no speed) are transparent and the ramp spans the rest."""
+    from qgis.core import (QgsColorRampShader, QgsRasterShader,
+                           QgsSingleBandPseudoColorRenderer)
+
+    stats = layer.dataProvider().bandStatistics(1)
+    low, high = stats.minimumValue, stats.maximumValue
+    if dry:
+        low = min(high, DRY_BELOW_M)
+    if not (math.isfinite(low) and math.isfinite(high)) or high <= low:
+        low, high = (low, low + 1.0) if math.isfinite(low) else (0.0, 1.0)
+    items = [QgsColorRampShader.ColorRampItem(0.0, QColor(0, 0, 0, 0), "dry")] if dry else []
+    for fraction, colour in stops:
+        value = low + fraction * (high - low)
+        items.append(QgsColorRampShader.ColorRampItem(value, QColor(colour),
+                                                      f"{value:.3g} {unit}"))
+    ramp = QgsColorRampShader(low, high)
+    ramp.setColorRampItemList(items)
+    shader = QgsRasterShader()
+    shader.setRasterShaderFunction(ramp)
+    renderer = QgsSingleBandPseudoColorRenderer(layer.dataProvider(), 1, shader)
+    renderer.setClassificationMin(low)
+    renderer.setClassificationMax(high)
+    layer.setRenderer(renderer)
+
+
+def style_max_depth(layer):
+    """Maximum depth: light to dark blue over the wet cells, dry ones (0 m) transparent."""
+    _pseudocolour(layer, DEPTH_STOPS, "m", dry=True)
+
+
+def style_max_level(layer):
+    """Maximum water level: over its range (never wet: no data, transparent)."""
+    _pseudocolour(layer, LEVEL_STOPS, "m")
+
+
+def style_max_speed(layer):
+    """Maximum speed: yellow to red over the wet cells, dry ones (0 m/s) transparent."""
+    _pseudocolour(layer, SPEED_STOPS, "m/s", dry=True)
+
+
+def style_arrival(layer):
+    """Arrival time: red where the water came first to yellow where it came last (never:
+    no data, transparent)."""
+    _pseudocolour(layer, ARRIVAL_STOPS, "s")
 
 
 # the order results stack in, top first: lines above points above rasters above the mesh

@@ -34,7 +34,9 @@ RESIDUAL_CLASS_LABELS = ("< 10 cm", "10–25 cm", "> 25 cm", "outside the mesh")
 # index, as QGIS's point-cloud layers open them
 POINT_EXTENSIONS = (".las", ".laz", ".xyz", ".txt", ".csv", ".pts")
 EPT_NAME = "ept.json"
-# the flood's result rasters by what they hold, as run_flood writes them and QGIS loads them
+# the flood's result rasters by what they hold, as run_flood writes them and QGIS loads them;
+# water thinner than DRY_BELOW_M (m; ANUGA's minimum_storable_height: round-off) is dry there
+DRY_BELOW_M = 1e-3
 RESULT_RASTERS = {"max_depth": "max_depth.tif", "max_stage": "max_water_level.tif",
                   "max_speed": "max_speed.tif", "arrival_s": "arrival_time.tif"}
 # a vector layer's geometries as messages name them, and how QGIS turns a layer into each kind

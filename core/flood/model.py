@@ -33,7 +33,7 @@ from .. import io
 from ..engine.arrays import boundary_edges, edge_nodes, spatial_order
 from ..errors import Cancelled, FloodMeshError
 from ..io.outputs import check_output_folder, staged_folder
-from ..options import RESULT_RASTERS
+from ..options import DRY_BELOW_M, RESULT_RASTERS
 from ..raster import Grid, require_metric_crs
 from ..steps.hydraulics import collinear_wall_stencils, hydraulic_checks, inradii, neighbours
 from .scenario_keys import check_keys, entries
@@ -52,7 +52,6 @@ SETTER_FIELDS = ("inradius_m", "share_of_steps", "checks", "max_depth_m", "max_s
 # (m): a thinner film is below any depth a flood reports (wet_depth_m, the worker's 1 cm
 # for speeds), so the share of its volume measures round-off, not the flood
 FILM_M = 0.001
-DRY_BELOW_M = 1e-3  # ANUGA's minimum_storable_height: thinner water (round-off) it stores as dry
 
 
 # ---------------------------------------------------------------------------------------------
