@@ -54,8 +54,8 @@ from ..io.rasters import named_instead
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_points
-from ..raster import (Grid, check_scale, check_transform, chosen_crs,
-                      corners_and_centre, holds_instead, require_metric_crs, same_place)
+from ..raster import (Grid, check_scale, check_transform, chosen_crs, corners_and_centre,
+                      extent_words, holds_instead, require_metric_crs, same_place)
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
 from .limits import BYTES_PER_FITTED_CELL, check_memory, fits_in_memory, footprint
@@ -386,7 +386,7 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
     if not tiles:
         raise FloodMeshError(f"none of the {len(paths)} tiles holds points that can be read: "
                              "check the tiles")
-    _check_tiles_scale(first[1], [t.bounds for t in tiles], f"tile {first[0]}", "points")
+    _check_tiles_scale(first[1], [(Path(t.path).name, t.bounds) for t in tiles], "points")
     return tiles, first[1], notes + _replaced_note(replaced)
 
 
@@ -398,22 +398,121 @@ def _replaced_note(replaced: list) -> list:
     return [replaced[0] + more] if replaced else []
 
 
-def _check_tiles_scale(crs: CRS, bounds: list, what: str, kind: str) -> None:
-    """``check_scale`` over the extent of all the tiles' ``bounds`` (xmin, ymin, xmax, ymax;
-    None where unknown: text tiles, not read yet, are checked once read, ``_check_text_tiles``)."""
-    known = np.array([b for b in bounds if b is not None], float).reshape(-1, 4)
-    if len(known):
-        low, high = known[:, :2].min(axis=0), known[:, 2:].max(axis=0)
-        check_scale(crs, *corners_and_centre(*low, *high), what, kind)
+# A tile whose extent lies farther from the rest than this many sides of the largest tile, and at
+# least this far (m), is refused: a tile in another CRS or unit (degrees, feet, a zone number
+# before the eastings), which the CRS's area of use, widened for projections' reaches, lets by
+FAR_TILE_SIDES, FAR_TILE_MIN_M = 50.0, 10_000.0
+
+
+def _check_tiles_scale(crs: CRS, named: list, kind: str) -> None:
+    """Refuse tiles far from the rest (``_refuse_far_tiles``), then ``check_scale`` over the
+    extent of all the tiles, naming the tiles at fault. ``named``: (tile name, bounds: xmin,
+    ymin, xmax, ymax m, or None where unknown: text tiles, not read yet, are checked once read,
+    ``_check_text_tiles``)."""
+    named = [(name, bounds) for name, bounds in named if bounds is not None]
+    if not named:
+        return
+    _refuse_far_tiles(named, crs, kind)
+    try:
+        check_scale(crs, *corners_and_centre(*_extent([b for _, b in named])), "the tiles", kind)
+    except FloodMeshError:
+        at_fault = []
+        for name, bounds in named:
+            try:
+                check_scale(crs, *corners_and_centre(*bounds), name, kind)
+            except FloodMeshError:
+                at_fault.append((name, bounds))
+        if not at_fault:
+            raise
+        check_scale(crs, *corners_and_centre(*_extent([b for _, b in at_fault])),
+                    _tiles_words([name for name, _ in at_fault]), kind)
+
+
+def _extent(bounds: list) -> tuple[float, float, float, float]:
+    """The box (xmin, ymin, xmax, ymax; m) round ``bounds``, boxes alike."""
+    known = np.array(bounds, float).reshape(-1, 4)
+    return (*known[:, :2].min(axis=0), *known[:, 2:].max(axis=0))
+
+
+def _tiles_words(names: list[str]) -> str:
+    """Tiles named as one subject of a sentence: 'tile a.laz', 'tile a.laz (and b.laz alike)',
+    'tile a.laz (and 4 more tiles alike)'."""
+    more = names[1:]
+    if not more:
+        return f"tile {names[0]}"
+    if len(more) <= 2:
+        return f"tile {names[0]} (and {' and '.join(more)} alike)"
+    return f"tile {names[0]} (and {len(more)} more tiles alike)"
+
+
+def _refuse_far_tiles(named: list, crs: CRS, kind: str) -> None:
+    """Refuse, naming them and their extent, the tiles (``named``: (name, bounds) pairs) that
+    lie apart from the largest group of tiles within ``FAR_TILE_SIDES`` sides of the largest
+    tile (at least ``FAR_TILE_MIN_M``) of each other; of groups alike, the one not in degrees,
+    else the first tile's, is the survey."""
+    # lazy: SciPy loads only when this runs
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    if len(named) < 2:
+        return
+    boxes = np.array([b for _, b in named], float)
+    side = float(np.max(boxes[:, 2:] - boxes[:, :2]))
+    far = max(FAR_TILE_SIDES * side, FAR_TILE_MIN_M)
+    centres = (boxes[:, :2] + boxes[:, 2:]) / 2
+    pairs = cKDTree(centres).query_pairs(far + 2 * side, output_type="ndarray")
+    n = len(named)
+    links = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    count, group = connected_components(links, directed=False)
+    if count == 1:
+        return
+    degrees = np.array([_in_degrees(*_extent(boxes[group == g])) for g in range(count)])
+    sizes = np.bincount(group)
+    survey = max(range(count), key=lambda g: (sizes[g], not degrees[g], g == group[0]))
+    apart = [i for i in range(n) if group[i] != survey]
+    rest = _extent(boxes[group == survey])
+    outside = _extent(boxes[apart])
+    gap = math.hypot(max(rest[0] - outside[2], outside[0] - rest[2], 0.0),
+                     max(rest[1] - outside[3], outside[1] - rest[3], 0.0))
+    code = f"EPSG:{crs.to_epsg() or 'XXXX'}"
+    if _in_degrees(*outside):
+        where = "x {:.6g} to {:.6g}, y {:.6g} to {:.6g}".format(*outside[::2], *outside[1::2])
+        fix = (f"its x, y look like longitude and latitude in degrees: reproject it to the "
+               f"others' CRS first ({_reproject(kind, code, 'EPSG:4326')}), or leave it out")
+    else:
+        where = extent_words(*outside)
+        fix = ("check its CRS and units (another CRS, feet, a zone number before the eastings) "
+               f"and reproject it to the others' first ({_reproject(kind, code)}), or grid it "
+               "apart")
+    others = "other tile" if sizes[survey] == 1 else f"{sizes[survey]} other tiles"
+    raise FloodMeshError(
+        f"{_tiles_words([named[i][0] for i in apart])} lies at {where}, {gap / 1000:,.0f} km "
+        f"from the {others} ({extent_words(*rest)}): {fix}")
+
+
+def _reproject(kind: str, code: str, source: str | None = None) -> str:
+    """The command that reprojects a point (``kind`` "points") or DEM tile to ``code``, from
+    ``source`` where given."""
+    if kind == "points":
+        given = f" --filters.reprojection.in_srs={source}" if source else ""
+        return f"pdal translate IN OUT -f filters.reprojection{given} " \
+               f"--filters.reprojection.out_srs={code}"
+    return f"gdalwarp{f' -s_srs {source}' if source else ''} -t_srs {code} IN OUT"
+
+
+def _in_degrees(xmin: float, ymin: float, xmax: float, ymax: float) -> bool:
+    """Whether a box's x, y could be longitude and latitude (degrees)."""
+    return -180.0 <= xmin and xmax <= 360.0 and -90.0 <= ymin and ymax <= 90.0
 
 
 def _check_text_tiles(meta: list, crs: CRS) -> None:
-    """``_check_tiles_scale`` over the points round one read (``meta``) of the XYZ text tiles,
-    which no header placed before (those with a class column too)."""
-    text = [m for m in meta if m.get("bounds") and not _is_las(m["path"])]  # read, with points
-    if text:
-        _check_tiles_scale(crs, [m["bounds"] for m in text],
-                           f"tile {Path(text[0]['path']).name}", "points")
+    """``_check_tiles_scale`` over the tiles round one read (``meta``; all those with points,
+    their extents from the points) where they hold XYZ text tiles, which no header placed
+    before (those with a class column too)."""
+    read = [m for m in meta if m.get("bounds")]  # read, with points
+    if any(not _is_las(m["path"]) for m in read):
+        _check_tiles_scale(crs, [(Path(m["path"]).name, m["bounds"]) for m in read], "points")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1497,7 +1596,8 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
         xmax = max(s.bounds.right for s in sources)
         ymin = min(s.bounds.bottom for s in sources)
         ymax = max(s.bounds.top for s in sources)
-        _check_tiles_scale(first[1], [(xmin, ymin, xmax, ymax)], f"tile {first[0]}", "raster")
+        _check_tiles_scale(first[1], [(path.name, tuple(src.bounds))
+                                      for path, src in zip(paths, sources)], "raster")
         for message in _replaced_note(replaced) if note else ():
             note(message)
         d = first[2].a

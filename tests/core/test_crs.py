@@ -11,7 +11,7 @@ from pyproj import CRS
 
 from floodmesh.core.frontends.cli import main
 
-from ..bad_inputs import plane_xyz, slope_dem, write_las, write_tif
+from ..bad_inputs import ORIGIN, plane_xyz, slope_dem, write_las, write_tif
 
 RD = (155_000.0, 463_000.0)  # in the Netherlands, RD New (EPSG:28992)
 
@@ -250,3 +250,34 @@ def test_export_refuses_a_mesh_far_from_true_scale(tmp_path, capsys):
     assert code == 2 and len(err) == 1, err
     assert "whose metre is 0.64 m on the ground at the data" in err[0], err
     assert not (tmp_path / "out.2dm").exists()
+
+
+def test_an_xyz_tile_in_degrees_among_utm_tiles_is_refused_by_name(tmp_path, capsys):
+    """A folder of XYZ tiles in UTM 32N with one in longitude and latitude (9.5° E, 51.4° N),
+    all given --crs EPSG:25832: refused in one line naming that tile, its extent and the
+    reprojection from degrees, not a point-spacing error about the whole set."""
+    folder = tmp_path / "xt"
+    folder.mkdir()
+    xyz = plane_xyz()
+    np.savetxt(folder / "a.xyz", xyz, fmt="%.3f")
+    degrees = (xyz - [xyz[:, 0].min(), xyz[:, 1].min(), 0.0]) * [1e-5, 1e-5, 1.0] + [9.5, 51.4, 0]
+    np.savetxt(folder / "b.xyz", degrees, fmt="%.7f")
+    code, err = floodmesh(["grid", folder, "--crs", "EPSG:25832", "--cell-size", 1, "--out",
+                           tmp_path / "dem.tif"], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith("floodmesh: error: tile b.xyz lies at x 9.5 to 9.5005, y 51.4 "), err
+    assert "in degrees" in err[0] and "in_srs=EPSG:4326" in err[0], err
+    assert not (tmp_path / "dem.tif").exists()
+
+
+def test_a_tile_set_far_from_true_scale_names_the_tile_at_fault(tmp_path, capsys):
+    """Two LAZ tiles 8 km apart far east of UTM 32N's meridian, where its scale passes 1.02
+    between them: the message names the eastern tile, not the first of the set."""
+    xyz = plane_xyz() - [ORIGIN[0], ORIGIN[1], 0.0] + [0.0, 5_700_000.0, 0.0]
+    write_las(tmp_path / "a.laz", xyz + [1_782_000.0, 0.0, 0.0])
+    write_las(tmp_path / "b.laz", xyz + [1_790_000.0, 0.0, 0.0])
+    code, err = floodmesh(["grid", tmp_path / "a.laz", tmp_path / "b.laz", "--cell-size", 1,
+                           "--out", tmp_path / "dem.tif"], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith("floodmesh: error: tile b.laz is in ETRS89 / UTM zone 32N, whose "
+                             "metre is 0.98 m"), err

@@ -327,7 +327,8 @@ def test_xyz_tiles_with_zone_prefixed_eastings_are_refused_once_read(scheduler, 
     west = xyz[:, 0] < xyz[:, 0].mean()
     np.savetxt(tmp_path / "west.xyz", xyz[west], fmt="%.3f")
     np.savetxt(tmp_path / "east.xyz", xyz[~west], fmt="%.3f")
-    with pytest.raises(FloodMeshError, match=r"tile east.xyz lies at x 32,41.* far outside the "
+    with pytest.raises(FloodMeshError, match=r"tile east.xyz \(and west.xyz alike\) lies at "
+                       r"x 32,41.* far outside the "
                        r"area where ETRS89 / UTM zone 32N is used .* --crs EPSG:4647"):
         grid_point_tiles(str(tmp_path / "*.xyz"), 1.0, crs="EPSG:25832", scheduler=scheduler,
                          out_path=tmp_path / "dem.tif")
