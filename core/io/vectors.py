@@ -6,11 +6,13 @@ from __future__ import annotations
 import contextlib
 import math
 import sqlite3
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import FloodMeshError
 from ..options import GEOMETRY_KINDS, wrong_geometry
+from ..raster import parse_crs
 from .outputs import atomic_output, require_file, vector_path
 
 # GeoPackages record when their content last changed; a fixed time makes the same inputs give
@@ -56,7 +58,7 @@ def write_gpkg_layer(path, layer: str, geometry_type: str, n: int, features, col
     with atomic_output(path) if atomic else contextlib.nullcontext(path) as target:
         with fiona.Env(OGR_CURRENT_DATE=GPKG_TIMESTAMP):
             with fiona.open(target, "w", driver="GPKG", layer=layer, schema=schema,
-                            crs_wkt=crs.to_wkt()):
+                            crs_wkt=_wkt(crs, path)):
                 pass
         if n:
             fill_gpkg_layer(target, layer, n, features, columns, properties)
@@ -85,6 +87,14 @@ def quoted(name: str) -> str:
 # features converted at a time: as shapely geometries, WKB and rows of Python objects a
 # triangle takes some 1 kB, so a mesh of millions converted at once would take gigabytes
 GPKG_CHUNK = 100_000
+
+
+def _wkt(crs, path) -> str | None:
+    """``crs`` (a pyproj CRS, or as ``parse_crs`` reads it: 'EPSG:25832', WKT) as WKT for the
+    layer written to ``path``; None: a layer without a CRS."""
+    if crs is None:
+        return None
+    return parse_crs(crs, f"the CRS of {Path(path).name}").to_wkt()
 
 
 def fill_gpkg_layer(path, layer: str, n: int, features, columns: dict,

@@ -790,3 +790,16 @@ def test_an_ept_index_reads_as_the_laz_it_was_built_from(real_data, tmp_path):
     ept.write_text(json.dumps({**meta, "dataType": "binary"}))
     with pytest.raises(FloodMeshError, match="EPT nodes of type 'binary' cannot be read"):
         io.read_points(ept)
+
+
+@pytest.mark.parametrize("crs", ["EPSG:25832", CRS.from_epsg(25832).to_wkt(), None])
+def test_write_points_gpkg_takes_a_crs_as_write_points_las_does(tmp_path, crs):
+    """write_points_gpkg with the CRS as text ('EPSG:25832', WKT), as write_points_las takes
+    it, stopped with AttributeError: 'str' object has no attribute 'to_wkt'; None writes a
+    layer without a CRS."""
+    path = tmp_path / "points.gpkg"
+    io.write_points_gpkg(path, np.array([[412_000.0, 5_652_000.0, 10.0]]), crs)
+    with fiona.open(path) as layer:
+        assert len(layer) == 1
+        own = CRS.from_wkt(layer.crs_wkt) if layer.crs_wkt else None
+    assert (own.to_epsg() if own else None) == (25832 if crs else None)
