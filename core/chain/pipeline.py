@@ -21,7 +21,7 @@ from ..engine.nearest import CellIndex, point_index
 from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
                             read_gridded_points, read_point_tiles, slope_file64,
                             write_front_rasters)
-from ..errors import Cancelled, FloodMeshError, interrupts_unwrapped
+from ..errors import Cancelled, interrupts_unwrapped
 from ..io.layer_definition import QLR_NAME, write_layer_definition
 from ..io.outputs import check_output_folder, scratch_folder, staged_folder
 from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG

@@ -431,8 +431,8 @@ def _line_part(part, z_missing=np.nan) -> np.ndarray | None:
 def _line_parts(path, note=None, *,
                 finite: bool = False) -> list[tuple[np.ndarray, dict, int]]:
     """Each part of each line feature as ((k, 3) coordinates, the feature's attributes, its
-    feature id as QGIS shows it: a GeoPackage's fid); with ``finite``, a vertex whose x, y or z (where
-    given) is no finite number is refused (``_refuse_non_finite``)."""
+    feature id as QGIS shows it: a GeoPackage's fid); with ``finite``, a vertex whose x, y or z
+    (where given) is no finite number is refused (``_refuse_non_finite``)."""
     # lazy: OGR loads only when this runs
     import fiona
 

@@ -586,10 +586,11 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     (k, 3 arrays) take z along it (``z_along_lines``; keep theirs where no line there has z: a
     modeller's 2-D line, read with NaN z, which leaves a line with z its z at a crossing; a
     node equally near two lines with z takes the one listed first), and those within it of one
-    of ``own_lines`` (the modeller's, among ``lines``) its z where it has one, though another line be nearer (a crossing's node, snapped to a grid), as
-    ``build_mesh`` gives them; the others z of a least-squares plane of ``points`` within
-    ``radius`` m (at most 0.9 of their distance to the nearest line, at least ``on_line``·10),
-    or keep theirs where fewer than 6 points are there. Returns z and counts. Points without a
+    of ``own_lines`` (the modeller's, among ``lines``) its z where it has one, though another
+    line be nearer (a crossing's node, snapped to a grid), as ``build_mesh`` gives them; the
+    others z of a least-squares plane of ``points`` within ``radius`` m (at most 0.9 of their
+    distance to the nearest line, at least ``on_line``·10), or keep theirs where fewer than 6
+    points are there. Returns z and counts. Points without a
     finite x, y, z or with a z no ground has (-9999) are left out (``points.step_points``,
     ``note`` told; ``index`` then built anew)."""
     nodes = xyz_array(nodes, "the mesh's nodes")
