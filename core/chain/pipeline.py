@@ -355,7 +355,8 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
     dem, (method, amount) = front.dem, options.simplification()
     min_distance = dem.cell_size / 2 if options.min_distance is None else options.min_distance
     simplified = lines = steps.run("simplify", simplify_breaklines, front.traced, method, amount,
-                                   min_distance=min_distance)
+                                   min_distance=min_distance, progress=None,
+                                   cancelled=steps.cancelled)
     confidence = None
     if _fitting(options):
         area = float(np.isfinite(dem.values).sum()) * dem.cell_size ** 2
@@ -692,7 +693,8 @@ def trace_front(source, options: RunOptions, steps: "_Steps | None" = None, *,
         slope_grid, breakpoints = _slope_and_breakpoints(dem, options, steps, cancelled)
     traced = steps.run("breaklines", trace_breaklines, breakpoints, slope_grid, dem,
                        options.s_crit, mode=options.tracing_mode, min_points=options.min_points,
-                       min_length=options.min_length, seed=options.seed)
+                       min_length=options.min_length, seed=options.seed, progress=None,
+                       cancelled=cancelled)
     return Front(dem, terrain.holdout, terrain.holdout_source, terrain.n_points, slope_grid,
                  breakpoints, traced, domain, own_lines, terrain.measured, terrain.files,
                  terrain.later, index)

@@ -257,3 +257,19 @@ def test_real_data_meets_angle_bound(run, request):
         f"{smallest.min():.2f}")
     assert report["min_angle_deg"] == pytest.approx(smallest.min(), abs=1e-9)
     assert report["n_below_min_angle"] == 0
+
+
+def test_the_bar_moves_inside_tracing_and_simplifying(demo_points_file, tmp_path):
+    """A whole run (`floodmesh run`, LiDAR to mesh) tells its bar along the tracer's and the
+    simplifier's work, as their own steps do, not only when each has ended: between the log's
+    "breaklines..." and the next step, and "simplify..." and the next, the bar moves several
+    times (counted, not timed)."""
+    events = []
+    run_pipeline(demo_points_file, tmp_path / "out", RunOptions(holdout=0.01),
+                 progress=lambda f: events.append(f), log=lambda m: events.append(m))
+    for step in ("breaklines...", "simplify..."):
+        start = events.index(step) + 1
+        end = next(k for k in range(start, len(events)) if isinstance(events[k], str))
+        inside = events[start:end]
+        assert len(inside) >= 3 and all(a <= b for a, b in zip(inside, inside[1:])), (step,
+                                                                                      inside)
