@@ -6,7 +6,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from qgis.core import (QgsApplication, QgsCoordinateTransformContext, QgsMeshLayer,
+from qgis.core import (QgsApplication, QgsCoordinateTransformContext, QgsMeshLayer, QgsProcessing,
                        QgsProcessingFeatureSourceDefinition, QgsProcessingModelAlgorithm,
                        QgsProcessingModelChildAlgorithm, QgsProcessingModelChildDependency,
                        QgsProcessingModelChildParameterSource, QgsProcessingModelOutput,
@@ -96,6 +96,9 @@ def model_with_a_qgis_step(path):
     output = QgsProcessingModelOutput("mesh", "Mesh")
     output.setChildId("mesh")
     output.setChildOutputName("OUTPUT")
+    # QGIS 3.40 takes a value for an output only with a default (as scripts/make_model.py)
+    output.setDefaultValue(QgsProcessing.TEMPORARY_OUTPUT)
+    output.setMandatory(True)
     mesh.setModelOutputs({"mesh": output})
     model.addChildAlgorithm(mesh)
     model.updateDestinationParameters()
@@ -114,18 +117,22 @@ def test_own_model_with_a_qgis_step_between_floodmesh_steps(processing, qgis_pro
     path = model_with_a_qgis_step(tmp_path / "long_lines.model3")
     model = QgsProcessingModelAlgorithm()
     assert model.fromFile(str(path))
+    # the mesh output's name as this QGIS gives it (its parameter, its result)
+    (given,) = [d.name() for d in model.destinationParameterDefinitions()]
+    (named,) = [d.name() for d in model.outputDefinitions()]
     result = processing.run(model, {"lines": traced["lines"], "dem": traced["dem"],
-                                    "mesh:mesh": str(tmp_path / "model.2dm")})
-    assert mesh_size(result["mesh:mesh"]) == mesh_size(expected)
+                                    given: str(tmp_path / "model.2dm")})
+    assert result[named] == str(tmp_path / "model.2dm"), (given, named, result)
+    assert mesh_size(result[named]) == mesh_size(expected)
 
     exe, env = qgis_process
     run = subprocess.run(
         [exe, "run", str(path), "--json", "--", f"lines={traced['lines']}",
-         f"dem={traced['dem']}", f"mesh:mesh={tmp_path / 'headless.2dm'}"],
+         f"dem={traced['dem']}", f"{given}={tmp_path / 'headless.2dm'}"],
         env=env, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-2000:]
     results = json.loads(run.stdout[run.stdout.index("{"):])["results"]
-    assert mesh_size(results["mesh:mesh"]) == mesh_size(expected)
+    assert mesh_size(results[named]) == mesh_size(expected)
 
 
 def test_selected_features_only(processing, traced, tmp_path):
