@@ -132,13 +132,17 @@ def test_ctrl_c_at_random_moments_leaves_old_or_complete_files(runs, tmp_path):
         for delay in [*np.sort(RNG.uniform(0.001, duration, 11)), 10 * duration]:
             target = tmp_path / "out"
             _start_from_previous(root, target)
-            signal.setitimer(signal.ITIMER_REAL, delay)
+            # the timer set and cleared inside the handled block (as test_arrays does): an alarm
+            # that went off just before the run or while the timer was being cleared escaped the
+            # test on a loaded machine
             try:
-                run_pipeline(source, target, AFTER)
+                try:
+                    signal.setitimer(signal.ITIMER_REAL, delay)
+                    run_pipeline(source, target, AFTER)
+                finally:
+                    signal.setitimer(signal.ITIMER_REAL, 0)
             except KeyboardInterrupt:
                 pass
-            finally:
-                signal.setitimer(signal.ITIMER_REAL, 0)
             seen.add(tuple(sorted(_assert_each_file_old_or_new(target, done).items())))
     finally:
         signal.signal(signal.SIGALRM, previous)
