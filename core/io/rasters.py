@@ -147,7 +147,7 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
                          advice="resample it to larger cells or split it into tiles")
             values = read_band(src)
             nodata, count, dtype = src.nodata, src.count, src.dtypes[0]
-            held = src.tags().get(QUANTITY_TAG)
+            held = held_quantity(src)
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
     if elevations:
@@ -161,8 +161,7 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
              "DEM with floating-point elevations (float32) where there is one")
     if not np.isfinite(values).any():
         raise no_valid_cells(path)
-    return Grid(values, transform, crs, held if held in QUANTITIES and held != ELEVATION
-                else None)
+    return Grid(values, transform, crs, None if held == ELEVATION else held)
 
 
 def read_dem(path, *, crs=None, note=None) -> Grid:
