@@ -19,7 +19,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import Cancelled, FloodMeshError
+from ..engine.progress import poll
+from ..errors import FloodMeshError
 from ..options import check_refinement
 from ..points import at_places_of, step_points, xyz_array
 from ..raster import Grid, usable_dem
@@ -102,8 +103,7 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     def build(picked: _Picks) -> Mesh:
         """The mesh with the points and triangles of earlier rounds and ``picked``."""
         nonlocal domain
-        if cancelled is not None and cancelled():  # each mesh, the node budget's tries too
-            raise Cancelled()
+        poll(cancelled)  # each mesh, the node budget's tries too
         if domain is None:  # the DEM's outline once, where build_mesh would trace it each round
             domain = domain_from_dem(dem)
         mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area,
@@ -113,8 +113,7 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         return mesh if elevations is None else elevations(mesh)  # node z from a terrain fit
 
     for k in range(max_rounds):
-        if cancelled is not None and cancelled():
-            raise Cancelled()
+        poll(cancelled)
         if k == 0 and first is not None:
             mesh = first if elevations is None else elevations(first)
         else:
@@ -176,8 +175,7 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
             break
         if not len(picks.points) and not len(misfit):
             break
-    if cancelled is not None and cancelled():  # pressed while the last mesh was made
-        raise Cancelled()
+    poll(cancelled)  # pressed while the last mesh was made
     if note is not None and tried > taken:
         note(_not_inserted(tried, taken))
     if note is not None and upper is not None and left is not None and any(left):
