@@ -125,8 +125,10 @@ def _expect_mesh_or_clear_error(sandbox, kind, func, *args):
 
 # ---------------------------------------------------------------------------------------------
 # checks, run inside the worker
-def _check(vertices, triangles, pslg, min_angle, max_area) -> str:
-    """'valid', or what is wrong with the mesh."""
+def _check(vertices, triangles, pslg, min_angle, max_area, corners=None) -> str:
+    """'valid', or what is wrong with the mesh. ``corners``: the input segments as indices of
+    ``vertices`` (default the PSLG's, whose vertices triangulate_pslg returns first; build_mesh
+    numbers the nodes anew and gives them as Mesh.segments)."""
     origin = vertices.min(axis=0)
     xy = vertices - origin
     p = xy[triangles]
@@ -137,7 +139,8 @@ def _check(vertices, triangles, pslg, min_angle, max_area) -> str:
     if signed.max() > max_area * (1 + 1e-6):
         return f"largest triangle {signed.max()} above {max_area}"
     # the one angle rule of core.steps.mesh: below the bound only at input corners sharper than 60°
-    defects, _ = below_angle_bound(xy, triangles, pslg.segments, min_angle)
+    corners = pslg.segments if corners is None else corners
+    defects, _ = below_angle_bound(xy, triangles, corners, min_angle)
     if defects.any():
         smallest = triangle_angles(xy, triangles[defects]).min()
         return (f"{int(defects.sum())} triangles below {min_angle} degrees away from "
@@ -190,7 +193,7 @@ def _mesh_raster_case(values, cell, origin, lines, min_angle, max_area):
     pslg = build_pslg(lines, domain, snap=cell / 4)
     mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area,
                       max_triangles=MAX_TRIANGLES, domain=domain)
-    return _check(mesh.nodes[:, :2], mesh.triangles, pslg, min_angle, max_area)
+    return _check(mesh.nodes[:, :2], mesh.triangles, pslg, min_angle, max_area, mesh.segments)
 
 
 def _mesh_raw_case(pslg, min_angle, max_area):
