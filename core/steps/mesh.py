@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import shapely
+from affine import Affine
 from pyproj import CRS
 
 from ..engine.arrays import boundary_edges, edge_nodes, spatial_order, unique_rows
@@ -67,18 +68,25 @@ def domain_from_dem(dem: Grid, *, min_area: float = 0.0, tolerance: float | None
     from rasterio.features import shapes
 
     valid = np.isfinite(dem.values).astype(np.uint8)
-    parts = [shapely.geometry.shape(geom) for geom, value in
-             shapes(valid, mask=valid.astype(bool), transform=dem.transform, connectivity=4)
-             if value == 1]
     d = dem.cell_size
     tolerance = d / 2 if tolerance is None else min(check_tolerance(tolerance), d / 2)
-    outline = shapely.unary_union(parts).buffer(-d / 2, join_style="mitre")
+    # the outline in cells (column, -row: north up), where every corner is exact: in metres, a
+    # strip of valid cells between cells with no data shrank to a sliver some 1e-13 m wide or to
+    # nothing as the DEM's origin and cell size happened to round; straightening such a sliver
+    # crossed rings, and smooth_outline's fallback then cut corners of 14° (the mesh fuzz test)
+    cells = Affine.scale(1.0, -1.0)
+    parts = [shapely.geometry.shape(geom) for geom, value in
+             shapes(valid, mask=valid.astype(bool), transform=cells, connectivity=4)
+             if value == 1]
+    outline = shapely.unary_union(parts).buffer(-0.5, join_style="mitre")
     polygons = [p for p in getattr(outline, "geoms", [outline])
-                if p.geom_type == "Polygon" and p.area > max(min_area, 4 * d * d)]
+                if p.geom_type == "Polygon" and p.area > max(min_area / d ** 2, 4)]
     if not polygons:
         raise FloodMeshError("the DEM has no area of valid cells large enough to mesh; check its "
                              "nodata and the cell size")
-    polygons = smooth_outline(polygons, tolerance, d, sharpest=SHARP_CORNER)
+    polygons = smooth_outline(polygons, tolerance / d, 1.0, sharpest=SHARP_CORNER)
+    to_map = dem.transform * ~cells
+    polygons = [shapely.transform(p, lambda uv: np.column_stack(to_map * uv.T)) for p in polygons]
     return shapely.MultiPolygon(polygons) if len(polygons) > 1 else polygons[0]
 
 

@@ -1,5 +1,5 @@
 """The domain edge of a DEM's valid cells without the staircase of cell edges (for
-``mesh.domain_from_dem``). Lengths and tolerances in metres.
+``mesh.domain_from_dem``). Lengths and tolerances in the coordinates' unit (cells there).
 
 The outline through the outer cell centres runs along the grid: a straight or curved data edge
 (a lake shore, a diagonal unsurveyed corner) comes out as steps of one cell, whose corners lie up
