@@ -233,12 +233,12 @@ def mesh(dem, output, *, breaklines=None, boundary=None, user_lines=None, size_f
     flow = None if flow_area is None else flow_size(terrain, flow_area=flow_area)
     stage(progress, cancelled, 0.1)
     # the first mesh, then (where the flow zone asks) the one refined there
-    shares = iter([(0.1, 0.85)] if flow is None else [(0.1, 0.5), (0.5, 0.85)])
-    result_mesh, _, _ = flow_refined(lambda size, _, told: build_mesh(
+    result_mesh, _, _ = flow_refined(lambda size, _, told, **progress_cancelled: build_mesh(
         terrain, lines, own_lines=own, min_angle=min_angle, max_area=max_area,
         conforming=conforming, domain=domain, size_field=size, max_triangles=max_triangles,
-        note=told, progress=part(progress, *next(shares)), cancelled=cancelled),
-        size, flow, None, terrain, lines=lines + own, note=note)
+        note=told, **progress_cancelled),
+        size, flow, None, terrain, lines=lines + own, note=note,
+        progress=part(progress, 0.1, 0.85), cancelled=cancelled)
     io.write_mesh_2dm(output, result_mesh.nodes, result_mesh.triangles, crs=terrain.crs)
     result = {"OUTPUT": str(output), "crs": terrain.crs.to_wkt()}
     stage(progress, None, 0.9)  # written: no more stopping

@@ -18,6 +18,7 @@ from ..engine.compiles import CompileWatch
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles, fits_in_memory
 from ..engine.nearest import CellIndex, point_index
+from ..engine.progress import part, report
 from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
                             read_gridded_points, read_point_tiles, slope_file64,
                             write_front_rasters)
@@ -216,7 +217,7 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
                       spacing)
     kept = {}
 
-    def build(size, spacing, told):
+    def build(size, spacing, told, progress=None, cancelled=None):
         """The mesh of ``size``, its lines spaced for a flood model (see hydraulic_lines) and
         thinned to the flow ``spacing`` (a Grid, or None), its repairs said to ``told``."""
         kept["lines"], kept["stats"] = (plain if spacing is None else _lines_for_flood(
@@ -225,29 +226,34 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
                           min_angle=options.min_angle, max_area=max_area,
                           conforming=options.conforming, domain=domain, size_field=size,
                           max_triangles=options.max_triangles,
-                          corner_gap=options.min_spacing or None, note=told)
+                          corner_gap=options.min_spacing or None, note=told,
+                          progress=progress, cancelled=cancelled)
 
     mesh, size, flow_zone = steps.run("mesh", flow_refined, build, size, flow, spacing,
-                                      front.dem, lines=plain[0] + front.own_lines, note=note)
+                                      front.dem, lines=plain[0] + front.own_lines, note=note,
+                                      progress=None, cancelled=cancelled)
     detected, line_stats = kept["lines"], kept["stats"]
     mesh, rounds = _terrain_z(mesh, front, options, steps, fits, detected, domain, size,
                               max_area, cancelled, low_ground, note)
     # the terrain fits are done: their points and index go before the assessment and writing
     size = fits.index = front.measured = None
-    res = steps.run("assess", residuals, mesh, front.holdout.xyz)
+    res = steps.run("assess", residuals, mesh, front.holdout.xyz, progress=None,
+                    cancelled=cancelled)
     outside = outside_mesh_note(front.holdout.xyz, res, front.dem, front.domain is not None)
     if outside:
         note(outside)
 
-    def write_all(stage, figures, pictures):
+    def write_all(stage, figures, pictures, progress=None):
         exported = _write_outputs(stage, front, options, mesh, lines, res, confidence,
-                                  group=out.name)
+                                  group=out.name, progress=part(progress, 0.0, 0.8),
+                                  cancelled=cancelled)
         pictures.wait()
-        report = _report(source, front, options, simplified, lines, exported, figures,
-                         steps)
+        report(progress, cancelled, 0.9)
+        run_report = _report(source, front, options, simplified, lines, exported, figures,
+                             steps)
         # the page of report.json, written inside the step: "write" is its last timing
-        write_report_html(stage, report, elapsed_s=time.perf_counter() - started)
-        return report
+        write_report_html(stage, run_report, elapsed_s=time.perf_counter() - started)
+        return run_report
 
     # the folder is replaced as a whole: an interrupt leaves the old run's files or these
     # and the picture process, drawing into it, ended before an interrupted run removes it
@@ -264,12 +270,12 @@ def _run(source, out: Path, inputs, options: RunOptions, steps: _Steps,
                    "stats": stats, "rounds": rounds, "terrain_fit": fits.record(),
                    "line_stats": line_stats, "flow_zone": flow_zone, "hydraulics": hydraulics,
                    "notes": notes}
-        report = steps.run("write", write_all, stage, figures, pictures)
-        io.write_json(stage / "report.json", report)
+        run_report = steps.run("write", write_all, stage, figures, pictures, progress=None)
+        io.write_json(stage / "report.json", run_report)
     compiled = steps.compiles.summary()
     if compiled and log:
         log(compiled)
-    return report
+    return run_report
 
 
 def say_later(front: Front, note, steps: _Steps | None = None) -> Callable[[], None]:
@@ -454,8 +460,8 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
     common = dict(check=front.holdout.xyz, domain=domain, size_field=size,
                   min_angle=options.min_angle, max_area=max_area, conforming=options.conforming,
                   elevations=elevations, max_nodes=options.max_triangles,
-                  noise=fits.window.noise if fits.window else None, cancelled=cancelled,
-                  note=note,
+                  noise=fits.window.noise if fits.window else None, progress=None,
+                  cancelled=cancelled, note=note,
                   mesh_options=dict(own_lines=front.own_lines,
                                     max_triangles=options.max_triangles,
                                     corner_gap=options.min_spacing or None))
@@ -525,29 +531,36 @@ def _figures(front: Front, options: RunOptions, simplified, mesh, res, detected,
 
 
 def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, res, confidence,
-                   *, group: str) -> list:
+                   *, group: str, progress=None, cancelled=None) -> list:
     """The run's files into ``out`` (``OUTPUT_FILES`` but the report's two and the pictures);
-    returns the solver exports written; the pictures are drawn apart (``write_report_pngs``)."""
+    returns the solver exports written; the pictures are drawn apart (``write_report_pngs``).
+    ``progress`` hears the share written, ``cancelled`` is polled between the files."""
     dem, holdout = front.dem, front.holdout
     io.write_raster(out / "dem.tif", dem, quantity=io.ELEVATION)
+    report(progress, cancelled, 0.2)
     if front.files:
         write_front_rasters(front.files, out)
     else:
         io.write_raster(out / "slope.tif", front.slope_grid, quantity="slope")
         io.write_raster(out / "breakpoints.tif", front.breakpoints, valid=np.isfinite(dem.values),
                         quantity="breakpoints")
+    report(progress, cancelled, 0.4)
     io.write_breaklines(out / "breaklines.gpkg", lines, dem.crs, fit_rms=confidence)
+    report(progress, cancelled, 0.5)
     # the solver exports of mesh.2dm and mesh.gpkg hold more (node strings, layers)
     if "2dm" not in options.formats:
         io.write_mesh_2dm(out / "mesh.2dm", mesh.nodes, mesh.triangles, crs=dem.crs)
     if "gpkg" not in options.formats:
         io.write_mesh_gpkg(out / "mesh.gpkg", mesh.nodes, mesh.triangles, dem.crs)
+    report(progress, cancelled, 0.7)
     io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
     write_layer_definition(out, group=group, crs_wkt=dem.crs.to_wkt(),
                            elevation_range=(mesh.nodes[:, 2].min(), mesh.nodes[:, 2].max()))
     # the lines as the mesh has them, own and detected, for a solver that meshes anew
+    report(progress, cancelled, 0.8)
     return (export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
-                           crs=dem.crs, breaklines=honoured_lines(mesh))
+                           crs=dem.crs, breaklines=honoured_lines(mesh),
+                           progress=part(progress, 0.8, 1.0), cancelled=cancelled)
             if options.formats else [])
 
 

@@ -22,6 +22,7 @@ import heapq
 import numba
 import numpy as np
 
+from ..engine.progress import part, poll, report
 from ..raster import Grid
 from .sizing import finer
 
@@ -235,10 +236,12 @@ def misfit_triangles(dem: Grid, cells: np.ndarray, nodes: np.ndarray, triangles:
 
 
 def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | None, dem: Grid,
-                 *, lines=(), note=None):
-    """(mesh, size field, figures or None): ``build(size, spacing, note)``, a Mesh of that size
-    field with its break lines thinned to the flow spacing ``spacing`` (a Grid, see
-    ``flow_spacing``; None: not thinned), its repairs told to ``note``. Without a flow size
+                 *, lines=(), note=None, progress=None, cancelled=None):
+    """(mesh, size field, figures or None): ``build(size, spacing, note, progress=,
+    cancelled=)``, a Mesh of that size field with its break lines thinned to the flow spacing
+    ``spacing`` (a Grid, see ``flow_spacing``; None: not thinned), its repairs told to ``note``,
+    its share of the work to ``progress`` (0–1), ``cancelled`` polled (see ``build_mesh``).
+    Without a flow size
     ``flow`` (see ``flow_size``), that mesh without the spacing; with one, first that mesh,
     whose triangles with relief that no plane follows (``misfit_triangles`` on the flow zone,
     but the cells a cell or less from one of its ``lines``, (k, 2+) arrays, where the DEM
@@ -246,27 +249,32 @@ def flow_refined(build, size: Grid | None, flow: Grid | None, spacing: Grid | No
     within a flow triangle's side of them, and only there. Figures: the shares of the DEM's
     valid cells in the flow zone, refined and thinned, the DEM's noise and the tolerance (m).
     ``note`` hears the notes of the mesh returned only, not those of a first mesh built again
-    (the same repairs of nearly the same lines)."""
+    (the same repairs of nearly the same lines). ``progress`` hears the whole: the first mesh
+    takes all of it without a flow size, else half, the mesh refined in the flow zone the rest."""
     notes = []
 
-    def build_told(size, spacing):
+    def build_told(size, spacing, shares):
         notes.clear()
-        return build(size, spacing, notes.append)
+        return build(size, spacing, notes.append, progress=part(progress, *shares),
+                     cancelled=cancelled)
 
-    result = _flow_refined(build_told, size, flow, spacing, dem, lines)
+    result = _flow_refined(build_told, size, flow, spacing, dem, lines, cancelled)
+    report(progress, None, 1.0)  # also where the first mesh needed no refining
     for message in notes if note else ():
         note(message)
     return result
 
 
-def _flow_refined(build, size, flow, spacing, dem: Grid, lines):
-    """``flow_refined``; ``build(size, spacing)`` tells its notes itself."""
+def _flow_refined(build, size, flow, spacing, dem: Grid, lines, cancelled=None):
+    """``flow_refined``; ``build(size, spacing, shares)`` tells its notes itself, and its
+    progress as the ``shares`` (start, end) of the whole."""
     # lazy: SciPy loads only when this runs
     from scipy.ndimage import binary_dilation
 
-    terrain = build(size, None)
+    terrain = build(size, None, (0.0, 1.0 if flow is None else 0.5))
     if flow is None:
         return terrain, size, None
+    poll(cancelled)
     zone = np.isfinite(np.asarray(flow.values, float))
     flagged, sigma = misfit_triangles(dem, zone & ~_beside(lines, dem), terrain.nodes,
                                       terrain.triangles)
@@ -282,7 +290,8 @@ def _flow_refined(build, size, flow, spacing, dem: Grid, lines):
         near = binary_dilation(flagged, iterations=max(1, int(round(side))))
         spacing = _only(spacing, near)
         figures["thinned_share"] = float((near & np.isfinite(spacing.values)).sum() / valid)
-    return build(size, spacing), size, figures
+    poll(cancelled)
+    return build(size, spacing, (0.5, 1.0)), size, figures
 
 
 def _beside(lines, dem: Grid) -> np.ndarray:

@@ -24,7 +24,7 @@ import numpy as np
 
 from .. import io
 from ..engine.arrays import unique_rows
-from ..engine.progress import report
+from ..engine.progress import along, report
 from ..errors import FloodMeshError
 from ..options import EXPORT_EXTENSIONS as EXTENSIONS, export_format, parse_formats
 from ..points import xyz_array
@@ -316,15 +316,17 @@ def export_mesh(path, nodes, triangles, *, fmt: str | None = None, crs=None, ope
     return written
 
 
-def export_formats(stem, nodes, triangles, formats, **options) -> list[Path]:
+def export_formats(stem, nodes, triangles, formats, *, progress=None, cancelled=None,
+                   **options) -> list[Path]:
     """Write ``stem`` + each format's extension (``mesh`` → ``mesh.slf``, ``mesh.14``, …);
-    the mesh is prepared once."""
+    the mesh is prepared once; ``progress`` hears the share of the formats written,
+    ``cancelled`` is polled before each."""
     formats = parse_formats(formats)
     keys = ("element_elevations", "breaklines", "title")
     writing = {k: options.pop(k) for k in keys if k in options}
     mesh = prepare(nodes, triangles, **options)
     written = []
-    for fmt in formats:
+    for fmt in along(formats, progress, cancelled):
         target = Path(f"{stem}{EXTENSIONS[fmt]}")
         written += write(target, mesh, fmt, **writing)
     return written

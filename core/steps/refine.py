@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..engine.progress import poll
+from ..engine.progress import part, poll, report
 from ..errors import FloodMeshError
 from ..options import check_refinement
 from ..points import at_places_of, step_points, xyz_array
@@ -100,8 +100,9 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     stop = (f"it reached its limit of {max_rounds} round{'s' if max_rounds != 1 else ''}, and "
             "more would refine them")
 
-    def build(picked: _Picks) -> Mesh:
-        """The mesh with the points and triangles of earlier rounds and ``picked``."""
+    def build(picked: _Picks, progress=None) -> Mesh:
+        """The mesh with the points and triangles of earlier rounds and ``picked``, its share
+        of the work told to ``progress``."""
         nonlocal domain
         poll(cancelled)  # each mesh, the node budget's tries too
         if domain is None:  # the DEM's outline once, where build_mesh would trace it each round
@@ -109,7 +110,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area,
                           points=np.vstack([inserted, picked.points]),
                           local_areas=np.vstack([local, picked.triangles]), domain=domain,
-                          size_field=size_field, conforming=conforming, **(mesh_options or {}))
+                          size_field=size_field, conforming=conforming, progress=progress,
+                          cancelled=cancelled, **(mesh_options or {}))
         return mesh if elevations is None else elevations(mesh)  # node z from a terrain fit
 
     for k in range(max_rounds):
@@ -117,7 +119,8 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
         if k == 0 and first is not None:
             mesh = first if elevations is None else elevations(first)
         else:
-            mesh = build(picks)
+            # the mesh takes half its round's share of the bar, the measuring the rest
+            mesh = build(picks, part(progress, k / max_rounds, (k + 0.5) / max_rounds))
         if len(mesh.nodes) > max_nodes:
             if best is None:
                 raise FloodMeshError(f"the unrefined mesh already has {len(mesh.nodes)} nodes, "
@@ -175,7 +178,7 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
             break
         if not len(picks.points) and not len(misfit):
             break
-    poll(cancelled)  # pressed while the last mesh was made
+    report(progress, cancelled, 1.0)  # Cancel pressed while the last mesh was made
     if note is not None and tried > taken:
         note(_not_inserted(tried, taken))
     if note is not None and upper is not None and left is not None and any(left):

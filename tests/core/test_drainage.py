@@ -240,7 +240,7 @@ def test_the_dem_rounding_a_line_s_kink_is_not_relief_to_refine():
     flow = dem.with_values(np.full(dem.shape, 23.0, np.float32))
     builds = []
 
-    def build(size, spacing, note):
+    def build(size, spacing, note, **progress_cancelled):
         builds.append(size)
         return mesh
 

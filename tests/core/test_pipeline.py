@@ -259,17 +259,69 @@ def test_real_data_meets_angle_bound(run, request):
     assert report["n_below_min_angle"] == 0
 
 
-def test_the_bar_moves_inside_tracing_and_simplifying(demo_points_file, tmp_path):
+@pytest.fixture(scope="module")
+def bar_run(demo_points_file, tmp_path_factory):
+    """A run on the demo floodplain with its bar's fractions and its log in one list, in the
+    order told."""
+    events = []
+    run_pipeline(demo_points_file, tmp_path_factory.mktemp("bar") / "out",
+                 RunOptions(holdout=0.01), progress=lambda f: events.append(f),
+                 log=lambda m: events.append(m))
+    return events
+
+
+def _told_within(events, step):
+    """The fractions told between the log's ``step`` ("mesh...") and the next step's name, or
+    the end (its notes and numba's compile messages are no step)."""
+    from floodmesh.core.engine.compiles import is_compile_message
+
+    start = events.index(step) + 1
+    end = next((k for k in range(start, len(events)) if isinstance(events[k], str)
+                and not events[k].startswith("note: ") and not is_compile_message(events[k])),
+               len(events))
+    return [f for f in events[start:end] if not isinstance(f, str)]
+
+
+def test_the_bar_moves_inside_tracing_and_simplifying(bar_run):
     """A whole run (`floodmesh run`, LiDAR to mesh) tells its bar along the tracer's and the
     simplifier's work, as their own steps do, not only when each has ended: between the log's
     "breaklines..." and the next step, and "simplify..." and the next, the bar moves several
     times (counted, not timed)."""
-    events = []
-    run_pipeline(demo_points_file, tmp_path / "out", RunOptions(holdout=0.01),
-                 progress=lambda f: events.append(f), log=lambda m: events.append(m))
     for step in ("breaklines...", "simplify..."):
-        start = events.index(step) + 1
-        end = next(k for k in range(start, len(events)) if isinstance(events[k], str))
-        inside = events[start:end]
+        inside = _told_within(bar_run, step)
         assert len(inside) >= 3 and all(a <= b for a, b in zip(inside, inside[1:])), (step,
                                                                                       inside)
+
+
+def test_the_bar_moves_inside_meshing_refining_and_writing(bar_run):
+    """After the break lines, a run's longest stretch (meshing with the flow zone's second
+    mesh, the misfit pass's mesh, the files) moves the bar too, not only as each ends: several
+    distinct fractions inside each of these steps, never back, within 0–1, up to 1 at the
+    end."""
+    fractions = [f for f in bar_run if not isinstance(f, str)]
+    assert all(0 <= f <= 1 for f in fractions), fractions
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    for step in ("mesh...", "refine...", "write..."):
+        inside = _told_within(bar_run, step)
+        assert len(set(inside)) >= 3, (step, inside)
+
+
+def test_cancel_as_meshing_begins_stops_there(demo_points_file, tmp_path):
+    """Cancel pressed as the mesh step begins (a big run's longest step) is honoured inside it:
+    the run stops with Cancelled, the bar moves no further and no later step starts, and no
+    output folder nor staging folder is left."""
+    events = []
+
+    def cancelled():
+        return "mesh..." in events
+
+    out = tmp_path / "out"
+    with pytest.raises(Cancelled):
+        run_pipeline(demo_points_file, out, RunOptions(holdout=0.01), cancelled=cancelled,
+                     progress=lambda f: events.append(f), log=lambda m: events.append(m))
+    from floodmesh.core.engine.compiles import is_compile_message
+
+    after = [e for e in events[events.index("mesh...") + 1:]
+             if not isinstance(e, str) or not (e.startswith("note: ") or is_compile_message(e))]
+    assert after == [], after
+    assert os.listdir(tmp_path) == []
