@@ -95,6 +95,12 @@ class _Steps:
             return result
         return collect
 
+    def fold(self, name: str, into: str) -> None:
+        """Step ``name``'s share of the bar given to step ``into``, which does its work, unless
+        ``name`` has run: the bar still ends at 1, never past it."""
+        if name not in self.seconds:
+            self.weights[into] = self.weights.get(into, 0.0) + self.weights.pop(name, 0.0)
+
     def _finished(self, name: str, seconds: float, cpu: float, weight: float) -> None:
         """Step ``name`` took ``seconds`` (wall) and ``cpu``: recorded, and its share of the
         progress bar done."""
@@ -109,7 +115,7 @@ class _Steps:
         if self.log:
             self.log(f"{name}...")
         start, cpu = time.perf_counter(), time.process_time()
-        weight = self.weights.get(name, 1.0)
+        weight = self.weights.get(name, 0.0)  # none listed: no share, the bar kept within 1
         if "progress" in kwargs and self.progress:
             base = self.done
             kwargs["progress"] = lambda f: self.progress((base + f * weight) / self.total)
@@ -295,11 +301,14 @@ def say_later(front: Front, note, steps: _Steps | None = None) -> Callable[[], N
 
 
 def _step_weights(options: RunOptions) -> dict:
-    """The steps a run with ``options`` takes, each with its share of the progress bar."""
+    """The steps a run with ``options`` takes, each with its share of the progress bar (a step
+    not listed, such as the tiles' points read back where they may not be, takes none)."""
     weights = {"read": 1, "grid": 4, "mesh inputs": 0.1, "slope": 1, "breakpoints": 0.5,
-               "breaklines": 1, "simplify": 0.5, "fit window": 0.2, "localise": 0.5,
-               "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2, "refine": 4,
-               "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
+               "tracing slope": 0.5, "breaklines": 1, "simplify": 0.5, "fit window": 0.2,
+               "localise": 0.5, "flow zone": 0.5, "hydraulic lines": 0.1, "mesh": 2,
+               "refine": 4, "node elevations": 0.5, "assess": 1, "figures": 0.2, "write": 2}
+    if options.slope_method != "log":  # the Laplacian's breakpoints, traced on first-order slope
+        del weights["tracing slope"]
     del weights["node elevations" if _refining(options) else "refine"]
     if not options.localise:
         del weights["localise"]
@@ -819,6 +828,7 @@ def _read_tiles_on_dask(source: Source, options: RunOptions, steps: _Steps, *, c
     gridded are read back for the terrain fits and --refine, as one file's are kept, where
     memory holds them beside the DEM (else the fits take the DEM's cell centres, with a note)."""
     files = None
+    steps.fold("read", into="grid")  # Dask reads the tiles as it grids them
     if options.slope_method != "log":
         files = {"folder": scratch_folder("tiles")}
         files["dem"] = Path(files["folder"].name) / "dem.tif"

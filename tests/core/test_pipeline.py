@@ -306,6 +306,18 @@ def test_the_bar_moves_inside_meshing_refining_and_writing(bar_run):
         assert len(set(inside)) >= 3, (step, inside)
 
 
+def test_the_bar_stays_within_the_whole_with_the_laplacian_of_gaussian(tmp_path):
+    """The Laplacian of Gaussian's run takes a step more (the first-order slope the tracer
+    follows): the bar still ends at 100 %, never past it (it showed 105 %)."""
+    points = tmp_path / "plane.laz"
+    io.write_points_las(points, PointCloud(plane_points(size=40.0, density=2.0),
+                                           CRS.from_epsg(25832)))
+    told = []
+    run_pipeline(points, tmp_path / "out", RunOptions(holdout=0.05, slope_method="log"),
+                 progress=told.append)
+    assert all(0 <= f <= 1 for f in told) and told == sorted(told) and told[-1] == 1.0, told
+
+
 def test_cancel_as_meshing_begins_stops_there(demo_points_file, tmp_path):
     """Cancel pressed as the mesh step begins (a big run's longest step) is honoured inside it:
     the run stops with Cancelled, the bar moves no further and no later step starts, and no

@@ -149,9 +149,12 @@ def test_run_on_tiles_equals_run_on_one_file(survey, scheduler, tmp_path, route)
     # tile held out its own share before: 7 of the 288 were other points, and the mesh had
     # 1,499 nodes against 1,493) and give the same lines and mesh to the byte either way
     options = RunOptions(scheduler=scheduler if route == "dask" else None)
-    tiled = run_pipeline(survey / "tiles", tmp_path / "tiled", options)
+    told = []
+    tiled = run_pipeline(survey / "tiles", tmp_path / "tiled", options, progress=told.append)
     single = run_pipeline(survey / "single.laz", tmp_path / "single", options)
     assert ("read back" in tiled["seconds"]) == (route == "dask")
+    # Dask reads the tiles as it grids them: the bar ends at 100 %, never past it
+    assert all(0 <= f <= 1 for f in told) and told == sorted(told) and told[-1] == 1.0, told
     assert tiled["n_holdout"] == single["n_holdout"] == 288
     checks = [io.read_points_vector(tmp_path / name / "residuals.gpkg") for name in
               ("tiled", "single")]
@@ -360,8 +363,12 @@ def test_tiles_whose_points_exceed_memory_fit_the_dem_cells_with_a_note(survey, 
     from floodmesh.core.chain import pipeline
 
     monkeypatch.setattr(pipeline, "fits_in_memory", lambda **sizes: False)
-    report = run_pipeline(survey / "tiles", tmp_path / "out", RunOptions(scheduler=scheduler))
+    told = []
+    report = run_pipeline(survey / "tiles", tmp_path / "out", RunOptions(scheduler=scheduler),
+                          progress=told.append)
     assert report["terrain_fit"]["points"] == "DEM cell centres"
+    # without the points read back the bar still ends at 100 % (it stopped at 95 %)
+    assert all(0 <= f <= 1 for f in told) and told == sorted(told) and told[-1] == 1.0, told
     assert any("more than memory holds" in n and "cell centres" in n for n in report["notes"])
 
 
