@@ -319,6 +319,19 @@ def _step_weights(options: RunOptions) -> dict:
     return weights
 
 
+# the steps of trace_front
+FRONT_STEPS = ("read", "grid", "mesh inputs", "slope", "breakpoints", "tracing slope",
+               "breaklines")
+
+
+def front_steps(options: RunOptions, progress=None, cancelled=None) -> _Steps:
+    """Silent steps for ``trace_front`` alone, which tell ``progress`` the share of its work
+    done (a run's weights) and poll ``cancelled``."""
+    weights = _step_weights(options)
+    return _Steps({name: weights[name] for name in FRONT_STEPS if name in weights}, progress,
+                  cancelled, None)
+
+
 class _TerrainFits:
     """The points of every terrain fit of a run (localisation, node z, refinement) and their one
     index: the points gridded, or the DEM's cell centres drawn (the same seeded draw each time)

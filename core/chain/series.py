@@ -12,6 +12,7 @@ from typing import Callable
 import numpy as np
 
 from .. import io
+from ..engine.progress import along, part, report
 from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, staged_folder
 from ..io.report import new_figure, save_png
@@ -23,7 +24,8 @@ from ..steps.accuracy import (accuracy_statistics, nssda_threshold_m, outside_me
 from ..steps.hydraulic_lines import lines_for_hydraulics
 from ..steps.mesh import Mesh, build_mesh, domain_from_dem, edge_tolerance
 from ..steps.simplify import simplify_breaklines
-from .pipeline import SERIES_FILES, Notes, folder_output, run_inputs, say_later, trace_front
+from .pipeline import (SERIES_FILES, Notes, folder_output, front_steps, run_inputs, say_later,
+                       trace_front)
 from .source import open_source
 
 def _mesh_files(labels) -> list[str]:
@@ -74,14 +76,17 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
                  min_angle: float = 25.0, min_distance: float | None = None, domain=None,
                  own_lines: list = (), min_spacing: float | None = None,
                  log: Callable[[str], None] | None = None,
-                 note: Callable[[str], None] | None = None) -> tuple[list[dict], list[Mesh]]:
+                 note: Callable[[str], None] | None = None,
+                 progress: Callable[[float], None] | None = None,
+                 cancelled: Callable[[], bool] | None = None) -> tuple[list[dict], list[Mesh]]:
     """Mesh ``dem`` with the ``traced`` break lines once per setting and assess each mesh on the
     check points ``check_xyz`` (n, 3; m). ``min_distance`` (m) defaults to half a cell;
     ``domain`` and ``own_lines`` as for ``build_mesh`` (a user's domain and lines);
     ``min_spacing`` (m; default the cell size, 0 off) as ``run``'s: the detected lines made
     affordable for a flood model (``hydraulic_lines``). ``note`` hears, after the last mesh,
     what the meshes and their assessments say as ``run``'s do, each once, naming the meshes
-    that say it where not every mesh does (``series_notes``).
+    that say it where not every mesh does (``series_notes``). ``progress`` hears the share of
+    the meshes done, along each; ``cancelled`` is polled along them (``Cancelled``).
 
     Returns one row per setting (``COLUMNS``: errors in metres, ``share_over_25cm`` a fraction)
     and the meshes, in the order of ``settings``. DEM cells and check points no ground has
@@ -92,7 +97,8 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
     spacing = dem.cell_size if min_spacing is None else min_spacing
     simplified, domains = {}, {}
     rows, meshes, said = [], [], {}
-    for setting in settings:
+    for k, setting in enumerate(settings):
+        share = part(progress, k / len(settings), (k + 1) / len(settings))
         if log:
             log(f"mesh {setting.label}...")
         key = (setting.method, setting.amount)
@@ -101,14 +107,16 @@ def scale_series(dem, traced: list, check_xyz: np.ndarray, settings: list[Settin
             domains[key] = domain if domain is not None else domain_from_dem(
                 dem, tolerance=edge_tolerance(setting.method, setting.amount, dem.cell_size))
             simplified[key] = [line.coords for line in simplify_breaklines(
-                traced, setting.method, setting.amount, min_distance=min_distance)]
+                traced, setting.method, setting.amount, min_distance=min_distance,
+                cancelled=cancelled)]
             if spacing > 0:
                 simplified[key], _ = lines_for_hydraulics(
                     simplified[key], domains[key], spacing=spacing, own_lines=own_lines)
         told = said[setting.label] = []
         mesh = build_mesh(dem, simplified[key], own_lines=own_lines, min_angle=min_angle,
-                          max_area=setting.max_area, domain=domains[key], note=told.append)
-        res = residuals(mesh, check_xyz)
+                          max_area=setting.max_area, domain=domains[key], note=told.append,
+                          progress=part(share, 0.0, 0.9), cancelled=cancelled)
+        res = residuals(mesh, check_xyz, progress=part(share, 0.9, 1.0), cancelled=cancelled)
         outside = outside_mesh_note(check_xyz, res, dem, domain is not None)
         if outside:
             told.append(outside)
@@ -180,26 +188,32 @@ def write_series_png(path, rows: list[dict], *, nssda_threshold_m: float | None 
 
 def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting], *,
                log: Callable[[str], None] | None = None,
+               progress: Callable[[float], None] | None = None,
                cancelled: Callable[[], bool] | None = None) -> dict:
     """Read, grid, slope, breakpoints and trace ``input_path`` once (as ``options`` say), then
     mesh and assess once per setting; write ``SERIES_FILES`` and ``mesh_<label>.2dm`` (its CRS
     in ``mesh_<label>.prj``) per row into ``out_dir``. ``log`` receives each mesh's name and,
     as ``run_pipeline``'s, the notes (``note: …``), which series.json's ``notes`` holds too.
+    ``progress`` hears the share done (0–1: the tracing half, the meshes and their writing the
+    rest), ``cancelled`` is polled along (``Cancelled``, nothing written).
     Returns the series.json content."""
     note = Notes(log)
     out, source = Path(out_dir), open_source(input_path)
     inputs = run_inputs(source, options)
     check_output_folder(out, inputs, [*SERIES_FILES, *_mesh_files(s.label for s in settings)])
-    front = trace_front(source, options, cancelled=cancelled, note=note)
+    front = trace_front(source, options, front_steps(options, part(progress, 0.0, 0.5),
+                                                     cancelled),
+                        cancelled=cancelled, note=note)
     say_later(front, note)()
     rows, meshes = scale_series(front.dem, front.traced, front.holdout.xyz, settings,
                                 min_angle=options.min_angle,
                                 min_distance=options.min_distance, domain=front.domain,
                                 own_lines=front.own_lines, min_spacing=options.min_spacing,
-                                log=log, note=note)
+                                log=log, note=note, progress=part(progress, 0.5, 0.95),
+                                cancelled=cancelled)
     # the folder is replaced as a whole: an interrupt leaves the old series' files or these
     with staged_folder(out, own=folder_output, keep=inputs) as stage:
-        for row, mesh in zip(rows, meshes):
+        for row, mesh in along(list(zip(rows, meshes)), part(progress, 0.95, 0.99), cancelled):
             io.write_mesh_2dm(stage / f"mesh_{row['label']}.2dm", mesh.nodes, mesh.triangles,
                               crs=front.dem.crs)
         n = max((r["n_assessed"] for r in rows), default=0)
@@ -213,4 +227,5 @@ def run_series(input_path, out_dir, options: RunOptions, settings: list[Setting]
                   "n_breaklines_traced": len(front.traced), "rows": rows, "notes": note.said,
                   "files": [*SERIES_FILES, *_mesh_files(r["label"] for r in rows)]}
         io.write_json(stage / "series.json", result)
+    report(progress, None, 1.0)
     return io.jsonable(result)

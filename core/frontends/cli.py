@@ -314,7 +314,8 @@ def cmd_series(args):
     args.keep_every = None  # the series' simplifications are in settings
     bar = ProgressBar("series")
     try:
-        result = run_series(_input(args), args.out, _options(args), settings, log=bar.log)
+        result = run_series(_input(args), args.out, _options(args), settings, progress=bar,
+                            log=bar.log)
     finally:
         bar.close()
     print_notes(result["notes"])

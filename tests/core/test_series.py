@@ -11,7 +11,7 @@ import pytest
 from matplotlib.image import imread
 
 from floodmesh.core import io
-from floodmesh.core.errors import FloodMeshError
+from floodmesh.core.errors import Cancelled, FloodMeshError
 from floodmesh.core.steps.mesh import triangle_areas
 from floodmesh.core.options import RunOptions
 from floodmesh.core.chain.series import COLUMNS, Setting, run_series, settings_grid
@@ -22,14 +22,20 @@ AREAS = (400.0, 100.0, 25.0)
 @pytest.fixture(scope="module")
 def series_run(demo_points_file, tmp_path_factory):
     out = tmp_path_factory.mktemp("series")
-    steps = []
+    steps, events = [], []  # the log; the bar's fractions and the log, in the order told
+
+    def log(message):
+        steps.append(message)
+        events.append(message)
+
     result = run_series(demo_points_file, out, RunOptions(holdout=0.01),
-                        settings_grid(AREAS, "keep-every", (4,)), log=steps.append)
-    return out, result, steps
+                        settings_grid(AREAS, "keep-every", (4,)), log=log,
+                        progress=events.append)
+    return out, result, steps, events
 
 
 def test_smaller_triangles_give_more_nodes_and_no_larger_error(series_run):
-    _, result, steps = series_run
+    _, result, steps, _ = series_run
     rows = result["rows"]
     assert [r["max_area_m2"] for r in rows] == list(AREAS)
     assert [s for s in steps if not s.startswith("note: ")] == [f"mesh {r['label']}..."
@@ -45,8 +51,35 @@ def test_smaller_triangles_give_more_nodes_and_no_larger_error(series_run):
     assert 0.98 * result["n_holdout"] < rows[0]["n_assessed"] <= result["n_holdout"]
 
 
+def test_the_bar_moves_along_each_mesh(series_run):
+    """`floodmesh series` and run_series tell the bar along each mesh and its assessment, not
+    only the tracing: several distinct fractions after each mesh's name, never back, within
+    0–1, ending at 1."""
+    *_, events = series_run
+    fractions = [f for f in events if not isinstance(f, str)]
+    assert all(0 <= f <= 1 for f in fractions) and fractions == sorted(fractions), fractions
+    assert fractions[-1] == 1.0
+    named = [k for k, e in enumerate(events) if isinstance(e, str) and e.startswith("mesh ")]
+    assert len(named) == len(AREAS)
+    for start, end in zip(named, named[1:] + [len(events)]):
+        inside = {f for f in events[start:end] if not isinstance(f, str)}
+        assert len(inside) >= 3, (events[start], inside)
+
+
+def test_cancel_at_a_mesh_stops_the_series_and_writes_nothing(demo_points_file, tmp_path):
+    """Cancel pressed as the first mesh begins stops the series there with Cancelled: no
+    later mesh is made, and no folder is written."""
+    seen = []
+    with pytest.raises(Cancelled):
+        run_series(demo_points_file, tmp_path / "out", RunOptions(holdout=0.01),
+                   settings_grid(AREAS, "keep-every", (4,)), log=seen.append,
+                   cancelled=lambda: any(s.startswith("mesh ") for s in seen))
+    assert [s for s in seen if s.startswith("mesh ")] == ["mesh a400-k4..."]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_csv_and_json_agree(series_run):
-    out, result, _ = series_run
+    out, result, _, _ = series_run
     stored = json.loads((out / "series.json").read_text())
     assert stored == result
     with open(out / "series.csv", newline="") as fh:
@@ -62,7 +95,7 @@ def test_csv_and_json_agree(series_run):
 
 
 def test_each_mesh_file_has_the_tables_node_count(series_run):
-    out, result, _ = series_run
+    out, result, _, _ = series_run
     for row in result["rows"]:
         nodes, triangles = io.read_mesh_2dm(out / f"mesh_{row['label']}.2dm")
         assert (len(nodes), len(triangles)) == (row["nodes"], row["triangles"])
@@ -73,7 +106,7 @@ def test_each_mesh_file_has_the_tables_node_count(series_run):
 
 
 def test_plot_is_a_png(series_run):
-    out, _, _ = series_run
+    out, _, _, _ = series_run
     image = imread(out / "series.png")
     assert image.ndim == 3 and image.shape[0] >= 300
     assert len(np.unique((image[:, :, :3] * 255).astype(np.uint8).reshape(-1, 3), axis=0)) > 10
@@ -111,7 +144,7 @@ def test_series_meshes_have_runs_spacing_for_a_flood_model(series_run, demo_poin
     domain edge where detected lines graze it; 0 turns it off, as for run."""
     from floodmesh.core.steps.hydraulics import inradii
 
-    out, result, _ = series_run
+    out, result, _, _ = series_run
     plain = run_series(demo_points_file, tmp_path / "plain",
                        RunOptions(holdout=0.01, min_spacing=0),
                        settings_grid(AREAS[:1], "keep-every", (4,)))
