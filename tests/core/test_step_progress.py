@@ -21,6 +21,7 @@ def chain(demo_points_file, tmp_path_factory):
     files.simplify(paths["lines.gpkg"], paths["simple.gpkg"], method="douglas-peucker",
                    amount=0.9)
     files.mesh(paths["dem.tif"], paths["mesh.2dm"], breaklines=paths["simple.gpkg"])
+    paths["points"] = demo_points_file
     return paths
 
 
@@ -32,6 +33,9 @@ STEPS = {
     "mesh": lambda p, out, **kw: files.mesh(p["dem.tif"], out / "mesh.2dm",
                                             breaklines=p["simple.gpkg"],
                                             triangles=out / "mesh.gpkg", **kw),
+    "refine": lambda p, out, **kw: files.refine(p["dem.tif"], p["points"], out / "fine.2dm",
+                                                breaklines=p["simple.gpkg"],
+                                                check=p["holdout.gpkg"], max_rounds=2, **kw),
     "assess": lambda p, out, **kw: files.assess(p["mesh.2dm"], p["holdout.gpkg"],
                                                 out / "res.gpkg", report=out / "accuracy.json",
                                                 png=out / "pics", **kw),
