@@ -18,11 +18,11 @@ from ..engine.compiles import CompileWatch
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles, fits_in_memory
 from ..engine.nearest import CellIndex, point_index
-from ..engine.progress import part, report
+from ..engine.progress import part, poll, report
 from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
                             read_gridded_points, read_point_tiles, slope_file64,
                             write_front_rasters)
-from ..errors import Cancelled, interrupts_unwrapped
+from ..errors import interrupts_unwrapped
 from ..io.layer_definition import QLR_NAME, write_layer_definition
 from ..io.outputs import check_output_folder, scratch_folder, staged_folder
 from ..io.report import BREAKLINES_PNG, HISTOGRAM_PNG, MAP_PNG
@@ -88,8 +88,7 @@ class _Steps:
         self.ahead_of_time.append(name)
 
         def collect():
-            if self.cancelled and self.cancelled():
-                raise Cancelled()
+            poll(self.cancelled)
             result, seconds, cpu = future.result()
             self._finished(name, seconds, cpu, self.weights.get(name, 0.0))
             return result
@@ -110,8 +109,7 @@ class _Steps:
             self.progress(self.done / self.total)
 
     def run(self, name: str, func: Callable, *args, **kwargs):
-        if self.cancelled and self.cancelled():
-            raise Cancelled()
+        poll(self.cancelled)
         if self.log:
             self.log(f"{name}...")
         start, cpu = time.perf_counter(), time.process_time()

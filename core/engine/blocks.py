@@ -19,11 +19,12 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from .._kernels.aot import kernel
-from ..errors import Cancelled, FloodMeshError
+from ..errors import FloodMeshError
 from ..io import (atomic_output, dem_file, describe_band, implausible_note, no_valid_cells,
                   nodata_range, raster_crs_wkt, raster_profile, read_band, refuse_non_elevations,
                   require_file)
 from ..raster import HIGHEST_GROUND_M, LOWEST_GROUND_M
+from .progress import poll
 
 DEFAULT_BLOCK_ROWS = 2048
 # File to file: strips of this many rows (a multiple of the tile size), the full width.
@@ -84,8 +85,7 @@ def run_blocks(read_into: Callable, write: Callable, shape: tuple[int, int],
     with ThreadPoolExecutor(1, thread_name_prefix="floodmesh-block") as pool:
         try:
             for k, window in enumerate(windows):
-                if cancelled is not None and cancelled():
-                    raise Cancelled()
+                poll(cancelled)
                 size = (window[2] + 2 * halo, window[3] + 2 * halo)
                 buffer = buffers.get((k % 2, size))
                 if buffer is None:

@@ -46,7 +46,7 @@ import numpy as np
 from affine import Affine
 from pyproj import CRS
 
-from ..errors import Cancelled, FloodMeshError
+from ..errors import FloodMeshError
 from ..io import (ELEVATION, GROUND_CLASS, atomic_output, classes_kept, describe_band,
                   drop_implausible, file_format, held_quantity, las_classes, las_crs,
                   las_fields_read, las_xyz, read_band, read_las, read_xyz)
@@ -59,6 +59,7 @@ from ..raster import (Grid, check_scale, check_transform, chosen_crs, corners_an
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
 from .limits import BYTES_PER_FITTED_CELL, check_memory, fits_in_memory, footprint
+from .progress import poll
 
 LAS_EXTENSIONS = (".las", ".laz")
 XYZ_EXTENSIONS = (".xyz", ".txt", ".csv", ".pts")
@@ -855,8 +856,7 @@ def _as_completed(client, futures, *, progress, cancelled, base: float, weight: 
     total = max(1, len(futures))
     try:
         while pending:
-            if cancelled is not None and cancelled():
-                raise Cancelled()
+            poll(cancelled)
             finished = [i for i, f in pending.items() if f.done()]
             if not finished:
                 time.sleep(0.05)
@@ -1171,8 +1171,7 @@ def read_point_tiles(inputs, cell_size: float, *, crs=None, classes=None,
         try:
             for read in reads:
                 while True:
-                    if cancelled is not None and cancelled():
-                        raise Cancelled()
+                    poll(cancelled)
                     with contextlib.suppress(TimeoutError):
                         figures, xyz = read.result(timeout=0.05)
                         break
@@ -1456,8 +1455,7 @@ def read_gridded_points(tiled: TiledDem, *,
     for one file (``grid_point_tiles`` keeps none of them)."""
     crs_wkt, parts = tiled.crs.to_wkt(), []
     for path, drop in zip(tiled.gridded, tiled.repeats or [None] * len(tiled.gridded)):
-        if cancelled is not None and cancelled():
-            raise Cancelled()
+        poll(cancelled)
         parts.append(_tile_points(path, crs_wkt, tiled.classes, tiled.held_below, tiled.seed,
                                   drop)[0])
     return np.concatenate(parts) if parts else np.empty((0, 3))

@@ -31,7 +31,8 @@ import numpy as np
 
 from .. import io
 from ..engine.arrays import boundary_edges, edge_nodes, spatial_order
-from ..errors import Cancelled, FloodMeshError
+from ..engine.progress import poll
+from ..errors import FloodMeshError
 from ..io.outputs import check_output_folder, staged_folder
 from ..options import DRY_BELOW_M, RESULT_RASTERS
 from ..raster import Grid, require_metric_crs
@@ -769,8 +770,7 @@ def run_anuga(prepared: dict, *, work_dir=None, python: str | None = None,
                              daemon=True).start()
             try:
                 while child.poll() is None or not lines.empty():
-                    if cancelled and cancelled():
-                        raise Cancelled()
+                    poll(cancelled)
                     try:
                         line = lines.get(timeout=0.2)
                     except queue.Empty:

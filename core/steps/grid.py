@@ -25,7 +25,8 @@ from .._kernels.points import extent_on_threads, hull_candidates, monotone_chain
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import MIN_GAP_IN_SPACINGS, check_memory, footprint
 from ..engine.nearest import cell_of
-from ..errors import Cancelled, FloodMeshError
+from ..engine.progress import poll
+from ..errors import FloodMeshError
 from ..options import check_cell_size, check_max_gap
 from ..points import PointCloud, check_spread, step_cloud
 from ..raster import Grid, check_cells_across
@@ -171,8 +172,7 @@ def grid_window(xyz: np.ndarray, cell_size: float, max_gap: float, x0: float, y1
     def grid_tile(tile):
         """Grid the tile at (r0, c0); the box of its circles past the given points'."""
         r0, c0 = tile
-        if cancelled is not None and cancelled():
-            raise Cancelled()
+        poll(cancelled)
         if near < halo:
             brow0, brow1, bcol0, bcol1 = bucket_span(
                 c0 * cell_size - near, (c0 + side) * cell_size + near,
