@@ -576,8 +576,8 @@ def _write_outputs(out: Path, front: Front, options: RunOptions, mesh, lines, re
     io.write_residuals(out / "residuals.gpkg", holdout.xyz, res, dem.crs)
     write_layer_definition(out, group=group, crs_wkt=dem.crs.to_wkt(),
                            elevation_range=(mesh.nodes[:, 2].min(), mesh.nodes[:, 2].max()))
-    # the lines as the mesh has them, own and detected, for a solver that meshes anew
     report(progress, cancelled, 0.8)
+    # the lines as the mesh has them, own and detected, for a solver that meshes anew
     return (export_formats(out / "mesh", mesh.nodes, mesh.triangles, options.formats,
                            crs=dem.crs, breaklines=honoured_lines(mesh),
                            progress=part(progress, 0.8, 1.0), cancelled=cancelled)
