@@ -1547,6 +1547,25 @@ def _refuse_non_elevations(paths: list, sources: list) -> None:
             + (", or rename a tile of elevations so named" if named else ""))
 
 
+def _refuse_tiles_in_degrees(paths: list, sources: list) -> None:
+    """Refuse DEM tiles (``paths``, open as ``sources``) whose own CRS is geographic (degrees)
+    beside tiles in a projected one, naming them and the others' CRS to reproject them to; a CRS
+    given replacing theirs would take their degrees for metres."""
+    degrees = [(path.name, src.crs) for path, src in zip(paths, sources)
+               if src.crs and src.crs.is_geographic]
+    metres = [(path.name, src.crs) for path, src in zip(paths, sources)
+              if src.crs and src.crs.is_projected]
+    if not degrees or not metres:
+        return
+    others = CRS.from_wkt(metres[0][1].to_wkt())
+    code = f"EPSG:{others.to_epsg() or 'XXXX'}"
+    raise FloodMeshError(
+        f"{_tiles_words([name for name, _ in degrees])} is in degrees (a geographic CRS, "
+        f"{CRS.from_wkt(degrees[0][1].to_wkt()).name}), but tile {metres[0][0]} is in "
+        f"{others.name}, in metres: all tiles must share one CRS in metres; reproject it to the "
+        f"others' CRS first ({_reproject('raster', code)})")
+
+
 def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
     """Several GeoTIFF DEM tiles (a folder, glob or list) as one Grid, after checking each: one
     CRS in metres (``crs`` replaces theirs, which ``note`` hears of) true to scale there, the
@@ -1568,6 +1587,7 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
                 raise FloodMeshError(f"tile {path.name} is not a readable raster ({exc}): "
                                      "replace it or leave it out") from None
         _refuse_non_elevations(paths, sources)
+        _refuse_tiles_in_degrees(paths, sources)
         for path, src in zip(paths, sources):
             name = path.name
             check_transform(src.transform, f"tile {name}")
@@ -1576,26 +1596,28 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
                                           f"tile {name}", kind="raster")
             if first is None:
                 first = (name, tile_crs, src.transform)
-            else:
-                if not same_place(tile_crs, first[1], heights=True):
-                    raise FloodMeshError(
-                        f"tile {name} is in {tile_crs.name}, but tile {first[0]} is in "
-                        f"{first[1].name}: all tiles must share one CRS; reproject {name} first "
-                        "(gdalwarp -t_srs EPSG:XXXX IN OUT)")
-                t, t0 = src.transform, first[2]
-                offset = ((t.c - t0.c) / t0.a, (t.f - t0.f) / t0.e)
-                if not np.isclose(t.a, t0.a, rtol=1e-9) or not all(
-                        abs(o - round(o)) < 1e-6 for o in offset):
-                    raise FloodMeshError(
-                        f"tile {name} has cells of {t.a:g} m at ({t.c:g}, {t.f:g}), not on the "
-                        f"grid of tile {first[0]} ({t0.a:g} m cells): resample it onto that "
-                        f"grid first (gdalwarp -tr {t0.a:g} {t0.a:g} -tap IN OUT)")
+            elif not same_place(tile_crs, first[1], heights=True):
+                raise FloodMeshError(
+                    f"tile {name} is in {tile_crs.name}, but tile {first[0]} is in "
+                    f"{first[1].name}: all tiles must share one CRS; reproject {name} first "
+                    "(gdalwarp -t_srs EPSG:XXXX IN OUT)")
         xmin = min(s.bounds.left for s in sources)
         xmax = max(s.bounds.right for s in sources)
         ymin = min(s.bounds.bottom for s in sources)
         ymax = max(s.bounds.top for s in sources)
+        # where they lie before how their cells line up: a tile in degrees under the CRS given
+        # is named as one, not as cells of 1e-05 m off the grid
         _check_tiles_scale(first[1], [(path.name, tuple(src.bounds))
                                       for path, src in zip(paths, sources)], "raster")
+        for path, src in zip(paths, sources):
+            t, t0 = src.transform, first[2]
+            offset = ((t.c - t0.c) / t0.a, (t.f - t0.f) / t0.e)
+            if not np.isclose(t.a, t0.a, rtol=1e-9) or not all(
+                    abs(o - round(o)) < 1e-6 for o in offset):
+                raise FloodMeshError(
+                    f"tile {path.name} has cells of {t.a:g} m at ({t.c:g}, {t.f:g}), not on the "
+                    f"grid of tile {first[0]} ({t0.a:g} m cells): resample it onto that "
+                    f"grid first (gdalwarp -tr {t0.a:g} {t0.a:g} -tap IN OUT)")
         for message in _replaced_note(replaced) if note else ():
             note(message)
         d = first[2].a

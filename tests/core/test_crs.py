@@ -270,6 +270,33 @@ def test_an_xyz_tile_in_degrees_among_utm_tiles_is_refused_by_name(tmp_path, cap
     assert not (tmp_path / "dem.tif").exists()
 
 
+def test_a_dem_tile_in_degrees_among_utm_tiles_is_named_as_in_degrees(tmp_path, capsys):
+    """A folder of two GeoTIFF DEM tiles in UTM 32N and one in EPSG:4326 given to run, with and
+    without --crs, or one without a CRS placed by --crs: refused in one line naming that tile as
+    in degrees and the reprojection to the others' CRS, not as cells of 1e-05 m off the grid."""
+    folder = tmp_path / "dem"
+    folder.mkdir()
+    dem = slope_dem(40, 40)
+    write_tif(folder / "a.tif", dem)
+    write_tif(folder / "b.tif", dem, transform=Affine(1.0, 0, ORIGIN[0] + 40, 0, -1.0,
+                                                      ORIGIN[1] + 40))
+    write_tif(folder / "c.tif", dem, transform=Affine(1e-5, 0, 9.5, 0, -1e-5, 51.4),
+              crs="EPSG:4326")
+    for given in ([], ["--crs", "EPSG:25832"]):
+        code, err = floodmesh(["run", folder, "--out", tmp_path / "out", *given], capsys)
+        assert code == 2 and len(err) == 1, err
+        assert err[0].startswith("floodmesh: error: tile c.tif is in degrees"), err
+        assert "gdalwarp -t_srs EPSG:25832 IN OUT" in err[0], err
+        assert not (tmp_path / "out").exists()
+    # without a CRS of its own, placed by --crs: named by where it lies, in degrees
+    write_tif(folder / "c.tif", dem, transform=Affine(1e-5, 0, 9.5, 0, -1e-5, 51.4), crs=None)
+    code, err = floodmesh(["run", folder, "--out", tmp_path / "out", "--crs", "EPSG:25832"],
+                          capsys)
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith("floodmesh: error: tile c.tif lies at x 9.5 to 9.5004"), err
+    assert "in degrees" in err[0] and "-s_srs EPSG:4326 -t_srs EPSG:25832" in err[0], err
+
+
 def test_a_tile_set_far_from_true_scale_names_the_tile_at_fault(tmp_path, capsys):
     """Two LAZ tiles 8 km apart far east of UTM 32N's meridian, where its scale passes 1.02
     between them: the message names the eastern tile, not the first of the set."""
