@@ -194,14 +194,23 @@ def _mixed_kinds(tiles: dict) -> str:
     given, that named it): the fewer kind named (a DEM or overview beside LAS tiles, or LAS
     files beside DEM tiles), and the fix for where they came from: those a folder or pattern
     took, moved out of its folder or a pattern that takes the others; those listed by name,
-    taken out of the list."""
+    taken out of the list. As many of each kind: both named, and the fix is to give one."""
     rasters = [p for p in tiles if tile_kind(p) == "dem"]
     points = [p for p in tiles if tile_kind(p) == "points"]
-    if len(rasters) <= len(points):
+    if len(rasters) == len(points):
+        fix = ("give one kind: keep the point files and the DEM rasters in separate folders and "
+               "give the folder of the kind to read")
+        folders = [_folder(item) for item in dict.fromkeys(tiles.values())
+                   if _takes_several(item)]
+        if folders:
+            fix += (f", or give one kind by quoted patterns: {_patterns(folders[0], points)} "
+                    f"for the point files, {_patterns(folders[0], rasters)} for the DEM rasters")
+        return (f"the tiles mix point files and DEM rasters, as many of each: "
+                f"{_counted(points, 'point file')} and {_counted(rasters, 'DEM raster')}: {fix}")
+    if len(rasters) < len(points):
         stray, kept, what, others = rasters, points, "DEM raster", "point tiles"
     else:
         stray, kept, what, others = points, rasters, "point file", "DEM tiles"
-    s = "s" if len(stray) > 1 else ""
     fixes = []
     by_name = [p for p in stray if not _takes_several(tiles[p])]
     if by_name:
@@ -209,15 +218,35 @@ def _mixed_kinds(tiles: dict) -> str:
                      f"{first_names([p.name for p in kept])})")
     found = [p for p in stray if _takes_several(tiles[p])]
     for item in dict.fromkeys(tiles[p] for p in found):
-        folder = item if Path(item).is_dir() else os.path.dirname(item) or "."
-        folder = folder.rstrip("/") or folder
-        suffixes = [p.suffix for p in kept]
-        pattern = os.path.join(folder, f"*{max(set(suffixes), key=suffixes.count)}")
+        folder = _folder(item)
         fixes.append(f"move {_them([p for p in found if tiles[p] == item])} out of {folder}, "
-                     f"or give the {others} as a quoted pattern, e.g. '{pattern}'")
-    return (f"the tiles mix point files and DEM rasters: {len(stray)} {what}{s} "
-            f"({first_names([p.name for p in stray])}) beside {len(kept)} {others}: "
-            + "; ".join(fixes))
+                     f"or give the {others} as {_patterns(folder, kept, 'quoted pattern')}")
+    return (f"the tiles mix point files and DEM rasters: {_counted(stray, what)} beside "
+            f"{len(kept)} {others}: " + "; ".join(fixes))
+
+
+def _counted(paths: list, what: str) -> str:
+    """'2 DEM rasters (a.tif, b.tif)': how many ``paths`` of a kind, and the first names."""
+    return f"{len(paths)} {what}{'s' if len(paths) > 1 else ''} " \
+           f"({first_names([p.name for p in paths])})"
+
+
+def _folder(item: str) -> str:
+    """The folder a folder or glob pattern given as tiles reads, spelled as given."""
+    folder = item if Path(item).is_dir() else os.path.dirname(item) or "."
+    return folder.rstrip("/") or folder
+
+
+def _patterns(folder: str, paths: list, said: str | None = None) -> str:
+    """The quoted glob patterns that take ``paths`` from ``folder``: one per extension among
+    them, the most common first (ties by name), so that one run reads them all; after ``said``
+    ("quoted pattern": 'a quoted pattern, e.g. ...', 'quoted patterns, e.g. ...') where given."""
+    suffixes = [p.suffix for p in paths]
+    kinds = sorted(set(suffixes), key=lambda ext: (-suffixes.count(ext), ext))
+    quoted = " ".join(f"'{os.path.join(folder, '*' + ext)}'" for ext in kinds)
+    if said is None:
+        return quoted
+    return f"{said}s, e.g. {quoted}" if len(kinds) > 1 else f"a {said}, e.g. {quoted}"
 
 
 def _takes_several(item: str) -> bool:

@@ -170,6 +170,31 @@ def test_a_mix_of_kinds_is_named_with_the_fix_for_how_the_tiles_were_given(
         assert not Path("out").exists() and not Path("dem.tif").exists()
 
 
+def test_as_many_point_files_as_dem_rasters_give_one_message_naming_both(tmp_path):
+    """A folder of a LAS and a LAZ tile beside two DEM rasters: no kind is the odd one out, so
+    the run names both kinds with their counts and asks for one kind, in the same words however
+    Python orders its sets (runs under other hash seeds)."""
+    folder = _las_tiles(tmp_path / "mixed")
+    (folder / "T1.las").rename(folder / "T1.laz")
+    write_tif(folder / "a.tif", slope_dem())
+    write_tif(folder / "b.tif", slope_dem())
+    said = set()
+    for seed in range(6):
+        done = subprocess.run([sys.executable, "-m", "floodmesh.core.frontends.cli", "run",
+                               str(folder), "--out", str(tmp_path / "out")],
+                              capture_output=True, text=True, timeout=600,
+                              env={**os.environ, "PYTHONHASHSEED": str(seed)})
+        assert done.returncode == 2 and len(done.stderr.splitlines()) == 1, done.stderr
+        said.add(done.stderr.strip())
+    assert said == {
+        "floodmesh: error: the tiles mix point files and DEM rasters, as many of each: 2 point "
+        "files (T0.las, T1.laz) and 2 DEM rasters (a.tif, b.tif): give one kind: keep the point "
+        "files and the DEM rasters in separate folders and give the folder of the kind to read, "
+        f"or give one kind by quoted patterns: '{folder}/*.las' '{folder}/*.laz' for the point "
+        f"files, '{folder}/*.tif' for the DEM rasters"}, said
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_run_into_its_own_tile_folder_is_refused_before_any_work(tmp_path, capsys):
     """Outputs written among the tiles would be read as tiles by the next run on the folder (a
     DEM, slope and breakpoints beside LAS tiles; silently among DEM tiles): refused up front,
