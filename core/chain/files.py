@@ -143,11 +143,10 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
     _files([breakpoints, slope, dem], [output], gpkg=[output])
     check_tracing(s_crit, mode, min_points, min_length, seed)
     fix = "give the slope's breakpoints (floodmesh breakpoints SLOPE; Classify breakpoints in QGIS)"
-    io.check_quantity(breakpoints, "breakpoints", fix)
-    io.check_quantity(slope, "slope", "the tracer follows the slope, also where the breakpoints "
-                      "come from the LoG response: give the DEM's slope (floodmesh slope DEM, "
-                      "without --method log)")
-    points = io.read_raster(breakpoints, crs=crs, elevations=False)
+    points = io.read_raster(breakpoints, crs=crs, elevations=False, holds=("breakpoints", fix))
+    slope_grid = io.read_raster(slope, crs=crs, elevations=False, holds=(
+        "slope", "the tracer follows the slope, also where the breakpoints come from the LoG "
+        "response: give the DEM's slope (floodmesh slope DEM, without --method log)"))
     # an untagged raster (another program's, or a DEM given in its place) is judged by its values
     other = points.values[(points.values != 0) & (points.values != 1) & ~np.isnan(points.values)]
     if other.size:
@@ -155,7 +154,6 @@ def trace(breakpoints, slope, dem, output, *, s_crit: float = 10.0, mode: str = 
                              f"(such as {other[0]:g}): it is no breakpoints raster: {fix}")
     points = points.with_values((points.values == 1).astype("uint8"))
     terrain = io.read_dem(dem, crs=crs, note=note)
-    slope_grid = io.read_raster(slope, crs=crs, elevations=False)
     stage(progress, cancelled, 0.1)
     lines = trace_breaklines(points, slope_grid, terrain, s_crit, mode=mode,
                              min_points=min_points, min_length=min_length, join=join, seed=seed,

@@ -905,9 +905,9 @@ def size_field(source, dem: Grid, slope_grid: Grid | None = None, *, max_area: f
         slope_grid = slope(dem, "one-over-distance") if slope_grid is None else slope_grid
         return size_from_slope(slope_grid, max_area=max_area, s_crit=s_crit,
                                min_area=max_area / 25 if min_area is None else min_area)
-    io.check_quantity(source, "size_field", "give a raster of maximum triangle areas in m² (a "
-                      "flood's size_field.tif), or slope for one from the DEM's slope")
-    field = io.read_raster(source, default_crs=dem.crs, elevations=False)
+    field = io.read_raster(source, default_crs=dem.crs, elevations=False, holds=(
+        "size_field", "give a raster of maximum triangle areas in m² (a flood's size_field.tif), "
+        "or slope for one from the DEM's slope"))
     require_same_place(field.crs, dem.crs, f"size field {Path(source).name}", "DEM")
     return field
 

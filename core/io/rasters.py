@@ -125,7 +125,7 @@ def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
 
 
 def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_crs=None,
-                dem: bool = False) -> Grid:
+                dem: bool = False, holds: tuple[str, str] | None = None) -> Grid:
     """Read band 1 of a raster as a float64 Grid with NaN for nodata, in ``crs``, else its own
     CRS, else ``default_crs`` (``raster_crs``).
 
@@ -133,6 +133,8 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
     ``note`` (given for DEMs) receives what was assumed: such cells, further bands left unused,
     elevations stored as whole numbers. ``dem`` (a step's DEM): a slope, LoG response or
     breakpoints that FloodMesh's steps wrote are refused (``refuse_non_elevations``).
+    ``holds`` (the quantity wanted, a key of ``QUANTITIES``, and the fix): a raster FloodMesh
+    tagged as holding another is refused first, as ``check_quantity`` refuses it.
     """
     # lazy: GDAL loads only when this runs
     import rasterio
@@ -142,6 +144,8 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
         with rasterio.open(path) as src:
             if dem:
                 refuse_non_elevations(src, f"raster {path.name}")
+            if holds:
+                refuse_other_quantity(held_quantity(src), f"raster {path.name}", *holds)
             transform, crs = src.transform, raster_crs(src, path, crs, note, default_crs)
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
@@ -267,11 +271,17 @@ def check_quantity(path, wanted: str, fix: str) -> None:
             held = held_quantity(src)
     except rasterio.errors.RasterioIOError:
         return
+    refuse_other_quantity(held, f"raster {Path(path).name}", wanted, fix)
+
+
+def refuse_other_quantity(held: str | None, name: str, wanted: str, fix: str) -> None:
+    """Refuse raster ``name`` whose tag (``held_quantity``) says it holds another quantity than
+    ``wanted`` (keys of ``QUANTITIES``), naming what it holds and ``fix`` (a DEM where its slope
+    belongs: how to make the slope); untagged (None), it is not judged."""
     if held == ELEVATION and wanted in ("slope", "log"):  # a DEM where its slope belongs
         fix = (f"give the DEM's {QUANTITIES[wanted][0]} (floodmesh slope DEM"
                f"{' --method log' if wanted == 'log' else ''}; Slope for break lines in QGIS)")
     if held is not None and held != wanted:
-        name = f"raster {Path(path).name}"
         raise FloodMeshError(f"{holds_instead(name, held, QUANTITIES[wanted][2])}: {fix}")
 
 
