@@ -98,7 +98,12 @@ def usable_rows(xyz: np.ndarray) -> np.ndarray | None:
 def drop_unusable(xyz: np.ndarray, source: str, note=None) -> np.ndarray:
     """The points (n, 3) that ``usable_rows`` keeps (``xyz`` itself where all are); ``note``
     is told how many were left out and why (no finite x, y and z; a z no ground has)."""
-    usable = usable_rows(xyz)
+    return without_unusable(xyz, usable_rows(xyz), source, note)
+
+
+def without_unusable(xyz: np.ndarray, usable: np.ndarray | None, source: str,
+                     note=None) -> np.ndarray:
+    """``drop_unusable`` where ``usable_rows`` was taken already (``usable``; None: all)."""
     if usable is None:
         return xyz
     if note:

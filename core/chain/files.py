@@ -82,12 +82,15 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
         written = f"DEM of {tiled.n_tiles} tiles ({tiled.n_points:,} points) written to {output}"
     else:
         # lazy: numba loads only when this runs
-        from ..steps.grid import grid_points_linear
+        from ..steps.grid import check_grid, grid_points_linear
 
+        plan = None
         if tiles is None:
             points = io.read_points(source.path, crs=crs, classes=classes, note=note)
             gridding, kept_back = split_holdout(points, holdout, seed, note=note)
             held, points_crs, read = kept_back.xyz, points.crs, ""
+            # the reader checked their spread: the plan spares the gridding that check
+            plan = check_grid(gridding, cell_size, max_gap)
         else:
             for message in tiles.notes if note else ():
                 note(message)
@@ -95,7 +98,7 @@ def grid(input, output, *, cell_size: float, crs=None, classes=None, max_gap=Non
             held, points_crs = tiles.holdout, tiles.crs
             read = f" from {tiles.n_tiles} tiles ({tiles.n_points:,} points)"
         dem = grid_points_linear(gridding, cell_size, max_gap=max_gap, progress=progress,
-                                 cancelled=cancelled)
+                                 cancelled=cancelled, plan=plan)
         io.write_raster(output, dem, quantity=io.ELEVATION)
         written = (f"DEM {dem.shape[1]} x {dem.shape[0]} cells of {dem.cell_size} m{read} "
                    f"written to {output}")

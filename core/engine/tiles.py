@@ -339,9 +339,9 @@ def is_large_copc(path: Path) -> bool:
         return False
 
 
-def _read_window(path: str) -> tuple[np.ndarray, np.ndarray]:
-    """(xyz, LAS classes) of the points of a COPC window (``copc_windows``): the octree nodes
-    that reach it decoded, their points within it kept."""
+def _read_window(path: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(xyz, LAS classes, the header's scales: m; x, y, z) of the points of a COPC window
+    (``copc_windows``): the octree nodes that reach it decoded, their points within it kept."""
     # lazy: laspy loads only when this runs
     import laspy
 
@@ -351,12 +351,13 @@ def _read_window(path: str) -> tuple[np.ndarray, np.ndarray]:
         with laspy.CopcReader.open(file, **las_fields_read(laspy)) as reader:
             points = reader.query(bounds=laspy.Bounds(mins=np.array([x0, y0]),
                                                       maxs=np.array([x1, y1])))
+            scales = np.asarray(reader.header.scales, float)
     except Exception as exc:
         raise _Unreadable(f"tile {Path(file).name} is not a readable COPC file ({exc})") from None
     x, y = np.asarray(points.x), np.asarray(points.y)
     inside = (x >= x0) & (x < x1) & (y >= y0) & (y < y1) & ~np.asarray(points.withheld, bool)
     xyz = np.column_stack([x[inside], y[inside], np.asarray(points.z)[inside]])
-    return xyz, np.asarray(points.classification)[inside]
+    return xyz, np.asarray(points.classification)[inside], scales
 
 
 def _tile_header(path: Path) -> tuple[int, object, tuple | None, bool]:
@@ -547,14 +548,15 @@ def _check_text_tiles(meta: list, crs: CRS) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # per-tile work (Dask tasks: plain functions of picklable arguments)
-def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """(xyz, LAS classes, or None for text without a class column) of all a tile's points, as
-    stored; a tile that cannot be read raises ``_Unreadable`` naming it."""
+def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(xyz, LAS classes, or None for text without a class column, the LAS header's scales: m;
+    x, y, z, or None for text) of all a tile's points, as stored; a tile that cannot be read
+    raises ``_Unreadable`` naming it."""
     if _WINDOW in str(path):
         return _read_window(str(path))
     if path.suffix.lower() not in LAS_EXTENSIONS:
         try:
-            return read_xyz(path)
+            return *read_xyz(path), None
         except FloodMeshError as exc:  # not XYZ text (its message begins with the file's name)
             if not str(exc).startswith(path.name):
                 raise
@@ -564,19 +566,15 @@ def _read_raw(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     except FloodMeshError as exc:
         raise _Unreadable(str(exc)) from None
     cls = las_classes(las)
-    return las_xyz(las, cls), cls
+    return las_xyz(las, cls), cls, np.asarray(las.header.scales, float)
 
 
-def _resolution(path: str, xyz: np.ndarray) -> np.ndarray:
-    """The step (m; x, y, z) to which a tile stores its coordinates: a LAS/LAZ header's scales;
-    for text, the coarsest of 1 m to 0.1 mm of which its numbers (the first 10,000) are whole
-    multiples."""
-    if _is_las(path):
-        # lazy: laspy loads only when this runs
-        import laspy
-
-        with laspy.open(path.split(_WINDOW)[0]) as reader:
-            return np.asarray(reader.header.scales, float)
+def _resolution(scales: np.ndarray | None, xyz: np.ndarray) -> np.ndarray:
+    """The step (m; x, y, z) to which a tile stores its coordinates: a LAS/LAZ header's
+    ``scales`` (``_read_raw``); for text (None), the coarsest of 1 m to 0.1 mm of which its
+    numbers (the first 10,000) are whole multiples."""
+    if scales is not None:
+        return scales
     sample = np.asarray(xyz[:10_000], float)
     steps = np.full(3, 1e-4)
     for axis in range(3):
@@ -650,8 +648,8 @@ def _tile_read(path: str, crs_wkt: str, classes, holdout: float, seed: int,
     bound), the digest of all its points, whether it is sparse and the step of its
     coordinates (``_resolution``)."""
     name = Path(path).name
-    xyz, cls = _read_raw(Path(path))
-    digest, resolution = _digest(xyz), _resolution(path, xyz)
+    xyz, cls, scales = _read_raw(Path(path))
+    digest, resolution = _digest(xyz), _resolution(scales, xyz)
     kept, kind = _kept(xyz, cls, classes, name, notes)
     del xyz, cls
     kept, sparse = _usable(kept, crs_wkt, name, notes)
@@ -668,7 +666,7 @@ def _tile_points(path: str, crs_wkt: str, classes, held_below: int | None, seed:
     ``held_below``), of the points round one kept (the same classes, the same non-finite points
     dropped), less those in ``drop`` (the points it repeats of an earlier tile it overlaps,
     ``tile_repeats``)."""
-    xyz, cls = _read_raw(Path(path))
+    xyz, cls, _ = _read_raw(Path(path))
     kept = _kept(xyz, cls, classes, Path(path).name)[0]
     del xyz, cls
     kept = _not_dropped(usable_points(kept), drop)
@@ -1295,7 +1293,7 @@ def _repeats_of(xyz: np.ndarray, figures: dict, earlier) -> tuple[np.ndarray, li
 
 def _round_one_points(path: str, crs_wkt: str, classes) -> np.ndarray:
     """A tile's points as round one keeps them (``_tile_read``), read again."""
-    xyz, cls = _read_raw(Path(path))
+    xyz, cls, _ = _read_raw(Path(path))
     kept = _kept(xyz, cls, classes, Path(path).name)[0]
     del xyz, cls
     return _usable(kept, crs_wkt, Path(path).name, [])[0]
@@ -1653,7 +1651,7 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
         check_memory(cells=int(math.ceil((xmax - xmin) / d) * math.ceil((ymax - ymin) / d)),
                      advice="resample the DEM tiles to larger cells")
         mosaic, transform = merge(sources, nodata=np.nan, dtype="float64")
-    values = mosaic[0].astype(np.float64)
+    values = np.asarray(mosaic[0], np.float64)  # merge made it float64: no copy
     values[~np.isfinite(values)] = np.nan
     drop_implausible(values, "the DEM tiles", "TILE", note)
     if not np.isfinite(values).any():

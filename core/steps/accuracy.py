@@ -12,7 +12,7 @@ import numpy as np
 
 from ..engine.progress import REPORTS, along
 from ..options import MIN_CHECK_POINTS
-from ..points import step_points, usable_rows, xyz_array
+from ..points import usable_rows, without_unusable, xyz_array
 from ..raster import MESH_CRS, Grid, metric_crs_at, nearest_value
 from .mesh import Mesh
 
@@ -55,20 +55,20 @@ def assess(mesh: Mesh, points_xyz: np.ndarray, *, alpha: float | None = None,
     """Step 8: the residuals of held-out points against the mesh's TIN (m, NaN outside it) and
     their statistics (``accuracy_statistics``: RMSE, NSSDA test, classes, E = RMSE + α·Δ).
     Points without a finite x, y, z or with a z no ground has (-9999) are left out, as the
-    readers leave them out (``points.step_points``, ``note`` told): their residual is NaN and
+    readers leave them out (``points.drop_unusable``, ``note`` told): their residual is NaN and
     no figure counts them, not even ``n_outside_mesh``. ``progress`` and ``cancelled`` as
     ``residuals``'."""
     nodes = xyz_array(mesh.nodes, "the mesh's nodes")
     metric_crs_at(mesh.crs, (*nodes[:, :2].min(axis=0), *nodes[:, :2].max(axis=0)), "the mesh",
                   given=MESH_CRS)
     given = xyz_array(points_xyz, "the check points")
-    usable = step_points(given, "the check points", note) if len(given) else given
-    if usable is given:
+    kept = usable_rows(given) if len(given) else None
+    if kept is None:
         res = residuals(mesh, given, progress=progress, cancelled=cancelled)
         return res, accuracy_statistics(res, alpha=alpha, delta=delta, note=note)
-    kept = usable_rows(given)
     res = np.full(len(given), np.nan)
-    res[kept] = residuals(mesh, usable, progress=progress, cancelled=cancelled)
+    res[kept] = residuals(mesh, without_unusable(given, kept, "the check points", note),
+                          progress=progress, cancelled=cancelled)
     return res, accuracy_statistics(res[kept], alpha=alpha, delta=delta, note=note)
 
 

@@ -56,8 +56,9 @@ def grid_points_linear(points: PointCloud, cell_size: float, *, max_gap: float |
     """
     cell_size = check_cell_size(cell_size)
     xyz = step_cloud(points, "the point cloud", note, least=3)
-    if xyz is not points.xyz:  # some left out: the caller's plan was made for them all
-        points, plan = PointCloud(xyz, points.crs), None
+    if xyz is not points.xyz:  # converted (a view, of an array numba made), or some left out:
+        # the caller's plan, made for them all, holds only where none were
+        points, plan = PointCloud(xyz, points.crs), plan if len(xyz) == len(points.xyz) else None
     if plan is None:  # the readers' check (points.clean_points) first: points spread over an
         # area, not on one line, which no cell size or gap would grid
         check_spread(xyz[:, :2], "the points")

@@ -73,7 +73,7 @@ def test_windows_of_a_copc_file_hold_every_point_once(survey, monkeypatch):
     monkeypatch.setattr(tiles, "WINDOW_POINTS", 40_000)
     found, _, _ = tiles.check_point_tiles([survey / "reach.copc.laz"])
     assert len(found) >= 6 and all(tiles._WINDOW in t.path for t in found)
-    parts = [tiles._read_raw(Path(t.path)) for t in found]
+    parts = [tiles._read_raw(Path(t.path))[:2] for t in found]
     assert all(len(xyz) for xyz, _ in parts)
     whole = io.read_points(survey / "reach.copc.laz").xyz
     np.testing.assert_array_equal(_sorted(np.concatenate([xyz for xyz, _ in parts])),
