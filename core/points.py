@@ -8,8 +8,8 @@ import numpy as np
 
 from .errors import FloodMeshError
 from .options import check_seed, holdout_count
-from .raster import (CLOUD_CRS, HIGHEST_GROUND_M, LOWEST_GROUND_M, check_scale, corners_and_centre,
-                     metric_crs_at, require_metric_crs, require_numbers)
+from .raster import (CLOUD_CRS, HIGHEST_GROUND_M, LOWEST_GROUND_M, metric_crs_at,
+                     require_metric_crs, require_numbers)
 
 if TYPE_CHECKING:  # pyproj is imported where a CRS is checked: it costs 0.1 s of start-up
     from pyproj import CRS
@@ -34,8 +34,9 @@ class PointCloud:
 def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
                  note=None, *, repeats: bool = True, scale: bool = True) -> PointCloud:
     """Drop non-finite points and those with a z no ground has (``usable_rows``) and check what
-    is left is usable terrain data in a CRS true to scale there (``scale=False`` leaves that
-    check to the caller, ``raster.check_scale``); ``note`` receives what was left out or found
+    is left is usable terrain data in a CRS true to scale there (``raster.metric_crs_at`` at
+    their sampled bounds, as ``step_cloud`` checks; ``scale=False`` leaves that check to the
+    caller, ``raster.check_scale``); ``note`` receives what was left out or found
     doubtful (points without x, y or z, or with a no-data z such as -9999, points at one x, y
     with different z: ``repeats=False`` leaves that check to the caller,
     ``repeated_positions_note``)."""
@@ -47,7 +48,7 @@ def clean_points(xyz: np.ndarray, crs, source: str, kind: str | None = "points",
                              "are needed to make a terrain model. Check the file and its classes")
     check_spread(xyz[:, :2], source)
     if scale:
-        check_scale(crs, *corners_and_centre(*_sampled_bounds(xyz)), source, kind)
+        metric_crs_at(crs, _sampled_bounds(xyz), source, kind)
     message = repeated_positions_note(xyz, source) if note and repeats else None
     if message:
         note(message)
