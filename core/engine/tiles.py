@@ -390,14 +390,16 @@ def check_point_tiles(paths: Sequence[Path], *, crs=None, skip_unreadable: bool 
     with other heights (``same_place``), or in a CRS not true to scale there. An empty tile is
     left out with a note; a COPC file of more than ``WINDOW_POINTS`` points becomes its windows
     (``copc_windows``). Returns the tiles, their CRS and the notes."""
-    tiles, first, notes, replaced = [], None, [], []
+    tiles, first, notes, replaced, headers = [], None, [], [], []
     for path in map(Path, paths):
-        name = path.name
         try:
-            count, file_crs, bounds, copc = _tile_header(path)
+            headers.append((path, *_tile_header(path)))
         except _Unreadable as exc:
             notes.append(_unreadable_note(exc, skip_unreadable))
-            continue
+    _refuse_tiles_in_degrees([(path.name, file_crs) for path, _, file_crs, _, _ in headers],
+                             "points")
+    for path, count, file_crs, bounds, copc in headers:
+        name = path.name
         if count == 0:
             notes.append(f"tile {name} holds no points (its header counts 0): it adds none")
             continue
@@ -1574,14 +1576,13 @@ def _refuse_non_elevations(paths: list, sources: list) -> None:
             + (", or rename a tile of elevations so named" if named else ""))
 
 
-def _refuse_tiles_in_degrees(paths: list, sources: list) -> None:
-    """Refuse DEM tiles (``paths``, open as ``sources``) whose own CRS is geographic (degrees)
-    beside tiles in a projected one, naming them and the others' CRS to reproject them to; a CRS
-    given replacing theirs would take their degrees for metres."""
-    degrees = [(path.name, src.crs) for path, src in zip(paths, sources)
-               if src.crs and src.crs.is_geographic]
-    metres = [(path.name, src.crs) for path, src in zip(paths, sources)
-              if src.crs and src.crs.is_projected]
+def _refuse_tiles_in_degrees(named: list, kind: str) -> None:
+    """Refuse tiles whose own CRS is geographic (degrees) beside tiles in a projected one, naming
+    them and the others' CRS to reproject them to (``_reproject``'s command for ``kind``,
+    "points" or "raster"); a CRS given replacing theirs would take their degrees for metres.
+    ``named``: (tile name, its own CRS or None)."""
+    degrees = [(name, crs) for name, crs in named if crs and crs.is_geographic]
+    metres = [(name, crs) for name, crs in named if crs and crs.is_projected]
     if not degrees or not metres:
         return
     others = CRS.from_wkt(metres[0][1].to_wkt())
@@ -1590,7 +1591,7 @@ def _refuse_tiles_in_degrees(paths: list, sources: list) -> None:
         f"{_tiles_words([name for name, _ in degrees])} is in degrees (a geographic CRS, "
         f"{CRS.from_wkt(degrees[0][1].to_wkt()).name}), but tile {metres[0][0]} is in "
         f"{others.name}, in metres: all tiles must share one CRS in metres; reproject it to the "
-        f"others' CRS first ({_reproject('raster', code)})")
+        f"others' CRS first ({_reproject(kind, code)})")
 
 
 def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
@@ -1614,7 +1615,8 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
                 raise FloodMeshError(f"tile {path.name} is not a readable raster ({exc}): "
                                      "replace it or leave it out") from None
         _refuse_non_elevations(paths, sources)
-        _refuse_tiles_in_degrees(paths, sources)
+        _refuse_tiles_in_degrees([(path.name, src.crs) for path, src in zip(paths, sources)],
+                                 "raster")
         for path, src in zip(paths, sources):
             name = path.name
             check_transform(src.transform, f"tile {name}")

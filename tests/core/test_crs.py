@@ -297,6 +297,24 @@ def test_a_dem_tile_in_degrees_among_utm_tiles_is_named_as_in_degrees(tmp_path, 
     assert "in degrees" in err[0] and "-s_srs EPSG:4326 -t_srs EPSG:25832" in err[0], err
 
 
+def test_a_point_tile_in_degrees_among_utm_tiles_is_named_as_in_degrees(tmp_path, capsys):
+    """Two LAZ tiles in UTM 32N and one in EPSG:4326 (longitude, latitude) given to grid, with
+    and without --crs: refused in one line naming that tile as in degrees and the reprojection
+    to the others' CRS (EPSG:25832), not a reprojection to EPSG:XXXX or cells of metres."""
+    xyz = plane_xyz()
+    write_las(tmp_path / "a.laz", xyz)
+    write_las(tmp_path / "b.laz", xyz + [40.0, 0.0, 0.0])
+    lonlat = (xyz - xyz.min(axis=0)) * [1e-5, 1e-5, 1.0] + [9.5, 51.4, 0.0]
+    write_las(tmp_path / "c.laz", lonlat, crs="EPSG:4326")
+    for given in ([], ["--crs", "EPSG:25832"]):
+        code, err = floodmesh(["grid", *(tmp_path / f"{t}.laz" for t in "abc"), "--cell-size",
+                               1, "--out", tmp_path / "dem.tif", *given], capsys)
+        assert code == 2 and len(err) == 1, err
+        assert err[0].startswith("floodmesh: error: tile c.laz is in degrees"), err
+        assert "out_srs=EPSG:25832" in err[0], err
+        assert not (tmp_path / "dem.tif").exists()
+
+
 def test_a_tile_set_far_from_true_scale_names_the_tile_at_fault(tmp_path, capsys):
     """Two LAZ tiles 8 km apart far east of UTM 32N's meridian, where its scale passes 1.02
     between them: the message names the eastern tile, not the first of the set."""
