@@ -399,7 +399,8 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
             s_crit=options.s_crit, tolerance=dem.cell_size / 10, max_gap=20 * dem.cell_size,
             join_gap=join_gap, join_lateral=dem.cell_size,
             bridge_gap=BRIDGE_GAP_CELLS * dem.cell_size if join_gap else None,
-            cell_size=dem.cell_size, index=fits.index)
+            cell_size=dem.cell_size, index=fits.index, progress=None,
+            cancelled=steps.cancelled)
         fits.counts.update(counts)
     fits.let_go()
     return simplified, lines, confidence
@@ -463,20 +464,23 @@ def _terrain_z(mesh, front: Front, options: RunOptions, steps: _Steps, fits: _Te
     modeller's own."""
     delta = front.dem.cell_size / 2
 
-    def elevations(mesh):
-        """Node z with the noise taken out, from the points gridded only (never the held-out)."""
+    def elevations(mesh, progress=None, cancelled=None):
+        """Node z with the noise taken out, from the points gridded only (never the held-out);
+        the share fitted told to ``progress``, ``cancelled`` polled."""
         if options.node_elevation != "plane":
             return mesh
         points, fit_index = fits.measured()
         z, counts = fit_node_elevations(mesh.nodes, points, detected + front.own_lines,
                                         fits.window.node_radius, on_line=delta / 10,
                                         own_lines=front.own_lines, index=fit_index,
-                                        noise=fits.window.noise)
+                                        noise=fits.window.noise, progress=progress,
+                                        cancelled=cancelled)
         fits.node_counts.update(counts)
         return replace(mesh, nodes=np.column_stack([mesh.nodes[:, :2], z]))
 
     if not _refining(options):
-        return steps.run("node elevations", elevations, mesh), []
+        return steps.run("node elevations", elevations, mesh, progress=None,
+                         cancelled=cancelled), []
     common = dict(check=front.holdout.xyz, domain=domain, size_field=size,
                   min_angle=options.min_angle, max_area=max_area, conforming=options.conforming,
                   elevations=elevations, max_nodes=options.max_triangles,

@@ -29,6 +29,7 @@ from numba import njit, prange
 
 from ..engine.arrays import distance_along, true_runs
 from ..engine.nearest import nearest_line, point_index, threads_for, z_along_lines
+from ..engine.progress import along, part, report
 from ..errors import FloodMeshError
 from ..points import step_points, xyz_array
 from .breaklines import BreakLine, as_breaklines
@@ -162,12 +163,13 @@ def _chunks(n: int):
     return [(a, min(n, a + FIT_CHUNK)) for a in range(0, n, FIT_CHUNK)]
 
 
-def _plane_fits(index, points, centres, radius):
+def _plane_fits(index, points, centres, radius, progress=None, cancelled=None):
     """Least-squares planes of the points within ``radius`` (one per centre) of each centre:
-    (z at the centre, RMS residual, point count); NaN where fewer than 4 points."""
+    (z at the centre, RMS residual, point count); NaN where fewer than 4 points. ``progress``
+    hears the share fitted, chunk by chunk, ``cancelled`` is polled between them."""
     points = np.asarray(points, float)
     parts = [_plane_fits_chunk(index, points, centres[a:b], radius[a:b])
-             for a, b in _chunks(len(centres))]
+             for a, b in along(_chunks(len(centres)), progress, cancelled)]
     if not parts:
         return np.zeros(0), np.zeros(0), np.zeros(0, np.int64)
     return tuple(np.concatenate(column) for column in zip(*parts))
@@ -524,13 +526,16 @@ def _tangents(coords: np.ndarray) -> np.ndarray:
 
 def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: FitWindow, *,
                         s_crit: float = 10.0, iterations: int = 2, min_f_ratio: float = 10.0,
-                        index=None) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+                        index=None, progress=None, cancelled=None
+                        ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """Break-line vertices moved onto the hinge of a two-plane fit to ``points`` (n, 3), z from
     the fit (see the module's docstring). ``lines`` are (k, 3) arrays. Returns the moved lines
     and, per line, each vertex's fit RMS residual (m) and the change of slope across the hinge
     (negative on a crest, positive at a toe, whichever way the line runs), both NaN where the
-    vertex was not moved."""
+    vertex was not moved. ``progress`` hears the share fitted (0–1), ``cancelled`` is polled
+    between the fits' chunks."""
     if not lines:
+        report(progress, cancelled, 1.0)
         return [], [], []
     index = index if index is not None else point_index(points)
     points = np.asarray(points, float)  # its rows: a point's x, y, z in one cache line
@@ -541,7 +546,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
     confidence = np.full(len(coords), np.nan)
     kink = np.full(len(coords), np.nan)
 
-    def hinge_fits(xy, tangents, half_length):
+    def hinge_fits(xy, tangents, half_length, progress):
         reach = float(np.hypot(window.half_width, half_length))
         with threads_for(len(xy)):
             # the fits' sums need no particular order of their points
@@ -550,13 +555,15 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
                                                xy[a:b, 0].copy(), xy[a:b, 1].copy(),
                                                tangents[a:b, 0].copy(), tangents[a:b, 1].copy(),
                                                window.half_width, half_length)
-                                   for a, b in _chunks(len(xy))])
+                                   for a, b in along(_chunks(len(xy)), progress, cancelled)])
 
-    for _ in range(iterations):
+    for i in range(iterations):
+        # each iteration its share of the bar: the full window's fits 0.6 of it, the lean rest
+        told = part(progress, i / iterations, (i + 1) / iterations)
         tangents = np.concatenate([_tangents(coords[a:b]) for a, b in zip(starts[:-1], starts[1:])])
-        fits = hinge_fits(coords[:, :2], tangents, window.half_length)
+        fits = hinge_fits(coords[:, :2], tangents, window.half_length, part(told, 0.0, 0.6))
         half_length = window.half_length
-        for _ in range(LEAN_ROUNDS):  # where the ground bends along the line: a shorter window
+        for r in range(LEAN_ROUNDS):  # where the ground bends along the line: a shorter window
             half_length /= 2
             if half_length < LEAN_LEAST * window.half_width:
                 break
@@ -564,7 +571,9 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
                 fits[:, 2] ** 2, max(window.noise, LEAN_NOISE_FLOOR), fits[:, 5] - 4))
             if not len(bent):
                 break
-            closer = hinge_fits(coords[bent, :2], tangents[bent], half_length)
+            closer = hinge_fits(coords[bent, :2], tangents[bent], half_length,
+                                part(told, 0.6 + 0.4 * r / LEAN_ROUNDS,
+                                     0.6 + 0.4 * (r + 1) / LEAN_ROUNDS))
             fitted = np.isfinite(closer[:, 2])
             fits[bent[fitted]] = closer[fitted]
         good = (np.isfinite(fits[:, 0]) & (np.abs(fits[:, 3]) >= min_kink)
@@ -574,6 +583,7 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
         coords[good, 2] = fits[good, 1]
         confidence[good] = fits[good, 2]
         kink[good] = fits[good, 3]
+        report(told, cancelled, 1.0)
     bounds = list(zip(starts[:-1], starts[1:]))
     return ([coords[a:b] for a, b in bounds], [confidence[a:b] for a, b in bounds],
             [kink[a:b] for a, b in bounds])
@@ -581,7 +591,8 @@ def localise_breaklines(lines: list[np.ndarray], points: np.ndarray, window: Fit
 
 def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.ndarray],
                         radius: float, *, on_line: float, own_lines: list = (), index=None,
-                        noise: float | None = None, note=None) -> tuple[np.ndarray, dict]:
+                        noise: float | None = None, note=None, progress=None,
+                        cancelled=None) -> tuple[np.ndarray, dict]:
     """Node elevations (n,) with the noise taken out: nodes within ``on_line`` m of a break line
     (k, 3 arrays) take z along it (``z_along_lines``; keep theirs where no line there has z: a
     modeller's 2-D line, read with NaN z, which leaves a line with z its z at a crossing; a
@@ -592,7 +603,8 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     distance to the nearest line, at least ``on_line``·10), or keep theirs where fewer than 6
     points are there. Returns z and counts. Points without a
     finite x, y, z or with a z no ground has (-9999) are left out (``points.step_points``,
-    ``note`` told; ``index`` then built anew)."""
+    ``note`` told; ``index`` then built anew). ``progress`` hears the share done (0–1) along
+    the fits, ``cancelled`` is polled on the way."""
     nodes = xyz_array(nodes, "the mesh's nodes")
     points, index = _measured(points, index, note)
     z = nodes[:, 2].copy()
@@ -601,17 +613,20 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     z[at] = on_z
     _, at, on_z = z_along_lines(xy, own_lines, within=on_line)
     z[at] = on_z
+    report(progress, cancelled, 0.1)
     on = distance <= on_line
     off = ~on
     r = np.clip(0.9 * distance[off], min(radius, 10 * on_line), radius)
     index = index if index is not None else point_index(points)
-    plane, rms, count = _plane_fits(index, points, xy[off], r)
+    plane, rms, count = _plane_fits(index, points, xy[off], r, part(progress, 0.2, 0.7),
+                                    cancelled)
     if noise:  # lean planes (where they misfit beyond the noise, a fold inside): a closer fit
-        for _ in range(2):
+        for k in range(2):
             bent = (count >= 6) & beyond_noise(rms ** 2, noise, count - 3)
             if not bent.any():
                 break
-            closer = _plane_fits(index, points, xy[off][bent], r[bent] / 2)
+            closer = _plane_fits(index, points, xy[off][bent], r[bent] / 2,
+                                 part(progress, 0.7 + 0.15 * k, 0.85 + 0.15 * k), cancelled)
             better = closer[2] >= 6
             pick = np.nonzero(bent)[0][better]
             plane[pick], rms[pick], count[pick] = (c[better] for c in closer)
@@ -619,6 +634,7 @@ def fit_node_elevations(nodes: np.ndarray, points: np.ndarray, lines: list[np.nd
     fitted = count >= 6
     idx = np.nonzero(off)[0][fitted]
     z[idx] = plane[fitted]
+    report(progress, None, 1.0)
     return z, {"on_lines": int(on.sum()), "plane_fitted": int(fitted.sum()),
                "kept": int((~fitted).sum())}
 
@@ -1017,8 +1033,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                     s_crit: float = 10.0, tolerance: float = 0.1,
                     max_gap: float = 12.0, join_gap: float | None = None,
                     join_lateral: float = 1.0, bridge_gap: float | None = None,
-                    cell_size: float = 1.0, index=None,
-                    note=None) -> tuple[list, list[float], dict]:
+                    cell_size: float = 1.0, index=None, note=None, progress=None,
+                    cancelled=None) -> tuple[list, list[float], dict]:
     """``localise_breaklines`` on BreakLines, then each line thinned: vertices the fit did not
     move are dropped where that leaves no gap over ``max_gap`` m and, between crests, moves the
     line by no more than ``UNMOVED_LATERAL`` cells (``cell_size`` m) in plan
@@ -1040,15 +1056,19 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     (``joining.snap_t_junctions``). Returns the BreakLines, each line's confidence (the
     median fit RMS residual of its vertices, m; NaN where none moved) and counts. ``index``:
     ``nearest.point_index(points)`` if built. ``lines`` may be (k, 3) arrays
-    (``as_breaklines``); points as for ``fit_node_elevations``."""
+    (``as_breaklines``); points as for ``fit_node_elevations``. ``progress`` hears the share
+    done (0–1) along the fits, then by stages, ``cancelled`` is polled on the way."""
     lines = as_breaklines(lines, "line")
     points, index = _measured(points, index, note)
     index = index if index is not None else point_index(points)  # one for both uses below
     lateral = UNMOVED_LATERAL * cell_size  # the grid's cell (m)
     moved, confidence, kinks = localise_breaklines([line.coords for line in lines], points,
-                                                   window, s_crit=s_crit, index=index)
+                                                   window, s_crit=s_crit, index=index,
+                                                   progress=part(progress, 0.0, 0.5),
+                                                   cancelled=cancelled)
     pieces, hops = [], 0  # (coords, slopes, component, fit RMS, kink, bridged) per piece
-    for line, coords, fit, kink in zip(lines, moved, confidence, kinks):
+    for line, coords, fit, kink in along(list(zip(lines, moved, confidence, kinks)),
+                                         part(progress, 0.5, 0.6), cancelled):
         fitted = _failed_fits_left_out(coords, np.isfinite(fit), max_gap, lateral, kink)
         keep = np.nonzero(fitted)[0][douglas_peucker_mask(coords[fitted], tolerance)]
         for piece in (corner for hop in _hops_cut(keep, kink)
@@ -1061,6 +1081,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
         hops -= 1
     companions = _companions(pieces, points, window, s_crit, index, tolerance)
     pieces += companions
+    report(progress, cancelled, 0.75)
     joined = len(pieces)
     if join_gap:  # measured between the pieces' fitted ends
         spans, cut = _fitted_cut(pieces, JOIN_TAIL_CELLS * cell_size)
@@ -1069,12 +1090,14 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
             ground=_ground_follows(points, window, index=index)), spans,
             [len(p[0]) for p in pieces]))
     joined -= len(pieces)
+    report(progress, cancelled, 0.85)
     n_bridges = 0
     if join_gap and bridge_gap:  # between the traced ends, then the fitted ends of the rest
         make = _bridges_fitted(points, window, s_crit, index, tolerance)
         for tail in (0.0, BRIDGE_TAIL_CELLS * cell_size):
             pieces, made = _bridged(pieces, make, bridge_gap, join_lateral, tail)
             n_bridges += made
+    report(progress, cancelled, 0.95)
     # a corner where neither arm joined or bridged anything is no use cut: the line as traced
     corners = _corners_left(pieces)
     if corners:
@@ -1096,6 +1119,7 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                for c, take, line in zip(snapped, takes, out)]
     every = np.concatenate(confidence) if confidence else np.zeros(0)
     done = np.isfinite(every)
+    report(progress, None, 1.0)
     return out, per_line, {"vertices": int(every.size), "vertices_localised": int(done.sum()),
                            "vertices_kept": int(sum(len(line.coords) for line in out)),
                            "hop_segments_cut": hops,

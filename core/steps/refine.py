@@ -14,6 +14,7 @@ reported is independent of the refinement.
 """
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -65,8 +66,10 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     points' vertical noise (None: estimated from them, ``localise.estimate_noise``);
     ``floor`` (m²): no triangle is refined to less (default half a DEM cell). ``domain``,
     ``size_field`` and ``mesh_options`` as for ``build_mesh``; ``elevations(mesh)`` (or None)
-    gives each round's mesh its node z; ``first``: the first round's mesh if already built;
-    ``most``: the share of a round's triangles split at most, the worst misfits first;
+    gives each round's mesh its node z (one that takes ``progress`` and ``cancelled`` keywords
+    hears its share of the bar and is polled, as ``build_mesh`` is); ``first``: the first
+    round's mesh if already built; ``most``: the share of a round's triangles split at most,
+    the worst misfits first;
     ``measure_last`` False: the last of ``max_rounds`` rounds measures only the check points
     (its refinement points' figures NaN), as nothing is refined after it; ``floor_at(xy)``: the
     floor (m²) at triangle centroids (k, 2), where it varies (None: ``floor`` everywhere);
@@ -102,25 +105,30 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
 
     def build(picked: _Picks, progress=None) -> Mesh:
         """The mesh with the points and triangles of earlier rounds and ``picked``, its share
-        of the work told to ``progress``."""
+        of the work told to ``progress``: its node z from ``elevations`` the last fifth."""
         nonlocal domain
         poll(cancelled)  # each mesh, the node budget's tries too
         if domain is None:  # the DEM's outline once, where build_mesh would trace it each round
             domain = domain_from_dem(dem)
+        meshed = 1.0 if elevations is None else 0.8
         mesh = build_mesh(dem, lines, min_angle=min_angle, max_area=max_area,
                           points=np.vstack([inserted, picked.points]),
                           local_areas=np.vstack([local, picked.triangles]), domain=domain,
-                          size_field=size_field, conforming=conforming, progress=progress,
-                          cancelled=cancelled, **(mesh_options or {}))
-        return mesh if elevations is None else elevations(mesh)  # node z from a terrain fit
+                          size_field=size_field, conforming=conforming,
+                          progress=part(progress, 0.0, meshed), cancelled=cancelled,
+                          **(mesh_options or {}))
+        return _with_z(mesh, elevations, part(progress, meshed, 1.0), cancelled)
 
     for k in range(max_rounds):
         poll(cancelled)
+        # the mesh (or the first one's node z) takes half its round's share of the bar, the
+        # measuring the rest; all of it where the round measures only the check points
+        told = part(progress, k / max_rounds, (k + 1) / max_rounds)
+        meshed = 1.0 if k == max_rounds - 1 and not measure_last else 0.5
         if k == 0 and first is not None:
-            mesh = first if elevations is None else elevations(first)
+            mesh = _with_z(first, elevations, part(told, 0.0, meshed), cancelled)
         else:
-            # the mesh takes half its round's share of the bar, the measuring the rest
-            mesh = build(picks, part(progress, k / max_rounds, (k + 0.5) / max_rounds))
+            mesh = build(picks, part(told, 0.0, meshed))
         if len(mesh.nodes) > max_nodes:
             if best is None:
                 raise FloodMeshError(f"the unrefined mesh already has {len(mesh.nodes)} nodes, "
@@ -155,22 +163,24 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
             break
         found, tin = locate(mesh.nodes, mesh.triangles, points, mesh.nodes[:, 2])
         res = points[:, 2] - tin
+        report(told, cancelled, 0.7)
         if noise is None:  # from planes fitted to some 30 points each (as the run's window)
             noise = estimate_noise(points, len(points) / (np.isfinite(dem.values).sum()
                                                           * dem.cell_size ** 2))
         misfit, excess = _misfit_triangles(mesh, found, res, lower, floor, noise, most,
                                            floor_at)
+        report(told, cancelled, 0.8)
         rounds.append(RefineRound(len(mesh.nodes), len(mesh.triangles), _rmse(res),
                                   _max_abs(res), *_check_figures(mesh, check), added,
                                   len(picks.triangles)))
+        report(told, cancelled, 0.9)
         best = mesh
         picks = _Picks.none(points) if upper is None else _worst_per_triangle(points, res,
                                                                               found, upper)
         picks = _Picks(picks.points, picks.score, misfit, excess)
         left = (0 if upper is None else int(np.count_nonzero(np.abs(np.nan_to_num(res)) > upper)),
                 len(misfit))
-        if progress is not None:
-            progress((k + 1) / max_rounds)
+        report(told, None, 1.0)
         if _met(res, target_rmse, target_max):
             stop = "the target holds"
             break
@@ -184,6 +194,20 @@ def refine_mesh(dem: Grid, lines: list[np.ndarray], points: np.ndarray, *,
     if note is not None and upper is not None and left is not None and any(left):
         note(_left_over(*left, upper, lower, stop))
     return best, rounds
+
+
+def _with_z(mesh: Mesh, elevations, progress, cancelled) -> Mesh:
+    """``mesh`` with its node z from ``elevations(mesh)`` (None: as it is), told ``progress``
+    and ``cancelled`` where it takes them (see ``refine_mesh``)."""
+    if elevations is None:
+        return mesh
+    takes = inspect.signature(elevations).parameters
+    if {"progress", "cancelled"} <= takes.keys() or any(
+            p.kind is p.VAR_KEYWORD for p in takes.values()):
+        return elevations(mesh, progress=progress, cancelled=cancelled)
+    mesh = elevations(mesh)
+    report(progress, cancelled, 1.0)
+    return mesh
 
 
 @dataclass(frozen=True)

@@ -318,22 +318,49 @@ def test_the_bar_stays_within_the_whole_with_the_laplacian_of_gaussian(tmp_path)
     assert all(0 <= f <= 1 for f in told) and told == sorted(told) and told[-1] == 1.0, told
 
 
-def test_cancel_as_meshing_begins_stops_there(demo_points_file, tmp_path):
-    """Cancel pressed as the mesh step begins (a big run's longest step) is honoured inside it:
-    the run stops with Cancelled, the bar moves no further and no later step starts, and no
-    output folder nor staging folder is left."""
+def test_the_bar_moves_inside_localising_and_the_first_refinement_round(bar_run):
+    """The hinge fits that put the lines onto the ground ("localise") move the bar while they
+    work (it told only their end), and the first refinement round, which fits the node z of the
+    run's first mesh and measures its misfit, moves it too: no jump inside the refine step of
+    more than a fifth of the step (the first round's half jumped at once, 61 -> 72 %)."""
+    assert len(set(_told_within(bar_run, "localise..."))) >= 5, bar_run
+    before = [f for f in bar_run[:bar_run.index("refine...")] if not isinstance(f, str)][-1:]
+    told = before + _told_within(bar_run, "refine...")
+    assert max(np.diff(told)) <= (told[-1] - told[0]) / 5, told
+
+
+def test_the_bar_moves_inside_node_elevations(demo_points_file, tmp_path):
+    """A run without the misfit pass fits its mesh's node z on local planes ("node
+    elevations"): the bar moves inside that step too (it told only its end), never back,
+    within 0–1, up to 1 at the end."""
+    events = []
+    run_pipeline(demo_points_file, tmp_path / "out", RunOptions(holdout=0.01, misfit_passes=0),
+                 progress=events.append, log=events.append)
+    fractions = [f for f in events if not isinstance(f, str)]
+    assert all(0 <= f <= 1 for f in fractions), fractions
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    assert len(set(_told_within(events, "node elevations..."))) >= 4, events
+
+
+@pytest.mark.parametrize("step", ["mesh...", "localise...", "node elevations..."])
+def test_cancel_as_a_step_begins_stops_there(demo_points_file, tmp_path, step):
+    """Cancel pressed as the mesh step (a big run's longest), the hinge fits ("localise") or
+    the node z's plane fits ("node elevations", a run without the misfit pass) begin is
+    honoured inside the step: the run stops with Cancelled, the bar moves no further and no
+    later step starts, and no output folder nor staging folder is left."""
     events = []
 
     def cancelled():
-        return "mesh..." in events
+        return step in events
 
     out = tmp_path / "out"
+    options = RunOptions(holdout=0.01, misfit_passes=0 if step == "node elevations..." else 1)
     with pytest.raises(Cancelled):
-        run_pipeline(demo_points_file, out, RunOptions(holdout=0.01), cancelled=cancelled,
+        run_pipeline(demo_points_file, out, options, cancelled=cancelled,
                      progress=lambda f: events.append(f), log=lambda m: events.append(m))
     from floodmesh.core.engine.compiles import is_compile_message
 
-    after = [e for e in events[events.index("mesh...") + 1:]
+    after = [e for e in events[events.index(step) + 1:]
              if not isinstance(e, str) or not (e.startswith("note: ") or is_compile_message(e))]
     assert after == [], after
     assert os.listdir(tmp_path) == []
