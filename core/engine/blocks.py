@@ -20,8 +20,9 @@ import numpy as np
 
 from .._kernels.aot import kernel
 from ..errors import FloodMeshError
-from ..io import (atomic_output, dem_file, describe_band, implausible_note, no_valid_cells,
-                  nodata_range, raster_crs_wkt, raster_profile, read_band, refuse_non_elevations,
+from ..io import (atomic_output, band_scaling, dem_file, describe_band, implausible_note,
+                  no_valid_cells, nodata_range, raster_crs_wkt, raster_profile, read_band,
+                  refuse_non_elevations,
                   require_file)
 from ..raster import HIGHEST_GROUND_M, LOWEST_GROUND_M
 from .progress import poll
@@ -211,13 +212,16 @@ def _band_reader(src, dtype, halo: int, elevations: bool):
     thread, makes nodata (``io.nodata_range``) and ±inf NaN in floats, with ``elevations`` also
     cells no ground has, gathered in ``implausible`` (count, least, greatest; ``halo`` cells of
     the buffer are another window's), and returns whether a finite cell is in it. Files that
-    mask cells by a mask band rather than a nodata value are read masked (``io.read_band``)."""
+    mask cells by a mask band rather than a nodata value, and those whose values are packed
+    (``io.band_scaling``), are read as ``io.read_band`` reads them, nodata NaN and unpacked."""
     # lazy: GDAL loads only when this runs
     from rasterio.enums import MaskFlags
 
     implausible = np.array([0.0, np.inf, -np.inf])
     flags = src.mask_flag_enums[0]
-    if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags or np.dtype(dtype).kind != "f":
+    whole = band_scaling(src) == (1.0, 0.0)
+    if MaskFlags.per_dataset in flags or MaskFlags.alpha in flags or not whole or \
+            np.dtype(dtype).kind != "f":
         def read(view, window):
             view[...] = read_band(src, window, dtype)
     else:
@@ -226,7 +230,8 @@ def _band_reader(src, dtype, halo: int, elevations: bool):
     if np.dtype(dtype).kind != "f":
         return read, lambda padded: True, implausible
     cast = np.dtype(dtype).type
-    low, high = (cast(v) for v in nodata_range(src))
+    # unpacked values are no longer the nodata tag's: read_band made those NaN
+    low, high = (cast(v) for v in (nodata_range(src) if whole else (np.nan, np.nan)))
     lowest, highest = (cast(LOWEST_GROUND_M), cast(HIGHEST_GROUND_M)) if elevations else \
         (cast(-np.inf), cast(np.inf))
     missing_to_nan = _kernel("missing_to_nan", dtype)

@@ -47,9 +47,9 @@ from affine import Affine
 from pyproj import CRS
 
 from ..errors import FloodMeshError
-from ..io import (ELEVATION, GROUND_CLASS, atomic_output, classes_kept, describe_band,
-                  drop_implausible, file_format, held_quantity, las_classes, las_crs,
-                  las_fields_read, las_xyz, read_band, read_las, read_xyz)
+from ..io import (ELEVATION, GROUND_CLASS, atomic_output, band_scaling, classes_kept,
+                  describe_band, drop_implausible, file_format, held_quantity, las_classes,
+                  las_crs, las_fields_read, las_xyz, read_band, read_las, read_xyz)
 from ..io.rasters import named_instead
 from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
@@ -1594,6 +1594,20 @@ def _refuse_tiles_in_degrees(named: list, kind: str) -> None:
         f"others' CRS first ({_reproject(kind, code)})")
 
 
+def _tiles_scaling(paths, sources) -> tuple[float, float]:
+    """The (scale, offset) the DEM tiles' values are packed by (``io.band_scaling``), one for
+    all; tiles packed by different ones are refused (they would be merged as stored)."""
+    scalings = [band_scaling(src) for src in sources]
+    for path, scaling in zip(paths, scalings):
+        if scaling != scalings[0]:
+            raise FloodMeshError(
+                f"tile {path.name} stores its elevations with scale {scaling[0]:g} and offset "
+                f"{scaling[1]:g}, tile {paths[0].name} with {scalings[0][0]:g} and "
+                f"{scalings[0][1]:g}: unpack them first (gdal_translate -unscale -ot Float32 IN "
+                "OUT)")
+    return scalings[0]
+
+
 def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
     """Several GeoTIFF DEM tiles (a folder, glob or list) as one Grid, after checking each: one
     CRS in metres (``crs`` replaces theirs, which ``note`` hears of) true to scale there, the
@@ -1652,9 +1666,11 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
         d = first[2].a
         check_memory(cells=int(math.ceil((xmax - xmin) / d) * math.ceil((ymax - ymin) / d)),
                      advice="resample the DEM tiles to larger cells")
+        scale, offset = _tiles_scaling(paths, sources)
         mosaic, transform = merge(sources, nodata=np.nan, dtype="float64")
     values = np.asarray(mosaic[0], np.float64)  # merge made it float64: no copy
     values[~np.isfinite(values)] = np.nan
+    values = values * scale + offset  # the stored values unpacked, as one tile's are
     drop_implausible(values, "the DEM tiles", "TILE", note)
     if not np.isfinite(values).any():
         raise FloodMeshError("the DEM tiles have no valid cells: check their nodata value")

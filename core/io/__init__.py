@@ -17,7 +17,7 @@ from .points import (GROUND_CLASS, classes_kept, file_format, las_classes, las_c
                      las_fields_read, las_xyz, point_file_name, read_las, read_point_file,
                      read_points, read_xyz, write_points_las)
 from .rasters import (ELEVATION, INTEGER_COMPRESSION, RASTER_EXTENSIONS, TILE,
-                      check_quantity, dem_file, describe_band, drop_implausible, held_quantity,
+                      band_scaling, check_quantity, dem_file, describe_band, drop_implausible, held_quantity,
                       implausible_note, no_valid_cells, nodata_range, raster_crs, raster_crs_wkt,
                       raster_profile, read_band, read_dem, read_input, read_raster,
                       refuse_non_elevations, write_raster)
@@ -32,7 +32,8 @@ __all__ = [
     "las_xyz", "point_file_name", "read_las", "read_point_file", "read_points", "read_xyz",
     "write_points_las",
     # rasters
-    "ELEVATION", "INTEGER_COMPRESSION", "RASTER_EXTENSIONS", "TILE", "check_quantity",
+    "ELEVATION", "INTEGER_COMPRESSION", "RASTER_EXTENSIONS", "TILE", "band_scaling",
+    "check_quantity",
     "dem_file", "describe_band", "drop_implausible", "held_quantity", "implausible_note",
     "no_valid_cells", "nodata_range", "raster_crs", "raster_crs_wkt", "raster_profile",
     "read_band", "read_input", "read_raster", "read_dem", "refuse_non_elevations", "write_raster",

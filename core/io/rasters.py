@@ -104,10 +104,18 @@ def nodata_range(src) -> tuple[float, float]:
     return low, high
 
 
+def band_scaling(src) -> tuple[float, float]:
+    """(scale, offset) of band 1 of the open ``src``: its values are stored · scale + offset (a
+    DEM packed as whole centimetres has scale 0.01), as GDAL defines them and QGIS shows them;
+    (1, 0) where the file gives none, or a scale of 0, which GDAL and QGIS ignore."""
+    scale, offset = float(src.scales[0]), float(src.offsets[0])
+    return (1.0, 0.0) if scale == 0 else (scale, offset)
+
+
 def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
     """Band 1 (or a window of it) as ``dtype`` with NaN for nodata (``nodata_range``) and ±inf,
     in one buffer (no masked array) unless the file masks cells by a mask band rather than a
-    nodata value."""
+    nodata value; a float ``dtype`` holds the values unpacked (``band_scaling``)."""
     # lazy: GDAL loads only when this runs
     from rasterio.enums import MaskFlags
 
@@ -121,6 +129,10 @@ def read_band(src, window=None, dtype=np.float64) -> np.ndarray:
     if low == low:
         bad |= (values >= low) & (values <= high)
     values[bad] = np.nan
+    scale, offset = band_scaling(src)
+    if (scale, offset) != (1.0, 0.0) and values.dtype.kind == "f":
+        values *= values.dtype.type(scale)
+        values += values.dtype.type(offset)
     return values
 
 
@@ -151,7 +163,7 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
                          advice="resample it to larger cells or split it into tiles")
             values = read_band(src)
             nodata, count, dtype = src.nodata, src.count, src.dtypes[0]
-            held = held_quantity(src)
+            held, step = held_quantity(src), abs(band_scaling(src)[0])
     except rasterio.errors.RasterioIOError as exc:
         raise FloodMeshError(f"{path.name} is not a readable raster ({exc})") from None
     if elevations:
@@ -160,7 +172,8 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
         note(f"raster {path.name} has {count} bands: band 1 is used as the elevations; "
              f"extract another one first if it holds them (gdal_translate -b N IN OUT)")
     if note and np.issubdtype(np.dtype(dtype), np.integer):
-        note(f"raster {path.name} stores elevations as whole numbers ({dtype}): its 1-unit "
+        steps = "1-unit" if step == 1 else f"{step:g} m"
+        note(f"raster {path.name} stores elevations as whole numbers ({dtype}): its {steps} "
              "steps are terraces whose edges the slope sees and break lines may follow; use a "
              "DEM with floating-point elevations (float32) where there is one")
     if not np.isfinite(values).any():
