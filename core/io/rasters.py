@@ -79,6 +79,9 @@ def no_valid_cells(path) -> FloodMeshError:
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 FLOAT32_EPS = float(np.finfo(np.float32).eps)
+# half the spacing of float32 numbers at FLT_MAX: a float32 sum overflows to inf where its
+# exact value reaches FLT_MAX plus this (it rounds up from there)
+FLOAT32_TOP_HALF_STEP = 2.0 ** 103
 
 
 def nodata_range(src) -> tuple[float, float]:
@@ -88,7 +91,9 @@ def nodata_range(src) -> tuple[float, float]:
     (5·10⁻⁷ of it) of the tag in the band's own type, GDAL's ARE_REAL_EQUAL (to a float32 ulp
     at the ends); in float32 GDAL's test also holds where cell plus tag overflows, which near
     ±FLT_MAX reaches the tag: a tag written with six digits, -3.40282e+38 (gdal_edit.py
-    -a_nodata), names the -3.4028235e+38 that the cells hold."""
+    -a_nodata), names the -3.4028235e+38 that the cells hold; a tag of ±FLT_MAX itself
+    (gdal_calc.py's, QGIS's raster calculator's) names the cells beyond ±1.01·10³¹ of its
+    sign, not the elevations."""
     nodata = src.nodata
     if nodata is None or not np.isfinite(nodata):  # NaN and ±inf cells are nodata anyway
         return np.nan, np.nan
@@ -98,7 +103,8 @@ def nodata_range(src) -> tuple[float, float]:
     tag = float(native.type(nodata))
     reach = 4 * FLOAT32_EPS * abs(tag)
     low, high = tag - reach, tag + reach
-    edge = FLOAT32_MAX - abs(tag)  # cells of the tag's sign beyond it overflow the sum
+    # cells of the tag's sign from here on overflow the float32 sum
+    edge = FLOAT32_MAX - abs(tag) + FLOAT32_TOP_HALF_STEP
     if native == np.float32 and edge <= abs(tag) + reach:  # and that reaches the tag
         low, high = (min(low, edge), FLOAT32_MAX) if tag > 0 else (-FLOAT32_MAX, max(high, -edge))
     return low, high

@@ -502,6 +502,30 @@ def test_a_nodata_tag_written_with_six_digits_names_the_cells_gdal_masks(tmp_pat
     assert "taken as nodata" not in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_nodata_tag_of_flt_max_leaves_the_elevations_of_its_sign_valid(tmp_path, sign):
+    # gdal_calc.py tags float32 output +FLT_MAX, QGIS's raster calculator -FLT_MAX: GDAL's mask
+    # leaves out only the cells whose float32 sum with the tag overflows (beyond 2^103 of its
+    # sign); a polder's elevations (below 0 m, under -FLT_MAX) or any (above, under +FLT_MAX)
+    # were all taken as nodata: "no valid cells", or a mesh of half the DEM
+    values = (sign * (slope_dem() - 9.0)).astype(np.float32)  # 1 to 7 m of the tag's sign
+    values[10:20, 10:20] = sign * np.finfo(np.float32).max
+    values[0, 0] = 0.0
+    dem = _raster(tmp_path / "calc.tif", values, nodata=sign * float(np.finfo(np.float32).max))
+    with rasterio.open(dem) as src:
+        gdal_valid = src.read_masks(1) > 0  # GDAL's own mask, as QGIS and gdalinfo take it
+    assert gdal_valid.sum() == values.size - 100
+    grid = io.read_input(dem)
+    np.testing.assert_array_equal(np.isfinite(grid.values), gdal_valid)
+    np.testing.assert_array_equal(grid.values[gdal_valid], values[gdal_valid])
+    out = tmp_path / "slope.tif"  # streamed block by block
+    assert main(["slope", str(dem), "--out", str(out)]) == 0
+    np.testing.assert_array_equal(np.isfinite(io.read_raster(out).values), gdal_valid)
+    assert main(["run", str(dem), "--out", str(tmp_path / "out")]) == 0
+    nodes, _ = io.read_mesh_2dm(tmp_path / "out" / "mesh.2dm")
+    assert np.ptp(nodes[:, 0]) == 59 and np.ptp(nodes[:, 1]) == 59  # the whole DEM
+
+
 def test_a_cell_size_given_for_a_dem_is_named_as_unused(tmp_path, capsys):
     dem = _raster(tmp_path / "dem.tif", slope_dem())  # 1 m cells
     assert main(["run", str(dem), "--out", str(tmp_path / "out"), "--cell-size", "2"]) == 0
