@@ -25,6 +25,14 @@ LOWEST_GROUND_M, HIGHEST_GROUND_M = -1000.0, 9000.0
 SCALE_Z_POINTS = ('pdal translate IN OUT -f filters.assign '
                   '--filters.assign.value="Z = Z * {factor:.7g}"')
 SCALE_Z_RASTER = 'gdal_calc.py -A IN --calc "A*{factor:.7g}" --outfile OUT'
+# Units other than metres a raster's band may name for its values (GDAL's unit type, which a
+# NetCDF's units attribute and a USGS DEM set): metres per unit
+LENGTH_UNITS = {
+    **dict.fromkeys(("ft", "foot", "feet", "international foot"), 0.3048),
+    **dict.fromkeys(("us-ft", "ftus", "us survey foot", "us survey feet"), 1200 / 3937),
+    **dict.fromkeys(("cm", "centimetre", "centimeter", "centimetres", "centimeters"), 0.01),
+    **dict.fromkeys(("mm", "millimetre", "millimeter", "millimetres", "millimeters"), 0.001),
+}
 
 
 def _for_kind(kind: str | None, points: str, raster: str) -> str:
@@ -173,6 +181,17 @@ def require_metric_crs(crs, what: str, kind: str | None = None, *,
             f"{_reproject_hint(kind)} (the UTM zone), and if z is in '{unit}' too scale it, "
             f"e.g. {_scale_z_hint(kind, axis.unit_conversion_factor)}")
     return crs
+
+
+def require_metre_elevations(unit: str | None, what: str) -> None:
+    """Refuse a DEM (``what``) whose band says its elevations are in a unit other than metres
+    (``unit``, GDAL's unit type: feet, centimetres, ``LENGTH_UNITS``), naming the conversion;
+    a band that names none, or another word, is taken as metres."""
+    factor = LENGTH_UNITS.get((unit or "").strip().lower())
+    if factor is not None:
+        raise FloodMeshError(
+            f"{what} has elevations in '{unit.strip()}' (its band's unit); FloodMesh works in "
+            f"metres: convert them first, e.g. {_scale_z_hint('raster', factor)}")
 
 
 # A projected CRS's scale at the data may differ from true by this fraction: UTM zones and

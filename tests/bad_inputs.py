@@ -189,6 +189,32 @@ def _tif(name, values_fn=slope_dem, **kwargs):
     return make
 
 
+def _tif_in(unit):
+    """slope_dem() as a GeoTIFF whose band says its values are in ``unit`` (GDAL's unit type,
+    as a NetCDF's units attribute or a USGS DEM sets it)."""
+    def make(folder):
+        path = write_tif(folder / f"dem_{unit.replace(' ', '_')}.tif", slope_dem())
+        with rasterio.open(path, "r+") as dst:
+            dst.set_band_unit(1, unit)
+        return path
+    return make
+
+
+def _tiles_one_in(unit):
+    """slope_dem() as two DEM tiles, the east one's band saying its values are in ``unit``."""
+    def make(folder):
+        tiles = folder / "tiles"
+        tiles.mkdir(exist_ok=True)
+        values = slope_dem()
+        write_tif(tiles / "west.tif", values[:, :30])
+        east = write_tif(tiles / "east.tif", values[:, 30:], transform=Affine(
+            1.0, 0.0, ORIGIN[0] + 30, 0.0, -1.0, ORIGIN[1] + values.shape[0]))
+        with rasterio.open(east, "r+") as dst:
+            dst.set_band_unit(1, unit)
+        return tiles
+    return make
+
+
 # Web Mercator at 50° N, where its metre is 0.64 m on the ground
 WEB_MERCATOR_50N = Affine(1.0, 0.0, 1_001_875.0, 0.0, -1.0, 6_446_475.0)
 
@@ -607,6 +633,16 @@ CASES = [
              _maker(_tif("feet.tif", crs="EPSG:2229")),
              _lidar(_tif("feet.tif", crs="EPSG:2229"))),
     BadInput("feet-real-autzen", "horizontal units of 'foot'", _maker(_autzen), _lidar(_autzen)),
+    BadInput("dem-band-in-feet", "has elevations in 'ft' (its band's unit); FloodMesh works in "
+             'metres: convert them first, e.g. `gdal_calc.py -A IN --calc "A*0.3048" --outfile '
+             'OUT`', _maker(_tif_in("ft")), _lidar(_tif_in("ft"))),
+    BadInput("dem-tile-band-in-feet", "tile east.tif has elevations in 'US survey foot'",
+             _maker(_tiles_one_in("US survey foot")),
+             _qgis("lidartomesh", TILE_FOLDER=_tiles_one_in("US survey foot"),
+                   OUTPUT_FOLDER="{out}")),
+    BadInput("dem-band-in-centimetres", "has elevations in 'cm' (its band's unit)",
+             lambda f: ["slope", _tif_in("cm")(f), "--out", "{out}/slope.tif"],
+             _qgis("slope", INPUT=_tif_in("cm"), OUTPUT="{out}/slope.tif")),
     BadInput("vertical-feet", "elevations in 'US survey foot'", _maker(_las_vertical_feet),
              _lidar(_las_vertical_feet)),
     BadInput("geocentric-crs", "a geocentric CRS, not a projected one",

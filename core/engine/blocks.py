@@ -22,9 +22,8 @@ from .._kernels.aot import kernel
 from ..errors import FloodMeshError
 from ..io import (atomic_output, band_scaling, dem_file, describe_band, implausible_note,
                   no_valid_cells, nodata_range, raster_crs_wkt, raster_profile, read_band,
-                  refuse_non_elevations,
-                  require_file)
-from ..raster import HIGHEST_GROUND_M, LOWEST_GROUND_M
+                  refuse_non_elevations, require_file)
+from ..raster import HIGHEST_GROUND_M, LOWEST_GROUND_M, require_metre_elevations
 from .progress import poll
 
 DEFAULT_BLOCK_ROWS = 2048
@@ -165,6 +164,7 @@ def map_raster(src_path, dst_path, func: Callable[[np.ndarray], np.ndarray], *, 
             _open(src_path) as src:
         if elevations:
             refuse_non_elevations(src, f"raster {src_path.name}")
+            require_metre_elevations(src.units[0], f"raster {src_path.name}")
         crs = raster_crs_wkt(src, src_path, crs)
         shape = (src.height, src.width)
         windows = row_windows(shape, block_rows) if windows is None else list(windows)

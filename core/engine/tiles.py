@@ -55,7 +55,8 @@ from ..io.outputs import remove_stale_scratch, scratch_folder
 from ..options import LOCAL_CLUSTER, check_cell_size, check_holdout, check_max_gap, holdout_count
 from ..points import clean_points, holdout_candidates, least_hash, place_hashes, usable_points
 from ..raster import (Grid, check_scale, check_transform, chosen_crs, corners_and_centre,
-                      extent_words, holds_instead, require_metric_crs, same_place)
+                      extent_words, holds_instead, require_metre_elevations, require_metric_crs,
+                      same_place)
 from ..steps.slope import slope_block
 from .blocks import cell_size, map_raster
 from .limits import BYTES_PER_FITTED_CELL, check_memory, fits_in_memory, footprint
@@ -1634,6 +1635,7 @@ def read_dem_tiles(inputs, *, crs=None, note=None) -> Grid:
         for path, src in zip(paths, sources):
             name = path.name
             check_transform(src.transform, f"tile {name}")
+            require_metre_elevations(src.units[0], f"tile {name}")
             own = src.crs.to_wkt() if src.crs else None
             tile_crs = require_metric_crs(chosen_crs(crs, own, f"tile {name}", replaced.append),
                                           f"tile {name}", kind="raster")

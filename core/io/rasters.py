@@ -13,7 +13,8 @@ from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import is_point_source
 from ..raster import (ELEVATION, METRE_NAMES, QUANTITIES, SCALE_TOLERANCE, Grid, check_transform,
-                      chosen_crs, drop_implausible, holds_instead, implausible_note, metric_crs_at)
+                      chosen_crs, drop_implausible, holds_instead, implausible_note, metric_crs_at,
+                      require_metre_elevations)
 from .outputs import atomic_output, require_file
 from .points import read_points
 
@@ -164,6 +165,8 @@ def read_raster(path, *, crs=None, elevations: bool = True, note=None, default_c
                 refuse_non_elevations(src, f"raster {path.name}")
             if holds:
                 refuse_other_quantity(held_quantity(src), f"raster {path.name}", *holds)
+            if elevations:
+                require_metre_elevations(src.units[0], f"raster {path.name}")
             transform, crs = src.transform, raster_crs(src, path, crs, note, default_crs)
             check_memory(cells=src.width * src.height,
                          advice="resample it to larger cells or split it into tiles")
