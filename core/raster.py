@@ -183,15 +183,18 @@ def require_metric_crs(crs, what: str, kind: str | None = None, *,
     return crs
 
 
-def require_metre_elevations(unit: str | None, what: str) -> None:
-    """Refuse a DEM (``what``) whose band says its elevations are in a unit other than metres
-    (``unit``, GDAL's unit type: feet, centimetres, ``LENGTH_UNITS``), naming the conversion;
-    a band that names none, or another word, is taken as metres."""
+def require_metre_elevations(unit: str | None, what: str, *, kind: str = "raster",
+                             said: str = "its band's unit", of: str = "elevations") -> None:
+    """Refuse ``what`` (a DEM, or point text: ``kind``) whose ``of`` (elevations, or x, y) are
+    said (``said``: by its band's unit, GDAL's unit type, or its header) to be in a unit other
+    than metres (``unit``: feet, centimetres, ``LENGTH_UNITS``), naming the conversion; no
+    unit, or another word, is taken as metres."""
     factor = LENGTH_UNITS.get((unit or "").strip().lower())
     if factor is not None:
+        fix = _scale_z_hint(kind, factor) if of == "elevations" else _reproject_hint(kind)
         raise FloodMeshError(
-            f"{what} has elevations in '{unit.strip()}' (its band's unit); FloodMesh works in "
-            f"metres: convert them first, e.g. {_scale_z_hint('raster', factor)}")
+            f"{what} has {of} in '{unit.strip()}' ({said}); FloodMesh works in metres: convert "
+            f"them first, e.g. {fix}")
 
 
 # A projected CRS's scale at the data may differ from true by this fraction: UTM zones and

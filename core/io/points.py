@@ -15,7 +15,7 @@ from ..engine.limits import check_memory
 from ..errors import FloodMeshError
 from ..options import EPT_NAME, POINT_EXTENSIONS
 from ..points import PointCloud, clean_points
-from ..raster import RefusedCRS, chosen_crs, parse_crs
+from ..raster import LENGTH_UNITS, RefusedCRS, chosen_crs, parse_crs, require_metre_elevations
 from .outputs import atomic_output, require_file
 
 GROUND_CLASS = 2
@@ -387,11 +387,18 @@ def _fields(line: str, delimiter: str | None) -> list[str]:
     return line.split(delimiter) if delimiter else line.split()
 
 
-def _column_name(field: str) -> str:
-    """A header field as ``COLUMN_NAMES`` spells it: quotes, a unit ("[m]", "(m)", "_m") and
-    case cut."""
-    name = re.sub(r"[\[(].*", "", field.strip().strip("\"'")).strip().lower()
-    return re.sub(r"[ _]m$", "", name)
+# a unit a header field gives its column after its name: "[ft]", "(m)", "_m", " ft"
+_FIELD_UNIT = re.compile(r"[\[(]\s*([^\])]*?)\s*[\])].*|[ _](m|" + "|".join(
+    re.escape(u) for u in LENGTH_UNITS if " " not in u) + r")$", re.IGNORECASE)
+
+
+def _column_name(field: str) -> tuple[str, str | None]:
+    """(the name, as ``COLUMN_NAMES`` spells it, and the unit) of a header field: quotes, the
+    unit ("[m]", "(ft)", "_m", " ft") and case cut."""
+    field = field.strip().strip("\"'").strip()
+    unit = _FIELD_UNIT.search(field)
+    name = field[:unit.start()] if unit else field
+    return name.strip().lower(), (unit.group(1) or unit.group(2)) if unit else None
 
 
 def xyz_layout(head: list[str], name: str) -> XyzLayout:
@@ -418,7 +425,7 @@ def xyz_layout(head: list[str], name: str) -> XyzLayout:
         return XyzLayout(delimiter, first, (0, 1, 2))
     except ValueError:  # a header line: the columns are those it names
         pass
-    names = [_column_name(f) for f in fields]
+    names, units = zip(*(_column_name(f) for f in fields))
     found = {role: [k for k, n in enumerate(names) if n in aliases]
              for role, aliases in COLUMN_NAMES.items()}
     if any(len(found[role]) != 1 for role in "xyz") or len(found["class"]) > 1:
@@ -426,6 +433,10 @@ def xyz_layout(head: list[str], name: str) -> XyzLayout:
             f"{name}: its header line names the columns {', '.join(f.strip() for f in fields)}, "
             "not one x, one y and one z column: name them x, y, z (or easting, northing, "
             "elevation), or delete the header line to read the first three columns as x, y, z")
+    for role, of in (("x", "x, y"), ("y", "x, y"), ("z", "elevations")):
+        k = found[role][0]
+        require_metre_elevations(units[k], name, kind="points", of=of,
+                                 said=f"its header's {fields[k].strip()}")
     return XyzLayout(delimiter, first + 1, tuple(found[role][0] for role in "xyz"),
                      found["class"][0] if found["class"] else None)
 
