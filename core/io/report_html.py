@@ -118,9 +118,11 @@ def _nssda(report: dict) -> str:
     n, rmse, bound = report["n_assessed"], report["rmse_m"], report.get("nssda_threshold_m")
     verdict = report.get("nssda_pass")
     if verdict is None or bound is None:
+        why = ("FEMA asks for 20 or more" if bound is not None else
+               "it needs at least 7; FEMA asks for 20 or more")
         return (f'<p id="nssda">FEMA/NSSDA sample test: <span class="untested">not tested'
-                f"</span>: too few check points ({n:,}) for the bound {_e(NSSDA_RULE)} (it "
-                "needs at least 7; FEMA asks for 20 or more).</p>")
+                f"</span>: too few check points ({n:,}) for the bound {_e(NSSDA_RULE)} "
+                f"({why}).</p>")
     word, cls, relation = (("PASS", "pass", "≤") if verdict else ("FAIL", "fail", ">"))
     return (f'<p id="nssda">FEMA/NSSDA sample test: <span class="{cls}">{word}</span>: the '
             f"RMSE of the {n:,} check points, {_e(cm(rmse))}, {relation} {_e(cm(bound))}, "

@@ -427,6 +427,7 @@ def test_report_html_escapes_text(html_run):
 def test_report_html_verdicts(html_run):
     """A failed test says FAIL, too few check points say the test was not made."""
     from floodmesh.core.io.report_html import report_html
+    from floodmesh.core.steps.accuracy import nssda_threshold_m
 
     _, report_dict = html_run
     failed = _Page(report_html(dict(report_dict, nssda_pass=False), {}))
@@ -434,6 +435,13 @@ def test_report_html_verdicts(html_run):
     few = _Page(report_html(dict(report_dict, n_assessed=5, nssda_pass=None,
                                  nssda_threshold_m=None), {}))
     assert "not tested" in few.ids["nssda"]
+    assert "it needs at least 7; FEMA asks for 20 or more" in few.ids["nssda"]
+    # 12 points: the bound exists (from 7), but FEMA's test takes 20; that is why, not the 7
+    twelve = _Page(report_html(dict(report_dict, n_assessed=12, nssda_pass=None,
+                                    nssda_threshold_m=nssda_threshold_m(12)), {}))
+    assert "not tested" in twelve.ids["nssda"] and "(12)" in twelve.ids["nssda"]
+    assert "FEMA asks for 20 or more" in twelve.ids["nssda"]
+    assert "at least 7" not in twelve.ids["nssda"]
 
 
 def test_report_html_without_holdout(tmp_path):
