@@ -16,8 +16,8 @@ from .outputs import atomic_output, jsonable, require_file, write_json
 from .points import (GROUND_CLASS, classes_kept, file_format, las_classes, las_crs,
                      las_fields_read, las_xyz, point_file_name, read_las, read_point_file,
                      read_points, read_xyz, write_points_las)
-from .rasters import (ELEVATION, INTEGER_COMPRESSION, RASTER_EXTENSIONS, TILE,
-                      band_scaling, check_quantity, dem_file, describe_band, drop_implausible, held_quantity,
+from .rasters import (ELEVATION, INTEGER_COMPRESSION, RASTER_EXTENSIONS, TILE, band_scaling,
+                      check_quantity, dem_file, describe_band, drop_implausible, held_quantity,
                       implausible_note, no_valid_cells, nodata_range, raster_crs, raster_crs_wkt,
                       raster_profile, read_band, read_dem, read_input, read_raster,
                       refuse_non_elevations, write_raster)
