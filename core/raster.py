@@ -187,9 +187,10 @@ def require_metre_elevations(unit: str | None, what: str, *, kind: str = "raster
                              said: str = "its band's unit", of: str = "elevations") -> None:
     """Refuse ``what`` (a DEM, or point text: ``kind``) whose ``of`` (elevations, or x, y) are
     said (``said``: by its band's unit, GDAL's unit type, or its header) to be in a unit other
-    than metres (``unit``: feet, centimetres, ``LENGTH_UNITS``), naming the conversion; no
-    unit, or another word, is taken as metres."""
-    factor = LENGTH_UNITS.get((unit or "").strip().lower())
+    than metres (``unit``: feet, centimetres, ``LENGTH_UNITS``, alone or before a datum's name:
+    "ft NAVD88"), naming the conversion; no unit, or another word, is taken as metres."""
+    key = (unit or "").strip().lower()
+    factor = LENGTH_UNITS.get(key, LENGTH_UNITS.get(key.split(" ")[0]))
     if factor is not None:
         fix = _scale_z_hint(kind, factor) if of == "elevations" else _reproject_hint(kind)
         raise FloodMeshError(

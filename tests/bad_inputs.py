@@ -586,12 +586,13 @@ CASES = [
     BadInput("xyz-header-without-x-y-z", "its header line names the columns Elev, Punkt",
              _maker(_text("named.csv", "Elev;Punkt;Wert\n" + _ROWS), crs=UTM),
              _lidar(_text("named.csv", "Elev;Punkt;Wert\n" + _ROWS), crs=UTM)),
-    BadInput("xyz-header-elevation-in-feet", "named.csv has elevations in 'ft' (its header's "
-             "Elevation (ft)); FloodMesh works in metres: convert them first, e.g. `pdal "
-             'translate IN OUT -f filters.assign --filters.assign.value="Z = Z * 0.3048"`',
-             _maker(_text("named.csv", "Easting (m),Northing (m),Elevation (ft)\n"
+    BadInput("xyz-header-elevation-in-feet", "named.csv has elevations in 'ft NAVD88' (its "
+             "header's Elevation (ft NAVD88)); FloodMesh works in metres: convert them first, "
+             'e.g. `pdal translate IN OUT -f filters.assign --filters.assign.value="Z = Z * '
+             '0.3048"`',
+             _maker(_text("named.csv", "Easting (m),Northing (m),Elevation (ft NAVD88)\n"
                           + _ROWS.replace(";", ",")), crs=UTM),
-             _lidar(_text("named.csv", "Easting (m),Northing (m),Elevation (ft)\n"
+             _lidar(_text("named.csv", "Easting (m),Northing (m),Elevation (ft NAVD88)\n"
                           + _ROWS.replace(";", ",")), crs=UTM)),
     BadInput("xyz-header-x-y-in-us-feet", "has x, y in 'US-FT' (its header's X [US-FT])",
              _maker(_text("named.csv", "X [US-FT];Y [US-FT];Z [m]\n"
