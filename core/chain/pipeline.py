@@ -389,7 +389,8 @@ def _break_lines(front: Front, options: RunOptions, steps: _Steps, fits: _Terrai
         points, built = fits.measured()
         fits.index, fits.window = steps.run(
             "fit window", _fit_window, points, index() if index else built, area,
-            dem.cell_size, node_radius=options.node_radius, seed=options.seed)
+            dem.cell_size, node_radius=options.node_radius, seed=options.seed, progress=None,
+            cancelled=steps.cancelled)
         fits.counts.update(asdict(fits.window))
     if options.localise:
         join_gap = (JOIN_GAP_CELLS * dem.cell_size if options.join_gap is None
@@ -625,12 +626,17 @@ def _report(source: Source, front: Front, options: RunOptions, simplified, lines
     }
 
 
-def _fit_window(points, index, area, cell_size, *, node_radius, seed):
+def _fit_window(points, index, area, cell_size, *, node_radius, seed, progress=None,
+                cancelled=None):
     """(index of the points, built if None, ``FitWindow``): the index serves every later
-    terrain fit."""
-    index = point_index(points) if index is None else index
+    terrain fit. ``progress`` hears the share done (0–1), ``cancelled`` is polled."""
+    start = 0.0
+    if index is None:
+        index, start = point_index(points), 0.8  # most of the step where built here
+        report(progress, cancelled, start)
     return index, fit_window(points, area, cell_size, node_radius=node_radius, seed=seed,
-                             index=index)
+                             index=index, progress=part(progress, start, 1.0),
+                             cancelled=cancelled)
 
 
 def run_inputs(source: Source, options: RunOptions) -> list:

@@ -86,8 +86,9 @@ JOIN_TAIL_CELLS = 6.0
 BRIDGE_TAIL_CELLS = 12.0
 
 # Rounds of places drawn for the noise estimate, for points that fill little of their bounding
-# box (a reach at 45°, a tile with a lake: a fifth filled still gives the samples in 8)
-NOISE_DRAWS = 8
+# box (a reach at 45°, a tile with a lake: a fifth filled still gives the samples in 8), fitted
+# NOISE_CHUNK places at a time (the bar moves, Cancel is heard, along a round)
+NOISE_DRAWS, NOISE_CHUNK = 8, 50
 
 
 @dataclass(frozen=True)
@@ -103,16 +104,19 @@ class FitWindow:
 
 
 def fit_window(points: np.ndarray, area: float, cell_size: float, *,
-               node_radius: float | None = None, seed: int = 0, index=None) -> FitWindow:
+               node_radius: float | None = None, seed: int = 0, index=None, progress=None,
+               cancelled=None) -> FitWindow:
     """The fitting windows for ``points`` (n, 3) covering ``area`` m² on a grid of
     ``cell_size`` m: sized from their density and their noise (estimated from them).
-    ``index``: ``nearest.point_index(points)`` if built (here and in every fit below)."""
+    ``index``: ``nearest.point_index(points)`` if built (here and in every fit below).
+    ``progress`` and ``cancelled``: as ``estimate_noise`` takes them."""
     if not area > 0 or len(points) < 10:
         raise FloodMeshError("too few measured points to fit the terrain to; turn off break-line "
                              "localisation and plane node elevations (--no-localise "
                              "--node-elevation dem)")
     density = len(points) / area
-    noise = estimate_noise(points, density, seed=seed, index=index)
+    noise = estimate_noise(points, density, seed=seed, index=index, progress=progress,
+                           cancelled=cancelled)
     # m² of window: 40 + 800·noise points, and no less than MIN_WINDOW_CELLS cells (dense or
     # clean points would otherwise shrink it below what places a hinge reliably)
     wanted = max((40 + 800 * noise) / density, MIN_WINDOW_CELLS * cell_size ** 2)
@@ -124,13 +128,15 @@ def fit_window(points: np.ndarray, area: float, cell_size: float, *,
 
 
 def estimate_noise(points: np.ndarray, density: float, *, samples: int = 400,
-                   seed: int = 0, index=None) -> float:
+                   seed: int = 0, index=None, progress=None, cancelled=None) -> float:
     """Vertical noise (m) of the points: the median RMS residual of least-squares planes fitted
     to about 30 points around ``samples`` places drawn at random in their bounding box (terrain
     curvature adds a little). The places depend on where the points lie, not on their order,
     so the same survey read in another order (a COPC file's octree, tiles merged) gives the
     same estimate; places with fewer than 10 points around (water, voids, beyond a diagonal
-    reach) are drawn again, up to NOISE_DRAWS rounds."""
+    reach) are drawn again, up to NOISE_DRAWS rounds. ``progress`` hears the share of the
+    samples gathered (0–1), ``cancelled`` is polled between the fits' chunks of
+    ``NOISE_CHUNK`` places."""
     rng = np.random.default_rng(seed)
     radius = np.sqrt(30 / density / np.pi)
     index = index if index is not None else point_index(points)
@@ -139,8 +145,10 @@ def estimate_noise(points: np.ndarray, density: float, *, samples: int = 400,
     rms = []
     for _ in range(NOISE_DRAWS):
         centres = lo + (hi - lo) * rng.random((wanted, 2))
-        _, fit_rms, count = _plane_fits(index, points, centres, np.full(wanted, radius))
-        rms.extend(fit_rms[count >= 10])
+        for a, b in _chunks(wanted, NOISE_CHUNK):  # each place's fit its own: the same numbers
+            _, fit_rms, count = _plane_fits(index, points, centres[a:b], np.full(b - a, radius))
+            rms.extend(fit_rms[count >= 10])
+            report(progress, cancelled, min(len(rms) / wanted, 1.0))
         if len(rms) >= wanted:
             break
     return float(np.median(rms[:wanted])) if rms else 0.0
@@ -159,8 +167,8 @@ def beyond_noise(mean_square: np.ndarray, noise: float, dof: np.ndarray) -> np.n
 FIT_CHUNK = 20_000
 
 
-def _chunks(n: int):
-    return [(a, min(n, a + FIT_CHUNK)) for a in range(0, n, FIT_CHUNK)]
+def _chunks(n: int, size: int = FIT_CHUNK):
+    return [(a, min(n, a + size)) for a in range(0, n, size)]
 
 
 def _plane_fits(index, points, centres, radius, progress=None, cancelled=None):
@@ -853,12 +861,14 @@ def _chained(pieces, chains) -> list[tuple]:
 
 
 def _bridges_fitted(points: np.ndarray, window: FitWindow, s_crit: float, index,
-                    tolerance: float, hold: float = BRIDGE_HOLD):
+                    tolerance: float, hold: float = BRIDGE_HOLD, progress=None, cancelled=None):
     """A ``make`` for ``joining.bridges``: each gap's chord, a vertex every half a hinge
     window along it, localised; a bridge where at least ``hold`` of those vertices find a kink
     of the line's kind (a crest across a channel's bed, a bank's toe across an embankment's
     slope), made of the ends and those vertices, thinned by Douglas–Peucker within
-    ``tolerance`` m, else None (a channel cut through a levee: no crest on the bed)."""
+    ``tolerance`` m, else None (a channel cut through a levee: no crest on the bed).
+    ``progress`` hears the share done (0–1) along the fits and the gaps, ``cancelled`` is
+    polled on the way."""
     step = window.half_length
 
     def make(gaps):
@@ -868,9 +878,11 @@ def _bridges_fitted(points: np.ndarray, window: FitWindow, s_crit: float, index,
             t = np.arange(n + 2)[:, None] / (n + 1)
             chords.append(a[None, :3] * (1 - t) + b[None, :3] * t)
         moved, fits, kinks = localise_breaklines(chords, points, window, s_crit=s_crit,
-                                                 index=index)
+                                                 index=index, progress=part(progress, 0, 0.8),
+                                                 cancelled=cancelled)
         out = []
-        for (a, b, kind), coords, fit, kink in zip(gaps, moved, fits, kinks):
+        for (a, b, kind), coords, fit, kink in along(list(zip(gaps, moved, fits, kinks)),
+                                                     part(progress, 0.8, 1.0), cancelled):
             coords, fit, kink = coords[1:-1], fit[1:-1], kink[1:-1]
             ok = np.isfinite(fit) & (np.sign(kink) == kind)
             if ok.mean() < hold:
@@ -948,7 +960,7 @@ def _resampled(coords: np.ndarray, step: float) -> np.ndarray:
 
 
 def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, index,
-                tolerance: float) -> list[tuple]:
+                tolerance: float, progress=None, cancelled=None) -> list[tuple]:
     """Pieces (as ``localise_traced`` keeps them) for the kinks that run beside a localised
     piece but that no line follows: the tracer follows one edge of a band of breakpoints, and
     where a crest and its toe (or a narrow embankment's two crests) lie a band's width apart
@@ -957,7 +969,9 @@ def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, in
     kink), a vertex every half a window length, and are localised; a run of at least
     ``COMPANION_RUN`` consecutive probe vertices that find a kink of one kind, each farther
     than ``COMPANION_APART`` half widths from every line and from the companions found before
-    it, is a new piece, thinned by Douglas–Peucker within ``tolerance`` m."""
+    it, is a new piece, thinned by Douglas–Peucker within ``tolerance`` m. ``progress`` hears
+    the share done (0–1) by stages and along the probes' fits, ``cancelled`` is polled on the
+    way."""
     kinds = _kinds(pieces)
     hw = window.half_width
     apart = COMPANION_APART * hw
@@ -984,6 +998,7 @@ def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, in
         rise = np.abs(_ground_z(points, window, xy[ok] + side * middle * normal[ok], index)
                       - base[ok[either]])
         ok[ok] = ~(rise <= 0.5 * np.tan(np.radians(s_crit)) * middle)
+    report(progress, cancelled, 0.1)
     fitted, owners, start = [], [], 0
     for k, xy, normal in samples:
         stop = start + len(xy)
@@ -999,7 +1014,8 @@ def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, in
     if not fitted:
         return []
     moved, fits, kinks = localise_breaklines(fitted, points, window, s_crit=s_crit,
-                                             index=index)
+                                             index=index, progress=part(progress, 0.1, 0.9),
+                                             cancelled=cancelled)
     vertices = np.concatenate(moved)
     distance = nearest_line(vertices, lines)[1]
     runs, start = [], 0
@@ -1012,7 +1028,8 @@ def _companions(pieces, points: np.ndarray, window: FitWindow, s_crit: float, in
                 if b - a >= COMPANION_RUN:
                     runs.append((k, coords[a:b], fit[a:b], kink[a:b]))
     out, found = [], []
-    for k, coords, fit, kink in sorted(runs, key=lambda r: -len(r[1])):
+    for k, coords, fit, kink in along(sorted(runs, key=lambda r: -len(r[1])),
+                                      part(progress, 0.9, 1.0), cancelled):
         if found:
             d = shapely.distance(shapely.points(coords[:, :2]), shapely.multilinestrings(found))
             keep = d > apart
@@ -1079,7 +1096,8 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
                 pieces.append((coords[piece], line.slopes[piece], line.component, fit[piece],
                                kink[piece], np.zeros(len(piece), bool)))
         hops -= 1
-    companions = _companions(pieces, points, window, s_crit, index, tolerance)
+    companions = _companions(pieces, points, window, s_crit, index, tolerance,
+                             part(progress, 0.6, 0.75), cancelled)
     pieces += companions
     report(progress, cancelled, 0.75)
     joined = len(pieces)
@@ -1093,8 +1111,10 @@ def localise_traced(lines: list, points: np.ndarray, window: FitWindow, *,
     report(progress, cancelled, 0.85)
     n_bridges = 0
     if join_gap and bridge_gap:  # between the traced ends, then the fitted ends of the rest
-        make = _bridges_fitted(points, window, s_crit, index, tolerance)
-        for tail in (0.0, BRIDGE_TAIL_CELLS * cell_size):
+        for k, tail in enumerate((0.0, BRIDGE_TAIL_CELLS * cell_size)):
+            make = _bridges_fitted(points, window, s_crit, index, tolerance,
+                                   progress=part(progress, 0.85 + 0.05 * k, 0.9 + 0.05 * k),
+                                   cancelled=cancelled)
             pieces, made = _bridged(pieces, make, bridge_gap, join_lateral, tail)
             n_bridges += made
     report(progress, cancelled, 0.95)

@@ -254,6 +254,50 @@ def test_a_toe_beside_a_traced_crest_is_found():
     assert all(abs(u) < 0.15 or abs(u - 3.0) < 0.15 for u in at)
 
 
+def _bank_crest_in_two_pieces(**options):
+    """localise_traced (join gap 2 m, bridge gap 12 m, ``options``) of a bank 3 m wide (15°)
+    whose crest the tracer followed in two pieces 8 m apart and whose toe it missed: the toe is
+    probed for (``_companions``) and both gaps are bridged (``_bridges_fitted``)."""
+    from floodmesh.core.steps.breaklines import BreakLine
+    from floodmesh.core.steps.localise import localise_traced
+
+    def bank(xy):
+        return 10.0 - 0.27 * np.clip((xy - 50.0) @ NORMAL, 0.0, 3.0)
+
+    points = noisy_points(bank)
+    lines = []
+    for s in (np.arange(-30, -3, 2.0), np.arange(5, 31, 2.0)):
+        xy = 50.0 + s[:, None] * TANGENT + 0.3 * NORMAL
+        lines.append(BreakLine(np.column_stack([xy, bank(xy)]), np.full(len(s), 15.0)))
+    return localise_traced(lines, points, fit_window(points, 1e4, 1.0), join_gap=2.0,
+                           bridge_gap=12.0, **options)
+
+
+def test_the_bar_moves_while_companions_are_probed_and_gaps_bridged():
+    """Localising lines (``localise_traced``, a run's "localise") tells its progress along the
+    probes for kinks beside the lines and the bridges' fits, not only by stages after the
+    line-by-line pass (0.6 of the step): there it told 0.75, 0.85, 0.95 and 1 alone."""
+    told = []
+    _, _, counts = _bank_crest_in_two_pieces(progress=told.append)
+    assert counts["companions_found"] >= 1 and counts["gaps_bridged"] >= 1  # the case holds
+    late = [f for f in told if f >= 0.6]
+    assert late == sorted(late) and told[-1] == 1.0, told
+    assert len(set(late)) >= 12 and max(np.diff(late)) <= 0.1 + 1e-9, told
+
+
+@pytest.mark.parametrize("pressed, stage_end", [(0.6, 0.75), (0.85, 0.95)])
+def test_cancel_while_companions_are_probed_or_gaps_bridged_stops_there(pressed, stage_end):
+    """Cancel pressed while the probes beside the lines (past 0.6 of the step) or the bridges
+    (past 0.85) are fitted is honoured before they end: it waited for the stage's end."""
+    from floodmesh.core.errors import Cancelled
+
+    told = []
+    with pytest.raises(Cancelled):
+        _bank_crest_in_two_pieces(progress=told.append,
+                                  cancelled=lambda: any(f > pressed for f in told))
+    assert max(told) < stage_end, told
+
+
 @pytest.mark.parametrize("noise", [0.05, 0.15])
 def test_no_companion_beside_a_lone_crest(noise):
     """A crest with plain ground on either side (the hinge of ``hinge``), surveyed with noise:

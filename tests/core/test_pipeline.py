@@ -329,6 +329,13 @@ def test_the_bar_moves_inside_localising_and_the_first_refinement_round(bar_run)
     assert max(np.diff(told)) <= (told[-1] - told[0]) / 5, told
 
 
+def test_the_bar_moves_inside_the_fit_window(bar_run):
+    """Sizing the fit window from the points' noise ("fit window", the plane fits at 400
+    places) moves the bar along its fits, never back (it told only its end)."""
+    inside = _told_within(bar_run, "fit window...")
+    assert len(set(inside)) >= 4 and inside == sorted(inside), inside
+
+
 def test_the_bar_moves_inside_node_elevations(demo_points_file, tmp_path):
     """A run without the misfit pass fits its mesh's node z on local planes ("node
     elevations"): the bar moves inside that step too (it told only its end), never back,
