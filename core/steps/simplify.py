@@ -4,7 +4,8 @@ Three methods per line: keep every n-th point, Douglas–Peucker, and a cubic sm
 ``simplify_breaklines`` is what the chain uses: it simplifies each line, then keeps the set a
 valid PSLG: a simplified segment that crosses another line (or its own) gets back the original
 vertices it skipped until it no longer does, parts of a line closer than ``min_distance`` to a
-longer line are merged into it (dropped), and vertices closer than ``min_distance`` to the
+longer line are merged into it (dropped; the segments reaching them get back the vertices
+they skipped, so that only that part goes), and vertices closer than ``min_distance`` to the
 previous one on their line are dropped. Those merges trade the tolerance for a valid mesh
 input: an original vertex next to a merge may lie up to tolerance + ``min_distance`` from the
 result (the chain reports the largest deviation it finds).
@@ -112,6 +113,7 @@ def simplify_breaklines(lines: list[BreakLine], method: str, amount: float, *,
     positions = [p.copy() for p, _ in plans]
     masks = [m.copy() for _, m in plans]
     _repair_crossings(lines, positions, masks, cancelled=cancelled)
+    _restore_beside_merges(lines, positions, masks, min_distance, cancelled)
     report(progress, cancelled, 0.9)
     separate = _separate(lines, positions, masks, min_distance)
     report(progress, None, 1.0)
@@ -223,9 +225,29 @@ def _refine_where(original, position, mask, other) -> bool:
     return changed
 
 
-def _separate(lines, positions, masks, min_distance) -> list[BreakLine]:
-    """Split off the kept vertices that lie within ``min_distance`` of a longer line (merged
-    into it), drop vertices within ``min_distance`` of the previous one, and build the lines."""
+def _restore_beside_merges(lines, positions, masks, min_distance, cancelled=None) -> None:
+    """Give a simplified segment from a kept vertex to one merged into a longer line
+    (``_merged``) back the original vertices it skipped, so that only the part of the line
+    within ``min_distance`` of the longer one merges, not the whole segment (a line's last
+    segment to a T-junction was dropped, its far end metres from any line); crossings that
+    brings are repaired as the simplification's (``_repair_crossings``)."""
+    for _ in range(10):
+        changed = False
+        for mask, merged in zip(masks, _merged(positions, masks, min_distance)):
+            kept = np.flatnonzero(mask)
+            for a, b in zip(kept[:-1][merged[:-1] != merged[1:]],
+                            kept[1:][merged[:-1] != merged[1:]]):
+                if b - a > 1:
+                    mask[a + 1:b] = True
+                    changed = True
+        if not changed:
+            return
+        _repair_crossings(lines, positions, masks, cancelled=cancelled)
+
+
+def _merged(positions, masks, min_distance) -> list[np.ndarray]:
+    """Per line, which of its kept vertices lie within ``min_distance`` of a longer line (they
+    merge into it)."""
     geoms = _kept_lines(positions, masks)
     near = [np.zeros(int(m.sum()), bool) for m in masks]
     if min_distance > 0 and len(geoms):
@@ -245,8 +267,15 @@ def _separate(lines, positions, masks, min_distance) -> list[BreakLine]:
         merged = np.zeros(len(kept), bool)
         merged[v[rank[owner[first[s]]] < rank[owner[v]]]] = True
         near = np.split(merged, np.cumsum(counts)[:-1])
+    return near
+
+
+def _separate(lines, positions, masks, min_distance) -> list[BreakLine]:
+    """Split off the kept vertices that lie within ``min_distance`` of a longer line (merged
+    into it, ``_merged``), drop vertices within ``min_distance`` of the previous one, and build
+    the lines."""
     out = []
-    for line, p, m, drop in zip(lines, positions, masks, near):
+    for line, p, m, drop in zip(lines, positions, masks, _merged(positions, masks, min_distance)):
         idx = np.flatnonzero(m)
         # runs of consecutive kept vertices that are not merged into a longer line
         breaks = np.flatnonzero(drop)

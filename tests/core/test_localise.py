@@ -616,12 +616,15 @@ def test_a_run_keeps_a_noisy_embankments_crest_where_a_gap_in_it_was_bridged(tmp
     ground along the embankment's four lines to within 0.7 m everywhere (when written: 0.56 m
     at most, 2 metres of line over 0.5 m off). A bridge was marked as a crossing's even where
     it crossed no other line, and the mesh, which leaves crossings out on low ground, dropped
-    the crest there: 0.83 m off, 9 metres over 0.5 m."""
-    from floodmesh.core.steps import localise
+    the crest there: 0.83 m off, 9 metres over 0.5 m. (Since the simplification keeps a line's
+    part beyond a merge, ``_restore_beside_merges``, that crest's pieces are longer and the
+    mesh 0.56 m off at most even then: the control takes that out too.)"""
+    from floodmesh.core.steps import localise, simplify
 
     score = _embankment_at_15_degrees_scored(tmp_path, density=2.0)
     now = score("now")["height_errors"]
     monkeypatch.setattr(localise, "_crosses_another", lambda *args: True)
+    monkeypatch.setattr(simplify, "_restore_beside_merges", lambda *args: None)
     before = score("before")["height_errors"]
     assert np.nanmax(now) < 0.7 and np.sum(now > 0.5) <= 4
     assert np.nanmax(before) > 0.75 and np.sum(before > 0.5) >= 8

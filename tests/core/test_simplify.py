@@ -258,6 +258,41 @@ def test_slivers_merge_into_the_longer_line():
     assert steps.min() >= 0.6 and spaced.coords[0, 0] == 0 and spaced.coords[-1, 0] == 9.75
 
 
+@pytest.mark.parametrize("method, amount", [("--tolerance", 0.5), ("--spline", 0.5),
+                                            ("--keep-every", 8)])
+def test_a_line_ending_at_a_longer_one_keeps_all_but_the_part_beside_it(tmp_path, method,
+                                                                          amount):
+    """``floodmesh simplify`` of a straight bank 30 m long whose end comes 0.3 m from a longer
+    line (a T-junction), at --min-distance 0.5: every traced vertex lies within the tolerance
+    plus the minimum distance of the lines written (method.md's bound; measured with shapely),
+    and the bank keeps all of its length but the half metre beside the longer line. The whole
+    last segment to the merged end went, for Douglas–Peucker the whole bank (its two ends)."""
+    from pyproj import CRS
+
+    from floodmesh.core import io
+    from floodmesh.core.frontends.cli import main
+
+    x0, y0 = 412_000.0, 5_652_000.0
+    x = np.arange(0.0, 101.0)
+    long_line = np.column_stack([x0 + x, y0 + 0.1 * np.sin(x / 7), 12 + 0.01 * x])
+    y = np.arange(30.0, -0.5, -1.0) + 0.3  # 30.3 ... 0.3 m north of the longer line
+    bank = np.column_stack([np.full_like(y, x0 + 50.5), y0 + y, 13 - 0.02 * y])
+    io.write_lines_gpkg(tmp_path / "lines.gpkg", [long_line, bank], CRS.from_epsg(25832))
+    out = tmp_path / "simple.gpkg"
+    assert main(["simplify", str(tmp_path / "lines.gpkg"), method, str(amount),
+                 "--min-distance", "0.5", "--out", str(out)]) == 0
+    written = io.read_lines_gpkg(out)
+    result = shapely.MultiLineString([line[:, :2] for line in written])
+    bound = (amount if method != "--keep-every" else 8 * np.sqrt(2)) + 0.5
+    for traced in (long_line, bank):
+        assert shapely.distance(result, shapely.points(traced[:, :2])).max() <= bound + 1e-9
+    # the bank: from its far end to within a metre of the longer line
+    bank_part = [line for line in written if np.ptp(line[:, 0]) < 1.0 and np.ptp(line[:, 1]) > 1]
+    assert len(bank_part) == 1
+    assert bank_part[0][:, 1].max() - y0 == pytest.approx(30.3, abs=amount)
+    assert bank_part[0][:, 1].min() - y0 <= 1.31
+
+
 def test_simplify_breaklines_refuses_bad_arguments():
     from floodmesh.core.steps.simplify import simplify_breaklines
 
