@@ -11,7 +11,8 @@ from qgis.PyQt.QtCore import QCoreApplication
 
 from ..core.errors import FloodMeshError
 from ..core.options import is_point_source, wrong_geometry
-from .compat import METRES, VECTOR_LINE, VECTOR_POINT, VECTOR_POLYGON
+from .compat import (METRES, OWN_GEOMETRY_CHECK, SKIP_INVALID, VECTOR_LINE, VECTOR_POINT,
+                     VECTOR_POLYGON)
 from .child import run_step
 from .styles import reload_rewritten, stack_when_loaded
 
@@ -267,11 +268,54 @@ def layer_file(layer, what: str) -> str:
 VECTOR_FILES = ["gpkg", "shp", "geojson", "json", "fgb"]
 
 
+def skips_invalid(value, context) -> bool:
+    """Whether invalid geometries of the input ``value`` are to be skipped: its own 'Invalid
+    feature filtering' (the dialog's advanced options of the input) or else Processing's."""
+    from qgis.core import QgsProcessingFeatureSourceDefinition
+
+    check = context.invalidGeometryCheck()
+    if isinstance(value, QgsProcessingFeatureSourceDefinition) and value.flags & OWN_GEOMETRY_CHECK:
+        check = value.geometryCheck
+    return _number(check) == _number(SKIP_INVALID)
+
+
+def valid_features_file(algorithm, parameters, name, context, feedback=None):
+    """A temporary GeoPackage of the features QGIS gives for the vector parameter ``name``
+    (its selection, filter and limit) less those with invalid geometries, which QGIS reports
+    as skipped."""
+    from qgis.core import QgsProcessingUtils, QgsVectorFileWriter
+
+    source = algorithm.parameterAsSource(parameters, name, context)
+    if source is None:
+        return None
+    path = QgsProcessingUtils.generateTempFilename(f"{name}.gpkg")
+    options = QgsVectorFileWriter.SaveVectorOptions()
+    options.driverName = "GPKG"
+    writer = QgsVectorFileWriter.create(path, source.fields(), source.wkbType(),
+                                        source.sourceCrs(), context.transformContext(), options)
+    for feature in source.getFeatures():
+        if feedback is not None and feedback.isCanceled():
+            break
+        writer.addFeature(feature)
+    error = writer.errorMessage() if writer.hasError() else ""
+    del writer  # closes the file
+    if error:
+        raise QgsProcessingException(
+            f"{algorithm.parameterDefinition(name).description()}: could not save its valid "
+            f"features to {path} ({error}): check the free space of the temporary folder")
+    return path
+
+
 def vector_file(algorithm, parameters, name, context, feedback=None):
     """The file core reads for the vector parameter ``name``, None when it is not given: the
     layer's own file (``file.gpkg|layername=NAME`` for one layer of a GeoPackage), or, for
     what only QGIS holds (a memory or database layer, selected features only, a layer's
-    filter), a temporary GeoPackage of those features, as QGIS hands layers to GDAL's tools."""
+    filter, a filter expression or feature limit of the input), a temporary GeoPackage of those
+    features, as QGIS hands layers to GDAL's tools; without the invalid ones where invalid
+    features are to be skipped (the input's or Processing's setting)."""
+    if (parameters.get(name) not in (None, "")
+            and skips_invalid(parameters.get(name), context)):
+        return valid_features_file(algorithm, parameters, name, context, feedback)
     path, layer = algorithm.parameterAsCompatibleSourceLayerPathAndLayerName(
         parameters, name, context, VECTOR_FILES, "gpkg", feedback)
     if not path:

@@ -58,3 +58,12 @@ else:
     from qgis.core import QgsRasterMinMaxOrigin
 
     USER_DEFINED_LIMITS = QgsRasterMinMaxOrigin.None_
+
+if hasattr(Qgis, "InvalidGeometryCheck"):  # QGIS >= 3.36
+    SKIP_INVALID = Qgis.InvalidGeometryCheck.SkipInvalid
+    OWN_GEOMETRY_CHECK = Qgis.ProcessingFeatureSourceDefinitionFlag.OverrideDefaultGeometryCheck
+else:
+    from qgis.core import QgsFeatureRequest, QgsProcessingFeatureSourceDefinition
+
+    SKIP_INVALID = QgsFeatureRequest.GeometrySkipInvalid
+    OWN_GEOMETRY_CHECK = QgsProcessingFeatureSourceDefinition.FlagOverrideDefaultGeometryCheck

@@ -39,12 +39,16 @@ def processing():
 
 @pytest.fixture
 def feedback_log():
-    """A Processing feedback that keeps what an algorithm logs (``infos``, ``warnings``): the
-    messages a user reads in the algorithm dialog's log."""
+    """A Processing feedback that keeps what an algorithm logs (``infos``, ``warnings``,
+    ``errors``: what the dialog's log shows in red): the messages a user reads in the algorithm
+    dialog's log."""
     class Recorder(qgis_core.QgsProcessingFeedback):
         def __init__(self):
             super().__init__()
-            self.infos, self.warnings = [], []
+            self.infos, self.warnings, self.errors = [], [], []
+
+        def reportError(self, text, fatal=False):  # noqa: N802
+            self.errors.append(text)
 
         def pushInfo(self, text):  # noqa: N802
             self.infos.append(text)

@@ -321,3 +321,74 @@ def test_an_output_into_a_geopackage_table_or_memory_says_what_to_give(processin
                               "file of its own"), message
     assert "give a file name ending in .gpkg or a temporary output" in message
     assert not list(tmp_path.iterdir())
+
+
+@pytest.fixture(scope="module")
+def domains(traced):
+    """Two domain GeoPackages: a valid polygon inside the DEM, and the same beside a polygon
+    whose ring crosses itself (a bowtie: invalid for QGIS and GEOS)."""
+    from qgis.core import QgsFeature, QgsGeometry, QgsRasterLayer
+
+    dem = QgsRasterLayer(traced["dem"], "dem")
+    e = dem.extent()
+    x0, y0, x1, y1 = e.xMinimum() + 20, e.yMinimum() + 20, e.xMaximum() - 20, e.yMaximum() - 20
+    rings = {"valid": f"(({x0} {y0},{x1} {y0},{x1} {y1},{x0} {y1},{x0} {y0}))",
+             "bowtie": f"(({x0} {y0},{x1} {y1},{x1} {y0},{x0} {y1},{x0} {y0}))"}
+    files = {}
+    for name, polygons in (("valid", ["valid"]), ("with_bowtie", ["valid", "bowtie"])):
+        memory = QgsVectorLayer(f"Polygon?crs={dem.crs().authid()}", name, "memory")
+        for polygon in polygons:
+            feature = QgsFeature()
+            feature.setGeometry(QgsGeometry.fromWkt(f"POLYGON{rings[polygon]}"))
+            assert memory.dataProvider().addFeature(feature)
+        files[name] = str(traced["folder"] / f"{name}.gpkg")
+        options = QgsVectorFileWriter.SaveVectorOptions()
+        options.driverName = "GPKG"
+        error = QgsVectorFileWriter.writeAsVectorFormatV3(
+            memory, files[name], QgsCoordinateTransformContext(), options)
+        assert error[0] == QgsVectorFileWriter.NoError, error
+    return files
+
+
+def test_invalid_features_are_skipped_where_the_input_says_so(processing, traced, domains,
+                                                              feedback_log, tmp_path):
+    """The domain input's 'Invalid feature filtering: Skip (ignore) features with invalid
+    geometries' (its advanced options in the dialog): the bowtie beside the domain is left
+    out, as QGIS's own algorithms leave it out, and the mesh is that of the valid domain; the
+    log says which feature was skipped. Not the same refusal as without the option."""
+    from floodmesh.algorithms.compat import OWN_GEOMETRY_CHECK, SKIP_INVALID
+
+    skip = QgsProcessingFeatureSourceDefinition(domains["with_bowtie"], False, -1,
+                                                OWN_GEOMETRY_CHECK, SKIP_INVALID)
+    meshes = [processing.run("floodmesh:buildmesh", {
+        "DEM": traced["dem"], "BOUNDARY": boundary, "OUTPUT": str(tmp_path / f"{i}.2dm")},
+        feedback=feedback_log)["OUTPUT"] for i, boundary in enumerate((skip, domains["valid"]))]
+    assert mesh_size(meshes[0]) == mesh_size(meshes[1])
+    skipped = " ".join(feedback_log.errors + feedback_log.warnings)
+    assert "has invalid geometry" in skipped, skipped
+
+
+def test_invalid_features_are_skipped_where_processing_s_setting_says_so(processing, traced,
+                                                                          domains, tmp_path):
+    """Processing's own setting 'Invalid features filtering: Skip' (Settings › Options ›
+    Processing › General) holds for FloodMesh's inputs too; left at 'Stop', the run stops
+    with one line naming the invalid polygon and no mesh."""
+    from processing.tools import dataobjects
+    from qgis.core import QgsProcessingException
+
+    from floodmesh.algorithms.compat import SKIP_INVALID
+
+    context = dataobjects.createContext()
+    context.setInvalidGeometryCheck(SKIP_INVALID)
+    mesh = processing.run("floodmesh:buildmesh", {
+        "DEM": traced["dem"], "BOUNDARY": domains["with_bowtie"],
+        "OUTPUT": str(tmp_path / "skipped.2dm")}, context=context)["OUTPUT"]
+    valid = processing.run("floodmesh:buildmesh", {
+        "DEM": traced["dem"], "BOUNDARY": domains["valid"],
+        "OUTPUT": str(tmp_path / "valid.2dm")})["OUTPUT"]
+    assert mesh_size(mesh) == mesh_size(valid)
+    with pytest.raises(QgsProcessingException, match="with_bowtie.gpkg is not a valid polygon"):
+        processing.run("floodmesh:buildmesh", {
+            "DEM": traced["dem"], "BOUNDARY": domains["with_bowtie"],
+            "OUTPUT": str(tmp_path / "stopped.2dm")})
+    assert not (tmp_path / "stopped.2dm").exists()
