@@ -198,7 +198,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
                     or parameters.get(definition.name()) in (None, "")):
                 continue
             needed = {SOURCE_GEOMETRIES.get(_number(t)) for t in definition.dataTypes()}
-            layer = self.parameterAsVectorLayer(parameters, definition.name(), context)
+            layer = source_layer(self, parameters, definition.name(), context)
             if len(needed) != 1 or None in needed or layer is None or not layer.isValid():
                 continue
             has = LAYER_GEOMETRIES.get(_number(layer.geometryType()))
@@ -266,6 +266,18 @@ def layer_file(layer, what: str) -> str:
 
 # vector formats core reads as QGIS has them; any other layer is saved to a GeoPackage first
 VECTOR_FILES = ["gpkg", "shp", "geojson", "json", "fgb"]
+
+
+def source_layer(algorithm, parameters, name, context):
+    """The layer of the vector parameter ``name``, also where it comes with options (selected
+    features only, a feature limit or filter, its invalid-geometry handling), for which QGIS's
+    parameterAsVectorLayer gives none."""
+    from qgis.core import QgsProcessingFeatureSourceDefinition
+
+    value = parameters.get(name)
+    if isinstance(value, QgsProcessingFeatureSourceDefinition):
+        parameters = {**parameters, name: value.source}
+    return algorithm.parameterAsVectorLayer(parameters, name, context)
 
 
 def skips_invalid(value, context) -> bool:

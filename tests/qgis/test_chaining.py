@@ -392,3 +392,49 @@ def test_invalid_features_are_skipped_where_processing_s_setting_says_so(process
             "DEM": traced["dem"], "BOUNDARY": domains["with_bowtie"],
             "OUTPUT": str(tmp_path / "stopped.2dm")})
     assert not (tmp_path / "stopped.2dm").exists()
+
+
+def with_options(layer, option):
+    """``layer`` as its input's options in the dialog hand it on: 'Selected features only', a
+    feature limit, or (QGIS >= 3.32) a feature filter expression."""
+    if option == "selected":
+        return QgsProcessingFeatureSourceDefinition(layer.id(), True)
+    if option == "limit":
+        return QgsProcessingFeatureSourceDefinition(layer.id(), False, 5)
+    definition = QgsProcessingFeatureSourceDefinition(layer.id(), False)
+    if not hasattr(definition, "filterExpression"):
+        pytest.skip("QGIS before 3.32 has no feature filter on an input")
+    definition.filterExpression = "$id > 0"
+    return definition
+
+
+@pytest.mark.parametrize("option", ["selected", "limit", "filter"])
+def test_a_layer_of_the_wrong_geometry_with_input_options_is_refused(processing, traced, option,
+                                                                     tmp_path):
+    """Held-out points given as break lines, or break lines as check points, with 'Selected
+    features only', a feature limit or a filter: refused before the run in one line naming the
+    layer, as without the options (not meshed without lines, nor a message about a temporary
+    file the user never named)."""
+    from qgis.core import QgsProcessingException
+
+    points = QgsVectorLayer(traced["holdout"], "holdout", "ogr")
+    lines = QgsVectorLayer(traced["lines"], "traced lines", "ogr")
+    QgsProject.instance().addMapLayers([points, lines])
+    try:
+        for layer in (points, lines):
+            layer.selectByIds(sorted(layer.allFeatureIds())[:5])
+        mesh = processing.run("floodmesh:buildmesh", {
+            "DEM": traced["dem"], "OUTPUT": str(tmp_path / "m.2dm")})["OUTPUT"]
+        runs = (("buildmesh", {"DEM": traced["dem"], "BREAKLINES": with_options(points, option),
+                               "OUTPUT": str(tmp_path / "b.2dm")},
+                 "holdout.gpkg has points; lines are needed here"),
+                ("assessaccuracy", {"MESH": mesh, "POINTS": with_options(lines, option),
+                                    "OUTPUT": str(tmp_path / "r.gpkg")},
+                 "lines.gpkg has lines; points are needed here"))
+        for algorithm, parameters, message in runs:
+            with pytest.raises(QgsProcessingException) as error:
+                processing.run(f"floodmesh:{algorithm}", parameters)
+            assert message in str(error.value), str(error.value)
+        assert not (tmp_path / "b.2dm").exists() and not (tmp_path / "r.gpkg").exists()
+    finally:
+        QgsProject.instance().removeMapLayers([points.id(), lines.id()])
