@@ -327,12 +327,35 @@ def vector_file(algorithm, parameters, name, context, feedback=None):
     features are to be skipped (the input's or Processing's setting)."""
     if (parameters.get(name) not in (None, "")
             and skips_invalid(parameters.get(name), context)):
-        return valid_features_file(algorithm, parameters, name, context, feedback)
-    path, layer = algorithm.parameterAsCompatibleSourceLayerPathAndLayerName(
-        parameters, name, context, VECTOR_FILES, "gpkg", feedback)
+        path, layer = valid_features_file(algorithm, parameters, name, context, feedback), ""
+    else:
+        path, layer = algorithm.parameterAsCompatibleSourceLayerPathAndLayerName(
+            parameters, name, context, VECTOR_FILES, "gpkg", feedback)
     if not path:
         return None
+    path = named_after_layer(path, source_layer(algorithm, parameters, name, context))
     return f"{path}|layername={layer}" if layer else path
+
+
+def named_after_layer(path: str, layer) -> str:
+    """A temporary copy of ``layer``'s features (``path``, which QGIS names after the
+    parameter, e.g. BREAKLINES.gpkg) renamed after the layer, so that core's messages name the
+    layer the user gave; the layer's own file as it is."""
+    import os
+
+    from qgis.core import QgsFileUtils
+
+    if layer is None or not layer.name():
+        return path
+    own = layer.source().split("|")[0]
+    if own and os.path.realpath(own) == os.path.realpath(path):
+        return path
+    named = Path(path).with_name(QgsFileUtils.stringToSafeFilename(layer.name())
+                                 + Path(path).suffix)
+    if named.exists():
+        return path
+    os.replace(path, named)
+    return str(named)
 
 
 def vector_crs(algorithm, parameters, name, context):

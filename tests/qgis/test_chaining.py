@@ -438,3 +438,26 @@ def test_a_layer_of_the_wrong_geometry_with_input_options_is_refused(processing,
         assert not (tmp_path / "b.2dm").exists() and not (tmp_path / "r.gpkg").exists()
     finally:
         QgsProject.instance().removeMapLayers([points.id(), lines.id()])
+
+
+@pytest.mark.parametrize("option", ["selected", "limit", "filter"])
+def test_errors_about_an_input_with_options_name_its_layer(processing, traced, in_utm33, option,
+                                                           tmp_path):
+    """Break lines of another CRS with 'Selected features only', a feature limit or a filter
+    (read from a temporary copy of those features): the refusal names the user's layer, as
+    without the options, not the copy's name (BREAKLINES.gpkg)."""
+    from qgis.core import QgsProcessingException
+
+    lines = QgsVectorLayer(in_utm33["lines"], "lines_33", "ogr")
+    QgsProject.instance().addMapLayer(lines)
+    try:
+        lines.selectByIds(sorted(lines.allFeatureIds())[:5])
+        with pytest.raises(QgsProcessingException) as error:
+            processing.run("floodmesh:buildmesh", {
+                "DEM": traced["dem"], "BREAKLINES": with_options(lines, option),
+                "OUTPUT": str(tmp_path / "b.2dm")})
+        message = str(error.value)
+        assert "lines_33.gpkg is in ETRS89 / UTM zone 33N" in message, message
+        assert not (tmp_path / "b.2dm").exists()
+    finally:
+        QgsProject.instance().removeMapLayer(lines.id())
