@@ -333,29 +333,49 @@ def vector_file(algorithm, parameters, name, context, feedback=None):
             parameters, name, context, VECTOR_FILES, "gpkg", feedback)
     if not path:
         return None
-    path = named_after_layer(path, source_layer(algorithm, parameters, name, context))
+    given = source_layer(algorithm, parameters, name, context)
+    if given is not None and is_copy(path, given):
+        path = named_after_layer(path, given)
+        check_features_left(path, given)
     return f"{path}|layername={layer}" if layer else path
+
+
+def is_copy(path: str, layer) -> bool:
+    """Whether ``path`` is a temporary copy of ``layer``'s features, not its own file."""
+    import os
+
+    own = layer.source().split("|")[0]
+    return not own or os.path.realpath(own) != os.path.realpath(path)
 
 
 def named_after_layer(path: str, layer) -> str:
     """A temporary copy of ``layer``'s features (``path``, which QGIS names after the
     parameter, e.g. BREAKLINES.gpkg) renamed after the layer, so that core's messages name the
-    layer the user gave; the layer's own file as it is."""
+    layer the user gave."""
     import os
 
     from qgis.core import QgsFileUtils
 
-    if layer is None or not layer.name():
-        return path
-    own = layer.source().split("|")[0]
-    if own and os.path.realpath(own) == os.path.realpath(path):
-        return path
     named = Path(path).with_name(QgsFileUtils.stringToSafeFilename(layer.name())
                                  + Path(path).suffix)
-    if named.exists():
+    if not layer.name() or named.exists():
         return path
     os.replace(path, named)
     return str(named)
+
+
+def check_features_left(path: str, layer) -> None:
+    """Refuse a copy that the input's options (selected features only, a feature limit or
+    filter, skipping invalid geometries) left empty, where the layer itself has features: the
+    step would otherwise run without them (a mesh without its lines) or blame the layer."""
+    from qgis.core import QgsVectorLayer
+
+    total = layer.featureCount()
+    if total > 0 and QgsVectorLayer(path, "copy", "ogr").featureCount() == 0:
+        raise FloodMeshError(
+            f"{layer.name()}: none of its {total} features is left by the input's options "
+            f"(selected features only, a feature limit or filter, invalid geometries skipped): "
+            f"select features or change the options")
 
 
 def vector_crs(algorithm, parameters, name, context):

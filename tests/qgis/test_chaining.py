@@ -461,3 +461,38 @@ def test_errors_about_an_input_with_options_name_its_layer(processing, traced, i
         assert not (tmp_path / "b.2dm").exists()
     finally:
         QgsProject.instance().removeMapLayer(lines.id())
+
+
+@pytest.mark.parametrize("option", ["nothing selected", "filter"])
+def test_input_options_that_leave_no_feature_are_refused(processing, traced, option, tmp_path):
+    """A feature filter that matches nothing (a typo in a field value), or 'Selected features
+    only' with nothing selected (a script, a batch row): one line naming the layer and the
+    options, not a mesh without its break lines nor 'holdout.gpkg has no 3-D points'."""
+    from qgis.core import QgsProcessingException
+
+    lines = QgsVectorLayer(traced["lines"], "traced lines", "ogr")
+    points = QgsVectorLayer(traced["holdout"], "holdout", "ogr")
+    QgsProject.instance().addMapLayers([lines, points])
+    try:
+        def emptied(layer):
+            if option == "nothing selected":
+                return QgsProcessingFeatureSourceDefinition(layer.id(), True)
+            definition = with_options(layer, "filter")
+            definition.filterExpression = "$id < 0"
+            return definition
+
+        mesh = processing.run("floodmesh:buildmesh", {
+            "DEM": traced["dem"], "OUTPUT": str(tmp_path / "m.2dm")})["OUTPUT"]
+        runs = (("buildmesh", {"DEM": traced["dem"], "BREAKLINES": emptied(lines),
+                               "OUTPUT": str(tmp_path / "b.2dm")}, lines),
+                ("assessaccuracy", {"MESH": mesh, "POINTS": emptied(points),
+                                    "OUTPUT": str(tmp_path / "r.gpkg")}, points))
+        for algorithm, parameters, layer in runs:
+            with pytest.raises(QgsProcessingException) as error:
+                processing.run(f"floodmesh:{algorithm}", parameters)
+            message = str(error.value).strip().splitlines()[-1]
+            assert message.startswith(f"{layer.name()}: none of its {layer.featureCount()} "
+                                      f"features is left by the input's options"), message
+        assert not (tmp_path / "b.2dm").exists() and not (tmp_path / "r.gpkg").exists()
+    finally:
+        QgsProject.instance().removeMapLayers([lines.id(), points.id()])
