@@ -336,7 +336,7 @@ def vector_file(algorithm, parameters, name, context, feedback=None):
     given = source_layer(algorithm, parameters, name, context)
     if given is not None and is_copy(path, given):
         path = named_after_layer(path, given)
-        check_features_left(path, given)
+        check_features_left(path, given, parameters.get(name))
     return f"{path}|layername={layer}" if layer else path
 
 
@@ -364,18 +364,41 @@ def named_after_layer(path: str, layer) -> str:
     return str(named)
 
 
-def check_features_left(path: str, layer) -> None:
-    """Refuse a copy that the input's options (selected features only, a feature limit or
-    filter, skipping invalid geometries) left empty, where the layer itself has features: the
-    step would otherwise run without them (a mesh without its lines) or blame the layer."""
+def check_features_left(path: str, layer, value) -> None:
+    """Refuse a copy that the input's options (``value``: selected features only, a feature
+    limit or filter, skipping invalid geometries) left empty, where the layer itself has
+    features: the step would otherwise run without them (a mesh without its lines) or blame the
+    layer. A filter expression that does not parse or names no field of the layer says so."""
     from qgis.core import QgsVectorLayer
 
     total = layer.featureCount()
-    if total > 0 and QgsVectorLayer(path, "copy", "ogr").featureCount() == 0:
-        raise FloodMeshError(
-            f"{layer.name()}: none of its {total} features is left by the input's options "
-            f"(selected features only, a feature limit or filter, invalid geometries skipped): "
-            f"select features or change the options")
+    if total <= 0 or QgsVectorLayer(path, "copy", "ogr").featureCount() > 0:
+        return
+    problem = filter_problem(getattr(value, "filterExpression", ""), layer)
+    if problem:
+        raise FloodMeshError(f"{layer.name()}: {problem}: correct the input's feature filter")
+    raise FloodMeshError(
+        f"{layer.name()}: none of its {total} features is left by the input's options "
+        f"(selected features only, a feature limit or filter, invalid geometries skipped): "
+        f"select features or change the options")
+
+
+def filter_problem(expression: str, layer) -> str:
+    """Why the feature filter ``expression`` cannot select features of ``layer`` (it does not
+    parse, or it names no field of the layer), or ''."""
+    from qgis.core import QgsExpression, QgsExpressionContext, QgsExpressionContextUtils
+
+    if not expression:
+        return ""
+    parsed = QgsExpression(expression)
+    if parsed.hasParserError():
+        return (f"its feature filter {expression!r} is not an expression "
+                f"({' '.join(parsed.parserErrorString().split())})")
+    context = QgsExpressionContext(QgsExpressionContextUtils.globalProjectLayerScopes(layer))
+    if not parsed.prepare(context) and parsed.hasEvalError():
+        return (f"its feature filter {expression!r} fails "
+                f"({' '.join(parsed.evalErrorString().split())})")
+    return ""
 
 
 def vector_crs(algorithm, parameters, name, context):

@@ -496,3 +496,27 @@ def test_input_options_that_leave_no_feature_are_refused(processing, traced, opt
         assert not (tmp_path / "b.2dm").exists() and not (tmp_path / "r.gpkg").exists()
     finally:
         QgsProject.instance().removeMapLayers([lines.id(), points.id()])
+
+
+@pytest.mark.parametrize("expression, says", [
+    ("length_m >", "is not an expression"),
+    ("lenght_m > 20", "'lenght_m' not found")])
+def test_a_feature_filter_that_cannot_select_says_what_is_wrong(processing, traced, expression,
+                                                                says, tmp_path):
+    """A feature filter (QGIS >= 3.32) cut short or with a misspelt field selects nothing (QGIS
+    hands on no features, silently): the refusal names the filter and its error."""
+    from qgis.core import QgsProcessingException
+
+    lines = QgsVectorLayer(traced["lines"], "traced lines", "ogr")
+    QgsProject.instance().addMapLayer(lines)
+    try:
+        definition = with_options(lines, "filter")
+        definition.filterExpression = expression
+        with pytest.raises(QgsProcessingException) as error:
+            simplified(processing, definition, tmp_path / "s.gpkg")
+        message = str(error.value).strip().splitlines()[-1]
+        assert message.startswith(f"traced lines: its feature filter {expression!r}"), message
+        assert says in message and message.endswith("correct the input's feature filter")
+        assert not (tmp_path / "s.gpkg").exists()
+    finally:
+        QgsProject.instance().removeMapLayer(lines.id())
