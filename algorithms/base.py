@@ -12,7 +12,7 @@ from qgis.PyQt.QtCore import QCoreApplication
 from ..core.errors import FloodMeshError
 from ..core.options import is_point_source, wrong_geometry
 from .compat import (METRES, OWN_GEOMETRY_CHECK, SKIP_INVALID, VECTOR_LINE, VECTOR_POINT,
-                     VECTOR_POLYGON)
+                     VECTOR_POLYGON, temporary_file)
 from .child import run_step
 from .styles import reload_rewritten, stack_when_loaded
 
@@ -295,12 +295,12 @@ def valid_features_file(algorithm, parameters, name, context, feedback=None):
     """A temporary GeoPackage of the features QGIS gives for the vector parameter ``name``
     (its selection, filter and limit) less those with invalid geometries, which QGIS reports
     as skipped."""
-    from qgis.core import QgsProcessingUtils, QgsVectorFileWriter
+    from qgis.core import QgsVectorFileWriter
 
     source = algorithm.parameterAsSource(parameters, name, context)
     if source is None:
         return None
-    path = QgsProcessingUtils.generateTempFilename(f"{name}.gpkg")
+    path = temporary_file(f"{name}.gpkg", context)
     options = QgsVectorFileWriter.SaveVectorOptions()
     options.driverName = "GPKG"
     writer = QgsVectorFileWriter.create(path, source.fields(), source.wkbType(),

@@ -67,3 +67,13 @@ else:
 
     SKIP_INVALID = QgsFeatureRequest.GeometrySkipInvalid
     OWN_GEOMETRY_CHECK = QgsProcessingFeatureSourceDefinition.FlagOverrideDefaultGeometryCheck
+
+
+def temporary_file(basename: str, context) -> str:
+    """A new temporary file name in the Processing temporary folder: the one set for this run
+    (QGIS >= 3.32: Algorithm Settings › Temporary folder) where QGIS has it."""
+    from qgis.core import QgsProcessingUtils
+
+    if hasattr(context, "temporaryFolder"):  # QGIS >= 3.32
+        return QgsProcessingUtils.generateTempFilename(basename, context)
+    return QgsProcessingUtils.generateTempFilename(basename)

@@ -520,3 +520,22 @@ def test_a_feature_filter_that_cannot_select_says_what_is_wrong(processing, trac
         assert not (tmp_path / "s.gpkg").exists()
     finally:
         QgsProject.instance().removeMapLayer(lines.id())
+
+
+def test_copies_of_inputs_go_to_the_run_s_temporary_folder(processing, traced, domains, tmp_path):
+    """The copy of an input that skips invalid features goes where QGIS puts its own copies:
+    the temporary folder set for the run (QGIS >= 3.32: the dialog's Algorithm Settings ›
+    Temporary folder, e.g. a larger disk than /tmp)."""
+    from processing.tools import dataobjects
+
+    from floodmesh.algorithms.compat import SKIP_INVALID
+
+    context = dataobjects.createContext()
+    if not hasattr(context, "setTemporaryFolder"):
+        pytest.skip("QGIS before 3.32 has no temporary folder per run")
+    context.setTemporaryFolder(str(tmp_path / "scratch"))
+    context.setInvalidGeometryCheck(SKIP_INVALID)
+    processing.run("floodmesh:buildmesh", {
+        "DEM": traced["dem"], "BOUNDARY": domains["with_bowtie"],
+        "OUTPUT": str(tmp_path / "m.2dm")}, context=context)
+    assert [p.name for p in (tmp_path / "scratch").rglob("*.gpkg")] == ["with_bowtie.gpkg"]
