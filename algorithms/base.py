@@ -179,6 +179,7 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         try:
             self.check_values(parameters, context)
             self.check_geometries(parameters, context)
+            self.check_inputs_kept(parameters, context)
         except FloodMeshError as exc:  # core's own message, before QGIS's generic range check
             return False, str(exc)
         return super().checkParameterValues(parameters, context)
@@ -205,6 +206,32 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
             if has is not None and has not in needed:
                 raise wrong_geometry(Path(layer.source().split("|")[0]).name or layer.name(),
                                      has, *needed)
+
+    def check_inputs_kept(self, parameters, context):
+        """An output named as the file of a vector input: refused, as core refuses it, also
+        where the step reads the input from a temporary copy (selected features, a filter,
+        unsaved edits), which is all core sees."""
+        import os
+
+        from qgis.core import (QgsProcessingOutputLayerDefinition,
+                               QgsProcessingParameterFeatureSource)
+
+        inputs = {}
+        for definition in self.parameterDefinitions():
+            if isinstance(definition, QgsProcessingParameterFeatureSource):
+                layer = source_layer(self, parameters, definition.name(), context)
+                own = layer.source().split("|")[0] if layer is not None else ""
+                if own and os.path.isfile(own):
+                    inputs[os.path.realpath(own)] = own
+        for definition in self.destinationParameterDefinitions():
+            out = parameters.get(definition.name())
+            if isinstance(out, QgsProcessingOutputLayerDefinition):
+                out = out.sink.staticValue()
+            if out and os.path.realpath(str(out)) in inputs:
+                raise FloodMeshError(
+                    f"the output {out} is the input {inputs[os.path.realpath(str(out))]}: "
+                    f"FloodMesh never overwrites an input; give the output another name or "
+                    f"folder")
 
     def processAlgorithm(self, parameters, context, feedback):  # noqa: N802
         # core's step (core.steps) checks its files before any work: no output is or replaces
@@ -291,10 +318,10 @@ def skips_invalid(value, context) -> bool:
     return _number(check) == _number(SKIP_INVALID)
 
 
-def valid_features_file(algorithm, parameters, name, context, feedback=None):
-    """A temporary GeoPackage of the features QGIS gives for the vector parameter ``name``
-    (its selection, filter and limit) less those with invalid geometries, which QGIS reports
-    as skipped."""
+def features_file(algorithm, parameters, name, context, feedback=None):
+    """A temporary GeoPackage of the features QGIS gives for the vector parameter ``name``:
+    its selection, filter and limit, the layer's unsaved edits, less invalid geometries where
+    they are skipped (QGIS reports each)."""
     from qgis.core import QgsVectorFileWriter
 
     source = algorithm.parameterAsSource(parameters, name, context)
@@ -324,16 +351,16 @@ def vector_file(algorithm, parameters, name, context, feedback=None):
     what only QGIS holds (a memory or database layer, selected features only, a layer's
     filter, a filter expression or feature limit of the input), a temporary GeoPackage of those
     features, as QGIS hands layers to GDAL's tools; without the invalid ones where invalid
-    features are to be skipped (the input's or Processing's setting)."""
-    if (parameters.get(name) not in (None, "")
-            and skips_invalid(parameters.get(name), context)):
-        path, layer = valid_features_file(algorithm, parameters, name, context, feedback), ""
+    features are to be skipped (the input's or Processing's setting), and of a layer with
+    unsaved edits (what QGIS shows, not its file)."""
+    given = source_layer(algorithm, parameters, name, context)
+    if given is not None and (skips_invalid(parameters.get(name), context) or given.isModified()):
+        path, layer = features_file(algorithm, parameters, name, context, feedback), ""
     else:
         path, layer = algorithm.parameterAsCompatibleSourceLayerPathAndLayerName(
             parameters, name, context, VECTOR_FILES, "gpkg", feedback)
     if not path:
         return None
-    given = source_layer(algorithm, parameters, name, context)
     if given is not None and is_copy(path, given):
         path = named_after_layer(path, given)
         check_features_left(path, given, parameters.get(name))

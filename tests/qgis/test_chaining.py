@@ -539,3 +539,53 @@ def test_copies_of_inputs_go_to_the_run_s_temporary_folder(processing, traced, d
         "DEM": traced["dem"], "BOUNDARY": domains["with_bowtie"],
         "OUTPUT": str(tmp_path / "m.2dm")}, context=context)
     assert [p.name for p in (tmp_path / "scratch").rglob("*.gpkg")] == ["with_bowtie.gpkg"]
+
+
+def test_a_layer_s_unsaved_edits_are_what_the_step_reads(processing, traced, tmp_path):
+    """Break lines edited in QGIS and not yet saved (lines deleted, the layer still in edit
+    mode): the step reads what the map shows, as QGIS's own algorithms do, not the file on
+    disk; the file stays as it was."""
+    layer = QgsVectorLayer(traced["lines"], "traced lines", "ogr")
+    QgsProject.instance().addMapLayer(layer)
+    try:
+        deleted = sorted(layer.allFeatureIds())[:20]
+        assert layer.startEditing() and layer.deleteFeatures(deleted)
+        kept = processing.run("native:extractbyexpression", {
+            "INPUT": traced["lines"], "OUTPUT": str(tmp_path / "kept.gpkg"),
+            "EXPRESSION": f"$id NOT IN ({','.join(map(str, deleted))})"})["OUTPUT"]
+        assert count(simplified(processing, layer, tmp_path / "edited.gpkg")) == count(
+            simplified(processing, kept, tmp_path / "saved.gpkg"))
+        assert count(traced["lines"]) == len(deleted) + count(kept)
+    finally:
+        layer.rollBack()
+        QgsProject.instance().removeMapLayer(layer.id())
+
+
+@pytest.mark.parametrize("option", ["selected", "unsaved edits"])
+def test_an_output_onto_an_input_read_from_a_copy_is_refused(processing, traced, option,
+                                                            tmp_path):
+    """The input GeoPackage named as the output, where the step reads the input from a copy
+    (its selected features, its unsaved edits): refused in one line as for the file itself,
+    the user's GeoPackage untouched (it was overwritten with the simplified selection)."""
+    import shutil
+
+    from qgis.core import QgsProcessingException
+
+    mine = tmp_path / "mine.gpkg"
+    shutil.copy(traced["lines"], mine)
+    layer = QgsVectorLayer(str(mine), "mine", "ogr")
+    QgsProject.instance().addMapLayer(layer)
+    try:
+        first = sorted(layer.allFeatureIds())[:5]
+        if option == "selected":
+            layer.selectByIds(first)
+            given = QgsProcessingFeatureSourceDefinition(layer.id(), True)
+        else:
+            assert layer.startEditing() and layer.deleteFeatures(first)
+            given = layer
+        with pytest.raises(QgsProcessingException, match="is the input"):
+            simplified(processing, given, mine)
+        layer.rollBack()
+        assert count(str(mine)) == count(traced["lines"])
+    finally:
+        QgsProject.instance().removeMapLayer(layer.id())
