@@ -353,6 +353,10 @@ def vector_file(algorithm, parameters, name, context, feedback=None):
     features, as QGIS hands layers to GDAL's tools; without the invalid ones where invalid
     features are to be skipped (the input's or Processing's setting), and of a layer with
     unsaved edits (what QGIS shows, not its file)."""
+    from qgis.core import QgsProcessingFeedback
+
+    if feedback is None:  # QGIS 3.22 dereferences it while it copies features: a crash
+        feedback = QgsProcessingFeedback()
     given = source_layer(algorithm, parameters, name, context)
     if given is not None and (skips_invalid(parameters.get(name), context) or given.isModified()):
         path, layer = features_file(algorithm, parameters, name, context, feedback), ""

@@ -163,3 +163,38 @@ def test_results_load_lines_above_the_mesh_in_the_runs_crs(processing, demo_poin
     mesh = project.mapLayersByName("Mesh")[0]
     assert mesh.crs().isValid() and mesh.crs().authid() == "EPSG:25832"
     project.clear()
+
+
+def test_a_domain_of_selected_features_meshes_within_it(processing, demo_points_file, tmp_path):
+    """The model domain as 'Selected features only' of a layer of two polygons (what the
+    dialog hands on): LiDAR to mesh checks and runs (QGIS 3.22 crashed while checking the
+    parameters) and meshes the selected polygon only."""
+    from qgis.core import (QgsCoordinateTransformContext, QgsFeature, QgsGeometry,
+                           QgsProcessingFeatureSourceDefinition, QgsProject, QgsVectorFileWriter)
+
+    from floodmesh.core.frontends.demo import DEMO_ORIGIN
+
+    x, y = DEMO_ORIGIN
+    memory = QgsVectorLayer("Polygon?crs=EPSG:25832", "domains", "memory")
+    for x0, x1 in ((x + 20, x + 120), (x + 160, x + 280)):
+        feature = QgsFeature()
+        feature.setGeometry(QgsGeometry.fromWkt(
+            f"POLYGON(({x0} {y + 20},{x1} {y + 20},{x1} {y + 220},{x0} {y + 220},{x0} {y + 20}))"))
+        assert memory.dataProvider().addFeature(feature)
+    options = QgsVectorFileWriter.SaveVectorOptions()
+    options.driverName = "GPKG"
+    written = QgsVectorFileWriter.writeAsVectorFormatV3(
+        memory, str(tmp_path / "domains.gpkg"), QgsCoordinateTransformContext(), options)
+    assert written[0] == QgsVectorFileWriter.NoError, written
+    layer = QgsVectorLayer(str(tmp_path / "domains.gpkg"), "domains", "ogr")
+    QgsProject.instance().addMapLayer(layer)
+    try:
+        layer.selectByIds([sorted(layer.allFeatureIds())[0]])
+        processing.run("floodmesh:lidartomesh", {
+            "INPUT": str(demo_points_file), "CELL_SIZE": 2.0, "MAX_AREA": 200.0,
+            "BOUNDARY": QgsProcessingFeatureSourceDefinition(layer.id(), True),
+            "OUTPUT_FOLDER": str(tmp_path / "out")})
+    finally:
+        QgsProject.instance().removeMapLayer(layer.id())
+    nodes = io.read_2dm(tmp_path / "out" / "mesh.2dm").nodes
+    assert nodes[:, 0].min() >= x + 20 - 1e-6 and nodes[:, 0].max() <= x + 120 + 1e-6
