@@ -216,17 +216,28 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         from qgis.core import (QgsProcessingOutputLayerDefinition,
                                QgsProcessingParameterFeatureSource)
 
-        inputs = {}
+        from qgis.core import QgsProcessingParameterFolderDestination
+
+        inputs, copied = {}, {}
         for definition in self.parameterDefinitions():
             if isinstance(definition, QgsProcessingParameterFeatureSource):
                 layer = source_layer(self, parameters, definition.name(), context)
                 own = layer.source().split("|")[0] if layer is not None else ""
                 if own and os.path.isfile(own):
                     inputs[os.path.realpath(own)] = own
+                    if read_from_copy(parameters.get(definition.name()), layer, context):
+                        copied[os.path.dirname(os.path.realpath(own))] = own
         for definition in self.destinationParameterDefinitions():
             out = parameters.get(definition.name())
             if isinstance(out, QgsProcessingOutputLayerDefinition):
                 out = out.sink.staticValue()
+            if (out and isinstance(definition, QgsProcessingParameterFolderDestination)
+                    and os.path.realpath(str(out)) in copied):
+                raise FloodMeshError(
+                    f"{copied[os.path.realpath(str(out))]} lies in the output folder {out} and "
+                    f"is read from a copy (selected features, a filter, unsaved edits), so "
+                    f"FloodMesh cannot tell whether the run would overwrite it: give another "
+                    f"output folder")
             if out and os.path.realpath(str(out)) in inputs:
                 raise FloodMeshError(
                     f"the output {out} is the input {inputs[os.path.realpath(str(out))]}: "
@@ -305,6 +316,16 @@ def source_layer(algorithm, parameters, name, context):
     if isinstance(value, QgsProcessingFeatureSourceDefinition):
         parameters = {**parameters, name: value.source}
     return algorithm.parameterAsVectorLayer(parameters, name, context)
+
+
+def read_from_copy(value, layer, context) -> bool:
+    """Whether a step reads the vector input ``value`` (of ``layer``) from a temporary copy,
+    not from the layer's file: input options, a layer filter, unsaved edits, skipped invalid
+    geometries."""
+    from qgis.core import QgsProcessingFeatureSourceDefinition
+
+    return (isinstance(value, QgsProcessingFeatureSourceDefinition) or layer.isModified()
+            or bool(layer.subsetString()) or skips_invalid(value, context))
 
 
 def skips_invalid(value, context) -> bool:

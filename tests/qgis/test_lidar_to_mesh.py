@@ -4,7 +4,9 @@ import json
 import subprocess
 
 import pytest
-from qgis.core import QgsMeshLayer, QgsProcessingContext, QgsProcessingFeedback, QgsVectorLayer
+from qgis.core import (QgsCoordinateTransformContext, QgsFeature, QgsGeometry, QgsMeshLayer,
+                       QgsProcessingContext, QgsProcessingFeedback, QgsVectorFileWriter,
+                       QgsVectorLayer)
 
 from floodmesh.core import io
 
@@ -165,18 +167,14 @@ def test_results_load_lines_above_the_mesh_in_the_runs_crs(processing, demo_poin
     project.clear()
 
 
-def test_a_domain_of_selected_features_meshes_within_it(processing, demo_points_file, tmp_path):
-    """The model domain as 'Selected features only' of a layer of two polygons (what the
-    dialog hands on): LiDAR to mesh checks and runs (QGIS 3.22 crashed while checking the
-    parameters) and meshes the selected polygon only."""
-    from qgis.core import (QgsCoordinateTransformContext, QgsFeature, QgsGeometry,
-                           QgsProcessingFeatureSourceDefinition, QgsProject, QgsVectorFileWriter)
-
+def rectangles(path, *spans):
+    """A GeoPackage at ``path`` of rectangles over the demo, one per (x0, x1) span (from 20 to
+    220 m north of its origin), as a layer of the project's kind."""
     from floodmesh.core.frontends.demo import DEMO_ORIGIN
 
-    x, y = DEMO_ORIGIN
-    memory = QgsVectorLayer("Polygon?crs=EPSG:25832", "domains", "memory")
-    for x0, x1 in ((x + 20, x + 120), (x + 160, x + 280)):
+    y = DEMO_ORIGIN[1]
+    memory = QgsVectorLayer("Polygon?crs=EPSG:25832", path.stem, "memory")
+    for x0, x1 in spans:
         feature = QgsFeature()
         feature.setGeometry(QgsGeometry.fromWkt(
             f"POLYGON(({x0} {y + 20},{x1} {y + 20},{x1} {y + 220},{x0} {y + 220},{x0} {y + 20}))"))
@@ -184,9 +182,21 @@ def test_a_domain_of_selected_features_meshes_within_it(processing, demo_points_
     options = QgsVectorFileWriter.SaveVectorOptions()
     options.driverName = "GPKG"
     written = QgsVectorFileWriter.writeAsVectorFormatV3(
-        memory, str(tmp_path / "domains.gpkg"), QgsCoordinateTransformContext(), options)
+        memory, str(path), QgsCoordinateTransformContext(), options)
     assert written[0] == QgsVectorFileWriter.NoError, written
-    layer = QgsVectorLayer(str(tmp_path / "domains.gpkg"), "domains", "ogr")
+    return QgsVectorLayer(str(path), path.stem, "ogr")
+
+
+def test_a_domain_of_selected_features_meshes_within_it(processing, demo_points_file, tmp_path):
+    """The model domain as 'Selected features only' of a layer of two polygons (what the
+    dialog hands on): LiDAR to mesh checks and runs (QGIS 3.22 crashed while checking the
+    parameters) and meshes the selected polygon only."""
+    from qgis.core import QgsProcessingFeatureSourceDefinition, QgsProject
+
+    from floodmesh.core.frontends.demo import DEMO_ORIGIN
+
+    x = DEMO_ORIGIN[0]
+    layer = rectangles(tmp_path / "domains.gpkg", (x + 20, x + 120), (x + 160, x + 280))
     QgsProject.instance().addMapLayer(layer)
     try:
         layer.selectByIds([sorted(layer.allFeatureIds())[0]])
@@ -198,3 +208,32 @@ def test_a_domain_of_selected_features_meshes_within_it(processing, demo_points_
         QgsProject.instance().removeMapLayer(layer.id())
     nodes = io.read_2dm(tmp_path / "out" / "mesh.2dm").nodes
     assert nodes[:, 0].min() >= x + 20 - 1e-6 and nodes[:, 0].max() <= x + 120 + 1e-6
+
+
+def test_a_domain_read_from_a_copy_in_the_output_folder_is_kept(processing, demo_points_file,
+                                                                tmp_path):
+    """The domain GeoPackage kept in the output folder under a name the run writes
+    (mesh.gpkg), given with 'Selected features only': refused before the run, the file kept
+    (the run overwrote it with its triangles, as it cannot see the file behind the copy)."""
+    from qgis.core import (QgsProcessingException, QgsProcessingFeatureSourceDefinition,
+                           QgsProject)
+
+    from floodmesh.core.frontends.demo import DEMO_ORIGIN
+
+    x = DEMO_ORIGIN[0]
+    out = tmp_path / "run"
+    out.mkdir()
+    layer = rectangles(out / "mesh.gpkg", (x + 20, x + 200))
+    before = (out / "mesh.gpkg").read_bytes()
+    QgsProject.instance().addMapLayer(layer)
+    try:
+        layer.selectAll()
+        with pytest.raises(QgsProcessingException, match="lies in the output folder"):
+            processing.run("floodmesh:lidartomesh", {
+                "INPUT": str(demo_points_file), "CELL_SIZE": 2.0, "MAX_AREA": 200.0,
+                "BOUNDARY": QgsProcessingFeatureSourceDefinition(layer.id(), True),
+                "OUTPUT_FOLDER": str(out)})
+    finally:
+        QgsProject.instance().removeMapLayer(layer.id())
+    assert (out / "mesh.gpkg").read_bytes() == before
+    assert not (out / "mesh.2dm").exists()
