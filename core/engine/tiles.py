@@ -199,10 +199,11 @@ def _mixed_kinds(tiles: dict) -> str:
     rasters = [p for p in tiles if tile_kind(p) == "dem"]
     points = [p for p in tiles if tile_kind(p) == "points"]
     if len(rasters) == len(points):
-        fix = ("give one kind: keep the point files and the DEM rasters in separate folders and "
-               "give the folder of the kind to read")
         folders = [_folder(item) for item in dict.fromkeys(tiles.values())
                    if _takes_several(item)]
+        fix = ("give one kind: keep the point files and the DEM rasters in separate folders and "
+               "give the folder of the kind to read" if folders else
+               "give one kind: list the point files or the DEM rasters, not both")
         if folders:
             fix += (f", or give one kind by quoted patterns: {_patterns(folders[0], points)} "
                     f"for the point files, {_patterns(folders[0], rasters)} for the DEM rasters")

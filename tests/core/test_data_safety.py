@@ -195,6 +195,21 @@ def test_as_many_point_files_as_dem_rasters_give_one_message_naming_both(tmp_pat
     assert not (tmp_path / "out").exists()
 
 
+def test_a_list_of_as_many_point_files_as_dem_rasters_is_asked_for_one_kind(tmp_path, capsys):
+    """A LAZ and a DEM listed by name: neither is the odd one out, so the message names both and
+    asks for a list of one kind, not to move them into folders."""
+    folder = _las_tiles(tmp_path / "mixed")
+    write_tif(folder / "a.tif", slope_dem())
+    code = main(["run", str(folder / "T0.las"), str(folder / "a.tif"), "--out",
+                 str(tmp_path / "out")])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2 and err == [
+        "floodmesh: error: the tiles mix point files and DEM rasters, as many of each: 1 point "
+        "file (T0.las) and 1 DEM raster (a.tif): give one kind: list the point files or the DEM "
+        "rasters, not both"], err
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_run_into_its_own_tile_folder_is_refused_before_any_work(tmp_path, capsys):
     """Outputs written among the tiles would be read as tiles by the next run on the folder (a
     DEM, slope and breakpoints beside LAS tiles; silently among DEM tiles): refused up front,

@@ -397,9 +397,10 @@ def test_one_tile_runs_as_its_file_and_a_mixed_list_is_named(tmp_path):
     seen = run_on_real_data(ONE_TILE_SCRIPT, tmp_path)
     assert seen["one_laz"] == ["OUTPUT"], seen
     assert "MESH" in seen["one_dem"], seen
-    assert seen["mixed"].endswith("1 DEM raster (merewether_topography1.asc) beside 1 point "
-                                  "tiles: take it out of the list of tiles (keep "
-                                  "Topography.laz)"), seen
+    assert seen["mixed"].endswith(
+        "as many of each: 1 point file (Topography.laz) and 1 DEM raster "
+        "(merewether_topography1.asc): give one kind: list the point files or the DEM rasters, "
+        "not both"), seen
 
 
 AFTER_RUN_SCRIPT = desktop_script(r"""
