@@ -18,7 +18,7 @@ from ..engine.compiles import CompileWatch
 from ..engine.arrays import without_huge_pages
 from ..engine.limits import BYTES_PER_FITTED_CELL, check_memory, check_triangles, fits_in_memory
 from ..engine.nearest import CellIndex, point_index
-from ..engine.progress import part, poll, report
+from ..engine.progress import part, poll, report, steady
 from ..engine.tiles import (TiledDem, grid_point_tiles, read_back, read_dem_tiles,
                             read_gridded_points, read_point_tiles, slope_file64,
                             write_front_rasters)
@@ -66,7 +66,7 @@ class _Steps:
 
     def __init__(self, weights: dict, progress, cancelled, log, background=None):
         self.weights, self.total = weights, float(sum(weights.values()))
-        self.progress, self.cancelled, self.log = progress, cancelled, log
+        self.progress, self.cancelled, self.log = steady(progress), cancelled, log
         self.done, self.seconds, self.cpu_seconds = 0.0, {}, {}
         self.compiles = CompileWatch(log)  # numba's first-run compile, said when it happens
         self.background = background  # an executor of one thread, or None: no work ahead

@@ -6,6 +6,9 @@ from __future__ import annotations
 from ..errors import Cancelled
 
 REPORTS = 100  # about as many reports along a loop: the bar moves by the percent
+# Shares of shares, summed in another order, round apart by some 1e-16: steps this small are
+# rounding, not progress, and are not told as a step back or as short of the end
+ROUNDING = 1e-9
 
 
 def poll(cancelled) -> None:
@@ -39,3 +42,23 @@ def along(items, progress=None, cancelled=None):
             report(progress, cancelled, k / len(items))
         yield item
     report(progress, cancelled, 1.0)
+
+
+def steady(progress):
+    """``progress`` (None: None) told fractions whose rounding is taken out: a fraction less
+    than ``ROUNDING`` below the last one told is told as that one, one within it of 1 as 1, so
+    the bar neither steps back nor ends short of 100 % by rounding; a larger step back (a
+    defect) goes through as it is."""
+    if progress is None:
+        return None
+    last = 0.0
+
+    def tell(fraction: float) -> None:
+        nonlocal last
+        if last - ROUNDING < fraction < last:
+            fraction = last
+        if abs(fraction - 1.0) < ROUNDING:
+            fraction = 1.0
+        last = fraction
+        progress(fraction)
+    return tell
