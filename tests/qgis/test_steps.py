@@ -193,7 +193,9 @@ def test_simplify_by_default_gives_the_command_line_s_lines(processing, demo_ras
                                                             tmp_path):
     """Simplify break lines and floodmesh simplify take one default (minimum distance 0: off),
     so the documented step chain gives the same lines in QGIS and on the command line; here a
-    minimum distance changes the lines, so a default of 0.5 m would show."""
+    minimum distance changes the lines (merges parts beside longer lines, whose segments get
+    back the vertices they skipped: not always fewer vertices), so a default of 0.5 m would
+    show."""
     import sys
     from pathlib import Path
 
@@ -212,7 +214,9 @@ def test_simplify_by_default_gives_the_command_line_s_lines(processing, demo_ras
         np.testing.assert_array_equal(a, b)
     merged = processing.run("floodmesh:simplifybreaklines", {
         "INPUT": lines, "MIN_DISTANCE": 0.5, "OUTPUT": str(tmp_path / "merged.gpkg")})["OUTPUT"]
-    assert sum(map(len, io.read_lines_gpkg(merged))) < sum(map(len, by_cli))
+    by_merging = io.read_lines_gpkg(merged)
+    assert len(by_merging) != len(by_cli) or any(
+        not np.array_equal(a, b) for a, b in zip(by_merging, by_cli))
 
 
 def test_refine_mesh_algorithm(processing, demo_rasters, tmp_path):
