@@ -14,7 +14,7 @@ from ..core.options import is_point_source, wrong_geometry
 from .compat import (METRES, OWN_GEOMETRY_CHECK, SKIP_INVALID, VECTOR_LINE, VECTOR_POINT,
                      VECTOR_POLYGON, temporary_file)
 from .child import run_step
-from .styles import reload_rewritten, stack_when_loaded
+from .styles import drop_unasked_loads, reload_rewritten, stack_when_loaded
 
 
 # what toolbox searches find every FloodMesh algorithm by (each adds its own, ``TAGS``)
@@ -248,9 +248,11 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         # core's step (core.steps) checks its files before any work: no output is or replaces
         # an input, each output folder is writable
         try:
-            return self.process(parameters, context, feedback)
+            results = self.process(parameters, context, feedback)
         except FloodMeshError as exc:
             raise QgsProcessingException(str(exc)) from None
+        drop_unasked_loads(self, parameters, context)
+        return results
 
     def postProcessAlgorithm(self, context, feedback):  # noqa: N802
         # in QGIS's main thread, after the run, before QGIS loads its results

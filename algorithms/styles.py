@@ -320,6 +320,27 @@ def load_results(context, crs_wkt, layers, group: str | None = None, folder=None
         context.addLayerToLoadOnCompletion(layer.id(), details)
 
 
+def drop_unasked_loads(algorithm, parameters, context) -> None:
+    """The layers a run handed to QGIS itself (``load_results``: a mesh, a run's folder) load
+    only where the user asked QGIS to load the run's layers. A file or folder output reaches the
+    algorithm as a plain path, which says nothing; a layer output (a raster, the triangles)
+    reaches it as a definition whose destination project is set where its layer is to be
+    loaded: the batch dialog's "Load layers on completion" box, the dialog's "Open output file
+    after running algorithm" box, processing.runAndLoadResults. With no such definition (the
+    dialog of an algorithm with only file outputs, qgis_process, processing.run) they stay."""
+    from qgis.core import QgsProcessingOutputLayerDefinition
+
+    asked = [value.destinationProject is not None
+             for value in (parameters.get(d.name())
+                           for d in algorithm.destinationParameterDefinitions())
+             if isinstance(value, QgsProcessingOutputLayerDefinition)]
+    if asked and not any(asked):
+        store = context.temporaryLayerStore()
+        context.setLayersToLoadOnCompletion({
+            key: details for key, details in context.layersToLoadOnCompletion().items()
+            if store.mapLayer(key) is None})
+
+
 def _file_of(source: str) -> tuple:
     """A layer source's file, resolved, and its layer name within it (a GeoPackage's), if any."""
     import os

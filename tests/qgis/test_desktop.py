@@ -38,6 +38,18 @@ def settle():
         QTest.qWait(200)
 
 
+def run_dialog(dialog):
+    # the algorithm's dialog shown, Run pressed, waited for (it runs as a background task)
+    dialog.show()
+    settle()
+    dialog.runAlgorithm()
+    for _ in range(900):
+        if dialog.results():
+            break
+        QTest.qWait(200)
+    settle()
+
+
 def kind(layer):
     from qgis.core import QgsMapLayerType, QgsWkbTypes
     if layer.type() == QgsMapLayerType.MeshLayer:
@@ -86,14 +98,7 @@ try:
     from processing.core.ProcessingResults import resultsList
     dialog = processing.createAlgorithmDialog("floodmesh:lidartomesh", {
         "INPUT": os.environ["FM_INPUT"], "OUTPUT_FOLDER": os.environ["FM_OUTPUT"] + " dialog"})
-    dialog.show()
-    settle()
-    dialog.runAlgorithm()
-    for _ in range(900):
-        if dialog.results():
-            break
-        QTest.qWait(200)
-    settle()
+    run_dialog(dialog)
     out["dialog_results"] = sorted(dialog.results() or {})
     out["results_viewer"] = [r.filename for r in resultsList.getResults()]
     out["tree_after_dialog"] = tree(project.layerTreeRoot())
@@ -747,3 +752,59 @@ def test_a_slope_layer_is_named_after_what_it_holds(tmp_path):
     "LoG response (m)", not both as "Slope (degrees) or LoG response (m)"."""
     seen = run_on_real_data(RESTRETCH_SCRIPT, tmp_path)
     assert seen["names"] == {"1": ["Slope (degrees)"], "6": ["LoG response (m)"]}, seen
+
+
+BATCH_SCRIPT = desktop_script(r"""
+    import processing
+    from processing.gui.BatchAlgorithmDialog import BatchAlgorithmDialog
+    project = QgsProject.instance()
+    base = os.environ["FM_OUTPUT"]
+
+    def algorithm():
+        return QgsApplication.processingRegistry().createAlgorithmById("floodmesh:buildmesh")
+
+    def batch(name, load):
+        # the Batch Processing dialog: two rows, DEM and mesh file set in each, the "Load layers
+        # on completion" box as the user left it, Run pressed
+        dialog = BatchAlgorithmDialog(algorithm(), iface.mainWindow())
+        dialog.show()
+        panel = dialog.mainWidget()
+        panel.addRow()
+        context = processing.tools.dataobjects.createContext()
+        for row in range(2):
+            panel.wrappers[row][panel.parameter_to_column["DEM"]].setParameterValue(
+                os.environ["FM_DEM"], context)
+            panel.wrappers[row][panel.parameter_to_column["MAX_AREA"]].setParameterValue(
+                400, context)
+            panel.tblParameters.cellWidget(row + 1, panel.parameter_to_column["OUTPUT"]).setValue(
+                f"{base} {name} {row}.2dm")
+        panel.checkLoadLayersOnCompletion.setChecked(load)
+        dialog.runAlgorithm()
+        settle()
+        out[name] = sorted(l.name() for l in project.mapLayers().values())
+        out[name + " written"] = [os.path.exists(f"{base} {name} {row}.2dm") for row in range(2)]
+        dialog.close()
+        project.removeAllMapLayers()
+        settle()
+
+    out["default box"] = BatchAlgorithmDialog(algorithm()).mainWidget(
+        ).checkLoadLayersOnCompletion.isChecked()
+    batch("unticked", False)
+    batch("ticked", True)
+    # the algorithm's own dialog, as it opens: the mesh loads
+    dialog = processing.createAlgorithmDialog("floodmesh:buildmesh", {
+        "DEM": os.environ["FM_DEM"], "MAX_AREA": 400, "OUTPUT": base + " dialog.2dm"})
+    run_dialog(dialog)
+    out["dialog"] = sorted(l.name() for l in project.mapLayers().values())
+""")
+
+
+def test_batch_loads_meshes_only_with_its_load_box_ticked(tmp_path):
+    """Build mesh in Batch Processing, "Load layers on completion" unticked: the meshes are
+    written and nothing is added to the project (as QGIS's own algorithms do), not one layer
+    "Mesh" per row; ticked, each row's mesh loads; the algorithm's own dialog still loads it."""
+    seen = run_on_real_data(BATCH_SCRIPT, tmp_path)
+    assert seen["unticked written"] == [True, True], seen
+    assert seen["unticked"] == [], seen
+    assert seen["ticked"] == ["Mesh", "Mesh"], seen
+    assert seen["dialog"] == ["Mesh"], seen
