@@ -6,8 +6,8 @@ import math
 from qgis.core import (QgsCategorizedSymbolRenderer, QgsCoordinateReferenceSystem,
                        QgsCoordinateTransform, QgsLayerTree, QgsMapLayerType, QgsProcessingContext,
                        QgsProcessingException, QgsProcessingLayerPostProcessorInterface,
-                       QgsRendererCategory, QgsSimpleLineSymbolLayer, QgsSingleSymbolRenderer,
-                       QgsSymbol)
+                       QgsProcessingOutputLayerDefinition, QgsRendererCategory,
+                       QgsSimpleLineSymbolLayer, QgsSingleSymbolRenderer, QgsSymbol)
 from qgis.PyQt.QtGui import QColor
 
 from ..core.options import (BREAKLINE_COLOUR, DRY_BELOW_M, HALO_COLOUR, MESH_EDGE_COLOUR,
@@ -328,8 +328,6 @@ def drop_unasked_loads(algorithm, parameters, context) -> None:
     loaded: the batch dialog's "Load layers on completion" box, the dialog's "Open output file
     after running algorithm" box, processing.runAndLoadResults. With no such definition (the
     dialog of an algorithm with only file outputs, qgis_process, processing.run) they stay."""
-    from qgis.core import QgsProcessingOutputLayerDefinition
-
     asked = [value.destinationProject is not None
              for value in (parameters.get(d.name())
                            for d in algorithm.destinationParameterDefinitions())
