@@ -147,7 +147,7 @@ def _las_vertical_feet(folder):
     return write_las(folder / "zfeet.laz", xyz, crs="EPSG:26910+6360")
 
 
-def _las_vertical_feet_keys(folder):
+def las_vertical_feet_keys(folder):
     """LAS 1.2 with GeoTIFF keys only, as US deliveries come: UTM 10N, NAVD88 height in US feet."""
     xyz = plane_xyz() - [ORIGIN[0] - 500_000.0, ORIGIN[1] - 4_000_000.0, 0.0]
     header = laspy.LasHeader(point_format=3, version="1.2")
@@ -607,7 +607,7 @@ CASES = [
     BadInput("las-cut-short", "its header counts 20,000 points, the file holds 15,000",
              _maker(_las_cut_short), _lidar(_las_cut_short)),
     BadInput("vertical-feet-geotiff-keys", "has elevations in US survey foot",
-             _maker(_las_vertical_feet_keys), _lidar(_las_vertical_feet_keys)),
+             _maker(las_vertical_feet_keys), _lidar(las_vertical_feet_keys)),
     BadInput("empty-xyz", "is empty", _maker(_empty_xyz, crs=UTM), _lidar(_empty_xyz, crs=UTM)),
     BadInput("empty-las", "holds no points", _maker(_empty_las), _lidar(_empty_las)),
     BadInput("no-ground-points", "no ground points", _maker(_no_ground_las),

@@ -1582,9 +1582,10 @@ def _refuse_tiles_in_degrees(named: list, kind: str) -> None:
     """Refuse tiles whose own CRS is geographic (degrees) beside tiles in a projected one, naming
     them and the others' CRS to reproject them to (``_reproject``'s command for ``kind``,
     "points" or "raster"); a CRS given replacing theirs would take their degrees for metres.
-    ``named``: (tile name, its own CRS or None)."""
-    degrees = [(name, crs) for name, crs in named if crs and crs.is_geographic]
-    metres = [(name, crs) for name, crs in named if crs and crs.is_projected]
+    ``named``: (tile name, its own CRS, None, or a ``RefusedCRS``, which ``require_metric_crs``
+    refuses later with its reason)."""
+    degrees = [(name, crs) for name, crs in named if getattr(crs, "is_geographic", False)]
+    metres = [(name, crs) for name, crs in named if getattr(crs, "is_projected", False)]
     if not degrees or not metres:
         return
     others = CRS.from_wkt(metres[0][1].to_wkt())

@@ -11,7 +11,8 @@ from pyproj import CRS
 
 from floodmesh.core.frontends.cli import main
 
-from ..bad_inputs import ORIGIN, plane_xyz, slope_dem, write_las, write_tif
+from ..bad_inputs import (ORIGIN, las_vertical_feet_keys, plane_xyz, slope_dem, write_las,
+                          write_tif)
 
 RD = (155_000.0, 463_000.0)  # in the Netherlands, RD New (EPSG:28992)
 
@@ -313,6 +314,19 @@ def test_a_point_tile_in_degrees_among_utm_tiles_is_named_as_in_degrees(tmp_path
         assert err[0].startswith("floodmesh: error: tile c.laz is in degrees"), err
         assert "out_srs=EPSG:25832" in err[0], err
         assert not (tmp_path / "dem.tif").exists()
+
+
+def test_a_point_tile_in_feet_among_tiles_in_metres_is_refused_for_its_feet(tmp_path, capsys):
+    """A LAS tile whose GeoTIFF keys give NAVD88 heights in US feet, listed with a UTM tile:
+    the one-line refusal of its feet, not a traceback from the check for tiles in degrees."""
+    xyz = plane_xyz() - [ORIGIN[0] - 500_000.0, ORIGIN[1] - 4_000_000.0, 0.0]
+    write_las(tmp_path / "a.laz", xyz + [40.0, 0.0, 0.0], crs="EPSG:26910")
+    feet = las_vertical_feet_keys(tmp_path)
+    code, err = floodmesh(["grid", tmp_path / "a.laz", feet, "--cell-size", 1, "--out",
+                           tmp_path / "dem.tif"], capsys)
+    assert code == 2 and len(err) == 1, err
+    assert "zfeet_keys.las" in err[0] and "elevations in" in err[0], err
+    assert not (tmp_path / "dem.tif").exists()
 
 
 def test_a_tile_set_far_from_true_scale_names_the_tile_at_fault(tmp_path, capsys):
