@@ -113,9 +113,9 @@ def simplify_breaklines(lines: list[BreakLine], method: str, amount: float, *,
     positions = [p.copy() for p, _ in plans]
     masks = [m.copy() for _, m in plans]
     _repair_crossings(lines, positions, masks, cancelled=cancelled)
-    _restore_beside_merges(lines, positions, masks, min_distance, cancelled)
+    merged = _restore_beside_merges(lines, positions, masks, min_distance, cancelled)
     report(progress, cancelled, 0.9)
-    separate = _separate(lines, positions, masks, min_distance)
+    separate = _separate(lines, positions, masks, merged, min_distance)
     report(progress, None, 1.0)
     return separate
 
@@ -225,24 +225,28 @@ def _refine_where(original, position, mask, other) -> bool:
     return changed
 
 
-def _restore_beside_merges(lines, positions, masks, min_distance, cancelled=None) -> None:
+def _restore_beside_merges(lines, positions, masks, min_distance,
+                           cancelled=None) -> list[np.ndarray]:
     """Give a simplified segment from a kept vertex to one merged into a longer line
     (``_merged``) back the original vertices it skipped, so that only the part of the line
     within ``min_distance`` of the longer one merges, not the whole segment (a line's last
     segment to a T-junction was dropped, its far end metres from any line); crossings that
-    brings are repaired as the simplification's (``_repair_crossings``)."""
+    brings are repaired as the simplification's (``_repair_crossings``). Returns ``_merged``
+    of the vertices then kept."""
     for _ in range(10):
         changed = False
-        for mask, merged in zip(masks, _merged(positions, masks, min_distance)):
+        merged = _merged(positions, masks, min_distance)
+        for mask, near in zip(masks, merged):
             kept = np.flatnonzero(mask)
-            for a, b in zip(kept[:-1][merged[:-1] != merged[1:]],
-                            kept[1:][merged[:-1] != merged[1:]]):
+            edge = near[:-1] != near[1:]
+            for a, b in zip(kept[:-1][edge], kept[1:][edge]):
                 if b - a > 1:
                     mask[a + 1:b] = True
                     changed = True
         if not changed:
-            return
+            return merged
         _repair_crossings(lines, positions, masks, cancelled=cancelled)
+    return _merged(positions, masks, min_distance)
 
 
 def _merged(positions, masks, min_distance) -> list[np.ndarray]:
@@ -270,12 +274,12 @@ def _merged(positions, masks, min_distance) -> list[np.ndarray]:
     return near
 
 
-def _separate(lines, positions, masks, min_distance) -> list[BreakLine]:
+def _separate(lines, positions, masks, merged, min_distance) -> list[BreakLine]:
     """Split off the kept vertices that lie within ``min_distance`` of a longer line (merged
-    into it, ``_merged``), drop vertices within ``min_distance`` of the previous one, and build
-    the lines."""
+    into it: ``merged``, as ``_merged`` gives it), drop vertices within ``min_distance`` of the
+    previous one, and build the lines."""
     out = []
-    for line, p, m, drop in zip(lines, positions, masks, _merged(positions, masks, min_distance)):
+    for line, p, m, drop in zip(lines, positions, masks, merged):
         idx = np.flatnonzero(m)
         # runs of consecutive kept vertices that are not merged into a longer line
         breaks = np.flatnonzero(drop)
