@@ -214,9 +214,8 @@ class FloodMeshAlgorithm(QgsProcessingAlgorithm):
         import os
 
         from qgis.core import (QgsProcessingOutputLayerDefinition,
-                               QgsProcessingParameterFeatureSource)
-
-        from qgis.core import QgsProcessingParameterFolderDestination
+                               QgsProcessingParameterFeatureSource,
+                               QgsProcessingParameterFolderDestination)
 
         inputs, copied = {}, {}
         for definition in self.parameterDefinitions():
